@@ -1,0 +1,91 @@
+"""Integer mirrors of the enums in ``termination`` for the compiled core.
+
+numba folds module-level ints into constants; the order here must match the
+tuples below, which the Python layer uses to turn ints back into enums.
+"""
+
+from __future__ import annotations
+
+from .termination import Action, GoalStatus, PassStart, Termination
+
+GOAL_REACHED = 0
+GTOL = 1
+STEP_SMALL = 2
+STALLED = 3
+LINE_SEARCH_FAILED = 4
+MAX_ITER = 5
+MAX_FEV = 6
+DEADLINE = 7
+NONFINITE = 8
+RUNNING = -1  # internal only: the pass has not ended
+
+TERMINATIONS: tuple[Termination, ...] = (
+    Termination.GOAL_REACHED,
+    Termination.GTOL,
+    Termination.STEP_SMALL,
+    Termination.STALLED,
+    Termination.LINE_SEARCH_FAILED,
+    Termination.MAX_ITER,
+    Termination.MAX_FEV,
+    Termination.DEADLINE,
+    Termination.NONFINITE,
+)
+N_CODES = len(TERMINATIONS)
+
+ACCEPT = 0
+RESET_H = 1
+RESTART_RANDOM = 2
+STOP = 3
+ACTIONS: tuple[Action, ...] = (Action.ACCEPT, Action.RESET_H, Action.RESTART_RANDOM, Action.STOP)
+
+NO_GOAL = 0
+MET = 1
+MISSED = 2
+GOAL_STATUSES: tuple[GoalStatus, ...] = (GoalStatus.NO_GOAL, GoalStatus.MET, GoalStatus.MISSED)
+
+START_INITIAL = 0
+START_RESET_H = 1
+START_RESTART = 2
+PASS_STARTS: tuple[PassStart, ...] = (PassStart.INITIAL, PassStart.RESET_H, PassStart.RESTART_RANDOM)
+
+GRAD_ANALYTIC = 0
+GRAD_FORWARD = 1
+GRAD_CENTRAL = 2
+
+# Layout of the float and int option vectors handed to the core (one array each,
+# because every extra argument of a numba dispatch costs type-checking time).
+F_GTOL = 0
+F_XTOL = 1
+F_FTOL = 2
+F_F_GOAL = 3
+F_MAX_STEP = 4
+F_C1 = 5
+F_C2 = 6
+F_STEPTOL = 7
+F_DEADLINE = 8
+F_RESTART_RADIUS = 9
+F_CURVATURE_EPS = 10
+N_FOPT = 11
+
+I_MAX_ITER = 0
+I_MAX_FEV = 1
+I_STALL_WINDOW = 2
+I_GRAD_MODE = 3
+I_CURVATURE = 4
+I_MAX_RESTARTS = 5
+I_SEED = 6
+I_HAS_GOAL = 7
+I_SCALE_H0 = 8
+I_MAX_PASSES = 9
+N_IOPT = 10
+
+# Columns of the pass log the core fills.
+L_START = 0
+L_ITERS = 1
+L_CODE = 2
+L_F_START = 3
+L_F_END = 4
+L_GOAL = 5
+L_ACTION = 6
+L_NFEV = 7
+N_LOG = 8
