@@ -2,9 +2,9 @@
 
 Everything here runs inside numba (one implementation; with ``NUMBA_DISABLE_JIT=1``
 the same code runs as plain Python for debugging and coverage). The objective is a
-compiled function ``fg(x, g, need_grad, data) -> f`` passed as an argument; the IK
-module calls ``run_solver`` with its objective bound at compile time, which keeps
-that specialisation in numba's on-disk cache.
+compiled function ``fg(x, g, need_grad, data) -> f``, either passed as an argument
+or registered for the type of ``data`` (see ``_dispatch``: only the registered
+route keeps the IK core in numba's on-disk cache).
 
 References:
     Dennis & Schnabel (1996), Numerical Methods for Unconstrained Optimization and
@@ -19,10 +19,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import jit
 
 from . import _codes as C
 from ._clock import now_s
+from ._dispatch import call_goal, call_objective
 from .analyzer import decide
 
 _EPS = 2.220446049250313e-16
@@ -30,7 +31,7 @@ _SQRT_EPS = 1.4901161193847656e-08
 _CBRT_EPS = 6.055454452393343e-06
 
 
-@njit(cache=True)
+@jit
 def _project(x, lo, hi, out):  # type: ignore[no-untyped-def]
     for i in range(x.shape[0]):
         v = x[i]
@@ -41,7 +42,7 @@ def _project(x, lo, hi, out):  # type: ignore[no-untyped-def]
         out[i] = v
 
 
-@njit(cache=True)
+@jit
 def _projected_gradient_norm(x, g, lo, hi):  # type: ignore[no-untyped-def]
     """inf-norm of P(x - g) - x: zero exactly at a KKT point of the box problem."""
     worst = 0.0
@@ -57,7 +58,7 @@ def _projected_gradient_norm(x, g, lo, hi):  # type: ignore[no-untyped-def]
     return worst
 
 
-@njit(cache=True)
+@jit
 def _all_finite(v):  # type: ignore[no-untyped-def]
     for i in range(v.shape[0]):
         if not math.isfinite(v[i]):
@@ -65,7 +66,7 @@ def _all_finite(v):  # type: ignore[no-untyped-def]
     return True
 
 
-@njit(cache=True)
+@jit
 def _evaluate(fg, data, x, g, need_grad, grad_mode, lo, hi, work, counters):  # type: ignore[no-untyped-def]
     """f(x) and, if asked, g(x); counters = [nfev, ngev].
 
@@ -76,12 +77,12 @@ def _evaluate(fg, data, x, g, need_grad, grad_mode, lo, hi, work, counters):  # 
     that would leave the box is taken the other way, so f is never evaluated outside.
     """
     if grad_mode == C.GRAD_ANALYTIC:
-        f = fg(x, g, need_grad, data)
+        f = call_objective(fg, x, g, need_grad, data)
         counters[0] += 1
         if need_grad:
             counters[1] += 1
         return f
-    f = fg(x, work, False, data)
+    f = call_objective(fg, x, work, False, data)
     counters[0] += 1
     if not need_grad:
         return f
@@ -96,7 +97,7 @@ def _evaluate(fg, data, x, g, need_grad, grad_mode, lo, hi, work, counters):  # 
                 h = -h
             x[i] = xi + h
             h = x[i] - xi  # the step actually represented in floating point
-            fp = fg(x, work, False, data)
+            fp = call_objective(fg, x, work, False, data)
             counters[0] += 1
             g[i] = (fp - f) / h
         else:
@@ -104,16 +105,16 @@ def _evaluate(fg, data, x, g, need_grad, grad_mode, lo, hi, work, counters):  # 
             up = min(xi + h, hi[i])
             down = max(xi - h, lo[i])
             x[i] = up
-            fp = fg(x, work, False, data)
+            fp = call_objective(fg, x, work, False, data)
             x[i] = down
-            fm = fg(x, work, False, data)
+            fm = call_objective(fg, x, work, False, data)
             counters[0] += 2
             g[i] = (fp - fm) / (up - down) if up > down else 0.0
         x[i] = xi
     return f
 
 
-@njit(cache=True)
+@jit
 def _line_search(  # type: ignore[no-untyped-def]
     fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters
 ):
@@ -203,7 +204,7 @@ def _line_search(  # type: ignore[no-untyped-def]
         lam = lam_t if lam_t > 0.1 * lam else 0.1 * lam
 
 
-@njit(cache=True)
+@jit
 def _curvature_phase(  # type: ignore[no-untyped-def]
     fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters,
     lam, f_new, slope, untouched, min_lambda,
@@ -311,7 +312,7 @@ def _curvature_phase(  # type: ignore[no-untyped-def]
     return 0, f_keep, lam_keep
 
 
-@njit(cache=True)
+@jit
 def _uniform(state):  # type: ignore[no-untyped-def]
     """Park-Miller minimal standard generator (product < 2^47: no int64 overflow).
 
@@ -323,7 +324,7 @@ def _uniform(state):  # type: ignore[no-untyped-def]
     return (state[0] - 1) / 2147483646.0
 
 
-@njit(cache=True)
+@jit
 def _random_point(x_center, lo, hi, radius, rng_state, out):  # type: ignore[no-untyped-def]
     """Uniform in the box intersected with [center - radius, center + radius].
 
@@ -344,7 +345,7 @@ def _random_point(x_center, lo, hi, radius, rng_state, out):  # type: ignore[no-
         out[i] = lo[i] if v < lo[i] else (hi[i] if v > hi[i] else v)
 
 
-@njit(cache=True)
+@jit
 def _descent_direction(h, g, x, lo, hi, d, gm):  # type: ignore[no-untyped-def]
     """d = -H_FF g_F on the free variables, 0 on those held at a bound.
 
@@ -369,7 +370,7 @@ def _descent_direction(h, g, x, lo, hi, d, gm):  # type: ignore[no-untyped-def]
     return slope
 
 
-@njit(cache=True)
+@jit
 def _set_identity(h):  # type: ignore[no-untyped-def]
     n = h.shape[0]
     for i in range(n):
@@ -377,7 +378,7 @@ def _set_identity(h):  # type: ignore[no-untyped-def]
             h[i, j] = 1.0 if i == j else 0.0
 
 
-@njit(cache=True)
+@jit
 def _bfgs_update(h, s, y, hy, eps_curv):  # type: ignore[no-untyped-def]
     """Inverse BFGS update (Nocedal & Wright eq. 6.17); False when skipped.
 
@@ -410,7 +411,7 @@ def _bfgs_update(h, s, y, hy, eps_curv):  # type: ignore[no-untyped-def]
     return True
 
 
-@njit(cache=True)
+@jit
 def _better(f, m, f_best, m_best, has_goal, f_goal):  # type: ignore[no-untyped-def]
     """Order of points: meeting the goal first, then lower f."""
     if has_goal:
@@ -421,22 +422,17 @@ def _better(f, m, f_best, m_best, has_goal, f_goal):  # type: ignore[no-untyped-
     return f < f_best
 
 
-@njit(cache=True)
-def goal_is_f(f, x, data):  # type: ignore[no-untyped-def]
-    """The default goal measure: f itself (goal met when f <= f_goal)."""
-    return f
-
-
-@njit(cache=True)
+@jit
 def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x, out_g):  # type: ignore[no-untyped-def]
     """Multi-pass projected BFGS under the analyzer; the whole solve in one call.
 
     Args:
-        fg: Compiled objective ``fg(x, g, need_grad, data) -> f``.
-        goal_fn: Compiled ``goal_fn(f, x, data) -> m``; the goal is met when
-            m <= f_goal. ``goal_is_f`` for plain minimization; the IK passes its
-            normalised pose error so that "goal met" means "IK succeeded" even
-            when f carries posture terms.
+        fg: Compiled objective ``fg(x, g, need_grad, data) -> f``, or None to use
+            the objective registered for the type of ``data`` (``_dispatch``).
+        goal_fn: Kept None. With fg None the goal measure registered with the
+            objective, m(f, x, data), decides "goal met" (m <= f_goal); else f
+            does. The IK registers its normalised pose error, so "goal met" means
+            "IK succeeded" even when f carries posture terms.
         data: Passed through to ``fg`` untouched.
         x0: Start, shape (n,); projected into the box here.
         lo, hi: Bounds, shape (n,); +-inf allowed; lo <= hi checked by the caller.
@@ -485,7 +481,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
     _project(x0, lo, hi, x)
     f = _evaluate(fg, data, x, g, True, grad_mode, lo, hi, work, counters)
     f_best = f
-    m = goal_fn(f, x, data) if has_goal else f
+    m = call_goal(goal_fn, fg, f, x, data) if has_goal else f
     m_best = m
     for i in range(n):
         out_x[i] = x[i]
@@ -587,7 +583,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
                 x[i] = x_new[i]
                 g[i] = g_new[i]
             if has_goal:
-                m = goal_fn(f, x, data)
+                m = call_goal(goal_fn, fg, f, x, data)
             if _better(f, m, f_best, m_best, has_goal, f_goal):
                 f_best = f
                 m_best = m
@@ -645,7 +641,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
             _random_point(x0, lo, hi, fopt[C.F_RESTART_RADIUS], rng_state, x)
             f = _evaluate(fg, data, x, g, True, grad_mode, lo, hi, work, counters)
             if has_goal:
-                m = goal_fn(f, x, data)
+                m = call_goal(goal_fn, fg, f, x, data)
             if _better(f, m, f_best, m_best, has_goal, f_goal):
                 f_best = f
                 m_best = m

@@ -21,7 +21,7 @@ from types import MappingProxyType
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
+from ._jit import jit
 
 from . import _codes as C
 from .termination import Action, GoalStatus, Termination
@@ -119,7 +119,7 @@ class AnalyzerPolicy:
         return out
 
 
-@njit(cache=True)
+@jit
 def decide(
     policy: npt.NDArray[np.int64],
     code: int,

@@ -15,7 +15,8 @@ import numpy.typing as npt
 from numba.core.registry import CPUDispatcher
 
 from . import _codes as C
-from ._core import goal_is_f, run_solver
+from ._core import run_solver
+from ._dispatch import registered_for
 from .analyzer import AnalyzerPolicy
 from .errors import DimensionMismatch, InvalidProblem
 from .types import GradientMode, Matrix, MinimizeOptions, MinimizeResult, PassRecord, Vector
@@ -149,8 +150,10 @@ def minimize(
     log = np.zeros((options.max_passes, C.N_LOG))
     out_x = np.empty(n)
     out_g = np.empty(n)
+    # A registered objective is bound at compile time (cached); others are passed in.
+    fg = None if registered_for(objective) else objective
     f, _, pg, code, nit, nfev, ngev, npass, nrest, nskip, elapsed = run_solver(
-        objective, goal_is_f, data, x, lo, hi, h, fopt, iopt, policy.as_array(), log, out_x, out_g
+        fg, None, data, x, lo, hi, h, fopt, iopt, policy.as_array(), log, out_x, out_g
     )
     pass_log = unpack_pass_log(log, npass)
     return MinimizeResult(

@@ -1,0 +1,91 @@
+"""How the compiled core reaches an objective without receiving it as a value.
+
+numba can pass a compiled function as an argument, but a caller that receives one
+whose body uses libm (cos, sqrt, ...) cannot be written to the on-disk cache, so the
+IK core would recompile (tens of seconds) in every process. Instead an objective is
+*registered* for the numba type of its ``data`` tuple, and the core calls
+``call_objective(None, ...)``: at compile time the overload below looks the data
+type up and binds the registered function statically, which caches like any
+direct call. Passing a compiled function as ``fg`` still works (the generic
+``minimize`` path for user objectives); it is compiled per process.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numba
+from numba.core import types
+from numba.extending import overload
+
+_REGISTRY: list[tuple[Any, Any, Any]] = []  # (numba type of data, fg, goal_fn or None)
+
+
+def register_objective(fg: Any, goal_fn: Any, data_example: tuple[Any, ...]) -> None:
+    """Bind ``fg`` (and an optional goal measure) to the numba type of ``data_example``."""
+    data_type = numba.typeof(data_example)
+    for ty, f, _ in _REGISTRY:
+        if ty == data_type and f is not fg:
+            raise ValueError(f"another objective is registered for data type {data_type}")
+    _REGISTRY.append((data_type, fg, goal_fn))
+
+
+def registered_for(fg: Any) -> bool:
+    return any(f is fg for _, f, _ in _REGISTRY)
+
+
+def _lookup(data_type: Any) -> tuple[Any, Any]:
+    for ty, fg, goal in _REGISTRY:
+        if ty == data_type:
+            return fg, goal
+    raise TypeError(f"no objective registered for data of type {data_type}")
+
+
+def call_objective(fg: Any, x: Any, g: Any, need_grad: bool, data: Any) -> float:
+    """f(x) (and g) from ``fg``, or from the objective registered for ``data``."""
+    if fg is None:
+        fg = _lookup(numba.typeof(data))[0]
+    return float(fg(x, g, need_grad, data))
+
+
+def call_goal(goal_fn: Any, fg: Any, f: float, x: Any, data: Any) -> float:
+    """The goal measure at x: the registered goal function, else f itself."""
+    if fg is None:
+        goal = _lookup(numba.typeof(data))[1]
+        if goal is not None:
+            return float(goal(f, x, data))
+    return f
+
+
+@overload(call_objective)
+def _call_objective_compiled(fg, x, g, need_grad, data):  # type: ignore[no-untyped-def]
+    # No annotations: numba compares the overload's parameters with the impl's.
+    if isinstance(fg, types.NoneType):
+        bound, _ = _lookup(data)
+
+        def impl_registered(fg, x, g, need_grad, data):  # type: ignore[no-untyped-def]
+            return bound(x, g, need_grad, data)
+
+        return impl_registered
+
+    def impl_value(fg, x, g, need_grad, data):  # type: ignore[no-untyped-def]
+        return fg(x, g, need_grad, data)
+
+    return impl_value
+
+
+@overload(call_goal)
+def _call_goal_compiled(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def]
+    if isinstance(fg, types.NoneType):
+        _, goal = _lookup(data)
+        if goal is not None:
+
+            def impl_goal(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def]
+                return goal(f, x, data)
+
+            return impl_goal
+
+    def impl_f(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def]
+        return f
+
+    return impl_f

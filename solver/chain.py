@@ -1,0 +1,558 @@
+"""The kinematic model: links joined by joints into a tree, with effectors.
+
+The article's model: every object (link) has a local frame relative to its parent,
+a pivot it rotates about, a joint of rotational (up to three axes, each with limits)
+or sliding kind, optional terminators, and end effectors. We add URDF-style
+revolute, continuous and prismatic joints about any unit axis.
+
+A ``Chain`` is validated once and then compiled into flat arrays (``CompiledChain``)
+that the numba kinematics walk. Frames are composed as
+``link = parent_link * origin * Tr(pivot) * motion(q) * Tr(-pivot)``; a rotational
+joint with axes "xz" has motion Rx(q0) Rz(q1) (intrinsic, in the declared order).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InvalidModel
+from .types import Matrix, Vector
+
+# Joints above this many degrees of freedom make a chain's dense BFGS matrix
+# (n x n) and its Jacobian walks too slow for a frame budget; the service caps lower.
+MAX_DOF_HARD = 2000
+
+
+class JointKind(enum.StrEnum):
+    """How a joint moves its child link."""
+
+    FIXED = "fixed"
+    ROTATIONAL = "rotational"  # the article's joint: 1-3 rotations about local x/y/z
+    REVOLUTE = "revolute"  # one rotation about any unit axis, with limits
+    CONTINUOUS = "continuous"  # revolute without limits
+    PRISMATIC = "prismatic"  # sliding along a unit axis, with limits
+
+
+class EffectorMode(enum.StrEnum):
+    """What an effector's target constrains."""
+
+    POSITION = "position"  # the tip point reaches the target position
+    POSE = "pose"  # position and full orientation
+    AIM = "aim"  # position (if weighted) and a local axis pointing along a direction
+
+
+def _finite(values: Sequence[float] | Vector, what: str, *, joint: str, field: str) -> Vector:
+    arr = np.asarray(values, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        raise InvalidModel(f"{what} must be finite", joint=joint, field=field)
+    return arr
+
+
+@dataclass(frozen=True, slots=True)
+class Transform:
+    """A rigid transform: rotation (3x3, orthonormal, det +1) then translation [m]."""
+
+    translation: Vector = field(default_factory=lambda: np.zeros(3))
+    rotation: Matrix = field(default_factory=lambda: np.eye(3))
+
+    @classmethod
+    def identity(cls) -> Transform:
+        return cls()
+
+    @classmethod
+    def from_quaternion(
+        cls, translation: Sequence[float], w: float, x: float, y: float, z: float, *,
+        owner: str = "", field_name: str = "rotation",
+    ) -> Transform:
+        """From a unit quaternion (w, x, y, z); |q| must be 1 within 1e-6."""
+        q = _finite([w, x, y, z], "quaternion", joint=owner, field=field_name)
+        norm = float(np.linalg.norm(q))
+        if abs(norm - 1.0) > 1e-6:
+            raise InvalidModel(
+                f"quaternion must have unit norm, got |q| = {norm:.9g}", joint=owner, field=field_name
+            )
+        return cls(_translation(translation, owner), quaternion_to_matrix(q / norm))
+
+    @classmethod
+    def from_rpy(
+        cls, translation: Sequence[float], roll: float, pitch: float, yaw: float, *, owner: str = ""
+    ) -> Transform:
+        """From URDF roll-pitch-yaw [rad]: R = Rz(yaw) Ry(pitch) Rx(roll)."""
+        r, p, y = _finite([roll, pitch, yaw], "rpy", joint=owner, field="rpy")
+        return cls(_translation(translation, owner), rpy_to_matrix(float(r), float(p), float(y)))
+
+    @classmethod
+    def from_matrix34(cls, matrix: Sequence[Sequence[float]] | Matrix, *, owner: str = "") -> Transform:
+        """From a 3x4 [R | t] matrix; R must be orthonormal with det +1 within 1e-6."""
+        m = _finite(matrix, "matrix", joint=owner, field="matrix")
+        if m.shape != (3, 4):
+            raise InvalidModel(f"matrix must be 3x4, got {m.shape}", joint=owner, field="matrix")
+        rot = m[:, :3]
+        if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0.0:
+            raise InvalidModel(
+                "matrix rotation part must be orthonormal with determinant +1",
+                joint=owner, field="matrix",
+            )
+        return cls(m[:, 3].copy(), rot.copy())
+
+    def as_matrix34(self) -> Matrix:
+        out = np.empty((3, 4))
+        out[:, :3] = self.rotation
+        out[:, 3] = self.translation
+        return out
+
+
+def _translation(values: Sequence[float], owner: str) -> Vector:
+    t = _finite(values, "translation", joint=owner, field="translation")
+    if t.shape != (3,):
+        raise InvalidModel(f"translation must have 3 components, got {t.shape}", joint=owner, field="translation")
+    return t
+
+
+def quaternion_to_matrix(q: Vector) -> Matrix:
+    """Rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = (float(v) for v in q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def matrix_to_quaternion(r: Matrix) -> Vector:
+    """Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Shepperd's method)."""
+    tr = float(np.trace(r))
+    if tr > 0.0:
+        s = math.sqrt(tr + 1.0) * 2.0
+        q = np.array([0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s])
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = math.sqrt(max(1.0 + r[i, i] - r[j, j] - r[k, k], 0.0)) * 2.0
+        q = np.empty(4)
+        q[0] = (r[k, j] - r[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (r[j, i] + r[i, j]) / s
+        q[1 + k] = (r[k, i] + r[i, k]) / s
+    if q[0] < 0.0:
+        q = -q
+    return q / np.linalg.norm(q)
+
+
+def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> Matrix:
+    """URDF's fixed-axis roll, pitch, yaw: R = Rz(yaw) @ Ry(pitch) @ Rx(roll)."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+_AXIS_VECTORS = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Joint:
+    """A joint from ``parent`` link to ``child`` link.
+
+    Attributes:
+        name: Unique joint name; single-DOF joints expose one variable of this name,
+            rotational joints one per axis named ``f"{name}.{axis}"``.
+        parent: Parent link name.
+        child: Child link name (each link has at most one parent joint: a tree).
+        kind: See ``JointKind``.
+        origin: Rest transform of the joint frame in the parent link frame.
+        pivot: Point the motion acts about, in the joint frame [m].
+        axis: Unit axis for revolute / continuous / prismatic joints.
+        axes: Active local axes of a rotational joint, in order, e.g. "zyx".
+        lower, upper: One limit per DOF [rad] or [m]; continuous joints use -inf/inf.
+        terminator: Joints above this one do not move for chains running through it.
+    """
+
+    name: str
+    parent: str
+    child: str
+    kind: JointKind
+    origin: Transform = field(default_factory=Transform)
+    pivot: Vector = field(default_factory=lambda: np.zeros(3))
+    axis: Vector = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    axes: str = ""
+    lower: tuple[float, ...] = ()
+    upper: tuple[float, ...] = ()
+    terminator: bool = False
+
+    @property
+    def dof_names(self) -> tuple[str, ...]:
+        if self.kind is JointKind.FIXED:
+            return ()
+        if self.kind is JointKind.ROTATIONAL:
+            return tuple(f"{self.name}.{a}" for a in self.axes)
+        return (self.name,)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Effector:
+    """A named point on a link that a target pulls on.
+
+    Attributes:
+        name: Unique effector name (targets refer to it).
+        link: Link carrying the effector.
+        tip_offset: Tip point in the link frame [m].
+        tip_rotation: Orientation of the tip frame in the link frame (pose targets
+            and the aim axis are expressed in the tip frame).
+        mode: What the target constrains.
+        aim_axis: For AIM: the tip-frame axis that must point along the target direction.
+        position_weight: Weight of squared position error [1/m^2 relative].
+        rotation_weight: Weight of squared orientation error [m^2/rad^2]; 0.1 m
+            lever arm by default, i.e. 1 mrad counts like 0.1 mm.
+    """
+
+    name: str
+    link: str
+    tip_offset: Vector = field(default_factory=lambda: np.zeros(3))
+    tip_rotation: Matrix = field(default_factory=lambda: np.eye(3))
+    mode: EffectorMode = EffectorMode.POSITION
+    aim_axis: Vector = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    position_weight: float = 1.0
+    rotation_weight: float = 0.01
+
+
+@dataclass(frozen=True, slots=True)
+class Chain:
+    """A validated hierarchy; build with ``build_chain``.
+
+    Attributes:
+        joints: In topological order (parents before children).
+        effectors: In declaration order.
+        root: The base link (the single link with no parent joint).
+        dof_names: One name per variable, in the order of q.
+        lower, upper: Limits per variable, shape (n_dof,).
+        compiled: The flat arrays the compiled kinematics use.
+    """
+
+    joints: tuple[Joint, ...]
+    effectors: tuple[Effector, ...]
+    root: str
+    dof_names: tuple[str, ...]
+    lower: Vector
+    upper: Vector
+    compiled: CompiledChain
+
+    @property
+    def n_dof(self) -> int:
+        return len(self.dof_names)
+
+    @property
+    def effector_names(self) -> tuple[str, ...]:
+        return tuple(e.name for e in self.effectors)
+
+    @property
+    def link_names(self) -> tuple[str, ...]:
+        return (self.root, *(j.child for j in self.joints))
+
+    def mid_limits(self) -> Vector:
+        """Middle of each variable's range (0 where a side is infinite)."""
+        mid = 0.5 * (self.lower + self.upper)
+        return np.where(np.isfinite(mid), mid, 0.0)
+
+    def effector_index(self, name: str) -> int:
+        for i, e in enumerate(self.effectors):
+            if e.name == name:
+                return i
+        raise InvalidModel(f"unknown effector {name!r}", field="effector")
+
+
+@dataclass(frozen=True, slots=True)
+class CompiledChain:
+    """Flat arrays for the numba kinematics; one node per elementary motion.
+
+    A joint becomes: a node carrying origin * Tr(pivot) and its first motion, one node
+    per further axis, and a node carrying Tr(-pivot) when the pivot is non-zero.
+    """
+
+    node_parent: np.ndarray  # int64[n_nodes], -1 for children of the root
+    node_pre: np.ndarray  # float64[n_nodes, 3, 4], fixed transform before the motion
+    node_kind: np.ndarray  # int64[n_nodes]: 0 fixed, 1 rotation, 2 translation
+    node_axis: np.ndarray  # float64[n_nodes, 3], unit axis in the node frame
+    node_dof: np.ndarray  # int64[n_nodes], variable index or -1
+    link_node: dict[str, int]  # link name -> node whose frame is the link frame (-1 root)
+    eff_node: np.ndarray  # int64[n_eff]
+    eff_tip: np.ndarray  # float64[n_eff, 3, 4], tip frame in the link frame
+    eff_mode: np.ndarray  # int64[n_eff]: 0 position, 1 pose, 2 aim
+    eff_aim: np.ndarray  # float64[n_eff, 3]
+    eff_weights: np.ndarray  # float64[n_eff, 2]: position, rotation
+    eff_dofs: tuple[np.ndarray, ...]  # per effector, the variables of its chain (terminator-aware)
+
+
+NODE_FIXED = 0
+NODE_ROTATION = 1
+NODE_TRANSLATION = 2
+MODE_CODES = {EffectorMode.POSITION: 0, EffectorMode.POSE: 1, EffectorMode.AIM: 2}
+
+
+def _check_unit_axis(axis: Vector, joint: str, field: str) -> Vector:
+    a = _finite(axis, "axis", joint=joint, field=field)
+    if a.shape != (3,):
+        raise InvalidModel(f"axis must have 3 components, got {a.shape}", joint=joint, field=field)
+    norm = float(np.linalg.norm(a))
+    if norm < 1e-9:
+        raise InvalidModel("axis must not be zero", joint=joint, field=field)
+    return a / norm
+
+
+def _check_joint(j: Joint) -> Joint:
+    """Normalise axes and limits of one joint, naming joint and field in every error."""
+    if not j.name:
+        raise InvalidModel("joint name must not be empty", field="name")
+    if j.parent == j.child:
+        raise InvalidModel("a joint cannot connect a link to itself", joint=j.name, field="child")
+    pivot = _finite(j.pivot, "pivot", joint=j.name, field="pivot")
+    if pivot.shape != (3,):
+        raise InvalidModel("pivot must have 3 components", joint=j.name, field="pivot")
+    axis = j.axis
+    n = 0
+    if j.kind is JointKind.ROTATIONAL:
+        axes = j.axes.lower()
+        if not 1 <= len(axes) <= 3 or any(a not in _AXIS_VECTORS for a in axes) or len(set(axes)) != len(axes):
+            raise InvalidModel(
+                f"axes must be 1-3 distinct letters of 'xyz', got {j.axes!r}", joint=j.name, field="axes"
+            )
+        n = len(axes)
+    elif j.kind is not JointKind.FIXED:
+        axis = _check_unit_axis(j.axis, j.name, "axis")
+        n = 1
+        axes = ""
+    else:
+        axes = ""
+    lower, upper = tuple(float(v) for v in j.lower), tuple(float(v) for v in j.upper)
+    if j.kind is JointKind.CONTINUOUS and not lower and not upper:
+        lower, upper = (-math.inf,), (math.inf,)
+    if len(lower) != n or len(upper) != n:
+        raise InvalidModel(
+            f"expected {n} lower and upper limits, got {len(lower)} and {len(upper)}",
+            joint=j.name, field="lower" if len(lower) != n else "upper",
+        )
+    for k in range(n):
+        lo, hi = lower[k], upper[k]
+        if math.isnan(lo) or math.isnan(hi):
+            raise InvalidModel("limits must not be NaN", joint=j.name, field="lower")
+        if j.kind is not JointKind.CONTINUOUS and not (math.isfinite(lo) and math.isfinite(hi)):
+            raise InvalidModel(
+                "limits must be finite (use a continuous joint for unlimited rotation)",
+                joint=j.name, field="lower" if not math.isfinite(lo) else "upper",
+            )
+        if lo > hi:
+            raise InvalidModel(f"lower > upper ({lo!r} > {hi!r})", joint=j.name, field="lower")
+    return Joint(
+        name=j.name, parent=j.parent, child=j.child, kind=j.kind, origin=j.origin, pivot=pivot,
+        axis=axis, axes=axes, lower=lower, upper=upper, terminator=j.terminator,
+    )
+
+
+def _check_effector(e: Effector, links: set[str]) -> Effector:
+    if not e.name:
+        raise InvalidModel("effector name must not be empty", field="name")
+    if e.link not in links:
+        raise InvalidModel(f"unknown link {e.link!r}", joint=e.name, field="link")
+    tip = _finite(e.tip_offset, "tip_offset", joint=e.name, field="tip_offset")
+    if tip.shape != (3,):
+        raise InvalidModel("tip_offset must have 3 components", joint=e.name, field="tip_offset")
+    rot = _finite(e.tip_rotation, "tip_rotation", joint=e.name, field="tip_rotation")
+    if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise InvalidModel("tip_rotation must be a rotation matrix", joint=e.name, field="tip_rotation")
+    aim = _check_unit_axis(e.aim_axis, e.name, "aim_axis")
+    for name in ("position_weight", "rotation_weight"):
+        w = float(getattr(e, name))
+        if not (math.isfinite(w) and w >= 0.0):
+            raise InvalidModel(f"{name} must be finite and >= 0", joint=e.name, field=name)
+    if e.mode is EffectorMode.POSITION and e.position_weight == 0.0:
+        raise InvalidModel("a position effector needs position_weight > 0", joint=e.name, field="position_weight")
+    if e.mode is not EffectorMode.POSITION and e.position_weight == 0.0 and e.rotation_weight == 0.0:
+        raise InvalidModel("all weights are zero", joint=e.name, field="rotation_weight")
+    return Effector(
+        name=e.name, link=e.link, tip_offset=tip, tip_rotation=rot, mode=e.mode, aim_axis=aim,
+        position_weight=float(e.position_weight), rotation_weight=float(e.rotation_weight),
+    )
+
+
+def build_chain(
+    joints: Sequence[Joint], effectors: Sequence[Effector], *, max_dof: int = MAX_DOF_HARD
+) -> Chain:
+    """Validate a hierarchy and compile it.
+
+    Raises:
+        InvalidModel: duplicate names, unknown parent, a cycle, several roots, a link
+            with two parents, bad axes or limits, non-finite numbers, too many DOF,
+            no effector. The error names the joint (or effector) and the field.
+    """
+    checked = [_check_joint(j) for j in joints]
+    seen: set[str] = set()
+    for j in checked:
+        if j.name in seen:
+            raise InvalidModel("duplicate joint name", joint=j.name, field="name")
+        seen.add(j.name)
+    by_child: dict[str, Joint] = {}
+    for j in checked:
+        if j.child in by_child:
+            raise InvalidModel(
+                f"link {j.child!r} already has parent joint {by_child[j.child].name!r}",
+                joint=j.name, field="child",
+            )
+        by_child[j.child] = j
+    parents = {j.parent for j in checked}
+    roots = sorted(p for p in parents if p not in by_child)
+    # Cycle check: walking up from any link must end at a root.
+    for j in checked:
+        link, steps = j.child, 0
+        while link in by_child:
+            link = by_child[link].parent
+            steps += 1
+            if steps > len(checked):
+                raise InvalidModel("the hierarchy contains a cycle", joint=j.name, field="parent")
+    if not checked:
+        raise InvalidModel("a chain needs at least one joint", field="joints")
+    if len(roots) != 1:
+        raise InvalidModel(
+            f"the hierarchy must have exactly one root link, found {roots}", field="parent"
+        )
+    root = roots[0]
+    # Topological order: breadth-first from the root, children in declaration order.
+    children: dict[str, list[Joint]] = {}
+    for j in checked:
+        children.setdefault(j.parent, []).append(j)
+    ordered: list[Joint] = []
+    frontier = [root]
+    while frontier:
+        nxt: list[str] = []
+        for link in frontier:
+            for j in children.get(link, []):
+                ordered.append(j)
+                nxt.append(j.child)
+        frontier = nxt
+    dof_names = tuple(name for j in ordered for name in j.dof_names)
+    if len(dof_names) > max_dof:
+        raise InvalidModel(f"too many degrees of freedom: {len(dof_names)} > {max_dof}", field="joints")
+    if len(set(dof_names)) != len(dof_names):
+        dup = next(n for n in dof_names if dof_names.count(n) > 1)
+        raise InvalidModel("duplicate variable name", joint=dup, field="name")
+    if not effectors:
+        raise InvalidModel("a chain needs at least one effector", field="effectors")
+    links = {root, *(j.child for j in ordered)}
+    effs = [_check_effector(e, links) for e in effectors]
+    if len({e.name for e in effs}) != len(effs):
+        raise InvalidModel("duplicate effector name", field="effectors")
+    lower = np.array([v for j in ordered for v in j.lower], dtype=np.float64)
+    upper = np.array([v for j in ordered for v in j.upper], dtype=np.float64)
+    compiled = _compile(ordered, effs, root)
+    return Chain(tuple(ordered), tuple(effs), root, dof_names, lower, upper, compiled)
+
+
+def _translation_only(t: Vector) -> Matrix:
+    m = np.zeros((3, 4))
+    m[:, :3] = np.eye(3)
+    m[:, 3] = t
+    return m
+
+
+def _compose(a: Matrix, b: Matrix) -> Matrix:
+    out = np.empty((3, 4))
+    out[:, :3] = a[:, :3] @ b[:, :3]
+    out[:, 3] = a[:, :3] @ b[:, 3] + a[:, 3]
+    return out
+
+
+def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> CompiledChain:
+    parent: list[int] = []
+    pre: list[Matrix] = []
+    kind: list[int] = []
+    axis: list[Vector] = []
+    dof: list[int] = []
+    link_node: dict[str, int] = {root: -1}
+    joint_first_node: dict[str, int] = {}
+    node_joint: list[str] = []
+    next_dof = 0
+
+    def add(p: int, m: Matrix, k: int, a: Vector, d: int, owner: str) -> int:
+        parent.append(p)
+        pre.append(m)
+        kind.append(k)
+        axis.append(a)
+        dof.append(d)
+        node_joint.append(owner)
+        return len(parent) - 1
+
+    for j in ordered:
+        p = link_node[j.parent]
+        has_pivot = bool(np.any(j.pivot != 0.0))
+        base = _compose(j.origin.as_matrix34(), _translation_only(j.pivot)) if has_pivot else j.origin.as_matrix34()
+        first = -1
+        if j.kind is JointKind.FIXED:
+            p = add(p, base, NODE_FIXED, np.zeros(3), -1, j.name)
+            first = p
+        elif j.kind is JointKind.ROTATIONAL:
+            m = base
+            for a in j.axes:
+                p = add(p, m, NODE_ROTATION, np.array(_AXIS_VECTORS[a]), next_dof, j.name)
+                first = p if first < 0 else first
+                next_dof += 1
+                m = _translation_only(np.zeros(3))
+        else:
+            k = NODE_TRANSLATION if j.kind is JointKind.PRISMATIC else NODE_ROTATION
+            p = add(p, base, k, j.axis, next_dof, j.name)
+            first = p
+            next_dof += 1
+        if has_pivot and j.kind is not JointKind.FIXED:
+            p = add(p, _translation_only(-j.pivot), NODE_FIXED, np.zeros(3), -1, j.name)
+        elif has_pivot:
+            # A fixed joint has no motion: fold -pivot into the same node.
+            pre[p] = _compose(pre[p], _translation_only(-j.pivot))
+        link_node[j.child] = p
+        joint_first_node[j.name] = first
+
+    node_parent = np.array(parent, dtype=np.int64)
+    node_dof = np.array(dof, dtype=np.int64)
+    terminators = {j.name for j in ordered if j.terminator}
+    eff_dofs: list[np.ndarray] = []
+    for e in effectors:
+        # Variables of this effector's chain: walk up until (and including) a terminator.
+        dofs: list[int] = []
+        node = link_node[e.link]
+        while node >= 0:
+            if node_dof[node] >= 0:
+                dofs.append(int(node_dof[node]))
+            owner = node_joint[node]
+            parent_node = node_parent[node]
+            if owner in terminators and (parent_node < 0 or node_joint[parent_node] != owner):
+                break
+            node = parent_node
+        eff_dofs.append(np.array(sorted(dofs), dtype=np.int64))
+    tips = np.empty((len(effectors), 3, 4))
+    for i, e in enumerate(effectors):
+        tips[i, :, :3] = e.tip_rotation
+        tips[i, :, 3] = e.tip_offset
+    return CompiledChain(
+        node_parent=node_parent,
+        node_pre=np.array(pre, dtype=np.float64).reshape(-1, 3, 4),
+        node_kind=np.array(kind, dtype=np.int64),
+        node_axis=np.array(axis, dtype=np.float64).reshape(-1, 3),
+        node_dof=node_dof,
+        link_node=link_node,
+        eff_node=np.array([link_node[e.link] for e in effectors], dtype=np.int64),
+        eff_tip=tips,
+        eff_mode=np.array([MODE_CODES[e.mode] for e in effectors], dtype=np.int64),
+        eff_aim=np.array([e.aim_axis for e in effectors], dtype=np.float64).reshape(-1, 3),
+        eff_weights=np.array([[e.position_weight, e.rotation_weight] for e in effectors]).reshape(-1, 2),
+        eff_dofs=tuple(eff_dofs),
+    )
