@@ -77,7 +77,8 @@ I_SEED = 6
 I_HAS_GOAL = 7
 I_SCALE_H0 = 8
 I_MAX_PASSES = 9
-N_IOPT = 10
+I_METRIC_EVERY = 10
+N_IOPT = 11
 
 # Columns of the pass log the core fills.
 L_START = 0

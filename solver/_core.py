@@ -23,7 +23,7 @@ from ._jit import jit
 
 from . import _codes as C
 from ._clock import now_s
-from ._dispatch import call_goal, call_objective
+from ._dispatch import call_goal, call_metric, call_objective
 from .analyzer import decide
 
 _EPS = 2.220446049250313e-16
@@ -132,7 +132,6 @@ def _line_search(  # type: ignore[no-untyped-def]
     curvature = iopt[C.I_CURVATURE] != 0
     max_fev = iopt[C.I_MAX_FEV]
     c1 = fopt[C.F_C1]
-    c2 = fopt[C.F_C2]
     # With analytic gradients g comes almost free with f (the IK Jacobian), so trial
     # points get both and the accepted point needs no second evaluation.
     trial_grad = grad_mode == C.GRAD_ANALYTIC or curvature
@@ -456,6 +455,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
     has_goal = iopt[C.I_HAS_GOAL] != 0
     scale_h0 = iopt[C.I_SCALE_H0] != 0
     max_passes = min(iopt[C.I_MAX_PASSES], log.shape[0])
+    metric_every = iopt[C.I_METRIC_EVERY]
     gtol = fopt[C.F_GTOL]
     xtol = fopt[C.F_XTOL]
     ftol = fopt[C.F_FTOL]
@@ -498,13 +498,18 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
         for j in range(n):
             if h[i, j] != (1.0 if i == j else 0.0):
                 h_is_identity = False
+    # "Fresh": H = I or the objective's own metric, i.e. no curvature learnt yet
+    # (a caller's H carried from a previous solve is not fresh).
+    h_fresh = h_is_identity
+    if h_is_identity and call_metric(fg, x, data, h):
+        h_is_identity = False
 
     while True:
         # ---- one pass -------------------------------------------------------
         pass_iters = 0
         f_pass_start = f
         nfev_pass_start = counters[0]
-        began_with_identity = h_is_identity
+        began_fresh = h_fresh
         first_step = True
         stall_count = 0
         code = C.RUNNING
@@ -573,8 +578,12 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
                     for i in range(n):
                         h[i, i] = sy / yy
             first_step = False
-            if _bfgs_update(h, s, y, hy, eps_curv):
+            if metric_every > 0 and pass_iters % metric_every == 0 and call_metric(fg, x_new, data, h):
+                # Re-seed H from the objective's metric (every step: damped Gauss-Newton).
                 h_is_identity = False
+            elif _bfgs_update(h, s, y, hy, eps_curv):
+                h_is_identity = False
+                h_fresh = False
             else:
                 n_skipped += 1
             improvement = f - f_trial
@@ -615,8 +624,9 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
             goal,
             max_restarts - n_restarts,
             budget_left and n_passes + 1 < max_passes,
-            began_with_identity,
+            began_fresh,
             f < f_pass_start,
+            start_kind == C.START_RESET_H,
         )
         if n_passes < log.shape[0]:
             row = log[n_passes]
@@ -648,8 +658,12 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
                 for i in range(n):
                     out_x[i] = x[i]
                     out_g[i] = g[i]
-        _set_identity(h)
-        h_is_identity = True
+        h_fresh = True
+        if call_metric(fg, x, data, h):
+            h_is_identity = False
+        else:
+            _set_identity(h)
+            h_is_identity = True
 
     pg = _projected_gradient_norm(out_x, out_g, lo, hi)
     elapsed = now_s() - t_start

@@ -18,26 +18,37 @@ import numba
 from numba.core import types
 from numba.extending import overload
 
-_REGISTRY: list[tuple[Any, Any, Any]] = []  # (numba type of data, fg, goal_fn or None)
+# (numba type of data, fg, goal_fn or None, metric_fn or None)
+_REGISTRY: list[tuple[Any, Any, Any, Any]] = []
 
 
-def register_objective(fg: Any, goal_fn: Any, data_example: tuple[Any, ...]) -> None:
-    """Bind ``fg`` (and an optional goal measure) to the numba type of ``data_example``."""
+def register_objective(
+    fg: Any, goal_fn: Any, data_example: tuple[Any, ...], metric_fn: Any = None
+) -> None:
+    """Bind ``fg`` to the numba type of ``data_example``.
+
+    Args:
+        fg: ``fg(x, g, need_grad, data) -> f``.
+        goal_fn: Optional ``goal_fn(f, x, data) -> m``: the goal is m <= f_goal.
+        data_example: A data tuple of the type the objective will receive.
+        metric_fn: Optional ``metric_fn(x, data, h) -> bool`` that writes an initial
+            inverse Hessian into h at the start of a pass (True when it did).
+    """
     data_type = numba.typeof(data_example)
-    for ty, f, _ in _REGISTRY:
+    for ty, f, _, _ in _REGISTRY:
         if ty == data_type and f is not fg:
             raise ValueError(f"another objective is registered for data type {data_type}")
-    _REGISTRY.append((data_type, fg, goal_fn))
+    _REGISTRY.append((data_type, fg, goal_fn, metric_fn))
 
 
 def registered_for(fg: Any) -> bool:
-    return any(f is fg for _, f, _ in _REGISTRY)
+    return any(f is fg for _, f, _, _ in _REGISTRY)
 
 
-def _lookup(data_type: Any) -> tuple[Any, Any]:
-    for ty, fg, goal in _REGISTRY:
+def _lookup(data_type: Any) -> tuple[Any, Any, Any]:
+    for ty, fg, goal, metric in _REGISTRY:
         if ty == data_type:
-            return fg, goal
+            return fg, goal, metric
     raise TypeError(f"no objective registered for data of type {data_type}")
 
 
@@ -61,7 +72,7 @@ def call_goal(goal_fn: Any, fg: Any, f: float, x: Any, data: Any) -> float:
 def _call_objective_compiled(fg, x, g, need_grad, data):  # type: ignore[no-untyped-def]
     # No annotations: numba compares the overload's parameters with the impl's.
     if isinstance(fg, types.NoneType):
-        bound, _ = _lookup(data)
+        bound = _lookup(data)[0]
 
         def impl_registered(fg, x, g, need_grad, data):  # type: ignore[no-untyped-def]
             return bound(x, g, need_grad, data)
@@ -77,7 +88,7 @@ def _call_objective_compiled(fg, x, g, need_grad, data):  # type: ignore[no-unty
 @overload(call_goal)
 def _call_goal_compiled(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def]
     if isinstance(fg, types.NoneType):
-        _, goal = _lookup(data)
+        goal = _lookup(data)[1]
         if goal is not None:
 
             def impl_goal(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def]
@@ -89,3 +100,29 @@ def _call_goal_compiled(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def
         return f
 
     return impl_f
+
+
+def call_metric(fg: Any, x: Any, data: Any, h: Any) -> bool:
+    """Write the registered initial inverse Hessian at x into h; False if there is none."""
+    if fg is None:
+        metric = _lookup(numba.typeof(data))[2]
+        if metric is not None:
+            return bool(metric(x, data, h))
+    return False
+
+
+@overload(call_metric)
+def _call_metric_compiled(fg, x, data, h):  # type: ignore[no-untyped-def]
+    if isinstance(fg, types.NoneType):
+        metric = _lookup(data)[2]
+        if metric is not None:
+
+            def impl_metric(fg, x, data, h):  # type: ignore[no-untyped-def]
+                return metric(x, data, h)
+
+            return impl_metric
+
+    def impl_none(fg, x, data, h):  # type: ignore[no-untyped-def]
+        return False
+
+    return impl_none

@@ -6,11 +6,14 @@ to the next move. Here the rules are data, a table from (termination, goal statu
 to an ``Action``, so a caller can change them per kind of problem and every
 decision is visible in the result's pass log.
 
-Two guards sit on top of the table, both because the table alone would loop:
-- a continuing action (reset, restart) when a budget is spent becomes STOP;
-- RESET_H after a pass that already began from H = I and did not lower f cannot
-  help, so it escalates: to RESTART_RANDOM when the goal was missed and restarts
-  remain, otherwise to STOP (or ACCEPT when no goal was set).
+Guards sit on top of the table, because the table alone could loop:
+- RESET_H after a pass that began from H = I and did not lower f cannot help;
+- with a goal that is still missed, a second RESET_H in a row (the reset pass
+  itself stalled) is not helping either: a local minimum is crawled along, not left.
+  Both escalate: to RESTART_RANDOM when the goal was missed and restarts remain,
+  otherwise to STOP (ACCEPT when no goal was set);
+- RESTART_RANDOM with no restarts left becomes STOP;
+- a continuing action (reset, restart) when a budget is spent becomes STOP.
 """
 
 from __future__ import annotations
@@ -128,6 +131,7 @@ def decide(
     budget_left: bool,
     pass_began_with_identity: bool,
     pass_improved: bool,
+    pass_was_reset: bool,
 ) -> int:
     """Next action (an ``_codes`` action int) for a pass that ended with ``code``.
 
@@ -139,9 +143,13 @@ def decide(
         budget_left: False once iterations, evaluations or time are spent.
         pass_began_with_identity: The pass started with H = I.
         pass_improved: f at the end of the pass is below f at its start.
+        pass_was_reset: The pass itself began with a RESET_H.
     """
     action = policy[code, goal]
-    if action == C.RESET_H and pass_began_with_identity and not pass_improved:
+    futile = pass_began_with_identity and (
+        not pass_improved or (goal == C.MISSED and pass_was_reset)
+    )
+    if action == C.RESET_H and futile:
         # A reset cannot change anything: H already was I and the pass went nowhere.
         if goal == C.MISSED and restarts_left > 0:
             action = C.RESTART_RANDOM

@@ -56,6 +56,7 @@ def pack_options(
     iopt[C.I_HAS_GOAL] = int(options.f_goal is not None)
     iopt[C.I_SCALE_H0] = int(options.scale_initial_h)
     iopt[C.I_MAX_PASSES] = options.max_passes
+    iopt[C.I_METRIC_EVERY] = options.metric_every
     return fopt, iopt
 
 

@@ -21,6 +21,24 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InvalidModel
+from .kinematics import (
+    ED_AIM,
+    ED_TIP,
+    ED_WIDTH,
+    ED_WP,
+    ED_WR,
+    EI_MODE,
+    EI_NODE,
+    MODE_AIM,
+    MODE_POSE,
+    MODE_POSITION,
+    ND_AXIS,
+    ND_PRE,
+    ND_WIDTH,
+    NODE_FIXED,
+    NODE_ROTATION,
+    NODE_TRANSLATION,
+)
 from .types import Matrix, Vector
 
 # Joints above this many degrees of freedom make a chain's dense BFGS matrix
@@ -276,30 +294,26 @@ class Chain:
 
 @dataclass(frozen=True, slots=True)
 class CompiledChain:
-    """Flat arrays for the numba kinematics; one node per elementary motion.
+    """Flat arrays for the numba kinematics (layout in ``kinematics``' docstring).
 
     A joint becomes: a node carrying origin * Tr(pivot) and its first motion, one node
     per further axis, and a node carrying Tr(-pivot) when the pivot is non-zero.
+    ``ed`` holds the static part of each effector row (tip frame, aim axis, weights).
     """
 
-    node_parent: np.ndarray  # int64[n_nodes], -1 for children of the root
-    node_pre: np.ndarray  # float64[n_nodes, 3, 4], fixed transform before the motion
-    node_kind: np.ndarray  # int64[n_nodes]: 0 fixed, 1 rotation, 2 translation
-    node_axis: np.ndarray  # float64[n_nodes, 3], unit axis in the node frame
-    node_dof: np.ndarray  # int64[n_nodes], variable index or -1
+    ni: np.ndarray  # int64[n_nodes, 3]
+    nd: np.ndarray  # float64[n_nodes, 27]
+    ei: np.ndarray  # int64[n_eff, 3]
+    ed: np.ndarray  # float64[n_eff, 36]
     link_node: dict[str, int]  # link name -> node whose frame is the link frame (-1 root)
-    eff_node: np.ndarray  # int64[n_eff]
-    eff_tip: np.ndarray  # float64[n_eff, 3, 4], tip frame in the link frame
-    eff_mode: np.ndarray  # int64[n_eff]: 0 position, 1 pose, 2 aim
-    eff_aim: np.ndarray  # float64[n_eff, 3]
-    eff_weights: np.ndarray  # float64[n_eff, 2]: position, rotation
     eff_dofs: tuple[np.ndarray, ...]  # per effector, the variables of its chain (terminator-aware)
 
+    @property
+    def n_nodes(self) -> int:
+        return int(self.ni.shape[0])
 
-NODE_FIXED = 0
-NODE_ROTATION = 1
-NODE_TRANSLATION = 2
-MODE_CODES = {EffectorMode.POSITION: 0, EffectorMode.POSE: 1, EffectorMode.AIM: 2}
+
+MODE_CODES = {EffectorMode.POSITION: MODE_POSITION, EffectorMode.POSE: MODE_POSE, EffectorMode.AIM: MODE_AIM}
 
 
 def _check_unit_axis(axis: Vector, joint: str, field: str) -> Vector:
@@ -538,21 +552,23 @@ def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> Comp
                 break
             node = parent_node
         eff_dofs.append(np.array(sorted(dofs), dtype=np.int64))
-    tips = np.empty((len(effectors), 3, 4))
+    n_nodes = len(parent)
+    ni = np.zeros((n_nodes, 3), dtype=np.int64)
+    nd = np.zeros((n_nodes, ND_WIDTH))
+    for k in range(n_nodes):
+        ni[k] = (parent[k], kind[k], dof[k])
+        nd[k, ND_PRE:ND_PRE + 12] = pre[k].reshape(-1)
+        nd[k, ND_AXIS:ND_AXIS + 3] = axis[k]
+    ei = np.zeros((len(effectors), 3), dtype=np.int64)
+    ed = np.zeros((len(effectors), ED_WIDTH))
     for i, e in enumerate(effectors):
-        tips[i, :, :3] = e.tip_rotation
-        tips[i, :, 3] = e.tip_offset
-    return CompiledChain(
-        node_parent=node_parent,
-        node_pre=np.array(pre, dtype=np.float64).reshape(-1, 3, 4),
-        node_kind=np.array(kind, dtype=np.int64),
-        node_axis=np.array(axis, dtype=np.float64).reshape(-1, 3),
-        node_dof=node_dof,
-        link_node=link_node,
-        eff_node=np.array([link_node[e.link] for e in effectors], dtype=np.int64),
-        eff_tip=tips,
-        eff_mode=np.array([MODE_CODES[e.mode] for e in effectors], dtype=np.int64),
-        eff_aim=np.array([e.aim_axis for e in effectors], dtype=np.float64).reshape(-1, 3),
-        eff_weights=np.array([[e.position_weight, e.rotation_weight] for e in effectors]).reshape(-1, 2),
-        eff_dofs=tuple(eff_dofs),
-    )
+        ei[i, EI_NODE] = link_node[e.link]
+        ei[i, EI_MODE] = MODE_CODES[e.mode]
+        tip = np.empty((3, 4))
+        tip[:, :3] = e.tip_rotation
+        tip[:, 3] = e.tip_offset
+        ed[i, ED_TIP:ED_TIP + 12] = tip.reshape(-1)
+        ed[i, ED_AIM:ED_AIM + 3] = e.aim_axis
+        ed[i, ED_WP] = e.position_weight
+        ed[i, ED_WR] = e.rotation_weight
+    return CompiledChain(ni=ni, nd=nd, ei=ei, ed=ed, link_node=link_node, eff_dofs=tuple(eff_dofs))

@@ -26,19 +26,25 @@ from .bfgs import pack_options, unpack_pass_log
 from .chain import Chain, EffectorMode
 from .errors import DimensionMismatch, InvalidProblem
 from .kinematics import (
-    D_EFF_ACTIVE,
-    D_EFF_W,
-    D_Q_REF,
-    D_REG,
-    D_TGT_DIR,
-    D_TGT_POS,
-    D_TGT_ROT,
-    D_TOL,
-    REG_LIMIT,
-    REG_MARGIN,
-    REG_POSTURE,
+    DD_HI,
+    DD_ROWS,
+    DD_LO,
+    DD_QREF,
+    ED_ERR_P,
+    ED_ERR_R,
+    ED_TDIR,
+    ED_TOL_P,
+    ED_TOL_R,
+    ED_TPOS,
+    ED_TROT,
+    ED_WP,
+    EI_ACTIVE,
+    MISC_LIMIT,
+    MISC_MARGIN,
+    MISC_POSTURE,
     effector_errors,
     ik_goal,
+    ik_metric,
     ik_objective,
 )
 from .termination import Termination
@@ -48,7 +54,10 @@ from .types import Matrix, MinimizeOptions, PassRecord, Vector
 @jit
 def _solve_core(data, x0, lo, hi, h, fopt, iopt, policy, log, out_x, out_g):  # type: ignore[no-untyped-def]
     # fg=None: the core binds the objective registered for this data type (cacheable).
-    return run_solver(None, None, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x, out_g)
+    # The final errors are computed here too: one compiled call per frame, not two.
+    out = run_solver(None, None, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x, out_g)
+    measure = effector_errors(out_x, data)
+    return out, measure
 
 
 class IKStatus(enum.StrEnum):
@@ -101,6 +110,11 @@ class IKOptions:
         scale_initial_h: Nocedal-Wright initial scaling of H at each pass.
         curvature: The article's curvature condition in the line search.
         carry_hessian: ``track`` starts each frame from the last frame's H.
+        metric_every: Re-seed H from the exact Gauss-Newton metric (2 J^T W J + mu I)^-1
+            every this many iterations (1: damped Gauss-Newton steps under the same
+            line search, multi-pass and analyzer; 0: the article's BFGS, with the
+            metric only at the start of each pass). 1 is the default because it
+            took ~10 iterations against ~37 on 7-DOF pose problems (bench/ik.py).
         policy: The analyzer's table.
     """
 
@@ -120,6 +134,7 @@ class IKOptions:
     scale_initial_h: bool = True
     curvature: bool = False
     carry_hessian: bool = False
+    metric_every: int = 1
     policy: AnalyzerPolicy = field(default_factory=AnalyzerPolicy.default)
 
     def __post_init__(self) -> None:
@@ -154,6 +169,7 @@ class IKOptions:
             time_budget_s=budget,
             scale_initial_h=self.scale_initial_h,
             max_passes=min(4 * (self.max_restarts + 1) + 8, 512),
+            metric_every=self.metric_every,
         )
 
 
@@ -235,35 +251,24 @@ class IKSolver:
         self.options = options or IKOptions()
         cc = chain.compiled
         n = chain.n_dof
-        n_eff = len(chain.effectors)
-        n_nodes = cc.node_parent.shape[0]
-        self._tgt_pos = np.zeros((n_eff, 3))
-        self._tgt_rot = np.tile(np.eye(3), (n_eff, 1, 1))
-        self._tgt_dir = np.zeros((n_eff, 3))
-        self._tgt_dir[:, 2] = 1.0
-        self._active = np.zeros(n_eff, dtype=np.int64)
-        self._weights = cc.eff_weights.copy()
-        self._tol = np.zeros((n_eff, 2))
-        self._reg = np.zeros(3)
-        self._q_ref = np.zeros(n)
-        self._lo = chain.lower.copy()
-        self._hi = chain.upper.copy()
-        self._data = (
-            cc.node_parent, cc.node_pre, cc.node_kind, cc.node_axis, cc.node_dof,
-            cc.eff_node, cc.eff_tip, cc.eff_mode, cc.eff_aim, self._weights,
-            self._tgt_pos, self._tgt_rot, self._tgt_dir, self._active, self._tol, self._reg,
-            self._q_ref, self._lo, self._hi,
-            np.zeros((max(n_nodes, 1), 3, 3)), np.zeros((max(n_nodes, 1), 3)),
-            np.zeros(1), np.full(n, np.nan),
-            np.zeros((2, 3, 3)), np.zeros((3, 3)), np.zeros((2, n_eff)), np.zeros(n),
-        )
+        self._ei = cc.ei.copy()
+        self._ed = cc.ed.copy()
+        self._ed[:, ED_TROT:ED_TROT + 9] = np.eye(3).reshape(-1)
+        self._ed[:, ED_TDIR + 2] = 1.0
+        self._dd = np.zeros((DD_ROWS, n))
+        self._dd[DD_LO] = chain.lower
+        self._dd[DD_HI] = chain.upper
+        self._misc = np.zeros(4)
+        self._data = (cc.ni, cc.nd.copy(), self._ei, self._ed, self._dd, self._misc)
         _register_once(self._data)
         self._chain_dofs = cc.eff_dofs
-        self._pos_err = np.zeros(n_eff)
-        self._rot_err = np.zeros(n_eff)
-        self._policy_cache: tuple[AnalyzerPolicy, np.ndarray] | None = None
+        self._every_effector_moves_all = all(d.shape[0] == n for d in cc.eff_dofs)
+        self._mid = chain.mid_limits()
+        self._identity = np.eye(n)
+        self._packed: dict[int, tuple[IKOptions, MinimizeOptions, np.ndarray, np.ndarray, np.ndarray]] = {}
         self._rng = np.random.default_rng(0)
-        self.q = chain.mid_limits()  # the stream's current pose
+        self._seeds = np.empty(0, dtype=np.int64)
+        self.q = self._mid.copy()  # the stream's current pose
         self._h: Matrix | None = None
 
     # -- public API ------------------------------------------------------------
@@ -290,14 +295,14 @@ class IKSolver:
             DimensionMismatch: seed of the wrong length.
         """
         opts = options or self.options
-        q0 = self.chain.mid_limits() if seed is None else self._check_seed(seed)
+        q0 = self._mid if seed is None else self._check_seed(seed)
         self._load_targets(targets, opts)
-        self._reg[REG_POSTURE] = opts.posture_weight
-        self._reg[REG_LIMIT] = opts.limit_weight
-        self._reg[REG_MARGIN] = opts.limit_margin
-        self._q_ref[:] = q0
+        self._misc[MISC_POSTURE] = opts.posture_weight
+        self._misc[MISC_LIMIT] = opts.limit_weight
+        self._misc[MISC_MARGIN] = opts.limit_margin
+        self._dd[DD_QREF] = q0
         lo, hi = self._free_bounds(q0)
-        return self._run(q0, lo, hi, opts, rng or self._rng, initial_inverse_hessian)
+        return self._run(q0, lo, hi, opts, rng, initial_inverse_hessian)
 
     def track(self, targets: Sequence[Target], *, options: IKOptions | None = None) -> IKResult:
         """Solve the next frame of a stream, warm-started from the previous answer.
@@ -320,7 +325,7 @@ class IKSolver:
     def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:
         """Pose errors of q against targets with the solver's tolerances (no solving)."""
         self._load_targets(targets, self.options)
-        effector_errors(self._check_seed(q), self._data, self._pos_err, self._rot_err)
+        effector_errors(self._check_seed(q), self._data)
         return self._effector_report(self.options)
 
     # -- internals -------------------------------------------------------------
@@ -334,25 +339,27 @@ class IKSolver:
 
     def _load_targets(self, targets: Sequence[Target], opts: IKOptions) -> None:
         chain = self.chain
-        self._active[:] = 0
-        self._weights[:] = chain.compiled.eff_weights
-        self._tol[:, 0] = opts.position_tolerance_m
-        self._tol[:, 1] = opts.rotation_tolerance_rad
+        ei = self._ei
+        ed = self._ed
+        ei[:, EI_ACTIVE] = 0
+        ed[:, ED_WP:ED_WP + 2] = chain.compiled.ed[:, ED_WP:ED_WP + 2]
+        ed[:, ED_TOL_P] = opts.position_tolerance_m
+        ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
         for t in targets:
             i = chain.effector_index(t.effector)
-            if self._active[i]:
+            if ei[i, EI_ACTIVE]:
                 raise InvalidProblem(f"two targets for effector {t.effector!r}")
             eff = chain.effectors[i]
             if t.position is not None:
-                self._tgt_pos[i] = _vec3(t.position, t.effector, "position")
+                ed[i, ED_TPOS:ED_TPOS + 3] = _vec3(t.position, t.effector, "position")
             elif eff.mode is EffectorMode.POSITION:
                 raise InvalidProblem(f"target for {t.effector!r} needs a position")
             else:
-                self._weights[i, 0] = 0.0
+                ed[i, ED_WP] = 0.0
             if eff.mode is EffectorMode.POSE:
                 if t.rotation is None:
                     raise InvalidProblem(f"target for {t.effector!r} (pose) needs a rotation")
-                self._tgt_rot[i] = _rotation(t.rotation, t.effector)
+                ed[i, ED_TROT:ED_TROT + 9] = _rotation(t.rotation, t.effector).reshape(-1)
             elif eff.mode is EffectorMode.AIM:
                 if t.direction is None:
                     raise InvalidProblem(f"target for {t.effector!r} (aim) needs a direction")
@@ -360,17 +367,15 @@ class IKSolver:
                 norm = float(np.linalg.norm(d))
                 if norm < 1e-12:
                     raise InvalidProblem(f"target direction for {t.effector!r} must not be zero")
-                self._tgt_dir[i] = d / norm
-            self._active[i] = 1
+                ed[i, ED_TDIR:ED_TDIR + 3] = d / norm
+            ei[i, EI_ACTIVE] = 1
 
     def _free_bounds(self, q0: Vector) -> tuple[Vector, Vector]:
         """Limits for this frame: variables outside every targeted chain are frozen at q0."""
-        active = np.flatnonzero(self._active)
-        lo = self._lo
-        hi = self._hi
-        if len(active) == len(self._chain_dofs) and all(
-            d.shape[0] == self.chain.n_dof for d in self._chain_dofs
-        ):
+        active = np.flatnonzero(self._ei[:, EI_ACTIVE])
+        lo = self.chain.lower
+        hi = self.chain.upper
+        if self._every_effector_moves_all and active.shape[0] > 0:
             return lo, hi
         free = np.zeros(self.chain.n_dof, dtype=bool)
         for i in active:
@@ -378,33 +383,52 @@ class IKSolver:
         q = np.clip(q0, lo, hi)
         return np.where(free, lo, q), np.where(free, hi, q)
 
-    def _policy_array(self, policy: AnalyzerPolicy) -> np.ndarray:
-        if self._policy_cache is None or self._policy_cache[0] is not policy:
-            self._policy_cache = (policy, policy.as_array())
-        return self._policy_cache[1]
+    def _packed_options(
+        self, opts: IKOptions
+    ) -> tuple[MinimizeOptions, np.ndarray, np.ndarray, np.ndarray]:
+        """Option vectors and policy table, built once per IKOptions object."""
+        hit = self._packed.get(id(opts))
+        if hit is None or hit[0] is not opts:
+            mopts = opts.minimize_options()
+            fopt, iopt = pack_options(mopts, seed=0, started_at=0.0)
+            if len(self._packed) > 32:
+                self._packed.clear()
+            hit = (opts, mopts, fopt, iopt, opts.policy.as_array())
+            self._packed[id(opts)] = hit
+        return hit[1], hit[2], hit[3], hit[4]
+
+    def _next_seed(self, rng: np.random.Generator | None) -> int:
+        if rng is not None:
+            return int(rng.integers(0, 2**31 - 1))
+        if self._seeds.shape[0] == 0:
+            # Drawing one integer costs ~4 us; a batch costs about the same.
+            self._seeds = self._rng.integers(0, 2**31 - 1, size=256)
+        seed = int(self._seeds[-1])
+        self._seeds = self._seeds[:-1]
+        return seed
 
     def _run(
-        self, q0: Vector, lo: Vector, hi: Vector, opts: IKOptions, rng: np.random.Generator,
+        self, q0: Vector, lo: Vector, hi: Vector, opts: IKOptions, rng: np.random.Generator | None,
         h0: Matrix | None,
     ) -> IKResult:
         n = self.chain.n_dof
-        mopts = opts.minimize_options()
-        seed = int(rng.integers(0, 2**31 - 1))
-        fopt, iopt = pack_options(mopts, seed=seed, started_at=time.perf_counter())
-        h = np.eye(n) if h0 is None else h0.copy()
+        mopts, fopt, iopt, policy = self._packed_options(opts)
+        iopt[C.I_SEED] = self._next_seed(rng)
+        budget = opts.time_budget_us
+        fopt[C.F_DEADLINE] = math.inf if budget is None else time.perf_counter() + budget * 1e-6
+        h = self._identity.copy() if h0 is None else h0.copy()
         log = np.zeros((mopts.max_passes, C.N_LOG))
         out_x = np.empty(n)
         out_g = np.empty(n)
         if n == 0:
             # An all-fixed chain: nothing to solve, only errors to report.
-            measure = effector_errors(q0, self._data, self._pos_err, self._rot_err)
+            measure = effector_errors(q0, self._data)
             status = IKStatus.SOLVED if measure <= 1.0 else IKStatus.NOT_REACHED
             code = Termination.GOAL_REACHED if measure <= 1.0 else Termination.GTOL
-            return self._result(q0, status, code, 0, 0, 0, 0, 0.0, (), h, opts)
-        f, measure, _, code, nit, nfev, _, npass, nrest, _, elapsed = _solve_core(
-            self._data, q0, lo, hi, h, fopt, iopt, self._policy_array(opts.policy), log, out_x, out_g
+            return self._result(q0.copy(), status, code, 0, 0, 0, 0, 0.0, (), h, opts)
+        (f, _, _, code, nit, nfev, _, npass, nrest, _, elapsed), measure = _solve_core(
+            self._data, q0, lo, hi, h, fopt, iopt, policy, log, out_x, out_g
         )
-        measure = effector_errors(out_x, self._data, self._pos_err, self._rot_err)
         termination = C.TERMINATIONS[int(code)]
         if measure <= 1.0:
             status = IKStatus.SOLVED
@@ -422,10 +446,11 @@ class IKSolver:
     def _effector_report(self, opts: IKOptions) -> tuple[EffectorError, ...]:
         out = []
         for i, eff in enumerate(self.chain.effectors):
-            if not self._active[i]:
+            if not self._ei[i, EI_ACTIVE]:
                 continue
-            pos = float(self._pos_err[i]) if self._weights[i, 0] > 0.0 else None
-            rot = float(self._rot_err[i]) if eff.mode is not EffectorMode.POSITION else None
+            row = self._ed[i]
+            pos = float(row[ED_ERR_P]) if row[ED_WP] > 0.0 else None
+            rot = float(row[ED_ERR_R]) if eff.mode is not EffectorMode.POSITION else None
             ok = (pos is None or pos <= opts.position_tolerance_m) and (
                 rot is None or rot <= opts.rotation_tolerance_rad
             )
@@ -452,7 +477,7 @@ def _register_once(data: tuple[np.ndarray, ...]) -> None:
     """Bind the IK objective to the IK data tuple's type (every chain shares it)."""
     global _REGISTERED
     if not _REGISTERED:
-        register_objective(ik_objective, ik_goal, data)
+        register_objective(ik_objective, ik_goal, data, ik_metric)
         _REGISTERED = True
 
 

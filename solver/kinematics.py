@@ -1,15 +1,34 @@
 """Compiled forward kinematics, the IK objective with its exact gradient, and pose errors.
 
-All functions take the flat arrays of ``chain.CompiledChain`` (bundled, with the
-targets and scratch space, in the ``data`` tuple built by ``ik.py``). The gradient
-needs no Jacobian matrix: for each effector we walk its ancestors once and
-accumulate J^T r column by column (revolute column: a x (p - o) for position and a
-for orientation; prismatic: a and 0).
+Data layout. Everything a solve needs travels in one tuple of six arrays (``IKData``
+in ``ik.py`` builds it): few arrays because every array crossing a compiled call
+boundary costs reference counting, and numba's dispatcher type-checks each one.
+
+    NI  int64[n_nodes, 3]     parent node (-1: root), kind (0 fixed, 1 rotation,
+                              2 translation), variable index (-1: none)
+    ND  float64[n_nodes, 27]  fixed transform before the motion (3x4, row-major,
+                              0:12), unit axis (12:15), world rotation (15:24, row-
+                              major) and origin (24:27) written by FK
+    EI  int64[n_eff, 3]       node, mode (0 position, 1 pose, 2 aim), active flag
+    ED  float64[n_eff, 36]    tip frame in the link (3x4, 0:12), aim axis (12:15),
+                              weights w_p, w_r (15, 16), target position (17:20),
+                              target rotation (20:29), target direction (29:32),
+                              tolerances (32, 33), last errors [m], [rad] (34, 35)
+    DD  float64[11, n]        reference pose, lower, upper, last q evaluated,
+                              gradient scratch, 6 rows of Jacobian scratch
+    MISC float64[4]           posture weight, limit weight, limit margin, goal
+                              measure of the last q evaluated
+
+The gradient needs no Jacobian matrix: for each effector we walk its ancestors once
+and accumulate J^T r column by column (revolute column: a x (p - o) for position and
+a for orientation; prismatic: a and 0).
 
 Orientation error is the rotation vector phi = log(R_e R_t^T) (world frame). With
 R = exp([phi]) and dR/dt = [w] R, dphi = J_l^-1(phi) w, and phi^T J_l^-1(phi) = phi^T,
 so d|phi|^2/dq = 2 phi^T J_w exactly (J_w the angular Jacobian): the same cheap
 form as for position, with no approximation of the log map's derivative.
+
+Nothing here allocates: the objective runs thousands of times per second per session.
 """
 
 from __future__ import annotations
@@ -17,75 +36,91 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from ._jit import jit, jit_inline
 
-from .chain import NODE_ROTATION, NODE_TRANSLATION
+# NI columns
+NI_PARENT = 0
+NI_KIND = 1
+NI_DOF = 2
+# ND columns
+ND_PRE = 0
+ND_AXIS = 12
+ND_R = 15
+ND_T = 24
+ND_WIDTH = 27
+# EI columns
+EI_NODE = 0
+EI_MODE = 1
+EI_ACTIVE = 2
+# ED columns
+ED_TIP = 0
+ED_AIM = 12
+ED_WP = 15
+ED_WR = 16
+ED_TPOS = 17
+ED_TROT = 20
+ED_TDIR = 29
+ED_TOL_P = 32
+ED_TOL_R = 33
+ED_ERR_P = 34
+ED_ERR_R = 35
+ED_WIDTH = 36
+# DD rows
+DD_QREF = 0
+DD_LO = 1
+DD_HI = 2
+DD_XLAST = 3
+DD_GSCRATCH = 4
+DD_J = 5  # rows 5..10: one effector's weighted Jacobian (metric)
+DD_ROWS = 11
+# Above this many variables the Gauss-Newton metric (O(n^3)) costs more than it saves.
+METRIC_MAX_DOF = 64
+# MISC
+MISC_POSTURE = 0
+MISC_LIMIT = 1
+MISC_MARGIN = 2
+MISC_GOAL = 3
 
-# Indices into the data tuple (see ik._problem_data); numba needs literal indices.
-D_PARENT = 0
-D_PRE = 1
-D_KIND = 2
-D_AXIS = 3
-D_DOF = 4
-D_EFF_NODE = 5
-D_EFF_TIP = 6
-D_EFF_MODE = 7
-D_EFF_AIM = 8
-D_EFF_W = 9
-D_TGT_POS = 10
-D_TGT_ROT = 11
-D_TGT_DIR = 12
-D_EFF_ACTIVE = 13
-D_TOL = 14
-D_REG = 15
-D_Q_REF = 16
-D_LO = 17
-D_HI = 18
-D_WORK_R = 19
-D_WORK_T = 20
-D_SCRATCH = 21
-D_X_LAST = 22
-D_MAT = 23  # float64[2, 3, 3] scratch: effector rotation, error rotation
-D_VEC = 24  # float64[3, 3] scratch: effector position, rotation vector, position residual
-D_ERR = 25  # float64[2, n_eff]: position and rotation error per effector
-D_G_SCRATCH = 26  # float64[n]: gradient buffer for value-only re-evaluations
-
+NODE_FIXED = 0
+NODE_ROTATION = 1
+NODE_TRANSLATION = 2
 MODE_POSITION = 0
 MODE_POSE = 1
 MODE_AIM = 2
 
-REG_POSTURE = 0  # weight of sum (q - q_ref)^2
-REG_LIMIT = 1  # weight of the limit-margin penalty
-REG_MARGIN = 2  # margin as a fraction of each variable's range
-
 
 @jit
-def forward_kinematics(q, parent, pre, kind, axis, dof, out_r, out_t):  # type: ignore[no-untyped-def]
-    """World rotation (n_nodes, 3, 3) and origin (n_nodes, 3) of every node for q.
-
-    Allocation-free on purpose: this runs inside the objective, which the core calls
-    through a function argument, and numba can neither cache nor cheaply run a
-    callee that allocates there.
-    """
-    for k in range(parent.shape[0]):
-        p = parent[k]
+def forward_kinematics(q, ni, nd):  # type: ignore[no-untyped-def]
+    """World rotation and origin of every node for q, written into nd[:, 15:27]."""
+    for k in range(ni.shape[0]):
+        p = ni[k, NI_PARENT]
         if p < 0:
             for i in range(3):
                 for j in range(3):
-                    out_r[k, i, j] = pre[k, i, j]
-                out_t[k, i] = pre[k, i, 3]
+                    nd[k, ND_R + 3 * i + j] = nd[k, ND_PRE + 4 * i + j]
+                nd[k, ND_T + i] = nd[k, ND_PRE + 4 * i + 3]
         else:
             for i in range(3):
-                p0, p1, p2 = out_r[p, i, 0], out_r[p, i, 1], out_r[p, i, 2]
+                p0 = nd[p, ND_R + 3 * i]
+                p1 = nd[p, ND_R + 3 * i + 1]
+                p2 = nd[p, ND_R + 3 * i + 2]
                 for j in range(3):
-                    out_r[k, i, j] = p0 * pre[k, 0, j] + p1 * pre[k, 1, j] + p2 * pre[k, 2, j]
-                out_t[k, i] = p0 * pre[k, 0, 3] + p1 * pre[k, 1, 3] + p2 * pre[k, 2, 3] + out_t[p, i]
-        d = dof[k]
+                    nd[k, ND_R + 3 * i + j] = (
+                        p0 * nd[k, ND_PRE + j] + p1 * nd[k, ND_PRE + 4 + j] + p2 * nd[k, ND_PRE + 8 + j]
+                    )
+                nd[k, ND_T + i] = (
+                    p0 * nd[k, ND_PRE + 3] + p1 * nd[k, ND_PRE + 7] + p2 * nd[k, ND_PRE + 11]
+                    + nd[p, ND_T + i]
+                )
+        d = ni[k, NI_DOF]
         if d < 0:
             continue
-        if kind[k] == NODE_ROTATION:
-            # out_r[k] <- out_r[k] @ Rot(axis, q) (Rodrigues).
-            ux, uy, uz = axis[k, 0], axis[k, 1], axis[k, 2]
+        ux = nd[k, ND_AXIS]
+        uy = nd[k, ND_AXIS + 1]
+        uz = nd[k, ND_AXIS + 2]
+        if ni[k, NI_KIND] == NODE_ROTATION:
+            # R <- R @ Rot(axis, q) (Rodrigues).
             c = math.cos(q[d])
             s = math.sin(q[d])
             v = 1.0 - c
@@ -99,205 +134,192 @@ def forward_kinematics(q, parent, pre, kind, axis, dof, out_r, out_t):  # type: 
             r21 = uz * uy * v + ux * s
             r22 = c + uz * uz * v
             for i in range(3):
-                a0, a1, a2 = out_r[k, i, 0], out_r[k, i, 1], out_r[k, i, 2]
-                out_r[k, i, 0] = a0 * r00 + a1 * r10 + a2 * r20
-                out_r[k, i, 1] = a0 * r01 + a1 * r11 + a2 * r21
-                out_r[k, i, 2] = a0 * r02 + a1 * r12 + a2 * r22
-        elif kind[k] == NODE_TRANSLATION:
+                a0 = nd[k, ND_R + 3 * i]
+                a1 = nd[k, ND_R + 3 * i + 1]
+                a2 = nd[k, ND_R + 3 * i + 2]
+                nd[k, ND_R + 3 * i] = a0 * r00 + a1 * r10 + a2 * r20
+                nd[k, ND_R + 3 * i + 1] = a0 * r01 + a1 * r11 + a2 * r21
+                nd[k, ND_R + 3 * i + 2] = a0 * r02 + a1 * r12 + a2 * r22
+        elif ni[k, NI_KIND] == NODE_TRANSLATION:
             for i in range(3):
-                out_t[k, i] += (
-                    out_r[k, i, 0] * axis[k, 0] + out_r[k, i, 1] * axis[k, 1] + out_r[k, i, 2] * axis[k, 2]
+                nd[k, ND_T + i] += (
+                    nd[k, ND_R + 3 * i] * ux + nd[k, ND_R + 3 * i + 1] * uy + nd[k, ND_R + 3 * i + 2] * uz
                 ) * q[d]
 
 
 @jit_inline
-def effector_frame(e, node, tip, work_r, work_t, r_out, p_out):  # type: ignore[no-untyped-def]
-    """World rotation and position of effector e's tip frame."""
+def effector_frame(e, ei, ed, nd):  # type: ignore[no-untyped-def]
+    """World tip frame of effector e: (r00..r22, px, py, pz) as 12 scalars."""
+    node = ei[e, EI_NODE]
     if node < 0:
-        for i in range(3):
-            for j in range(3):
-                r_out[i, j] = tip[e, i, j]
-            p_out[i] = tip[e, i, 3]
-        return
-    for i in range(3):
-        for j in range(3):
-            r_out[i, j] = (
-                work_r[node, i, 0] * tip[e, 0, j]
-                + work_r[node, i, 1] * tip[e, 1, j]
-                + work_r[node, i, 2] * tip[e, 2, j]
-            )
-        p_out[i] = (
-            work_r[node, i, 0] * tip[e, 0, 3]
-            + work_r[node, i, 1] * tip[e, 1, 3]
-            + work_r[node, i, 2] * tip[e, 2, 3]
-            + work_t[node, i]
+        return (
+            ed[e, 0], ed[e, 1], ed[e, 2], ed[e, 4], ed[e, 5], ed[e, 6], ed[e, 8], ed[e, 9], ed[e, 10],
+            ed[e, 3], ed[e, 7], ed[e, 11],
         )
+    a00 = nd[node, ND_R]
+    a01 = nd[node, ND_R + 1]
+    a02 = nd[node, ND_R + 2]
+    a10 = nd[node, ND_R + 3]
+    a11 = nd[node, ND_R + 4]
+    a12 = nd[node, ND_R + 5]
+    a20 = nd[node, ND_R + 6]
+    a21 = nd[node, ND_R + 7]
+    a22 = nd[node, ND_R + 8]
+    b00, b01, b02, b03 = ed[e, 0], ed[e, 1], ed[e, 2], ed[e, 3]
+    b10, b11, b12, b13 = ed[e, 4], ed[e, 5], ed[e, 6], ed[e, 7]
+    b20, b21, b22, b23 = ed[e, 8], ed[e, 9], ed[e, 10], ed[e, 11]
+    return (
+        a00 * b00 + a01 * b10 + a02 * b20,
+        a00 * b01 + a01 * b11 + a02 * b21,
+        a00 * b02 + a01 * b12 + a02 * b22,
+        a10 * b00 + a11 * b10 + a12 * b20,
+        a10 * b01 + a11 * b11 + a12 * b21,
+        a10 * b02 + a11 * b12 + a12 * b22,
+        a20 * b00 + a21 * b10 + a22 * b20,
+        a20 * b01 + a21 * b11 + a22 * b21,
+        a20 * b02 + a21 * b12 + a22 * b22,
+        a00 * b03 + a01 * b13 + a02 * b23 + nd[node, ND_T],
+        a10 * b03 + a11 * b13 + a12 * b23 + nd[node, ND_T + 1],
+        a20 * b03 + a21 * b13 + a22 * b23 + nd[node, ND_T + 2],
+    )
 
 
 @jit_inline
-def rotation_log(r, out):  # type: ignore[no-untyped-def]
-    """Rotation vector phi with exp([phi]) = r, |phi| in [0, pi]; returns |phi|."""
-    c = 0.5 * (r[0, 0] + r[1, 1] + r[2, 2] - 1.0)
-    if c > 1.0:
-        c = 1.0
-    elif c < -1.0:
-        c = -1.0
-    vx = 0.5 * (r[2, 1] - r[1, 2])
-    vy = 0.5 * (r[0, 2] - r[2, 0])
-    vz = 0.5 * (r[1, 0] - r[0, 1])
+def rotation_log(r00, r01, r02, r10, r11, r12, r20, r21, r22):  # type: ignore[no-untyped-def]
+    """Rotation vector phi with exp([phi]) = R, |phi| in [0, pi]: (phi_x, phi_y, phi_z, |phi|)."""
+    c = 0.5 * (r00 + r11 + r22 - 1.0)
+    c = min(1.0, max(-1.0, c))
+    vx = 0.5 * (r21 - r12)
+    vy = 0.5 * (r02 - r20)
+    vz = 0.5 * (r10 - r01)
     s = math.sqrt(vx * vx + vy * vy + vz * vz)
     theta = math.atan2(s, c)
     if theta < 1e-6:
         k = 1.0 + theta * theta / 6.0  # theta / sin(theta), series
-        out[0] = vx * k
-        out[1] = vy * k
-        out[2] = vz * k
-    elif theta < math.pi - 1e-4:
+        return vx * k, vy * k, vz * k, theta
+    if theta < math.pi - 1e-4:
         k = theta / s
-        out[0] = vx * k
-        out[1] = vy * k
-        out[2] = vz * k
+        return vx * k, vy * k, vz * k, theta
+    # Near pi, sin(theta) carries no axis information: use (R + I) / 2 ~ a a^T.
+    if r00 >= r11 and r00 >= r22:
+        ax, ay, az = r00 + 1.0, r10, r20
+    elif r11 >= r22:
+        ax, ay, az = r01, r11 + 1.0, r21
     else:
-        # Near pi, sin(theta) carries no axis information: use (R + I) / 2 ~ a a^T.
-        best = 0
-        for i in range(1, 3):
-            if r[i, i] > r[best, best]:
-                best = i
-        col0 = 0.5 * (r[0, best] + (1.0 if best == 0 else 0.0))
-        col1 = 0.5 * (r[1, best] + (1.0 if best == 1 else 0.0))
-        col2 = 0.5 * (r[2, best] + (1.0 if best == 2 else 0.0))
-        norm = math.sqrt(col0 * col0 + col1 * col1 + col2 * col2)
-        ax, ay, az = col0 / norm, col1 / norm, col2 / norm
-        if ax * vx + ay * vy + az * vz < 0.0:
-            ax, ay, az = -ax, -ay, -az
-        out[0] = ax * theta
-        out[1] = ay * theta
-        out[2] = az * theta
-    return theta
+        ax, ay, az = r02, r12, r22 + 1.0
+    norm = math.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax / norm, ay / norm, az / norm
+    if ax * vx + ay * vy + az * vz < 0.0:
+        ax, ay, az = -ax, -ay, -az
+    return ax * theta, ay * theta, az * theta, theta
 
 
 @jit_inline
-def _effector_terms(q, g, need_grad, data, pos_err, rot_err):  # type: ignore[no-untyped-def]
-    """Pose part of f (and of g); fills per-effector errors [m] and [rad]."""
-    parent = data[D_PARENT]
-    kind = data[D_KIND]
-    axis = data[D_AXIS]
-    dof = data[D_DOF]
-    eff_node = data[D_EFF_NODE]
-    tip = data[D_EFF_TIP]
-    mode = data[D_EFF_MODE]
-    aim = data[D_EFF_AIM]
-    weights = data[D_EFF_W]
-    tgt_pos = data[D_TGT_POS]
-    tgt_rot = data[D_TGT_ROT]
-    tgt_dir = data[D_TGT_DIR]
-    active = data[D_EFF_ACTIVE]
-    work_r = data[D_WORK_R]
-    work_t = data[D_WORK_T]
-    forward_kinematics(q, parent, data[D_PRE], kind, axis, dof, work_r, work_t)
-    mats = data[D_MAT]
-    vecs = data[D_VEC]
-    re = mats[0]
-    rerr = mats[1]
-    pe = vecs[0]
-    phi = vecs[1]
-    rp = vecs[2]
+def _effector_terms(q, g, need_grad, ni, nd, ei, ed):  # type: ignore[no-untyped-def]
+    """Pose part of f (and of g); stores each effector's errors in ed[:, 34:36]."""
+    forward_kinematics(q, ni, nd)
     f = 0.0
-    for e in range(eff_node.shape[0]):
-        pos_err[e] = 0.0
-        rot_err[e] = 0.0
-        if active[e] == 0:
+    for e in range(ei.shape[0]):
+        ed[e, ED_ERR_P] = 0.0
+        ed[e, ED_ERR_R] = 0.0
+        if ei[e, EI_ACTIVE] == 0:
             continue
-        node = eff_node[e]
-        effector_frame(e, node, tip, work_r, work_t, re, pe)
-        wp = weights[e, 0]
-        wr = weights[e, 1]
-        m = mode[e]
-        for i in range(3):
-            rp[i] = pe[i] - tgt_pos[e, i]
-        pos_err[e] = math.sqrt(rp[0] * rp[0] + rp[1] * rp[1] + rp[2] * rp[2])
-        f += wp * pos_err[e] * pos_err[e]
-        ax = 0.0
-        ay = 0.0
-        az = 0.0
-        if m == MODE_POSE:
-            for i in range(3):
-                for j in range(3):
-                    rerr[i, j] = (
-                        re[i, 0] * tgt_rot[e, j, 0] + re[i, 1] * tgt_rot[e, j, 1] + re[i, 2] * tgt_rot[e, j, 2]
-                    )
-            rot_err[e] = rotation_log(rerr, phi)
-            f += wr * rot_err[e] * rot_err[e]
-        elif m == MODE_AIM:
-            ax = re[0, 0] * aim[e, 0] + re[0, 1] * aim[e, 1] + re[0, 2] * aim[e, 2]
-            ay = re[1, 0] * aim[e, 0] + re[1, 1] * aim[e, 1] + re[1, 2] * aim[e, 2]
-            az = re[2, 0] * aim[e, 0] + re[2, 1] * aim[e, 1] + re[2, 2] * aim[e, 2]
-            dx = ax - tgt_dir[e, 0]
-            dy = ay - tgt_dir[e, 1]
-            dz = az - tgt_dir[e, 2]
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = effector_frame(e, ei, ed, nd)
+        wp = ed[e, ED_WP]
+        wr = ed[e, ED_WR]
+        mode = ei[e, EI_MODE]
+        rx = px - ed[e, ED_TPOS]
+        ry = py - ed[e, ED_TPOS + 1]
+        rz = pz - ed[e, ED_TPOS + 2]
+        dist2 = rx * rx + ry * ry + rz * rz
+        ed[e, ED_ERR_P] = math.sqrt(dist2)
+        f += wp * dist2
+        # (ox, oy, oz): the orientation term's gradient is 2 w_r w . o for angular velocity w.
+        ox = 0.0
+        oy = 0.0
+        oz = 0.0
+        if mode == MODE_POSE:
+            t = ED_TROT
+            # R_err = R_e R_t^T
+            e00 = r00 * ed[e, t] + r01 * ed[e, t + 1] + r02 * ed[e, t + 2]
+            e01 = r00 * ed[e, t + 3] + r01 * ed[e, t + 4] + r02 * ed[e, t + 5]
+            e02 = r00 * ed[e, t + 6] + r01 * ed[e, t + 7] + r02 * ed[e, t + 8]
+            e10 = r10 * ed[e, t] + r11 * ed[e, t + 1] + r12 * ed[e, t + 2]
+            e11 = r10 * ed[e, t + 3] + r11 * ed[e, t + 4] + r12 * ed[e, t + 5]
+            e12 = r10 * ed[e, t + 6] + r11 * ed[e, t + 7] + r12 * ed[e, t + 8]
+            e20 = r20 * ed[e, t] + r21 * ed[e, t + 1] + r22 * ed[e, t + 2]
+            e21 = r20 * ed[e, t + 3] + r21 * ed[e, t + 4] + r22 * ed[e, t + 5]
+            e22 = r20 * ed[e, t + 6] + r21 * ed[e, t + 7] + r22 * ed[e, t + 8]
+            ox, oy, oz, theta = rotation_log(e00, e01, e02, e10, e11, e12, e20, e21, e22)
+            ed[e, ED_ERR_R] = theta
+            f += wr * theta * theta
+        elif mode == MODE_AIM:
+            a = ED_AIM
+            ax = r00 * ed[e, a] + r01 * ed[e, a + 1] + r02 * ed[e, a + 2]
+            ay = r10 * ed[e, a] + r11 * ed[e, a + 1] + r12 * ed[e, a + 2]
+            az = r20 * ed[e, a] + r21 * ed[e, a + 1] + r22 * ed[e, a + 2]
+            dx = ax - ed[e, ED_TDIR]
+            dy = ay - ed[e, ED_TDIR + 1]
+            dz = az - ed[e, ED_TDIR + 2]
             f += wr * (dx * dx + dy * dy + dz * dz)
-            # Gradient of |a - d|^2 along an angular velocity w is 2 w . (a x (a - d)).
-            phi[0] = ay * dz - az * dy
-            phi[1] = az * dx - ax * dz
-            phi[2] = ax * dy - ay * dx
-            cosang = ax * tgt_dir[e, 0] + ay * tgt_dir[e, 1] + az * tgt_dir[e, 2]
-            cosang = min(1.0, max(-1.0, cosang))
-            rot_err[e] = math.acos(cosang)
+            # d|a - d|^2/dt = 2 (a - d) . (w x a) = 2 w . (a x (a - d)).
+            ox = ay * dz - az * dy
+            oy = az * dx - ax * dz
+            oz = ax * dy - ay * dx
+            cosang = ax * ed[e, ED_TDIR] + ay * ed[e, ED_TDIR + 1] + az * ed[e, ED_TDIR + 2]
+            ed[e, ED_ERR_R] = math.acos(min(1.0, max(-1.0, cosang)))
         if not need_grad:
             continue
-        use_rot = m == MODE_POSE or m == MODE_AIM  # phi holds this effector's rotation term
-        k = node
+        k = ei[e, EI_NODE]
         while k >= 0:
-            d = dof[k]
+            d = ni[k, NI_DOF]
             if d >= 0:
                 # World axis of node k's motion: R_k a (a rotation leaves its own axis fixed).
-                wx = work_r[k, 0, 0] * axis[k, 0] + work_r[k, 0, 1] * axis[k, 1] + work_r[k, 0, 2] * axis[k, 2]
-                wy = work_r[k, 1, 0] * axis[k, 0] + work_r[k, 1, 1] * axis[k, 1] + work_r[k, 1, 2] * axis[k, 2]
-                wz = work_r[k, 2, 0] * axis[k, 0] + work_r[k, 2, 1] * axis[k, 1] + work_r[k, 2, 2] * axis[k, 2]
-                if kind[k] == NODE_ROTATION:
-                    lx = pe[0] - work_t[k, 0]
-                    ly = pe[1] - work_t[k, 1]
-                    lz = pe[2] - work_t[k, 2]
+                ux = nd[k, ND_AXIS]
+                uy = nd[k, ND_AXIS + 1]
+                uz = nd[k, ND_AXIS + 2]
+                wx = nd[k, ND_R] * ux + nd[k, ND_R + 1] * uy + nd[k, ND_R + 2] * uz
+                wy = nd[k, ND_R + 3] * ux + nd[k, ND_R + 4] * uy + nd[k, ND_R + 5] * uz
+                wz = nd[k, ND_R + 6] * ux + nd[k, ND_R + 7] * uy + nd[k, ND_R + 8] * uz
+                if ni[k, NI_KIND] == NODE_ROTATION:
+                    lx = px - nd[k, ND_T]
+                    ly = py - nd[k, ND_T + 1]
+                    lz = pz - nd[k, ND_T + 2]
                     jx = wy * lz - wz * ly
                     jy = wz * lx - wx * lz
                     jz = wx * ly - wy * lx
-                    grad = 2.0 * wp * (jx * rp[0] + jy * rp[1] + jz * rp[2])
-                    if use_rot:
-                        grad += 2.0 * wr * (wx * phi[0] + wy * phi[1] + wz * phi[2])
-                    g[d] += grad
+                    g[d] += 2.0 * (wp * (jx * rx + jy * ry + jz * rz) + wr * (wx * ox + wy * oy + wz * oz))
                 else:
-                    g[d] += 2.0 * wp * (wx * rp[0] + wy * rp[1] + wz * rp[2])
-            k = parent[k]
+                    g[d] += 2.0 * wp * (wx * rx + wy * ry + wz * rz)
+            k = ni[k, NI_PARENT]
     return f
 
 
 @jit_inline
-def _regularisation(q, g, need_grad, data):  # type: ignore[no-untyped-def]
-    """Posture pull towards q_ref and a penalty inside each limit's margin band.
+def _regularisation(q, g, need_grad, dd, misc):  # type: ignore[no-untyped-def]
+    """Posture pull towards the reference pose and a penalty inside each limit's margin band.
 
     The limit term is zero in the interior and quadratic within ``margin`` x range
     of a limit, so it only acts on a joint drifting towards its stop (C1-smooth).
     """
-    reg = data[D_REG]
-    w_post = reg[REG_POSTURE]
-    w_lim = reg[REG_LIMIT]
+    w_post = misc[MISC_POSTURE]
+    w_lim = misc[MISC_LIMIT]
     if w_post == 0.0 and w_lim == 0.0:
         return 0.0
-    q_ref = data[D_Q_REF]
-    lo = data[D_LO]
-    hi = data[D_HI]
-    margin = reg[REG_MARGIN]
+    margin = misc[MISC_MARGIN]
     f = 0.0
     for i in range(q.shape[0]):
         if w_post != 0.0:
-            dq = q[i] - q_ref[i]
+            dq = q[i] - dd[DD_QREF, i]
             f += w_post * dq * dq
             if need_grad:
                 g[i] += 2.0 * w_post * dq
-        if w_lim != 0.0 and math.isfinite(lo[i]) and math.isfinite(hi[i]):
-            band = margin * (hi[i] - lo[i])
-            below = lo[i] + band - q[i]
-            above = q[i] - (hi[i] - band)
+        lo = dd[DD_LO, i]
+        hi = dd[DD_HI, i]
+        if w_lim != 0.0 and math.isfinite(lo) and math.isfinite(hi):
+            band = margin * (hi - lo)
+            below = lo + band - q[i]
+            above = q[i] - (hi - band)
             if below > 0.0:
                 f += w_lim * below * below
                 if need_grad:
@@ -310,63 +332,167 @@ def _regularisation(q, g, need_grad, data):  # type: ignore[no-untyped-def]
 
 
 @jit_inline
-def _goal_measure(data, pos_err, rot_err):  # type: ignore[no-untyped-def]
+def _goal_measure(ei, ed):  # type: ignore[no-untyped-def]
     """max over effectors of error / tolerance: <= 1 exactly when the IK succeeded."""
-    tol = data[D_TOL]
-    mode = data[D_EFF_MODE]
-    weights = data[D_EFF_W]
-    active = data[D_EFF_ACTIVE]
     worst = 0.0
-    for e in range(pos_err.shape[0]):
-        if active[e] == 0:
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] == 0:
             continue
-        if mode[e] == MODE_POSITION or weights[e, 0] > 0.0:
-            v = pos_err[e] / tol[e, 0]
-            if v > worst:
-                worst = v
-        if mode[e] != MODE_POSITION and weights[e, 1] > 0.0:
-            v = rot_err[e] / tol[e, 1]
-            if v > worst:
-                worst = v
+        if ei[e, EI_MODE] == MODE_POSITION or ed[e, ED_WP] > 0.0:
+            worst = max(worst, ed[e, ED_ERR_P] / ed[e, ED_TOL_P])
+        if ei[e, EI_MODE] != MODE_POSITION and ed[e, ED_WR] > 0.0:
+            worst = max(worst, ed[e, ED_ERR_R] / ed[e, ED_TOL_R])
     return worst
 
 
 @jit
 def ik_objective(q, g, need_grad, data):  # type: ignore[no-untyped-def]
     """f(q) = sum_e w_p |p_e - t_e|^2 + w_r |rot err_e|^2 + posture + limit margin."""
-    errs = data[D_ERR]
-    pos_err = errs[0]
-    rot_err = errs[1]
+    ni, nd, ei, ed, dd, misc = data
     if need_grad:
         for i in range(g.shape[0]):
             g[i] = 0.0
-    f = _effector_terms(q, g, need_grad, data, pos_err, rot_err)
-    f += _regularisation(q, g, need_grad, data)
+    f = _effector_terms(q, g, need_grad, ni, nd, ei, ed)
+    f += _regularisation(q, g, need_grad, dd, misc)
     # Remember the goal measure for this q so the goal test needs no second FK.
-    scratch = data[D_SCRATCH]
-    x_last = data[D_X_LAST]
-    scratch[0] = _goal_measure(data, pos_err, rot_err)
+    misc[MISC_GOAL] = _goal_measure(ei, ed)
     for i in range(q.shape[0]):
-        x_last[i] = q[i]
+        dd[DD_XLAST, i] = q[i]
     return f
 
 
 @jit
 def ik_goal(f, q, data):  # type: ignore[no-untyped-def]
     """Normalised pose error at q (cached from the last objective call when q matches)."""
-    x_last = data[D_X_LAST]
-    same = True
+    dd = data[4]
     for i in range(q.shape[0]):
-        if q[i] != x_last[i]:
-            same = False
+        if q[i] != dd[DD_XLAST, i]:
+            ik_objective(q, dd[DD_GSCRATCH], False, data)
             break
-    if not same:
-        ik_objective(q, data[D_G_SCRATCH], False, data)
-    return data[D_SCRATCH][0]
+    return data[5][MISC_GOAL]
 
 
 @jit
-def effector_errors(q, data, pos_err, rot_err):  # type: ignore[no-untyped-def]
-    """Per-effector position [m] and orientation [rad] errors at q; returns the goal measure."""
-    _effector_terms(q, data[D_G_SCRATCH], False, data, pos_err, rot_err)
-    return _goal_measure(data, pos_err, rot_err)
+def effector_errors(q, data):  # type: ignore[no-untyped-def]
+    """Errors at q into ED[:, 34:36]; returns the goal measure."""
+    ni, nd, ei, ed, dd, misc = data
+    _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
+    return _goal_measure(ei, ed)
+
+
+@jit
+def effector_frame_py(e, ei, ed, nd):  # type: ignore[no-untyped-def]
+    """``effector_frame`` callable from Python (inline-only functions are not)."""
+    return effector_frame(e, ei, ed, nd)
+
+
+@jit
+def ik_metric(q, data, h):  # type: ignore[no-untyped-def]
+    """Initial inverse Hessian at q from the exact Jacobian: (2 J^T W J + mu I)^-1.
+
+    BFGS from H = I takes dozens of iterations on a pose problem; starting each pass
+    from the damped Gauss-Newton metric (Levenberg-Marquardt's matrix with
+    mu = f + 1e-9 (Sugihara 2011)) makes the first step a damped Gauss-Newton step
+    and lets BFGS refine it. Returns False (caller keeps H = I) for large chains.
+    """
+    ni, nd, ei, ed, dd, misc = data
+    n = q.shape[0]
+    if n > METRIC_MAX_DOF:
+        return False
+    f = _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
+    for i in range(n):
+        for j in range(n):
+            h[i, j] = 0.0
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] == 0:
+            continue
+        for r in range(6):
+            for i in range(n):
+                dd[DD_J + r, i] = 0.0
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = effector_frame(e, ei, ed, nd)
+        mode = ei[e, EI_MODE]
+        sp = math.sqrt(ed[e, ED_WP])
+        sr = math.sqrt(ed[e, ED_WR]) if mode != MODE_POSITION else 0.0
+        a = ED_AIM
+        ax = r00 * ed[e, a] + r01 * ed[e, a + 1] + r02 * ed[e, a + 2]
+        ay = r10 * ed[e, a] + r11 * ed[e, a + 1] + r12 * ed[e, a + 2]
+        az = r20 * ed[e, a] + r21 * ed[e, a + 1] + r22 * ed[e, a + 2]
+        k = ei[e, EI_NODE]
+        while k >= 0:
+            d = ni[k, NI_DOF]
+            if d >= 0:
+                ux = nd[k, ND_AXIS]
+                uy = nd[k, ND_AXIS + 1]
+                uz = nd[k, ND_AXIS + 2]
+                wx = nd[k, ND_R] * ux + nd[k, ND_R + 1] * uy + nd[k, ND_R + 2] * uz
+                wy = nd[k, ND_R + 3] * ux + nd[k, ND_R + 4] * uy + nd[k, ND_R + 5] * uz
+                wz = nd[k, ND_R + 6] * ux + nd[k, ND_R + 7] * uy + nd[k, ND_R + 8] * uz
+                if ni[k, NI_KIND] == NODE_ROTATION:
+                    lx = px - nd[k, ND_T]
+                    ly = py - nd[k, ND_T + 1]
+                    lz = pz - nd[k, ND_T + 2]
+                    dd[DD_J, d] += sp * (wy * lz - wz * ly)
+                    dd[DD_J + 1, d] += sp * (wz * lx - wx * lz)
+                    dd[DD_J + 2, d] += sp * (wx * ly - wy * lx)
+                    if mode == MODE_POSE:
+                        dd[DD_J + 3, d] += sr * wx
+                        dd[DD_J + 4, d] += sr * wy
+                        dd[DD_J + 5, d] += sr * wz
+                    elif mode == MODE_AIM:
+                        # d a / dt = w x a
+                        dd[DD_J + 3, d] += sr * (wy * az - wz * ay)
+                        dd[DD_J + 4, d] += sr * (wz * ax - wx * az)
+                        dd[DD_J + 5, d] += sr * (wx * ay - wy * ax)
+                else:
+                    dd[DD_J, d] += sp * wx
+                    dd[DD_J + 1, d] += sp * wy
+                    dd[DD_J + 2, d] += sp * wz
+            k = ni[k, NI_PARENT]
+        for r in range(6):
+            for i in range(n):
+                v = dd[DD_J + r, i]
+                if v == 0.0:
+                    continue
+                for j in range(n):
+                    h[i, j] += 2.0 * v * dd[DD_J + r, j]
+    mu = f + 1e-9
+    w_post = misc[MISC_POSTURE]
+    for i in range(n):
+        h[i, i] += mu + 2.0 * w_post
+    return _invert_spd_in_place(h)
+
+
+@jit
+def _invert_spd_in_place(m):  # type: ignore[no-untyped-def]
+    """m <- m^-1 for a symmetric positive definite m (Cholesky); False if not SPD."""
+    n = m.shape[0]
+    low = np.zeros((n, n))
+    for j in range(n):
+        s = m[j, j]
+        for k in range(j):
+            s -= low[j, k] * low[j, k]
+        if not s > 0.0:
+            return False
+        low[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = m[i, j]
+            for k in range(j):
+                s -= low[i, k] * low[j, k]
+            low[i, j] = s / low[j, j]
+    # inv(L) in place of low (lower triangular).
+    for j in range(n):
+        low[j, j] = 1.0 / low[j, j]
+        for i in range(j + 1, n):
+            s = 0.0
+            for k in range(j, i):
+                s -= low[i, k] * low[k, j]
+            low[i, j] = s / low[i, i]
+    # m^-1 = inv(L)^T inv(L)
+    for i in range(n):
+        for j in range(i, n):
+            s = 0.0
+            for k in range(j, n):
+                s += low[k, i] * low[k, j]
+            m[i, j] = s
+            m[j, i] = s
+    return True

@@ -58,6 +58,9 @@ class MinimizeOptions:
             (Nocedal & Wright eq. 6.20); off by default, as in the article.
         skip_update_eps: Skip the BFGS update unless y.s > eps * |s| |y|.
         max_passes: Upper bound on passes (also the pass log's length).
+        metric_every: With an objective that supplies a metric (the IK's
+            Gauss-Newton matrix), re-seed H from it every this many iterations
+            instead of the BFGS update; 0 uses it only at the start of each pass.
     """
 
     gtol: float = 1e-8
@@ -79,6 +82,7 @@ class MinimizeOptions:
     scale_initial_h: bool = False
     skip_update_eps: float = 1e-10
     max_passes: int = 64
+    metric_every: int = 0
 
     def __post_init__(self) -> None:
         if not 0.0 < self.armijo_c1 < 0.5:
@@ -102,7 +106,7 @@ class MinimizeOptions:
         for name in ("max_iter", "max_fev", "max_passes"):
             if getattr(self, name) < 1:
                 raise InvalidProblem(f"{name} must be >= 1, got {getattr(self, name)!r}")
-        for name in ("stall_window", "max_restarts"):
+        for name in ("stall_window", "max_restarts", "metric_every"):
             if getattr(self, name) < 0:
                 raise InvalidProblem(f"{name} must be >= 0, got {getattr(self, name)!r}")
 
