@@ -1,0 +1,402 @@
+"""chain_from_urdf: hardened parsing, one error per check (type, field, joint), happy paths.
+
+The core tests use only URDFs committed in tests/solver/data/. The installed robots
+located by bench/robots.py (example-robot-data, rtb-data: benchmark extras) are
+checked in ``test_installed_robot`` only, which skips when the URDF file cannot be found.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+import solver.urdf
+from solver.chain import EffectorMode, JointKind
+from solver.errors import InvalidModel
+from solver.fk import effector_poses, link_poses
+from solver.urdf import MAX_FIXED_JOINTS, chain_from_urdf
+
+DATA = Path(__file__).resolve().parent / "data"
+REPO = Path(__file__).resolve().parents[2]
+PLANAR = (DATA / "planar_2link.urdf").read_text(encoding="utf-8")
+PANDA = (DATA / "panda_kinematic.urdf").read_text(encoding="utf-8")
+PANDA_ARM = tuple(f"panda_joint{i}" for i in range(1, 8))
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20240611)
+
+# --- small inline URDFs for the error table -------------------------------------------
+
+_LINKS = '<link name="base"/><link name="l1"/><link name="l2"/><link name="other"/>'
+_J1 = (
+    '<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>'
+    '<axis xyz="0 0 1"/><limit lower="-1" upper="1"/></joint>'
+)
+_LIMIT = '<limit lower="-1" upper="1"/>'
+_AXIS_LIMIT = '<axis xyz="0 0 1"/>' + _LIMIT
+
+
+def _j2(
+    inner: str = _AXIS_LIMIT, *, type_: str | None = "revolute", name: str = "j2",
+    parent: str = "l1", child: str = "l2",
+) -> str:
+    type_attr = f' type="{type_}"' if type_ is not None else ""
+    return (
+        f'<joint name="{name}"{type_attr}><parent link="{parent}"/><child link="{child}"/>'
+        f"{inner}</joint>"
+    )
+
+
+def _robot(*body: str, links: str = _LINKS) -> str:
+    return f'<robot name="t">{links}{_J1}{"".join(body)}</robot>'
+
+
+_BILLION_LAUGHS = """<?xml version="1.0"?>
+<!DOCTYPE robot [
+  <!ENTITY lol "lol">
+  <!ENTITY lol1 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">
+  <!ENTITY lol2 "&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;">
+  <!ENTITY lol3 "&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;">
+  <!ENTITY lol4 "&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;">
+  <!ENTITY lol5 "&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;">
+  <!ENTITY lol6 "&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;">
+  <!ENTITY lol7 "&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;">
+  <!ENTITY lol8 "&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;">
+  <!ENTITY lol9 "&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;">
+]>
+<robot name="&lol9;"><link name="base"/></robot>
+"""
+_EXTERNAL_ENTITY = """<?xml version="1.0"?>
+<!DOCTYPE robot [<!ENTITY x SYSTEM "file:///etc/passwd">]>
+<robot name="t"><link name="&x;"/></robot>
+"""
+_EXTERNAL_DTD = '<!DOCTYPE robot SYSTEM "http://example.invalid/urdf.dtd"><robot name="t"/>'
+_PLAIN_DTD = "<!DOCTYPE robot><robot name=\"t\"/>"
+_CYCLE = (  # l1 and l2 each have one parent joint, but they are each other's parents
+    '<robot name="t"><link name="base"/><link name="l1"/><link name="l2"/>'
+    '<joint name="a" type="fixed"><parent link="l1"/><child link="l2"/></joint>'
+    '<joint name="b" type="fixed"><parent link="l2"/><child link="l1"/></joint></robot>'
+)
+
+# (id, text, keyword overrides, expected field, expected joint or None)
+ERROR_CASES: list[tuple[str, str, dict[str, object], str, str | None]] = [
+    # hardened parsing: every DTD is refused before anything is expanded or fetched
+    ("billion_laughs", _BILLION_LAUGHS, {}, "urdf", None),
+    ("external_entity", _EXTERNAL_ENTITY, {}, "urdf", None),
+    ("external_dtd", _EXTERNAL_DTD, {}, "urdf", None),
+    ("plain_dtd", _PLAIN_DTD, {}, "urdf", None),
+    ("not_xml", "robot: {name: t}", {}, "urdf", None),
+    ("unclosed", '<robot name="t"><link name="base">', {}, "urdf", None),
+    ("empty", "", {}, "urdf", None),
+    ("root_not_robot", '<sdf version="1.7"><model name="t"/></sdf>', {}, "urdf", None),
+    ("lone_surrogate", '<robot name="\ud800"/>', {}, "urdf", None),
+    # unsupported joint features on the path
+    ("mimic", _robot(_j2(_AXIS_LIMIT + '<mimic joint="j1" multiplier="2"/>')), {}, "mimic", "j2"),
+    ("floating", _robot(_j2("", type_="floating")), {}, "type", "j2"),
+    ("planar", _robot(_j2('<axis xyz="0 0 1"/>', type_="planar")), {}, "type", "j2"),
+    ("unknown_type", _robot(_j2(type_="ball")), {}, "type", "j2"),
+    ("missing_type", _robot(_j2(type_=None)), {}, "type", "j2"),
+    # limits
+    ("revolute_no_limit", _robot(_j2('<axis xyz="0 0 1"/>')), {}, "limit", "j2"),
+    ("prismatic_no_limit", _robot(_j2('<axis xyz="0 0 1"/>', type_="prismatic")), {}, "limit",
+     "j2"),
+    ("no_lower", _robot(_j2('<limit upper="1"/>')), {}, "limit.lower", "j2"),
+    ("no_upper", _robot(_j2('<limit lower="-1"/>')), {}, "limit.upper", "j2"),
+    ("lower_gt_upper", _robot(_j2('<limit lower="1" upper="-1"/>')), {}, "limit.lower", "j2"),
+    ("nan_lower", _robot(_j2('<limit lower="NaN" upper="1"/>')), {}, "limit.lower", "j2"),
+    ("inf_upper", _robot(_j2('<limit lower="0" upper="inf"/>')), {}, "limit.upper", "j2"),
+    ("text_lower", _robot(_j2('<limit lower="low" upper="1"/>')), {}, "limit.lower", "j2"),
+    ("underscore_lower", _robot(_j2('<limit lower="-1_0" upper="1"/>')), {}, "limit.lower", "j2"),
+    # axis
+    ("zero_axis", _robot(_j2('<axis xyz="0 0 0"/>' + _LIMIT)), {}, "axis", "j2"),
+    ("tiny_axis", _robot(_j2('<axis xyz="1e-12 0 0"/>' + _LIMIT)), {}, "axis", "j2"),
+    ("two_axis_values", _robot(_j2('<axis xyz="0 1"/>' + _LIMIT)), {}, "axis", "j2"),
+    ("nan_axis", _robot(_j2('<axis xyz="0 nan 1"/>' + _LIMIT)), {}, "axis", "j2"),
+    # origin
+    ("nan_xyz", _robot(_j2(_AXIS_LIMIT + '<origin xyz="0 NaN 0"/>')), {}, "origin.xyz", "j2"),
+    ("overflow_xyz", _robot(_j2(_AXIS_LIMIT + '<origin xyz="1e999 0 0"/>')), {}, "origin.xyz",
+     "j2"),
+    ("comma_xyz", _robot(_j2(_AXIS_LIMIT + '<origin xyz="0,0,0"/>')), {}, "origin.xyz", "j2"),
+    ("inf_rpy", _robot(_j2(_AXIS_LIMIT + '<origin rpy="0 -inf 0"/>')), {}, "origin.rpy", "j2"),
+    ("text_rpy", _robot(_j2(_AXIS_LIMIT + '<origin rpy="0 0 pi"/>')), {}, "origin.rpy", "j2"),
+    # structure
+    ("unknown_parent_link", _robot(_j2(parent="nowhere")), {}, "parent", "j2"),
+    ("unknown_child_link", _robot(_j2(child="nowhere")), {}, "child", "j2"),
+    ("missing_parent", _robot('<joint name="j2" type="fixed"><child link="l2"/></joint>'), {},
+     "parent", "j2"),
+    ("duplicate_joint", _robot(_j2(name="j1")), {}, "name", "j1"),
+    ("duplicate_link", _robot(_j2(), links=_LINKS + '<link name="l1"/>'), {}, "name", "l1"),
+    ("nameless_joint", _robot('<joint type="fixed"><parent link="l1"/><child link="l2"/></joint>'),
+     {}, "name", None),
+    ("two_parents", _robot(_j2(child="l1")), {}, "child", "j2"),
+    ("cycle", _CYCLE, {}, "parent", "b"),  # walking up from l2: a, then b closes the loop
+    # base and tips
+    ("unknown_tip", _robot(_j2()), {"tip_links": "l9"}, "tip_links", "l9"),
+    ("tip_not_below_base", _robot(_j2(), _j2(name="j3", parent="base", child="other")),
+     {"base_link": "l1", "tip_links": "other"}, "tip_links", "other"),
+    ("tip_is_base", _robot(_j2()), {"tip_links": "base"}, "tip_links", "base"),
+    ("no_tips", _robot(_j2()), {"tip_links": []}, "tip_links", None),
+    ("duplicate_tips", _robot(_j2()), {"tip_links": ["l2", "l2"]}, "tip_links", "l2"),
+    ("unknown_base", _robot(_j2()), {"base_link": "world"}, "base_link", "world"),
+    ("too_many_dof", _robot(_j2()), {"max_dof": 1}, "joints", None),
+]
+
+
+@pytest.mark.parametrize(
+    ("text", "overrides", "field", "joint"),
+    [pytest.param(*case[1:], id=case[0]) for case in ERROR_CASES],
+)
+def test_invalid_urdf(
+    text: str, overrides: dict[str, object], field: str, joint: str | None
+) -> None:
+    kwargs: dict[str, object] = {"base_link": "base", "tip_links": "l2", **overrides}
+    with pytest.raises(InvalidModel) as info:
+        chain_from_urdf(text, **kwargs)  # type: ignore[arg-type]
+    assert info.value.field == field
+    if joint is not None:
+        assert info.value.joint == joint
+
+
+def test_oversize_is_rejected_before_parsing(monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_parse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the parser must not see oversize text")
+
+    monkeypatch.setattr(solver.urdf.DET, "fromstring", no_parse)
+    big = '<robot name="t">' + " " * 2_000_000 + "</robot>"
+    with pytest.raises(InvalidModel) as info:
+        chain_from_urdf(big, base_link="base", tip_links="tip")
+    assert info.value.field == "urdf"
+
+
+def test_size_cap_counts_utf8_bytes() -> None:
+    size = len(PLANAR.encode("utf-8"))
+    assert chain_from_urdf(PLANAR, base_link="base", tip_links="tip", max_bytes=size).n_dof == 2
+    with pytest.raises(InvalidModel) as info:
+        chain_from_urdf(PLANAR, base_link="base", tip_links="tip", max_bytes=size - 1)
+    assert info.value.field == "urdf"
+    # 2 characters, 4 bytes: the character count alone would pass.
+    text = PLANAR.replace("<robot", "<!-- éé --><robot", 1)
+    cap = len(text.encode("utf-8")) - 1
+    assert len(text) <= cap
+    with pytest.raises(InvalidModel) as info:
+        chain_from_urdf(text, base_link="base", tip_links="tip", max_bytes=cap)
+    assert info.value.field == "urdf"
+
+
+def test_too_many_fixed_joints_on_the_path() -> None:
+    n = MAX_FIXED_JOINTS + 1
+    links = "".join(f'<link name="f{i}"/>' for i in range(n))
+    joints = "".join(
+        f'<joint name="fj{i}" type="fixed"><parent link="{"l2" if i == 0 else f"f{i - 1}"}"/>'
+        f'<child link="f{i}"/></joint>'
+        for i in range(n)
+    )
+    text = _robot(_j2(), joints, links=_LINKS + links)
+    with pytest.raises(InvalidModel) as info:
+        chain_from_urdf(text, base_link="base", tip_links=f"f{n - 1}")
+    assert info.value.field == "joints"
+    ok = chain_from_urdf(text, base_link="base", tip_links=f"f{n - 2}")
+    assert ok.n_dof == 2
+
+
+# --- happy paths ------------------------------------------------------------------------
+
+
+def test_planar_arm_structure() -> None:
+    chain = chain_from_urdf(PLANAR, base_link="base", tip_links="tip")
+    assert chain.dof_names == ("shoulder", "elbow")
+    assert chain.root == "base"
+    # camera (floating joint, off the path) and the <transmission> joint are ignored
+    assert chain.link_names == ("base", "link1", "link2", "tip")
+    assert_allclose(chain.lower, [-3.14159, -2.5], rtol=0.0, atol=0.0)
+    assert_allclose(chain.upper, [3.14159, 2.5], rtol=0.0, atol=0.0)
+    assert chain.effector_names == ("tip",)
+    assert chain.effectors[0].link == "tip"
+    assert chain.effectors[0].mode is EffectorMode.POSE
+
+
+@pytest.mark.parametrize(
+    ("q", "xy", "yaw"),
+    [
+        ((0.0, 0.0), (0.8, 0.0), 0.0),
+        ((math.pi / 2, 0.0), (0.0, 0.8), math.pi / 2),
+        ((math.pi / 2, -math.pi / 2), (0.3, 0.5), 0.0),
+        ((0.0, math.pi / 2), (0.5, 0.3), math.pi / 2),
+        ((-math.pi / 2, -math.pi / 2), (-0.3, -0.5), -math.pi),
+    ],
+)
+def test_planar_arm_fk_by_hand(q: tuple[float, float], xy: tuple[float, float], yaw: float) -> None:
+    chain = chain_from_urdf(PLANAR, base_link="base", tip_links="tip")
+    pose = effector_poses(chain, np.array(q))[0]
+    c, s = math.cos(yaw), math.sin(yaw)
+    expected = np.array([[c, -s, 0, xy[0]], [s, c, 0, xy[1]], [0, 0, 1, 0], [0, 0, 0, 1]])
+    assert_allclose(pose, expected, rtol=0.0, atol=1e-15)
+    # the elbow link sits at the end of the first 0.5 m link
+    elbow = link_poses(chain, np.array(q))["link2"]
+    expected_xy = [0.5 * math.cos(q[0]), 0.5 * math.sin(q[0])]
+    assert_allclose(elbow[:2, 3], expected_xy, rtol=0.0, atol=1e-15)
+
+
+def test_tip_as_string_or_sequence_and_mode() -> None:
+    one = chain_from_urdf(PLANAR, base_link="base", tip_links="tip")
+    seq = chain_from_urdf(PLANAR, base_link="base", tip_links=("tip",), mode=EffectorMode.AIM)
+    assert one.dof_names == seq.dof_names
+    assert seq.effectors[0].mode is EffectorMode.AIM
+    mid = chain_from_urdf(PLANAR, base_link="link1", tip_links="tip")  # base need not be the root
+    assert mid.dof_names == ("elbow",)
+    assert mid.root == "link1"
+
+
+def test_urdf_defaults_and_joint_kinds() -> None:
+    text = (
+        '<robot name="t"><link name="base"/><link name="a"/><link name="b"/><link name="c"/>'
+        '<link name="d"/>'
+        # no <origin>, no <axis>: identity origin, axis (1, 0, 0)
+        '<joint name="rev" type="revolute"><parent link="base"/><child link="a"/>'
+        '<limit lower="-0.5" upper="0.5"/></joint>'
+        # continuous: limits ignored, unbounded
+        '<joint name="cont" type="continuous"><parent link="a"/><child link="b"/>'
+        '<origin xyz="1 2 3"/><axis xyz="0 3 4"/><limit effort="1" velocity="1"/></joint>'
+        '<joint name="slide" type="prismatic"><parent link="b"/><child link="c"/>'
+        '<origin rpy="0.1 0.2 0.3"/><axis xyz="0 0 -2"/><limit lower="0" upper="0.2"/></joint>'
+        # fixed: a zero axis and no limits are fine (the iiwa's tool0 joint has axis 0 0 0)
+        '<joint name="tool" type="fixed"><parent link="c"/><child link="d"/>'
+        '<axis xyz="0 0 0"/></joint></robot>'
+    )
+    chain = chain_from_urdf(text, base_link="base", tip_links="d")
+    by_name = {j.name: j for j in chain.joints}
+    assert [by_name[n].kind for n in ("rev", "cont", "slide", "tool")] == [
+        JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.PRISMATIC, JointKind.FIXED,
+    ]
+    assert_allclose(by_name["rev"].axis, [1.0, 0.0, 0.0], rtol=0.0, atol=0.0)
+    assert_allclose(by_name["rev"].origin.translation, [0.0, 0.0, 0.0], rtol=0.0, atol=0.0)
+    assert_allclose(by_name["rev"].origin.rotation, np.eye(3), rtol=0.0, atol=0.0)
+    assert_allclose(by_name["cont"].axis, [0.0, 0.6, 0.8], rtol=0.0, atol=1e-15)
+    assert_allclose(by_name["cont"].origin.translation, [1.0, 2.0, 3.0], rtol=0.0, atol=0.0)
+    assert_allclose(by_name["slide"].axis, [0.0, 0.0, -1.0], rtol=0.0, atol=0.0)
+    assert chain.dof_names == ("rev", "cont", "slide")
+    assert_allclose(chain.lower, [-0.5, -math.inf, 0.0], rtol=0.0, atol=0.0)
+    assert_allclose(chain.upper, [0.5, math.inf, 0.2], rtol=0.0, atol=0.0)
+    # rpy is fixed-axis X-Y-Z: R = Rz(yaw) Ry(pitch) Rx(roll)
+    r, p, y = 0.1, 0.2, 0.3
+    rx = np.array([[1, 0, 0], [0, math.cos(r), -math.sin(r)], [0, math.sin(r), math.cos(r)]])
+    ry = np.array([[math.cos(p), 0, math.sin(p)], [0, 1, 0], [-math.sin(p), 0, math.cos(p)]])
+    rz = np.array([[math.cos(y), -math.sin(y), 0], [math.sin(y), math.cos(y), 0], [0, 0, 1]])
+    assert_allclose(by_name["slide"].origin.rotation, rz @ ry @ rx, rtol=0.0, atol=1e-15)
+
+
+def test_default_xml_namespace_is_accepted() -> None:
+    text = PLANAR.replace('<robot name="planar_2link">', '<robot name="p" xmlns="urn:ex:urdf">')
+    chain = chain_from_urdf(text, base_link="base", tip_links="tip")
+    assert chain.dof_names == ("shoulder", "elbow")
+
+
+def test_panda_arm_ignores_the_mimic_finger_off_the_path() -> None:
+    chain = chain_from_urdf(PANDA, base_link="panda_link0", tip_links="panda_link8")
+    assert chain.dof_names == PANDA_ARM
+    assert_allclose(
+        chain.lower, [-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973],
+        rtol=0.0, atol=0.0,
+    )
+    assert_allclose(
+        chain.upper, [2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973], rtol=0.0, atol=0.0
+    )
+    # q = 0: the flange is 0.088 m forward and 0.333 + 0.316 + 0.384 - 0.107 m up, facing down
+    pose = effector_poses(chain, np.zeros(7))[0]
+    expected = np.array([[1.0, 0, 0, 0.088], [0, -1, 0, 0], [0, 0, -1, 0.926], [0, 0, 0, 1]])
+    assert_allclose(pose, expected, rtol=0.0, atol=1e-15)
+
+
+def test_panda_tree_with_two_tips() -> None:
+    chain = chain_from_urdf(
+        PANDA, base_link="panda_link0", tip_links=["panda_hand_tcp", "panda_leftfinger"],
+        mode=EffectorMode.POSITION,
+    )
+    assert chain.dof_names == (*PANDA_ARM, "panda_finger_joint1")
+    assert chain.effector_names == ("panda_hand_tcp", "panda_leftfinger")
+    assert all(e.mode is EffectorMode.POSITION for e in chain.effectors)
+    assert "panda_rightfinger" not in chain.link_names
+
+
+def test_panda_mimic_finger_on_the_path_is_rejected() -> None:
+    with pytest.raises(InvalidModel) as info:
+        chain_from_urdf(PANDA, base_link="panda_link0", tip_links="panda_rightfinger")
+    assert (info.value.field, info.value.joint) == ("mimic", "panda_finger_joint2")
+
+
+# --- installed robots (benchmark extras) --------------------------------------------------
+
+
+def _bench_robots() -> ModuleType | None:
+    path = REPO / "bench" / "robots.py"
+    if not path.is_file():
+        return None
+    name = "_bench_robots_for_tests"
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # dataclasses look their module up while the class is built
+    spec.loader.exec_module(module)
+    return module
+
+
+def installed_robot(name: str) -> Any:
+    """bench.robots.robot(name), or a skip if its URDF file cannot be found."""
+    robots = _bench_robots()
+    if robots is None:
+        pytest.skip(f"{REPO / 'bench' / 'robots.py'} not found")
+    try:
+        return robots.robot(name)
+    except FileNotFoundError as e:
+        pytest.skip(f"URDF for {name!r} not found: {e}")
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "iiwa"])
+def test_installed_robot(name: str, rng: np.random.Generator) -> None:
+    spec = installed_robot(name)
+    full = chain_from_urdf(
+        spec.urdf_text(), base_link=spec.base_link, tip_links=spec.tip_link
+    )
+    assert full.dof_names == spec.joint_names
+    assert_allclose(full.lower, spec.lower, rtol=0.0, atol=0.0)
+    assert_allclose(full.upper, spec.upper, rtol=0.0, atol=0.0)
+    assert full.effector_names == (spec.tip_link,)
+    # Without meshes, the same kinematics.
+    stripped = chain_from_urdf(
+        spec.kinematic_urdf_text(),
+        base_link=spec.base_link, tip_links=spec.tip_link,
+    )
+    for _ in range(10):
+        q = rng.uniform(full.lower, full.upper)
+        assert_allclose(
+            effector_poses(full, q)[0], effector_poses(stripped, q)[0], rtol=0.0, atol=0.0
+        )
+
+
+def test_committed_panda_matches_installed_panda(rng: np.random.Generator) -> None:
+    """The committed copy keeps the kinematics of the file it was made from."""
+    spec = installed_robot("panda")
+    tips = ["panda_hand_tcp", "panda_leftfinger"]
+    installed = chain_from_urdf(spec.urdf_text(), base_link="panda_link0", tip_links=tips)
+    committed = chain_from_urdf(PANDA, base_link="panda_link0", tip_links=tips)
+    assert installed.dof_names == committed.dof_names
+    assert_allclose(installed.lower, committed.lower, rtol=0.0, atol=0.0)
+    assert_allclose(installed.upper, committed.upper, rtol=0.0, atol=0.0)
+    for _ in range(10):
+        q = rng.uniform(committed.lower, committed.upper)
+        a, b = link_poses(installed, q), link_poses(committed, q)
+        assert a.keys() == b.keys()
+        for link in a:
+            assert_allclose(a[link], b[link], rtol=0.0, atol=0.0)
