@@ -422,7 +422,7 @@ def _better(f, m, f_best, m_best, has_goal, f_goal):  # type: ignore[no-untyped-
 
 
 @jit
-def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x, out_g):  # type: ignore[no-untyped-def]
+def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g):  # type: ignore[no-untyped-def]
     """Multi-pass projected BFGS under the analyzer; the whole solve in one call.
 
     Args:
@@ -440,6 +440,9 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
         fopt, iopt: Option vectors laid out as in ``_codes`` (F_*, I_*).
         policy: Analyzer table int64[n_codes, 3].
         log: float64[max_passes, N_LOG] pass log, filled row by row.
+        trace: float64[rows, 5]: for each accepted step (while rows last) f before,
+            f after, g.(x+ - x), lambda, and the smallest distance of x+ to a bound
+            (negative would mean it left the box). Shape (0, 5) records nothing.
         out_x, out_g: Receive the best x and its gradient.
 
     Returns:
@@ -558,6 +561,17 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x,
                 break
             if grad_mode != C.GRAD_ANALYTIC and iopt[C.I_CURVATURE] == 0:
                 f_trial = _evaluate(fg, data, x_new, g_new, True, grad_mode, lo, hi, work, counters)
+            if nit < trace.shape[0]:
+                slack = math.inf
+                dec = 0.0
+                for i in range(n):
+                    dec += g[i] * (x_new[i] - x[i])
+                    slack = min(slack, x_new[i] - lo[i], hi[i] - x_new[i])
+                trace[nit, 0] = f
+                trace[nit, 1] = f_trial
+                trace[nit, 2] = dec
+                trace[nit, 3] = lam
+                trace[nit, 4] = slack
             nit += 1
             pass_iters += 1
             step_rel = 0.0

@@ -62,7 +62,10 @@ DEFAULT_TABLE: PolicyTable = MappingProxyType(
 
 def _single_pass_table() -> PolicyTable:
     """Every pass is final: the plain single-pass BFGS of the article's reference [1]."""
-    table = {key: (_A.ACCEPT if key[1] is not _G.MISSED else _A.STOP) for key in DEFAULT_TABLE}
+    table = {
+        key: (_A.ACCEPT if key[1] is not _G.MISSED and key[0] is not _T.NONFINITE else _A.STOP)
+        for key in DEFAULT_TABLE
+    }
     return MappingProxyType(table)
 
 

@@ -19,7 +19,7 @@ from ._core import run_solver
 from ._dispatch import registered_for
 from .analyzer import AnalyzerPolicy
 from .errors import DimensionMismatch, InvalidProblem
-from .types import GradientMode, Matrix, MinimizeOptions, MinimizeResult, PassRecord, Vector
+from .types import AcceptedStep, GradientMode, Matrix, MinimizeOptions, MinimizeResult, PassRecord, Vector
 
 _GRAD_MODES = {
     GradientMode.ANALYTIC: C.GRAD_ANALYTIC,
@@ -107,6 +107,7 @@ def minimize(
     data: tuple[Any, ...] = (),
     initial_inverse_hessian: Matrix | None = None,
     rng: np.random.Generator | None = None,
+    record_steps: bool = False,
 ) -> MinimizeResult:
     """Minimize f over the box [lower, upper] with multi-pass BFGS under the analyzer.
 
@@ -122,6 +123,7 @@ def minimize(
         initial_inverse_hessian: Initial H, shape (n, n), symmetric positive
             definite (for example the last solve's ``inverse_hessian``); default I.
         rng: Source of the random-restart seed; None uses a fixed seed (reproducible).
+        record_steps: Record every accepted step (for tests of the line search).
 
     Returns:
         The best point found and how the solve ended; never raises for a solve that
@@ -151,10 +153,11 @@ def minimize(
     log = np.zeros((options.max_passes, C.N_LOG))
     out_x = np.empty(n)
     out_g = np.empty(n)
+    trace = np.zeros((options.max_iter if record_steps else 0, 5))
     # A registered objective is bound at compile time (cached); others are passed in.
     fg = None if registered_for(objective) else objective
     f, _, pg, code, nit, nfev, ngev, npass, nrest, nskip, elapsed = run_solver(
-        fg, None, data, x, lo, hi, h, fopt, iopt, policy.as_array(), log, out_x, out_g
+        fg, None, data, x, lo, hi, h, fopt, iopt, policy.as_array(), log, trace, out_x, out_g
     )
     pass_log = unpack_pass_log(log, npass)
     return MinimizeResult(
@@ -172,6 +175,7 @@ def minimize(
         pass_log=pass_log,
         elapsed_us=float(elapsed) * 1e6,
         inverse_hessian=h,
+        steps=tuple(AcceptedStep(*(float(v) for v in row)) for row in trace[: int(nit)]),
     )
 
 

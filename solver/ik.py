@@ -52,10 +52,10 @@ from .types import Matrix, MinimizeOptions, PassRecord, Vector
 
 
 @jit
-def _solve_core(data, x0, lo, hi, h, fopt, iopt, policy, log, out_x, out_g):  # type: ignore[no-untyped-def]
+def _solve_core(data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g):  # type: ignore[no-untyped-def]
     # fg=None: the core binds the objective registered for this data type (cacheable).
     # The final errors are computed here too: one compiled call per frame, not two.
-    out = run_solver(None, None, data, x0, lo, hi, h, fopt, iopt, policy, log, out_x, out_g)
+    out = run_solver(None, None, data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g)
     measure = effector_errors(out_x, data)
     return out, measure
 
@@ -427,7 +427,7 @@ class IKSolver:
             code = Termination.GOAL_REACHED if measure <= 1.0 else Termination.GTOL
             return self._result(q0.copy(), status, code, 0, 0, 0, 0, 0.0, (), h, opts)
         (f, _, _, code, nit, nfev, _, npass, nrest, _, elapsed), measure = _solve_core(
-            self._data, q0, lo, hi, h, fopt, iopt, policy, log, out_x, out_g
+            self._data, q0, lo, hi, h, fopt, iopt, policy, log, _NO_TRACE, out_x, out_g
         )
         termination = C.TERMINATIONS[int(code)]
         if measure <= 1.0:
@@ -471,6 +471,7 @@ class IKSolver:
 
 
 _REGISTERED = False
+_NO_TRACE = np.empty((0, 5))
 
 
 def _register_once(data: tuple[np.ndarray, ...]) -> None:

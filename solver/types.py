@@ -126,6 +126,24 @@ class PassRecord:
 
 
 @dataclass(frozen=True, slots=True)
+class AcceptedStep:
+    """One accepted line-search step (recorded with ``minimize(..., record_steps=True)``).
+
+    Attributes:
+        f_before, f_after: f at x and at x+.
+        decrease: g(x) . (x+ - x), the predicted first-order change (< 0).
+        step_length: lambda.
+        bound_slack: min_i min(x+_i - lower_i, upper_i - x+_i); >= 0 inside the box.
+    """
+
+    f_before: float
+    f_after: float
+    decrease: float
+    step_length: float
+    bound_slack: float
+
+
+@dataclass(frozen=True, slots=True)
 class MinimizeResult:
     """Outcome of ``minimize``: the best point seen and how the solve went.
 
@@ -141,6 +159,7 @@ class MinimizeResult:
         pass_log: One record per pass, in order.
         elapsed_us: Wall time of the compiled solve, microseconds.
         inverse_hessian: Final H, shape (n, n), to carry curvature into a next solve.
+        steps: Accepted steps, in order, when recorded (else empty).
     """
 
     x: Vector
@@ -157,3 +176,4 @@ class MinimizeResult:
     pass_log: tuple[PassRecord, ...]
     elapsed_us: float
     inverse_hessian: Matrix
+    steps: tuple[AcceptedStep, ...] = ()
