@@ -1,0 +1,100 @@
+"""The JSON contract of the IK service: pydantic v2 models for every request, response
+and WebSocket message.
+
+Conventions, stated once and kept everywhere:
+
+- lengths in metres, angles in radians, times in microseconds (``_us``) or seconds (``_s``);
+- the world frame of a chain is the frame of its root (base) link;
+- quaternions are objects ``{"w", "x", "y", "z"}`` (never positional arrays, so that
+  engines using xyzw and wxyz orders cannot be confused); they must have unit norm
+  within 1e-3 and are normalised by the server;
+- every float must be finite (NaN and +-infinity are rejected), every model rejects
+  unknown fields.
+
+This package imports pydantic and ``solver.termination`` only (the termination codes
+are part of the contract).
+"""
+
+from .chain import (
+    ChainSpec,
+    EffectorSpec,
+    ExampleChain,
+    HierarchyChain,
+    JointSpec,
+    OriginSpec,
+    UrdfChain,
+)
+from .common import ErrorBody, FiniteFloat, Quaternion, StrictModel, Vec3
+from .solve import (
+    ClipRequest,
+    DofInfo,
+    EffectorErrorOut,
+    EffectorInfo,
+    Frame,
+    FrameRequest,
+    FrameResult,
+    FrameResults,
+    FramesBody,
+    OptionsPatch,
+    Pose,
+    PoseIn,
+    SessionCounters,
+    SessionCreate,
+    SessionCreated,
+    SessionInfo,
+    SolveRequest,
+    SolverOptions,
+    Target,
+)
+from .ws import (
+    ClientMessage,
+    ErrorMessage,
+    ErrorPayload,
+    FrameMessage,
+    PingMessage,
+    PongMessage,
+    ResultMessage,
+    ServerMessage,
+)
+
+__all__ = [
+    "ChainSpec",
+    "ClientMessage",
+    "ClipRequest",
+    "DofInfo",
+    "EffectorErrorOut",
+    "EffectorInfo",
+    "EffectorSpec",
+    "ErrorBody",
+    "ErrorMessage",
+    "ErrorPayload",
+    "ExampleChain",
+    "FiniteFloat",
+    "Frame",
+    "FrameMessage",
+    "FrameRequest",
+    "FramesBody",
+    "FrameResult",
+    "FrameResults",
+    "HierarchyChain",
+    "JointSpec",
+    "OptionsPatch",
+    "OriginSpec",
+    "PingMessage",
+    "PongMessage",
+    "Pose",
+    "PoseIn",
+    "Quaternion",
+    "ResultMessage",
+    "ServerMessage",
+    "SessionCounters",
+    "SessionCreate",
+    "SessionCreated",
+    "SessionInfo",
+    "SolveRequest",
+    "SolverOptions",
+    "StrictModel",
+    "Target",
+    "UrdfChain",
+    "Vec3",
+]

@@ -1,0 +1,202 @@
+"""Chain definitions: a hierarchy of joints and effectors as JSON, URDF text, or a named
+example chain shipped with the server. One of them is chosen by ``format``."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import ConfigDict, Field
+
+from .common import IDENTITY, ZERO3, FiniteFloat, Quaternion, StrictModel, Vec3
+
+Name = Annotated[str, Field(min_length=1, max_length=128)]
+JointKindName = Literal["fixed", "rotational", "revolute", "continuous", "prismatic"]
+EffectorModeName = Literal["position", "pose", "aim"]
+ExampleName = Literal["panda_arm", "humanoid_arm", "tail", "two_arm_torso"]
+
+# Static caps that bound the work pydantic does before the server's configurable
+# limits (IK_MAX_JOINTS, IK_MAX_DOF, ...) are checked.
+HARD_MAX_JOINTS = 4096
+HARD_MAX_EFFECTORS = 256
+HARD_MAX_URDF_CHARS = 8_000_000
+
+
+class OriginSpec(StrictModel):
+    """Rest transform of a joint frame in its parent link's frame: rotate, then translate."""
+
+    translation: Vec3 = Field(default=ZERO3, description="Offset [m]")
+    rotation: Quaternion = Field(default=IDENTITY, description="Orientation (unit quaternion)")
+
+
+class JointSpec(StrictModel):
+    """A joint from ``parent`` link to ``child`` link.
+
+    Kinds: ``fixed`` (no DOF); ``rotational`` (1-3 rotations about the joint frame's
+    x/y/z in the order given by ``axes``, e.g. ``"zy"``: one DOF per axis, named
+    ``"<joint>.<axis>"``); ``revolute`` (rotation about ``axis``) and ``prismatic``
+    (sliding along ``axis``), one DOF named like the joint; ``continuous`` (revolute
+    without limits). The link frame is ``parent * origin * Tr(pivot) * motion(q) *
+    Tr(-pivot)``.
+    """
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "name": "elbow",
+                    "parent": "upper_arm",
+                    "child": "forearm",
+                    "kind": "revolute",
+                    "origin": {"translation": {"x": 0.0, "y": 0.0, "z": 0.4}},
+                    "axis": {"x": 0.0, "y": 1.0, "z": 0.0},
+                    "lower": [0.0],
+                    "upper": [2.6],
+                }
+            ]
+        }
+    )
+
+    name: Name = Field(description="Unique joint name")
+    parent: Name = Field(description="Parent link name")
+    child: Name = Field(description="Child link name (each link has at most one parent joint)")
+    kind: JointKindName = Field(description="How the joint moves its child")
+    origin: OriginSpec = Field(default_factory=OriginSpec, description="Rest transform")
+    pivot: Vec3 = Field(default=ZERO3, description="Point the motion acts about, joint frame [m]")
+    axis: Vec3 = Field(
+        default=Vec3(x=0.0, y=0.0, z=1.0),
+        description="Unit axis (revolute, continuous, prismatic); normalised by the server",
+    )
+    axes: str = Field(
+        default="",
+        pattern=r"^[xyz]{0,3}$",
+        description='Rotational joints: active local axes in order, e.g. "zxy"',
+    )
+    lower: list[FiniteFloat] = Field(
+        default_factory=list,
+        max_length=3,
+        description="One lower limit per DOF [rad] or [m]; empty for fixed and continuous",
+    )
+    upper: list[FiniteFloat] = Field(
+        default_factory=list,
+        max_length=3,
+        description="One upper limit per DOF [rad] or [m]; empty for fixed and continuous",
+    )
+    terminator: bool = Field(
+        default=False,
+        description="Joints above this one do not move for effectors whose chain runs through it",
+    )
+
+
+class EffectorSpec(StrictModel):
+    """A named point on a link that targets pull on."""
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"name": "hand", "link": "hand", "mode": "position"}]}
+    )
+
+    name: Name = Field(description="Unique effector name; targets refer to it")
+    link: Name = Field(description="Link carrying the effector")
+    tip_offset: Vec3 = Field(default=ZERO3, description="Tip point in the link frame [m]")
+    tip_rotation: Quaternion = Field(
+        default=IDENTITY, description="Orientation of the tip frame in the link frame"
+    )
+    mode: EffectorModeName = Field(
+        default="position",
+        description=(
+            "position: the tip reaches a point; pose: point and orientation; "
+            "aim: the tip's aim_axis points along a direction (and reaches a point if given)"
+        ),
+    )
+    aim_axis: Vec3 = Field(
+        default=Vec3(x=0.0, y=0.0, z=1.0), description="Aim mode: tip-frame axis to point"
+    )
+    position_weight: FiniteFloat = Field(
+        default=1.0, ge=0.0, description="Weight of the squared position error [1/m^2]"
+    )
+    rotation_weight: FiniteFloat = Field(
+        default=0.01,
+        ge=0.0,
+        description="Weight of the squared orientation error [m^2/rad^2 relative]; "
+        "0.01 makes 1 mrad count like 0.1 mm",
+    )
+
+
+class HierarchyChain(StrictModel):
+    """A chain given as joints and effectors (JSON)."""
+
+    format: Literal["hierarchy"] = Field(description="Selects this chain format")
+    joints: list[JointSpec] = Field(
+        min_length=1, max_length=HARD_MAX_JOINTS, description="The joints, any order"
+    )
+    effectors: list[EffectorSpec] = Field(
+        min_length=1, max_length=HARD_MAX_EFFECTORS, description="The effectors"
+    )
+
+
+class UrdfChain(StrictModel):
+    """A chain read from URDF text: the joints on the paths from ``base_link`` to each
+    of ``tip_links``. Each tip link becomes an effector named after the link."""
+
+    format: Literal["urdf"] = Field(description="Selects this chain format")
+    urdf: str = Field(
+        max_length=HARD_MAX_URDF_CHARS,
+        description="The URDF document (kinematic elements are read; meshes are ignored)",
+    )
+    base_link: Name = Field(description="Link that becomes the chain's root (world) frame")
+    tip_links: list[Name] = Field(
+        min_length=1, max_length=HARD_MAX_EFFECTORS, description="Links that carry effectors"
+    )
+    mode: EffectorModeName = Field(default="pose", description="Mode of every effector")
+
+
+class ExampleChain(StrictModel):
+    """One of the example chains built into the server (handy for trying the API)."""
+
+    format: Literal["example"] = Field(description="Selects this chain format")
+    name: ExampleName = Field(
+        description="panda_arm (7 DOF, pose effector 'tool'), humanoid_arm (7 DOF, pose "
+        "effector 'hand'), tail (40 DOF, position effector 'tip'), two_arm_torso (7 DOF, "
+        "position effectors 'left_hand' and 'right_hand')"
+    )
+
+
+ChainSpec = Annotated[
+    HierarchyChain | UrdfChain | ExampleChain,
+    Field(discriminator="format", description="The chain, in one of three formats"),
+]
+
+# The hierarchy used by the /docs examples and the README: a 3-DOF arm whose hand
+# reaches points within 0.75 m of the shoulder.
+EXAMPLE_ARM: dict[str, Any] = {
+    "format": "hierarchy",
+    "joints": [
+        {
+            "name": "shoulder",
+            "parent": "base",
+            "child": "upper_arm",
+            "kind": "rotational",
+            "axes": "zy",
+            "origin": {"translation": {"x": 0.0, "y": 0.0, "z": 0.3}},
+            "lower": [-3.1, -1.5],
+            "upper": [3.1, 1.5],
+        },
+        {
+            "name": "elbow",
+            "parent": "upper_arm",
+            "child": "forearm",
+            "kind": "revolute",
+            "origin": {"translation": {"x": 0.0, "y": 0.0, "z": 0.4}},
+            "axis": {"x": 0.0, "y": 1.0, "z": 0.0},
+            "lower": [0.0],
+            "upper": [2.6],
+        },
+        {
+            "name": "wrist",
+            "parent": "forearm",
+            "child": "hand",
+            "kind": "fixed",
+            "origin": {"translation": {"x": 0.0, "y": 0.0, "z": 0.35}},
+        },
+    ],
+    "effectors": [{"name": "hand", "link": "hand", "mode": "position"}],
+}

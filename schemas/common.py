@@ -1,0 +1,89 @@
+"""Building blocks: strict base model, finite floats, vectors, quaternions, error body."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+# Finite floats only: NaN and +-inf are rejected at the boundary (JSON has no literal
+# for them anyway, but MessagePack and Python clients can send them).
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+# A quaternion must have unit norm within this (float32 round-off in game engines).
+QUATERNION_NORM_TOLERANCE = 1e-3
+
+
+class StrictModel(BaseModel):
+    """Base of every model: unknown fields rejected, finite floats, frozen."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
+
+
+class Vec3(StrictModel):
+    """A 3-vector: a point or offset [m], or a direction (unitless)."""
+
+    model_config = ConfigDict(json_schema_extra={"examples": [{"x": 0.3, "y": 0.0, "z": 0.5}]})
+
+    x: FiniteFloat = Field(description="x component")
+    y: FiniteFloat = Field(description="y component")
+    z: FiniteFloat = Field(description="z component")
+
+
+class Quaternion(StrictModel):
+    """A rotation as a unit quaternion ``{w, x, y, z}`` (w is the scalar part).
+
+    The norm must be 1 within 1e-3; the server normalises it. Identity is
+    ``{"w": 1, "x": 0, "y": 0, "z": 0}``.
+    """
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"w": 1.0, "x": 0.0, "y": 0.0, "z": 0.0}]}
+    )
+
+    w: FiniteFloat = Field(description="scalar part")
+    x: FiniteFloat = Field(description="x of the vector part")
+    y: FiniteFloat = Field(description="y of the vector part")
+    z: FiniteFloat = Field(description="z of the vector part")
+
+    @model_validator(mode="after")
+    def _unit_norm(self) -> Quaternion:
+        norm = math.sqrt(self.w**2 + self.x**2 + self.y**2 + self.z**2)
+        if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+            raise ValueError(
+                f"quaternion must have unit norm (within {QUATERNION_NORM_TOLERANCE}), "
+                f"got |q| = {norm:.6g}"
+            )
+        return self
+
+
+IDENTITY = Quaternion(w=1.0, x=0.0, y=0.0, z=0.0)
+ZERO3 = Vec3(x=0.0, y=0.0, z=0.0)
+
+
+class ErrorBody(StrictModel):
+    """Every HTTP error: FastAPI's ``detail`` plus a stable ``code``.
+
+    For ``invalid_format`` (the body failed validation) ``detail`` is FastAPI's list of
+    ``{loc, msg, type}`` entries; for every other code it is a message and ``field``
+    names the offending field when there is one.
+    """
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "detail": "chain.joints[1].lower: lower > upper (1.0 > -1.0)",
+                    "code": "invalid_problem",
+                    "field": "chain.joints[1].lower",
+                }
+            ]
+        }
+    )
+
+    detail: str | list[dict[str, object]] = Field(description="What went wrong")
+    code: str = Field(description="Stable error code (see the README's table)")
+    field: str | None = Field(
+        default=None, description="Dotted path of the offending field, when known"
+    )

@@ -1,0 +1,400 @@
+"""Targets, frames, solver options, frame results and the session resources."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
+
+from solver.termination import Termination
+
+from .chain import EXAMPLE_ARM, ChainSpec, EffectorModeName, Name
+from .common import FiniteFloat, Quaternion, StrictModel, Vec3
+
+# Frame ids: non-negative integers that a JavaScript client can hold exactly.
+MAX_FRAME_ID = 2**53 - 1
+FrameId = Annotated[int, Field(ge=0, le=MAX_FRAME_ID)]
+
+HARD_MAX_FRAMES = 10_000
+HARD_MAX_TARGETS = 256
+HARD_MAX_DOF_VALUES = 8192
+
+IKStatusName = Literal["solved", "not_reached", "budget_exhausted", "nonfinite"]
+TerminationName = Literal[
+    "goal_reached",
+    "gtol",
+    "step_small",
+    "stalled",
+    "line_search_failed",
+    "max_iter",
+    "max_fev",
+    "deadline",
+    "nonfinite",
+]
+# The Literal above is what /docs shows; this keeps it equal to the solver's enum.
+assert set(TerminationName.__args__) == {t.value for t in Termination}  # type: ignore[attr-defined]
+
+
+# --- solver options -------------------------------------------------------------------
+_OPTION_FIELDS: dict[str, dict[str, Any]] = {
+    "position_tolerance_m": {
+        "gt": 0.0,
+        "le": 1.0,
+        "description": "A frame succeeds when every position error is at most this [m]",
+    },
+    "rotation_tolerance_rad": {
+        "gt": 0.0,
+        "le": 3.15,
+        "description": "... and every orientation / aim error at most this [rad]",
+    },
+    "time_budget_us": {
+        "gt": 0.0,
+        "le": 1_000_000.0,
+        "description": "Wall-clock budget of one frame's solve [us]; the server caps it "
+        "(IK_MAX_TIME_BUDGET_US)",
+    },
+    "max_iter": {"ge": 1, "le": 100_000, "description": "Iterations per frame, all passes"},
+    "max_restarts": {"ge": 0, "le": 10_000, "description": "Random restarts per frame"},
+    "restart_radius_rad": {
+        "gt": 0.0,
+        "description": "Restarts sample within this distance of the seed, per variable "
+        "[rad] or [m]; use a large value (e.g. 100) to sample the whole range",
+    },
+    "max_step_rad": {
+        "gt": 0.0,
+        "description": "Cap on any variable's change per iteration [rad] or [m]",
+    },
+    "posture_weight": {
+        "ge": 0.0,
+        "description": "Pull towards the seed (previous pose in a session): w * sum(dq^2)",
+    },
+    "limit_weight": {"ge": 0.0, "description": "Penalty near the joint limits"},
+    "limit_margin": {
+        "ge": 0.0,
+        "lt": 0.5,
+        "description": "Width of the limit band, as a fraction of each joint's range",
+    },
+}
+
+
+class SolverOptions(StrictModel):
+    """The effective solver options of a session or a one-shot solve."""
+
+    position_tolerance_m: FiniteFloat = Field(**_OPTION_FIELDS["position_tolerance_m"])
+    rotation_tolerance_rad: FiniteFloat = Field(**_OPTION_FIELDS["rotation_tolerance_rad"])
+    time_budget_us: FiniteFloat = Field(**_OPTION_FIELDS["time_budget_us"])
+    max_iter: int = Field(**_OPTION_FIELDS["max_iter"])
+    max_restarts: int = Field(**_OPTION_FIELDS["max_restarts"])
+    restart_radius_rad: FiniteFloat = Field(**_OPTION_FIELDS["restart_radius_rad"])
+    max_step_rad: FiniteFloat = Field(**_OPTION_FIELDS["max_step_rad"])
+    posture_weight: FiniteFloat = Field(**_OPTION_FIELDS["posture_weight"])
+    limit_weight: FiniteFloat = Field(**_OPTION_FIELDS["limit_weight"])
+    limit_margin: FiniteFloat = Field(**_OPTION_FIELDS["limit_margin"])
+
+
+class OptionsPatch(StrictModel):
+    """Solver options to change; fields left out keep their current (or default) value."""
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"time_budget_us": 800, "position_tolerance_m": 0.001}]}
+    )
+
+    position_tolerance_m: FiniteFloat | None = Field(
+        default=None, **_OPTION_FIELDS["position_tolerance_m"]
+    )
+    rotation_tolerance_rad: FiniteFloat | None = Field(
+        default=None, **_OPTION_FIELDS["rotation_tolerance_rad"]
+    )
+    time_budget_us: FiniteFloat | None = Field(default=None, **_OPTION_FIELDS["time_budget_us"])
+    max_iter: int | None = Field(default=None, **_OPTION_FIELDS["max_iter"])
+    max_restarts: int | None = Field(default=None, **_OPTION_FIELDS["max_restarts"])
+    restart_radius_rad: FiniteFloat | None = Field(
+        default=None, **_OPTION_FIELDS["restart_radius_rad"]
+    )
+    max_step_rad: FiniteFloat | None = Field(default=None, **_OPTION_FIELDS["max_step_rad"])
+    posture_weight: FiniteFloat | None = Field(default=None, **_OPTION_FIELDS["posture_weight"])
+    limit_weight: FiniteFloat | None = Field(default=None, **_OPTION_FIELDS["limit_weight"])
+    limit_margin: FiniteFloat | None = Field(default=None, **_OPTION_FIELDS["limit_margin"])
+
+
+# --- targets and frames ----------------------------------------------------------------
+class Target(StrictModel):
+    """What one effector should reach in this frame, in the chain's root frame.
+
+    position effectors need ``position``; pose effectors need ``orientation`` (and
+    ``position``, unless only the orientation matters); aim effectors need
+    ``direction`` (and optionally ``position``). Effectors without a target in a frame
+    are not pulled (their joints stay free only if another target moves them).
+    """
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}},
+                {
+                    "effector": "tool",
+                    "position": {"x": 0.4, "y": 0.0, "z": 0.5},
+                    "orientation": {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0},
+                },
+            ]
+        }
+    )
+
+    effector: Name = Field(description="Effector name")
+    position: Vec3 | None = Field(default=None, description="Target tip position [m]")
+    orientation: Quaternion | None = Field(
+        default=None, description="Target tip orientation (pose effectors)"
+    )
+    direction: Vec3 | None = Field(
+        default=None,
+        description="Direction the aim axis should point along (aim effectors); any "
+        "non-zero length, normalised by the server",
+    )
+
+    @model_validator(mode="after")
+    def _something(self) -> Target:
+        if self.position is None and self.orientation is None and self.direction is None:
+            raise ValueError("a target needs a position, an orientation or a direction")
+        return self
+
+
+class Frame(StrictModel):
+    """One frame: a target per effector (at most one each). ``id`` is echoed back."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "id": 1,
+                    "targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}}],
+                }
+            ]
+        }
+    )
+
+    id: FrameId | None = Field(default=None, description="Client's frame id, echoed in the result")
+    targets: list[Target] = Field(min_length=1, max_length=HARD_MAX_TARGETS)
+
+
+# POST /v1/sessions/{id}/frames takes one frame, or {"frames": [...]} (a clip).
+FrameRequest = Frame
+
+
+class ClipRequest(StrictModel):
+    """An ordered list of frames, solved one after the other, each warm-started from the
+    previous answer (the server caps the length: IK_MAX_FRAMES_PER_REQUEST)."""
+
+    frames: list[Frame] = Field(min_length=1, max_length=HARD_MAX_FRAMES)
+
+
+def _frames_tag(value: Any) -> str:
+    if isinstance(value, dict):
+        return "clip" if "frames" in value else "frame"
+    return "clip" if isinstance(value, ClipRequest) else "frame"
+
+
+FramesBody = Annotated[
+    Annotated[Frame, Tag("frame")] | Annotated[ClipRequest, Tag("clip")],
+    Discriminator(_frames_tag),
+]
+
+
+# --- results ---------------------------------------------------------------------------
+class EffectorErrorOut(StrictModel):
+    """Pose error of one targeted effector after the solve."""
+
+    name: str
+    position_error_m: float | None = Field(description="Distance to the target position [m]")
+    rotation_error_rad: float | None = Field(
+        description="Orientation (pose) or aim-direction (aim) error [rad]; null for position"
+    )
+    within_tolerance: bool = Field(description="Both errors within the tolerances")
+
+
+class FrameResult(StrictModel):
+    """The answer to one frame. A frame that did not reach its target is still a result
+    (``success: false``), not an error."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "id": 1,
+                    "success": True,
+                    "status": "solved",
+                    "termination": "goal_reached",
+                    "joints": {"shoulder.z": 0.3217, "shoulder.y": 0.1301, "elbow": 1.9611},
+                    "q": [0.3217, 0.1301, 1.9611],
+                    "effectors": [
+                        {
+                            "name": "hand",
+                            "position_error_m": 3.1e-05,
+                            "rotation_error_rad": None,
+                            "within_tolerance": True,
+                        }
+                    ],
+                    "iterations": 12,
+                    "function_evals": 15,
+                    "passes": 1,
+                    "restarts": 0,
+                    "solve_us": 21.4,
+                    "server_us": 160.2,
+                }
+            ]
+        }
+    )
+
+    id: int | None = Field(description="The client's frame id, echoed (null if none was sent)")
+    success: bool = Field(description="Every targeted effector is within the tolerances")
+    status: IKStatusName = Field(
+        description="solved | not_reached (converged outside tolerance: unreachable or a "
+        "local minimum; closest pose returned) | budget_exhausted (time or iterations ran "
+        "out; best pose returned) | nonfinite (the model produced NaN/inf)"
+    )
+    termination: TerminationName = Field(description="How the optimizer's last pass ended")
+    joints: dict[str, float] = Field(description="Joint values by DOF name [rad] or [m]")
+    q: list[float] = Field(description="The same values as an array, in the session's DOF order")
+    effectors: list[EffectorErrorOut] = Field(description="Errors of the targeted effectors")
+    iterations: int = Field(description="Optimizer iterations, all passes")
+    function_evals: int = Field(description="Objective evaluations")
+    passes: int = Field(description="Optimizer passes (H resets and restarts start new ones)")
+    restarts: int = Field(description="Random restarts")
+    solve_us: float = Field(description="Time in the compiled solver [us]")
+    server_us: float = Field(
+        description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
+    )
+
+
+class FrameResults(StrictModel):
+    """One result per frame, in the order of the frames."""
+
+    results: list[FrameResult]
+
+
+# --- poses -----------------------------------------------------------------------------
+class Pose(StrictModel):
+    """Joint values, by name and as an array in DOF order."""
+
+    q: list[float] = Field(description="Values in DOF order [rad] or [m]")
+    joints: dict[str, float] = Field(description="Values by DOF name [rad] or [m]")
+
+
+class PoseIn(StrictModel):
+    """A pose: either ``q`` (every DOF, in order) or ``joints`` (some DOFs by name; the
+    others keep their current value). Values are clipped into the limits."""
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"joints": {"elbow": 1.2}}, {"q": [0.0, 0.2, 1.2]}]}
+    )
+
+    q: list[FiniteFloat] | None = Field(
+        default=None, max_length=HARD_MAX_DOF_VALUES, description="Every DOF, in order"
+    )
+    joints: dict[str, FiniteFloat] | None = Field(
+        default=None, max_length=HARD_MAX_DOF_VALUES, description="Some DOFs by name"
+    )
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> PoseIn:
+        if (self.q is None) == (self.joints is None):
+            raise ValueError("give exactly one of 'q' and 'joints'")
+        return self
+
+
+# --- sessions --------------------------------------------------------------------------
+class DofInfo(StrictModel):
+    """One degree of freedom of the chain."""
+
+    name: str
+    lower: float | None = Field(description="Lower limit [rad] or [m]; null if unbounded")
+    upper: float | None = Field(description="Upper limit [rad] or [m]; null if unbounded")
+
+
+class EffectorInfo(StrictModel):
+    """One effector of the chain."""
+
+    name: str
+    mode: EffectorModeName
+
+
+class SessionCreate(StrictModel):
+    """A chain, solver options (missing fields take the server's defaults) and an
+    optional initial pose (default: the middle of each joint's range)."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "chain": EXAMPLE_ARM,
+                    "options": {"time_budget_us": 1000},
+                    "initial_pose": {"joints": {"elbow": 1.0}},
+                }
+            ]
+        }
+    )
+
+    chain: ChainSpec
+    options: OptionsPatch | None = None
+    initial_pose: PoseIn | None = None
+
+
+class SessionCreated(StrictModel):
+    """The new session. ``token`` is shown only here: send it as
+    ``Authorization: Bearer <token>`` on every call that touches the session."""
+
+    id: str = Field(description="Session id (URL-safe)")
+    token: str = Field(description="Access token (URL-safe)")
+    n_dof: int
+    dof: list[DofInfo] = Field(description="The joint order of q, with limits")
+    effectors: list[EffectorInfo]
+    options: SolverOptions
+    pose: Pose
+    idle_ttl_s: float = Field(description="The session expires after this long without use [s]")
+
+
+class SessionCounters(StrictModel):
+    """Work done by a session."""
+
+    frames: int = Field(description="Frames solved")
+    solved: int = Field(description="Frames that reached their targets")
+    not_solved: int = Field(description="Frames that did not")
+
+
+class SessionInfo(StrictModel):
+    """A session's chain summary, current pose and counters."""
+
+    id: str
+    n_dof: int
+    dof: list[DofInfo]
+    effectors: list[EffectorInfo]
+    options: SolverOptions
+    pose: Pose
+    counters: SessionCounters
+    created_at: float = Field(description="Creation time, Unix epoch [s]")
+    idle_s: float = Field(description="Time since the last use [s]")
+    idle_ttl_s: float = Field(description="Idle time after which the session expires [s]")
+    websockets: int = Field(description="Open WebSocket connections")
+
+
+class SolveRequest(StrictModel):
+    """A stateless one-shot solve: chain, one frame of targets, optional seed."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "chain": EXAMPLE_ARM,
+                    "targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}}],
+                    "seed": {"joints": {"elbow": 1.0}},
+                }
+            ]
+        }
+    )
+
+    chain: ChainSpec
+    targets: list[Target] = Field(min_length=1, max_length=HARD_MAX_TARGETS)
+    seed: PoseIn | None = Field(
+        default=None, description="Start pose (default: the middle of each joint's range)"
+    )
+    options: OptionsPatch | None = None
+    id: FrameId | None = Field(default=None, description="Echoed in the result")

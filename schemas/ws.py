@@ -1,0 +1,69 @@
+"""WebSocket envelopes (``/v1/sessions/{id}/ws``), a discriminated union on ``type``.
+
+The same shapes travel as JSON text messages or as MessagePack binary messages; the
+server answers in the encoding of the message it answers. Every message carries the
+client's ``id``: a non-negative integer that must increase within a connection.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field
+
+from .common import StrictModel
+from .solve import HARD_MAX_TARGETS, FrameId, FrameResult, Target
+
+
+class FrameMessage(StrictModel):
+    """Client -> server: solve one frame, warm-started from the session's current pose."""
+
+    type: Literal["frame"]
+    id: FrameId = Field(description="Frame id; must be greater than the previous message's id")
+    targets: list[Target] = Field(min_length=1, max_length=HARD_MAX_TARGETS)
+
+
+class PingMessage(StrictModel):
+    """Client -> server: ask for a ``pong`` (keep-alive, round-trip time)."""
+
+    type: Literal["ping"]
+    id: FrameId
+
+
+ClientMessage = Annotated[FrameMessage | PingMessage, Field(discriminator="type")]
+
+
+class ResultMessage(StrictModel):
+    """Server -> client: the result of frame ``id``; ``success`` is the frame's success."""
+
+    id: int
+    type: Literal["result"]
+    success: bool
+    result: FrameResult
+
+
+class ErrorPayload(StrictModel):
+    """A recoverable error: the message was not solved, the socket stays open."""
+
+    code: str = Field(description="invalid_format | invalid_problem | id_reuse | not_ready | ...")
+    message: str
+    field: str | None = None
+
+
+class ErrorMessage(StrictModel):
+    """Server -> client: message ``id`` (null if it could not be read) failed."""
+
+    id: int | None
+    type: Literal["result"]
+    success: Literal[False]
+    error: ErrorPayload
+
+
+class PongMessage(StrictModel):
+    """Server -> client: the answer to a ping."""
+
+    id: int
+    type: Literal["pong"]
+
+
+ServerMessage = ResultMessage | ErrorMessage | PongMessage

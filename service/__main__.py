@@ -1,0 +1,59 @@
+"""``python -m service``: uvicorn serving ``create_app`` on IK_HOST:IK_PORT."""
+
+from __future__ import annotations
+
+import os
+
+# Before numpy is imported: one BLAS thread (solves are tiny; threads only contend).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import logging  # noqa: E402
+import re  # noqa: E402
+
+import uvicorn  # noqa: E402
+
+from .config import get_settings  # noqa: E402
+from .main import create_app  # noqa: E402
+
+_TOKEN = re.compile(r"(token=)[^&\s\"]+")
+
+
+class _RedactTokens(logging.Filter):
+    """uvicorn's access log prints query strings; WebSocket clients may put ?token= there."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.args, tuple):
+            record.args = tuple(
+                _TOKEN.sub(r"\1<redacted>", a) if isinstance(a, str) else a for a in record.args
+            )
+        record.msg = _TOKEN.sub(r"\1<redacted>", str(record.msg))
+        return True
+
+
+def main() -> None:
+    settings = get_settings()
+    logging.basicConfig(level=settings.log_level.upper(), format="%(levelname)s:     %(message)s")
+    for name in ("uvicorn.access", "uvicorn.error"):
+        logging.getLogger(name).addFilter(_RedactTokens())
+    host = f"[{settings.host}]" if ":" in settings.host else settings.host
+    logging.getLogger("service").info(
+        "IK service on http://%s:%d (API docs: http://%s:%d/docs)",
+        host,
+        settings.port,
+        host,
+        settings.port,
+    )
+    uvicorn.run(
+        create_app(settings),
+        host=settings.host,
+        port=settings.port,
+        ws="websockets-sansio",
+        ws_max_size=settings.ws_max_message_bytes,
+        timeout_graceful_shutdown=settings.graceful_shutdown_s,
+        log_level=settings.log_level,
+        log_config=None,
+    )
+
+
+if __name__ == "__main__":
+    main()

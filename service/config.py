@@ -1,0 +1,68 @@
+"""Settings from environment variables with the ``IK_`` prefix (pydantic-settings).
+
+Every field is one row of the README's configuration table; units are in the names.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import Literal
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Server configuration; build one per app (tests pass their own)."""
+
+    model_config = SettingsConfigDict(env_prefix="IK_", frozen=True, extra="ignore")
+
+    # Network (used by ``python -m service``).
+    host: str = Field(default="127.0.0.1", description="Address to bind")
+    port: int = Field(default=8000, ge=0, le=65535, description="Port to bind")
+    log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
+    graceful_shutdown_s: int = Field(
+        default=5, ge=0, description="Time open connections get to finish on SIGTERM [s]"
+    )
+
+    # Sessions.
+    session_ttl_s: float = Field(default=300.0, gt=0, description="Idle time before expiry [s]")
+    max_sessions: int = Field(default=1000, ge=1, description="Session cap (503 when full)")
+    sweep_interval_s: float = Field(default=10.0, gt=0, description="Expiry sweep period [s]")
+
+    # Limits.
+    max_joints: int = Field(default=256, ge=1, description="Joints per chain")
+    max_dof: int = Field(default=256, ge=1, description="Degrees of freedom per chain")
+    max_effectors: int = Field(default=32, ge=1, description="Effectors per chain")
+    max_urdf_bytes: int = Field(default=2_000_000, ge=1, description="URDF text size [bytes]")
+    max_frames_per_request: int = Field(default=600, ge=1, description="Frames in one clip")
+    max_body_bytes: int = Field(default=4_194_304, ge=1024, description="HTTP body [bytes]")
+    ws_max_message_bytes: int = Field(
+        default=1_048_576, ge=1024, description="WebSocket message size [bytes] (close 1009)"
+    )
+    max_websockets: int = Field(default=1000, ge=1, description="Open WebSockets (close 1013)")
+    max_time_budget_us: float = Field(
+        default=50_000.0, gt=0, description="Largest per-frame time budget a client may ask [us]"
+    )
+
+    # Where solves run (see the README: "Inline or off the event loop").
+    inline_budget_us: float = Field(
+        default=2_000.0,
+        ge=0,
+        description="Solve inline on the event loop when frames x time_budget_us <= this [us]; "
+        "otherwise in the solver thread pool",
+    )
+    solver_threads: int = Field(default=2, ge=1, description="Solver thread-pool size")
+
+    # Default solver options (a session or request may override each).
+    default_time_budget_us: float = Field(default=1_000.0, gt=0, description="[us] per frame")
+    default_position_tolerance_m: float = Field(default=1e-4, gt=0, description="[m]")
+    default_rotation_tolerance_rad: float = Field(default=1e-3, gt=0, description="[rad]")
+    default_max_iter: int = Field(default=1000, ge=1, description="Iterations per frame")
+    default_max_restarts: int = Field(default=50, ge=0, description="Restarts per frame")
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """The process's settings, read from the environment once."""
+    return Settings()

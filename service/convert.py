@@ -1,0 +1,387 @@
+"""schemas <-> solver: the only module that imports both.
+
+Every solver exception raised while turning a request into solver objects becomes a
+``ServiceError("invalid_problem")`` naming the request field (``chain.joints[2].lower``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+import schemas as S
+from solver.chain import (
+    Chain,
+    Effector,
+    EffectorMode,
+    Joint,
+    JointKind,
+    Transform,
+    build_chain,
+    quaternion_to_matrix,
+)
+from solver.errors import IKError, InvalidModel
+from solver.examples import EXAMPLES
+from solver.ik import STREAM_DEFAULTS, IKOptions, IKResult
+from solver.ik import Target as SolverTarget
+from solver.types import Vector
+from solver.urdf import chain_from_urdf
+
+from .config import Settings
+from .errors import invalid_problem
+
+_EFFECTOR_FIELDS = frozenset(
+    {"link", "tip_offset", "tip_rotation", "aim_axis", "position_weight", "rotation_weight", "mode"}
+)
+_URDF_REQUEST_FIELDS = frozenset({"base_link", "tip_links", "mode"})
+
+
+@dataclass(frozen=True, slots=True)
+class ChainView:
+    """A chain plus the lookups the service needs on every frame."""
+
+    chain: Chain
+    effector_modes: dict[str, EffectorMode]
+    dof_index: dict[str, int]
+    summary: dict[str, Any]  # n_dof, dof (with limits), effectors: JSON-ready
+
+    @classmethod
+    def of(cls, chain: Chain) -> ChainView:
+        modes = {e.name: e.mode for e in chain.effectors}
+        dof = [
+            {"name": n, "lower": _finite_or_none(lo), "upper": _finite_or_none(hi)}
+            for n, lo, hi in zip(chain.dof_names, chain.lower, chain.upper, strict=True)
+        ]
+        summary = {
+            "n_dof": chain.n_dof,
+            "dof": dof,
+            "effectors": [{"name": e.name, "mode": e.mode.value} for e in chain.effectors],
+        }
+        index = {n: i for i, n in enumerate(chain.dof_names)}
+        return cls(chain, modes, index, summary)
+
+
+def _finite_or_none(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
+
+
+# --- chains ----------------------------------------------------------------------------
+def chain_from_spec(
+    spec: S.HierarchyChain | S.UrdfChain | S.ExampleChain, settings: Settings
+) -> ChainView:
+    """Build and validate the chain a request describes, within the server's limits.
+
+    Raises:
+        ServiceError: ``invalid_problem`` naming the field (``chain.joints[i].<field>``).
+    """
+    if isinstance(spec, S.ExampleChain):
+        factory: Callable[[], Chain] = EXAMPLES[spec.name]
+        chain = factory()
+    elif isinstance(spec, S.UrdfChain):
+        chain = _urdf_chain(spec, settings)
+    else:
+        chain = _hierarchy_chain(spec, settings)
+    if chain.n_dof > settings.max_dof:
+        raise invalid_problem(
+            f"too many degrees of freedom: {chain.n_dof} > {settings.max_dof}", "chain"
+        )
+    if len(chain.joints) > settings.max_joints:
+        raise invalid_problem(
+            f"too many joints: {len(chain.joints)} > {settings.max_joints}", "chain"
+        )
+    return ChainView.of(chain)
+
+
+def _urdf_chain(spec: S.UrdfChain, settings: Settings) -> Chain:
+    if len(spec.tip_links) > settings.max_effectors:
+        raise invalid_problem(
+            f"too many tip links: {len(spec.tip_links)} > {settings.max_effectors}",
+            "chain.tip_links",
+        )
+    try:
+        return chain_from_urdf(
+            spec.urdf,
+            base_link=spec.base_link,
+            tip_links=spec.tip_links,
+            mode=EffectorMode(spec.mode),
+            max_dof=settings.max_dof,
+            max_bytes=settings.max_urdf_bytes,
+        )
+    except InvalidModel as e:
+        field = f"chain.{e.field}" if e.field in _URDF_REQUEST_FIELDS else "chain.urdf"
+        raise invalid_problem(str(e), field) from None
+
+
+def _vec(v: S.Vec3) -> Vector:
+    return np.array((v.x, v.y, v.z), dtype=np.float64)
+
+
+def _rotation(q: S.Quaternion) -> Vector:
+    wxyz = np.array((q.w, q.x, q.y, q.z), dtype=np.float64)
+    return quaternion_to_matrix(wxyz / np.linalg.norm(wxyz))
+
+
+def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
+    if len(spec.joints) > settings.max_joints:
+        raise invalid_problem(
+            f"too many joints: {len(spec.joints)} > {settings.max_joints}", "chain.joints"
+        )
+    if len(spec.effectors) > settings.max_effectors:
+        raise invalid_problem(
+            f"too many effectors: {len(spec.effectors)} > {settings.max_effectors}",
+            "chain.effectors",
+        )
+    joints = [
+        Joint(
+            name=j.name,
+            parent=j.parent,
+            child=j.child,
+            kind=JointKind(j.kind),
+            origin=Transform(_vec(j.origin.translation), _rotation(j.origin.rotation)),
+            pivot=_vec(j.pivot),
+            axis=_vec(j.axis),
+            axes=j.axes,
+            lower=tuple(j.lower),
+            upper=tuple(j.upper),
+            terminator=j.terminator,
+        )
+        for j in spec.joints
+    ]
+    effectors = [
+        Effector(
+            name=e.name,
+            link=e.link,
+            tip_offset=_vec(e.tip_offset),
+            tip_rotation=_rotation(e.tip_rotation),
+            mode=EffectorMode(e.mode),
+            aim_axis=_vec(e.aim_axis),
+            position_weight=e.position_weight,
+            rotation_weight=e.rotation_weight,
+        )
+        for e in spec.effectors
+    ]
+    try:
+        return build_chain(joints, effectors, max_dof=settings.max_dof)
+    except InvalidModel as e:
+        raise invalid_problem(str(e), _hierarchy_field(spec, e)) from None
+
+
+def _hierarchy_field(spec: S.HierarchyChain, e: InvalidModel) -> str:
+    """The request path of the joint / effector field an InvalidModel names."""
+    field = e.field or ""
+    if field in ("rotation", "translation"):
+        field = f"origin.{field}"
+    if e.joint is not None:
+        if field in _EFFECTOR_FIELDS or (
+            field == "name" and not any(j.name == e.joint for j in spec.joints)
+        ):
+            for i, eff in enumerate(spec.effectors):
+                if eff.name == e.joint:
+                    return f"chain.effectors[{i}].{field}" if field else f"chain.effectors[{i}]"
+        for i, j in enumerate(spec.joints):
+            # A duplicate variable is named "<joint>.<axis>" for rotational joints.
+            if e.joint in (j.name, *(f"{j.name}.{a}" for a in j.axes)):
+                return f"chain.joints[{i}].{field}" if field else f"chain.joints[{i}]"
+    if field in ("joints", "effectors"):
+        return f"chain.{field}"
+    if field in ("parent", "name", "child"):
+        return "chain.joints"
+    return f"chain.{field}" if field else "chain"
+
+
+# --- options ---------------------------------------------------------------------------
+def session_defaults(settings: Settings) -> IKOptions:
+    """Stream defaults (local restarts, light limit pull) with the server's settings."""
+    return replace(
+        STREAM_DEFAULTS,
+        time_budget_us=settings.default_time_budget_us,
+        position_tolerance_m=settings.default_position_tolerance_m,
+        rotation_tolerance_rad=settings.default_rotation_tolerance_rad,
+        max_iter=settings.default_max_iter,
+        max_restarts=settings.default_max_restarts,
+    )
+
+
+def oneshot_defaults(settings: Settings) -> IKOptions:
+    """One-shot defaults (restarts anywhere in the limits) with the server's settings."""
+    return replace(
+        IKOptions(),
+        time_budget_us=settings.default_time_budget_us,
+        position_tolerance_m=settings.default_position_tolerance_m,
+        rotation_tolerance_rad=settings.default_rotation_tolerance_rad,
+        max_iter=settings.default_max_iter,
+        max_restarts=settings.default_max_restarts,
+    )
+
+
+def apply_options(
+    patch: S.OptionsPatch | None, base: IKOptions, settings: Settings, *, field: str = "options"
+) -> IKOptions:
+    """``base`` with the fields ``patch`` sets, validated by the solver and the server caps."""
+    if patch is None:
+        return base
+    changes = patch.model_dump(exclude_none=True)
+    budget = changes.get("time_budget_us")
+    if budget is not None and budget > settings.max_time_budget_us:
+        raise invalid_problem(
+            f"time_budget_us must be at most {settings.max_time_budget_us:g} "
+            "(IK_MAX_TIME_BUDGET_US)",
+            f"{field}.time_budget_us",
+        )
+    try:
+        return replace(base, **changes)
+    except IKError as e:
+        raise invalid_problem(str(e), field) from None
+
+
+def options_dict(o: IKOptions) -> dict[str, Any]:
+    """The SolverOptions view of IKOptions (JSON-ready)."""
+    return {
+        "position_tolerance_m": o.position_tolerance_m,
+        "rotation_tolerance_rad": o.rotation_tolerance_rad,
+        "time_budget_us": o.time_budget_us,
+        "max_iter": o.max_iter,
+        "max_restarts": o.max_restarts,
+        "restart_radius_rad": o.restart_radius_rad if math.isfinite(o.restart_radius_rad) else 1e9,
+        "max_step_rad": o.max_step_rad,
+        "posture_weight": o.posture_weight,
+        "limit_weight": o.limit_weight,
+        "limit_margin": o.limit_margin,
+    }
+
+
+# --- targets and poses -----------------------------------------------------------------
+def targets(ts: Sequence[S.Target], view: ChainView, field: str) -> list[SolverTarget]:
+    """Solver targets for one frame, checked against the chain's effectors.
+
+    Raises:
+        ServiceError: unknown effector, two targets for one effector, or a target that
+            lacks (or adds) what the effector's mode uses; ``field`` names it.
+    """
+    out: list[SolverTarget] = []
+    seen: set[str] = set()
+    for j, t in enumerate(ts):
+        where = f"{field}[{j}]"
+        mode = view.effector_modes.get(t.effector)
+        if mode is None:
+            raise invalid_problem(
+                f"unknown effector {t.effector!r} (effectors: {sorted(view.effector_modes)})",
+                f"{where}.effector",
+            )
+        if t.effector in seen:
+            raise invalid_problem(f"two targets for effector {t.effector!r}", f"{where}.effector")
+        seen.add(t.effector)
+        if mode is EffectorMode.POSITION:
+            _require(
+                t.position is not None, "a position effector needs 'position'", where, "position"
+            )
+            _require(
+                t.orientation is None,
+                "a position effector takes no 'orientation'",
+                where,
+                "orientation",
+            )
+            _require(
+                t.direction is None, "a position effector takes no 'direction'", where, "direction"
+            )
+        elif mode is EffectorMode.POSE:
+            _require(
+                t.orientation is not None,
+                "a pose effector needs 'orientation'",
+                where,
+                "orientation",
+            )
+            _require(
+                t.direction is None, "a pose effector takes no 'direction'", where, "direction"
+            )
+        else:
+            _require(
+                t.direction is not None, "an aim effector needs 'direction'", where, "direction"
+            )
+            _require(
+                t.orientation is None,
+                "an aim effector takes no 'orientation'",
+                where,
+                "orientation",
+            )
+        direction = None
+        if t.direction is not None:
+            direction = _vec(t.direction)
+            if not float(np.linalg.norm(direction)) > 1e-9:
+                raise invalid_problem("direction must not be zero", f"{where}.direction")
+        out.append(
+            SolverTarget(
+                effector=t.effector,
+                position=None if t.position is None else _vec(t.position),
+                rotation=None if t.orientation is None else _rotation(t.orientation),
+                direction=direction,
+            )
+        )
+    return out
+
+
+def _require(ok: bool, message: str, where: str, name: str) -> None:
+    if not ok:
+        raise invalid_problem(message, f"{where}.{name}")
+
+
+def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str) -> Vector:
+    """A full q from a PoseIn (``joints`` fills in ``current``), clipped into the limits."""
+    chain = view.chain
+    if pose.q is not None:
+        if len(pose.q) != chain.n_dof:
+            raise invalid_problem(
+                f"q must have {chain.n_dof} values (one per DOF), got {len(pose.q)}", f"{field}.q"
+            )
+        q = np.array(pose.q, dtype=np.float64)
+    else:
+        assert pose.joints is not None
+        q = np.array(current, dtype=np.float64)
+        for name, value in pose.joints.items():
+            i = view.dof_index.get(name)
+            if i is None:
+                raise invalid_problem(
+                    f"unknown DOF {name!r} (DOFs: {list(chain.dof_names)})",
+                    f"{field}.joints.{name}",
+                )
+            q[i] = value
+    return np.clip(q, chain.lower, chain.upper)
+
+
+def pose_dict(view: ChainView, q: Vector) -> dict[str, Any]:
+    values = q.tolist()
+    return {"q": values, "joints": dict(zip(view.chain.dof_names, values, strict=True))}
+
+
+# --- results ---------------------------------------------------------------------------
+def result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str, Any]:
+    """A FrameResult as a JSON/MessagePack-ready dict (the hot path: no re-validation;
+    tests check the shape against ``schemas.FrameResult``)."""
+    values = r.q.tolist()
+    return {
+        "id": frame_id,
+        "success": r.success,
+        "status": r.status.value,
+        "termination": r.termination.value,
+        "joints": dict(zip(r.dof_names, values, strict=True)),
+        "q": values,
+        "effectors": [
+            {
+                "name": e.name,
+                "position_error_m": e.position_error_m,
+                "rotation_error_rad": e.rotation_error_rad,
+                "within_tolerance": e.within_tolerance,
+            }
+            for e in r.effectors
+        ],
+        "iterations": r.iterations,
+        "function_evals": r.function_evals,
+        "passes": r.passes,
+        "restarts": r.restarts,
+        "solve_us": r.solve_us,
+        "server_us": server_us,
+    }

@@ -1,0 +1,96 @@
+"""What handlers share: the per-app ``Services`` (on ``app.state.ik``) and the session
+authentication dependency.
+
+Authentication: every call that touches a session needs its token, as
+``Authorization: Bearer <token>`` (WebSocket clients that cannot set headers may use
+``?token=``). No token -> 401 ``unauthorized``; unknown or expired session -> 404
+``not_found``; wrong token -> 403 ``forbidden``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Annotated
+
+from fastapi import Depends, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from starlette import status
+from starlette.requests import HTTPConnection
+
+from .config import Settings
+from .errors import ServiceError, not_found
+from .metrics import Metrics
+from .sessions import Session, SessionStore
+from .solving import Runner
+
+T0_KEY = "ik.t0"
+
+
+@dataclass(slots=True)
+class Services:
+    """Everything a handler needs, built in the app's lifespan."""
+
+    settings: Settings
+    store: SessionStore
+    metrics: Metrics
+    runner: Runner
+    open_websockets: int = 0
+
+
+def services(conn: HTTPConnection) -> Services:
+    svc: Services = conn.app.state.ik
+    return svc
+
+
+def received_at(request: Request) -> float:
+    """perf_counter() when the request arrived (set by the timing middleware)."""
+    t0 = request.scope.get(T0_KEY)
+    return float(t0) if t0 is not None else time.perf_counter()
+
+
+def unauthorized() -> ServiceError:
+    return ServiceError(
+        "unauthorized",
+        "this call needs the session's token: Authorization: Bearer <token>",
+        status_code=status.HTTP_401_UNAUTHORIZED,
+    )
+
+
+def forbidden() -> ServiceError:
+    return ServiceError(
+        "forbidden", "the token does not match this session", status_code=status.HTTP_403_FORBIDDEN
+    )
+
+
+async def authenticate(store: SessionStore, session_id: str, token: str | None) -> Session:
+    """The session ``session_id`` if ``token`` opens it.
+
+    Raises:
+        ServiceError: unauthorized (no token), not_found, forbidden (wrong token).
+    """
+    if not token:
+        raise unauthorized()
+    session = await store.get(session_id)
+    if session is None:
+        raise not_found()
+    if not session.token_ok(token):
+        raise forbidden()
+    return session
+
+
+_bearer = HTTPBearer(auto_error=False, description="The session token from POST /v1/sessions")
+
+
+async def session_auth(
+    session_id: str,
+    request: Request,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+) -> Session:
+    """Dependency: the authenticated session of the path's ``session_id``."""
+    token = credentials.credentials if credentials is not None else None
+    return await authenticate(services(request).store, session_id, token)
+
+
+ServicesDep = Annotated[Services, Depends(services)]
+SessionDep = Annotated[Session, Depends(session_auth)]

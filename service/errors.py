@@ -1,0 +1,181 @@
+"""Service errors with stable codes, their HTTP mapping and the WebSocket close codes.
+
+Codes owned here (HTTP status / WebSocket behaviour):
+
+==================== ====== =====================================================
+code                 HTTP   WebSocket
+==================== ====== =====================================================
+invalid_format       422    error message, socket stays open
+invalid_problem      422    error message, socket stays open
+id_reuse             --     error message (id not greater than the previous one)
+unauthorized         401    close 4401 (no token)
+forbidden            403    close 4403 (wrong token)
+not_found            404    close 4404 (no such session, or it expired / was deleted)
+method_not_allowed   405    --
+payload_too_large    413    close 1009 (message larger than IK_WS_MAX_MESSAGE_BYTES)
+too_many_sessions    503    -- (+ Retry-After)
+not_ready            503    error message (solver still warming up) (+ Retry-After)
+too_many_websockets  --     close 1013 (try again later)
+internal_error       500    error message, then close 1011
+==================== ====== =====================================================
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from starlette import status
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.responses import Response
+
+from solver.errors import IKError
+
+from .responses import ORJSONResponse
+
+log = logging.getLogger("service")
+
+# Application close codes mirror the HTTP statuses (4000-4999 is the private range).
+WS_UNAUTHORIZED = 4401
+WS_FORBIDDEN = 4403
+WS_NOT_FOUND = 4404
+WS_CLOSE_CODES: dict[int, str] = {
+    status.WS_1000_NORMAL_CLOSURE: "normal closure",
+    status.WS_1009_MESSAGE_TOO_BIG: "message larger than IK_WS_MAX_MESSAGE_BYTES",
+    status.WS_1011_INTERNAL_ERROR: "unexpected server error (logged)",
+    status.WS_1012_SERVICE_RESTART: "the server is shutting down; reconnect",
+    status.WS_1013_TRY_AGAIN_LATER: "too many open WebSockets; retry later",
+    WS_UNAUTHORIZED: "no token (Authorization: Bearer or ?token=)",
+    WS_FORBIDDEN: "wrong token for this session",
+    WS_NOT_FOUND: "no such session (never existed, expired or deleted)",
+}
+
+
+class ServiceError(Exception):
+    """An error a client caused or must handle; carries its stable code.
+
+    Args:
+        code: Stable error code (module docstring).
+        detail: Human-readable message.
+        status_code: HTTP status.
+        field: Dotted path of the offending field, if any.
+        retry_after_s: Adds ``Retry-After`` (seconds, rounded up).
+    """
+
+    def __init__(
+        self,
+        code: str,
+        detail: str,
+        *,
+        status_code: int,
+        field: str | None = None,
+        retry_after_s: float | None = None,
+    ) -> None:
+        super().__init__(detail)
+        self.code = code
+        self.detail = detail
+        self.status_code = status_code
+        self.field = field
+        self.retry_after_s = retry_after_s
+
+    def body(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"detail": self.detail, "code": self.code}
+        if self.field is not None:
+            out["field"] = self.field
+        return out
+
+    def headers(self) -> dict[str, str]:
+        h: dict[str, str] = {}
+        if self.retry_after_s is not None:
+            h["Retry-After"] = str(max(1, math.ceil(self.retry_after_s)))
+        if self.status_code == status.HTTP_401_UNAUTHORIZED:
+            h["WWW-Authenticate"] = "Bearer"
+        return h
+
+
+def invalid_problem(detail: str, field: str | None) -> ServiceError:
+    where = f"{field}: " if field and not detail.startswith(field) else ""
+    return ServiceError(
+        "invalid_problem",
+        f"{where}{detail}",
+        status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
+        field=field,
+    )
+
+
+def not_found(detail: str = "no such session") -> ServiceError:
+    return ServiceError("not_found", detail, status_code=status.HTTP_404_NOT_FOUND)
+
+
+def not_ready() -> ServiceError:
+    return ServiceError(
+        "not_ready",
+        "the solver is still warming up (see /readyz)",
+        status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
+        retry_after_s=1.0,
+    )
+
+
+def validation_errors(errors: Any) -> list[dict[str, Any]]:
+    """pydantic errors without the echoed input (it can be a whole URDF) or URLs."""
+    out = []
+    for e in errors:
+        out.append(
+            {"loc": list(e.get("loc", ())), "msg": str(e.get("msg", "")), "type": e.get("type", "")}
+        )
+    return out
+
+
+_HTTP_CODES = {
+    status.HTTP_404_NOT_FOUND: "not_found",
+    status.HTTP_405_METHOD_NOT_ALLOWED: "method_not_allowed",
+    status.HTTP_413_CONTENT_TOO_LARGE: "payload_too_large",
+}
+
+
+async def _service_error(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, ServiceError)
+    return ORJSONResponse(exc.body(), status_code=exc.status_code, headers=exc.headers())
+
+
+async def _validation_error(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, RequestValidationError)
+    return ORJSONResponse(
+        {"detail": validation_errors(exc.errors()), "code": "invalid_format"},
+        status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
+    )
+
+
+async def _solver_error(request: Request, exc: Exception) -> Response:
+    # convert.py maps solver errors with the field named; this is the safety net.
+    assert isinstance(exc, IKError)
+    err = invalid_problem(str(exc), getattr(exc, "field", None))
+    return ORJSONResponse(err.body(), status_code=err.status_code)
+
+
+async def _http_error(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, StarletteHTTPException)
+    code = _HTTP_CODES.get(exc.status_code, "http_error")
+    return ORJSONResponse(
+        {"detail": exc.detail, "code": code}, status_code=exc.status_code, headers=exc.headers
+    )
+
+
+async def _internal_error(request: Request, exc: Exception) -> Response:
+    # Starlette's ServerErrorMiddleware logs the traceback once and re-raises.
+    return ORJSONResponse(
+        {"detail": "internal server error", "code": "internal_error"},
+        status_code=status.HTTP_500_INTERNAL_SERVER_ERROR,
+    )
+
+
+def install_handlers(app: FastAPI) -> None:
+    """The one central mapper from exceptions to ``{"detail", "code"}`` bodies."""
+    app.add_exception_handler(ServiceError, _service_error)
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(IKError, _solver_error)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
+    app.add_exception_handler(Exception, _internal_error)

@@ -1,0 +1,20 @@
+"""JSON responses rendered with orjson (FastAPI's ORJSONResponse is deprecated)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import orjson
+from starlette.responses import JSONResponse
+
+
+def dumps(content: Any) -> bytes:
+    """orjson with numpy support; floats stay float64 (the contract has no NaN/inf)."""
+    return orjson.dumps(content, option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+class ORJSONResponse(JSONResponse):
+    """application/json rendered by orjson."""
+
+    def render(self, content: Any) -> bytes:
+        return dumps(content)

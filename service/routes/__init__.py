@@ -1,0 +1,1 @@
+"""Thin handlers: http.py (/v1 resources), ws.py (/v1/sessions/{id}/ws), health.py."""

@@ -1,0 +1,280 @@
+"""/v1 HTTP resources: sessions, their frames, pose and options, and one-shot solves.
+
+Codes: 201/200/204 on success; 401 unauthorized, 403 forbidden, 404 not_found,
+413 payload_too_large, 422 invalid_format / invalid_problem, 503 too_many_sessions /
+not_ready (+ Retry-After).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, Request, Response
+from starlette import status
+
+import schemas as S
+from schemas.chain import EXAMPLE_ARM
+
+from .. import convert
+from ..deps import ServicesDep, SessionDep, received_at
+from ..errors import ServiceError, invalid_problem, not_found
+from ..responses import ORJSONResponse
+from ..sessions import Session, SessionStore, StoreFull, new_session
+from ..solving import make_solver, solve_once
+
+router = APIRouter(prefix="/v1")
+
+_E = {"model": S.ErrorBody}
+_AUTH_ERRORS: dict[int | str, dict[str, Any]] = {
+    401: {**_E, "description": "No token (`unauthorized`)"},
+    403: {**_E, "description": "Wrong token (`forbidden`)"},
+    404: {**_E, "description": "No such session, or it expired (`not_found`)"},
+}
+_422: dict[int | str, dict[str, Any]] = {
+    422: {**_E, "description": "`invalid_format` (schema) or `invalid_problem` (field named)"}
+}
+_503: dict[int | str, dict[str, Any]] = {
+    503: {**_E, "description": "`not_ready` (warming up) or `too_many_sessions`; see Retry-After"}
+}
+
+_CREATE_EXAMPLES = {
+    "hierarchy": {
+        "summary": "A 3-DOF arm given as joints (position effector 'hand')",
+        "value": {"chain": EXAMPLE_ARM, "options": {"time_budget_us": 1000}},
+    },
+    "example": {
+        "summary": "The built-in Franka Panda example (pose effector 'tool')",
+        "value": {"chain": {"format": "example", "name": "panda_arm"}},
+    },
+    "urdf": {
+        "summary": "URDF text with base and tip links",
+        "value": {
+            "chain": {
+                "format": "urdf",
+                "urdf": (
+                    '<robot name="r"><link name="base"/><link name="l1"/><link name="tip"/>'
+                    '<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>'
+                    '<axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/>'
+                    '</joint><joint name="j2" type="revolute"><parent link="l1"/>'
+                    '<child link="tip"/><origin xyz="0.5 0 0"/><axis xyz="0 0 1"/>'
+                    '<limit lower="-3" upper="3" effort="1" velocity="1"/></joint></robot>'
+                ),
+                "base_link": "base",
+                "tip_links": ["tip"],
+                "mode": "position",
+            }
+        },
+    },
+}
+_FRAMES_EXAMPLES = {
+    "frame": {
+        "summary": "One frame (for the 3-DOF arm example)",
+        "value": {
+            "id": 1,
+            "targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}}],
+        },
+    },
+    "clip": {
+        "summary": "A clip: frames solved in order, each from the previous answer",
+        "value": {
+            "frames": [
+                {
+                    "id": 1,
+                    "targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}}],
+                },
+                {
+                    "id": 2,
+                    "targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.12, "z": 0.59}}],
+                },
+                {
+                    "id": 3,
+                    "targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.14, "z": 0.58}}],
+                },
+            ]
+        },
+    },
+    "panda": {
+        "summary": "One pose frame for the panda_arm example (effector 'tool')",
+        "value": {
+            "id": 7,
+            "targets": [
+                {
+                    "effector": "tool",
+                    "position": {"x": 0.4, "y": 0.1, "z": 0.5},
+                    "orientation": {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0},
+                }
+            ],
+        },
+    },
+}
+
+
+def _session_info(session: Session, store: SessionStore) -> dict[str, Any]:
+    view = session.view
+    return {
+        "id": session.id,
+        **view.summary,
+        "options": convert.options_dict(session.options),
+        "pose": convert.pose_dict(view, session.solver.q),
+        "counters": {
+            "frames": session.frames,
+            "solved": session.solved,
+            "not_solved": session.frames - session.solved,
+        },
+        "created_at": session.created_at,
+        "idle_s": store.idle_s(session),
+        "idle_ttl_s": store.ttl_s,
+        "websockets": session.websockets,
+    }
+
+
+@router.post(
+    "/sessions",
+    status_code=status.HTTP_201_CREATED,
+    response_model=S.SessionCreated,
+    responses={**_422, **_503},
+    tags=["sessions"],
+)
+async def create_session(
+    body: Annotated[S.SessionCreate, Body(openapi_examples=_CREATE_EXAMPLES)], svc: ServicesDep
+) -> Response:
+    """Create a session: a chain, solver options and an optional initial pose."""
+    svc.runner.check_ready()
+    settings = svc.settings
+    view = await svc.runner.in_pool(convert.chain_from_spec, body.chain, settings)
+    options = convert.apply_options(body.options, convert.session_defaults(settings), settings)
+    solver = await svc.runner.in_pool(make_solver, view, options)
+    if body.initial_pose is not None:
+        solver.set_pose(convert.pose_vector(body.initial_pose, view, solver.q, "initial_pose"))
+    session, token = new_session(view, solver, options, now=svc.store.clock())
+    try:
+        await svc.store.add(session)
+    except StoreFull as e:
+        raise ServiceError(
+            "too_many_sessions",
+            f"the server holds its maximum of {settings.max_sessions} sessions",
+            status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
+            retry_after_s=e.retry_after_s,
+        ) from None
+    svc.metrics.sessions_created.inc()
+    body_out = {
+        "id": session.id,
+        "token": token,
+        **view.summary,
+        "options": convert.options_dict(options),
+        "pose": convert.pose_dict(view, solver.q),
+        "idle_ttl_s": svc.store.ttl_s,
+    }
+    return ORJSONResponse(
+        body_out,
+        status_code=status.HTTP_201_CREATED,
+        headers={"Location": f"/v1/sessions/{session.id}"},
+    )
+
+
+@router.get(
+    "/sessions/{session_id}",
+    response_model=S.SessionInfo,
+    responses=_AUTH_ERRORS,
+    tags=["sessions"],
+)
+async def get_session(session: SessionDep, svc: ServicesDep) -> dict[str, Any]:
+    """The session's chain summary, options, current pose and counters."""
+    svc.store.touch(session)
+    return _session_info(session, svc.store)
+
+
+@router.patch(
+    "/sessions/{session_id}",
+    response_model=S.SessionInfo,
+    responses={**_AUTH_ERRORS, **_422},
+    tags=["sessions"],
+)
+async def patch_session(
+    body: Annotated[S.OptionsPatch, Body()], session: SessionDep, svc: ServicesDep
+) -> dict[str, Any]:
+    """Change solver options; fields left out keep their value. Applies to later frames."""
+    async with session.lock:
+        if session.closed:
+            raise not_found()
+        session.options = convert.apply_options(body, session.options, svc.settings, field="body")
+    svc.store.touch(session)
+    return _session_info(session, svc.store)
+
+
+@router.put(
+    "/sessions/{session_id}/pose",
+    response_model=S.Pose,
+    responses={**_AUTH_ERRORS, **_422},
+    tags=["sessions"],
+)
+async def put_pose(
+    body: Annotated[S.PoseIn, Body()], session: SessionDep, svc: ServicesDep
+) -> dict[str, Any]:
+    """Set the current pose (the next frame starts from it); values are clipped into the limits."""
+    async with session.lock:
+        if session.closed:
+            raise not_found()
+        q = convert.pose_vector(body, session.view, session.solver.q, "body")
+        session.solver.set_pose(q)
+    svc.store.touch(session)
+    return convert.pose_dict(session.view, session.solver.q)
+
+
+@router.delete(
+    "/sessions/{session_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    responses=_AUTH_ERRORS,
+    tags=["sessions"],
+)
+async def delete_session(session: SessionDep, svc: ServicesDep) -> Response:
+    """Delete the session; open WebSockets on it close with 4404 at their next message."""
+    await svc.store.remove(session.id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+@router.post(
+    "/sessions/{session_id}/frames",
+    response_model=S.FrameResults,
+    responses={**_AUTH_ERRORS, **_422, **_503},
+    tags=["sessions"],
+)
+async def post_frames(
+    body: Annotated[S.FramesBody, Body(openapi_examples=_FRAMES_EXAMPLES)],
+    request: Request,
+    session: SessionDep,
+    svc: ServicesDep,
+) -> Response:
+    """Solve one frame, or a clip of frames in order; one result per frame."""
+    t0 = received_at(request)
+    if isinstance(body, S.ClipRequest):
+        limit = svc.settings.max_frames_per_request
+        if len(body.frames) > limit:
+            raise invalid_problem(
+                f"at most {limit} frames per request (IK_MAX_FRAMES_PER_REQUEST)", "frames"
+            )
+        jobs = [
+            (f.id, convert.targets(f.targets, session.view, f"frames[{i}].targets"))
+            for i, f in enumerate(body.frames)
+        ]
+    else:
+        jobs = [(body.id, convert.targets(body.targets, session.view, "targets"))]
+    results = await svc.runner.session_frames(session, svc.store, jobs, t0, "http")
+    return ORJSONResponse({"results": results})
+
+
+@router.post("/solve", response_model=S.FrameResult, responses={**_422, **_503}, tags=["one-shot"])
+async def solve(body: S.SolveRequest, request: Request, svc: ServicesDep) -> Response:
+    """Stateless one-shot solve: a chain, one frame of targets, an optional seed."""
+    t0 = received_at(request)
+    svc.runner.check_ready()
+    settings = svc.settings
+    view = await svc.runner.in_pool(convert.chain_from_spec, body.chain, settings)
+    options = convert.apply_options(body.options, convert.oneshot_defaults(settings), settings)
+    targets = convert.targets(body.targets, view, "targets")
+    seed = None
+    if body.seed is not None:
+        seed = convert.pose_vector(body.seed, view, view.chain.mid_limits(), "seed")
+    r, out = await svc.runner.in_pool(solve_once, view, targets, seed, options, body.id, t0)
+    svc.metrics.frame(r, out["server_us"] * 1e-6, "http")
+    return ORJSONResponse(out)

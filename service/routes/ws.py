@@ -1,0 +1,200 @@
+"""WebSocket ``/v1/sessions/{session_id}/ws``: the game-client path.
+
+The client sends ``frame`` (and ``ping``) messages, each with an increasing ``id``; the
+server answers each one, in order, before reading the next. JSON text messages get JSON
+text answers, MessagePack binary messages get MessagePack answers.
+
+Recoverable errors (an error ``result`` message; the socket stays open): invalid_format,
+invalid_problem, id_reuse, not_ready. Closes: 4401 unauthorized, 4403 forbidden,
+4404 not_found (at connect, or when the session was deleted / expired), 1009 message
+too big, 1013 too many WebSockets, 1011 unexpected error (after an internal_error
+message), 1012 server shutting down (uvicorn).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import msgpack
+import orjson
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from pydantic import TypeAdapter, ValidationError
+from starlette import status
+
+import schemas as S
+
+from .. import convert
+from ..deps import Services, authenticate, services
+from ..errors import (
+    WS_FORBIDDEN,
+    WS_NOT_FOUND,
+    WS_UNAUTHORIZED,
+    ServiceError,
+    validation_errors,
+)
+from ..sessions import Session
+
+log = logging.getLogger("service")
+router = APIRouter(prefix="/v1")
+
+_CLIENT_MESSAGE: TypeAdapter[S.FrameMessage | S.PingMessage] = TypeAdapter(S.ClientMessage)
+_AUTH_CLOSE = {
+    "unauthorized": WS_UNAUTHORIZED,
+    "forbidden": WS_FORBIDDEN,
+    "not_found": WS_NOT_FOUND,
+}
+
+
+def _token(ws: WebSocket) -> str | None:
+    auth = ws.headers.get("authorization")
+    if auth is not None:
+        scheme, _, value = auth.partition(" ")
+        if scheme.lower() == "bearer" and value.strip():
+            return value.strip()
+    return ws.query_params.get("token")
+
+
+def _error(msg_id: int | None, code: str, message: str, field: str | None = None) -> dict[str, Any]:
+    err: dict[str, Any] = {"code": code, "message": message}
+    if field is not None:
+        err["field"] = field
+    return {"id": msg_id, "type": "result", "success": False, "error": err}
+
+
+def _raw_id(raw: Any) -> int | None:
+    """The id of a message that failed validation, if it has a usable one."""
+    if isinstance(raw, dict):
+        v = raw.get("id")
+        if isinstance(v, int) and not isinstance(v, bool):
+            return v
+    return None
+
+
+class _Connection:
+    """One open socket: decoding, the id sequence, replies in the request's encoding."""
+
+    def __init__(self, ws: WebSocket, svc: Services, session: Session) -> None:
+        self.ws = ws
+        self.svc = svc
+        self.session = session
+        self.last_id = -1
+
+    async def send(self, payload: dict[str, Any], binary: bool) -> None:
+        if binary:
+            await self.ws.send_bytes(msgpack.packb(payload))
+        else:
+            await self.ws.send_text(orjson.dumps(payload).decode())
+
+    async def reply_error(
+        self, binary: bool, msg_id: int | None, code: str, message: str, field: str | None = None
+    ) -> None:
+        self.svc.metrics.error(code, "ws")
+        await self.send(_error(msg_id, code, message, field), binary)
+
+    async def handle(self, data: str | bytes, t0: float) -> None:
+        binary = isinstance(data, bytes)
+        raw: Any = None
+        try:
+            if binary:
+                raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
+                msg = _CLIENT_MESSAGE.validate_python(raw)
+            else:
+                msg = _CLIENT_MESSAGE.validate_json(data)
+        except ValidationError as e:
+            if raw is None and not binary:
+                try:
+                    raw = orjson.loads(data)
+                except orjson.JSONDecodeError:
+                    raw = None
+            errors = validation_errors(e.errors())
+            first = errors[0] if errors else {"loc": [], "msg": "invalid message"}
+            field = ".".join(str(p) for p in first["loc"]) or None
+            await self.reply_error(binary, _raw_id(raw), "invalid_format", str(first["msg"]), field)
+            return
+        except Exception as e:  # msgpack's errors share no useful base class
+            await self.reply_error(
+                binary, None, "invalid_format", f"not MessagePack: {type(e).__name__}"
+            )
+            return
+        if msg.id <= self.last_id:
+            await self.reply_error(
+                binary, msg.id, "id_reuse", f"id must be greater than {self.last_id}", "id"
+            )
+            return
+        self.last_id = msg.id
+        if isinstance(msg, S.PingMessage):
+            await self.send({"id": msg.id, "type": "pong"}, binary)
+            return
+        try:
+            jobs = [(msg.id, convert.targets(msg.targets, self.session.view, "targets"))]
+            (result,) = await self.svc.runner.session_frames(
+                self.session, self.svc.store, jobs, t0, "ws"
+            )
+        except ServiceError as e:
+            if e.code == "not_found":
+                raise
+            await self.reply_error(binary, msg.id, e.code, e.detail, e.field)
+            return
+        await self.send(
+            {"id": msg.id, "type": "result", "success": result["success"], "result": result}, binary
+        )
+
+
+@router.websocket("/sessions/{session_id}/ws")
+async def session_ws(ws: WebSocket, session_id: str) -> None:
+    """Frames over a WebSocket (protocol in the README)."""
+    svc = services(ws)
+    await ws.accept()
+    try:
+        session = await authenticate(svc.store, session_id, _token(ws))
+    except ServiceError as e:
+        svc.metrics.error(e.code, "ws")
+        await ws.close(code=_AUTH_CLOSE[e.code], reason=e.code)
+        return
+    if svc.open_websockets >= svc.settings.max_websockets:
+        svc.metrics.error("too_many_websockets", "ws")
+        await ws.close(code=status.WS_1013_TRY_AGAIN_LATER, reason="too_many_websockets")
+        return
+    conn = _Connection(ws, svc, session)
+    limit = svc.settings.ws_max_message_bytes
+    svc.open_websockets += 1
+    svc.metrics.websockets.inc()
+    session.websockets += 1
+    try:
+        while True:
+            message = await ws.receive()
+            t0 = time.perf_counter()
+            if message["type"] == "websocket.disconnect":
+                return
+            data: str | bytes | None = message.get("text")
+            if data is None:
+                data = message.get("bytes")
+            if data is None:
+                continue
+            if len(data) > limit:
+                await ws.close(code=status.WS_1009_MESSAGE_TOO_BIG, reason="payload_too_large")
+                return
+            if session.closed:
+                await ws.close(code=WS_NOT_FOUND, reason="not_found")
+                return
+            try:
+                await conn.handle(data, t0)
+            except ServiceError as e:  # the session went away while the frame waited
+                await ws.close(code=WS_NOT_FOUND, reason=e.code)
+                return
+    except WebSocketDisconnect:
+        return
+    except Exception:
+        log.exception("unexpected error on a WebSocket")
+        try:
+            await conn.send(_error(None, "internal_error", "internal server error"), False)
+            await ws.close(code=status.WS_1011_INTERNAL_ERROR, reason="internal_error")
+        except Exception:  # the socket may be gone already
+            pass
+    finally:
+        session.websockets -= 1
+        svc.open_websockets -= 1
+        svc.metrics.websockets.dec()
+        svc.store.touch(session)

@@ -1,0 +1,180 @@
+"""Where and how frames are solved: inline on the event loop, or in the solver pool.
+
+The rule (measured, see the README and bench/ws_inline_vs_thread.py): a request whose
+worst case, frames x time_budget_us, is at most ``IK_INLINE_BUDGET_US`` is solved inline
+under the session's lock (a hand-off to a thread costs more than a typical solve);
+anything longer runs in a small dedicated thread pool, where the compiled core releases
+the GIL, so the loop keeps serving other clients. Model building and one-shot solves
+(chain parsing is Python and can take milliseconds) always run in the pool.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, TypeVar
+
+import numpy as np
+
+from solver.ik import IKOptions, IKResult, IKSolver
+from solver.ik import Target as SolverTarget
+
+from . import convert
+from .errors import not_found, not_ready
+from .metrics import Metrics
+from .sessions import Session, SessionStore
+
+log = logging.getLogger("service")
+T = TypeVar("T")
+
+# One frame to solve: (client frame id, solver targets).
+FrameJob = tuple[int | None, list[SolverTarget]]
+
+
+def default_warmup() -> float:
+    """Load (or compile) the solver's numba core; returns the seconds it took."""
+    import solver
+
+    fn: Any = getattr(solver, "warmup", None)
+    if fn is not None and not callable(fn):  # a ``solver.warmup`` module
+        fn = getattr(fn, "warmup", None)
+    if callable(fn):
+        return float(fn())
+    from solver.examples import panda_arm
+    from solver.ik import IKSolver, pose_targets
+
+    t = time.perf_counter()
+    chain = panda_arm()
+    IKSolver(chain).solve(pose_targets(chain, chain.mid_limits() + 0.1))
+    return time.perf_counter() - t
+
+
+class Warmup:
+    """Runs the warm-up once in a thread; ``ready`` flips when it is done."""
+
+    def __init__(self, fn: Callable[[], float]) -> None:
+        self._fn = fn
+        self.ready = threading.Event()
+        self.seconds: float | None = None
+        self.error: str | None = None
+        self._thread = threading.Thread(target=self._run, name="ik-warmup", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _run(self) -> None:
+        t = time.perf_counter()
+        try:
+            self._fn()
+        except Exception as e:  # readyz stays 503 and says why
+            self.error = f"{type(e).__name__}: {e}"
+            log.exception("solver warm-up failed")
+            return
+        self.seconds = time.perf_counter() - t
+        log.info("solver warm in %.2f s", self.seconds)
+        self.ready.set()
+
+
+class Runner:
+    """Runs solves inline or in the pool, records metrics, keeps sessions in order."""
+
+    def __init__(
+        self, *, inline_budget_us: float, threads: int, metrics: Metrics, warmup: Warmup
+    ) -> None:
+        self.inline_budget_us = inline_budget_us
+        self.metrics = metrics
+        self.warmup = warmup
+        self.pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="ik-solve")
+
+    def shutdown(self) -> None:
+        self.pool.shutdown(wait=False, cancel_futures=True)
+
+    def check_ready(self) -> None:
+        if not self.warmup.ready.is_set():
+            raise not_ready()
+
+    def inline(self, n_frames: int, options: IKOptions) -> bool:
+        budget = options.time_budget_us
+        return budget is not None and n_frames * budget <= self.inline_budget_us
+
+    async def in_pool(self, fn: Callable[..., T], *args: Any) -> T:
+        """Run ``fn`` in the solver pool."""
+        return await asyncio.get_running_loop().run_in_executor(self.pool, fn, *args)
+
+    async def session_frames(
+        self,
+        session: Session,
+        store: SessionStore,
+        jobs: Sequence[FrameJob],
+        t0: float,
+        transport: str,
+    ) -> list[dict[str, Any]]:
+        """Solve a session's frames in order, each warm-started from the previous answer.
+
+        Frames of one session never overlap: the session's lock is held until the last
+        frame is done, also when the caller goes away while a pooled solve runs.
+        """
+        self.check_ready()
+        await session.lock.acquire()
+        released = False
+        try:
+            if session.closed:
+                raise not_found()
+            options = session.options
+            args = (session, jobs, options, t0, self.metrics, transport)
+            if self.inline(len(jobs), options):
+                out = _track_all(*args)
+            else:
+                fut = asyncio.get_running_loop().run_in_executor(self.pool, _track_all, *args)
+                # The lock is released when the thread is done, never earlier.
+                fut.add_done_callback(lambda _: session.lock.release())
+                released = True
+                out = await asyncio.shield(fut)
+        finally:
+            if not released:
+                session.lock.release()
+        store.touch(session)
+        return out
+
+
+def _track_all(
+    session: Session,
+    jobs: Sequence[FrameJob],
+    options: IKOptions,
+    t0: float,
+    metrics: Metrics,
+    transport: str,
+) -> list[dict[str, Any]]:
+    """Runs under the session's lock (inline or in the pool); counts as it goes."""
+    out = []
+    solver = session.solver
+    for frame_id, targets in jobs:
+        r = solver.track(targets, options=options)
+        server_us = (time.perf_counter() - t0) * 1e6
+        out.append(convert.result_dict(r, frame_id, server_us))
+        session.frames += 1
+        session.solved += int(r.success)
+        metrics.frame(r, server_us * 1e-6, transport)
+    return out
+
+
+def make_solver(view: convert.ChainView, options: IKOptions) -> IKSolver:
+    """A session's solver (runs in the pool: it allocates per-chain arrays)."""
+    return IKSolver(view.chain, options)
+
+
+def solve_once(
+    view: convert.ChainView,
+    targets: list[SolverTarget],
+    seed: np.ndarray | None,
+    options: IKOptions,
+    frame_id: int | None,
+    t0: float,
+) -> tuple[IKResult, dict[str, Any]]:
+    """A stateless one-shot solve (runs in the pool)."""
+    r = IKSolver(view.chain, options).solve(targets, seed, options=options)
+    return r, convert.result_dict(r, frame_id, (time.perf_counter() - t0) * 1e6)
