@@ -7,10 +7,28 @@ from .analyzer import AnalyzerPolicy
 from .bfgs import minimize
 from .errors import DimensionMismatch, IKError, InvalidModel, InvalidProblem
 from .termination import TERMINATION_MESSAGES, Action, GoalStatus, PassStart, Termination
-from .types import GradientMode, MinimizeOptions, MinimizeResult, PassRecord
+from .chain import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from .ik import IKOptions, IKResult, IKSolver, IKStatus, Target, solve
+from .types import AcceptedStep, GradientMode, MinimizeOptions, MinimizeResult, PassRecord
+from .warmup import warmup
 
 __all__ = [
+    "AcceptedStep",
     "Action",
+    "Chain",
+    "Effector",
+    "EffectorMode",
+    "IKOptions",
+    "IKResult",
+    "IKSolver",
+    "IKStatus",
+    "Joint",
+    "JointKind",
+    "Target",
+    "Transform",
+    "build_chain",
+    "solve",
+    "warmup",
     "AnalyzerPolicy",
     "DimensionMismatch",
     "GoalStatus",

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InvalidModel
+from .errors import InvalidModel, InvalidProblem
 from .kinematics import (
     ED_AIM,
     ED_TIP,
@@ -289,7 +289,7 @@ class Chain:
         for i, e in enumerate(self.effectors):
             if e.name == name:
                 return i
-        raise InvalidModel(f"unknown effector {name!r}", field="effector")
+        raise InvalidProblem(f"unknown effector {name!r}; this chain has {list(self.effector_names)}")
 
 
 @dataclass(frozen=True, slots=True)

@@ -302,6 +302,8 @@ class IKSolver:
         self._misc[MISC_MARGIN] = opts.limit_margin
         self._dd[DD_QREF] = q0
         lo, hi = self._free_bounds(q0)
+        self._dd[DD_LO] = lo
+        self._dd[DD_HI] = hi
         return self._run(q0, lo, hi, opts, rng, initial_inverse_hessian)
 
     def track(self, targets: Sequence[Target], *, options: IKOptions | None = None) -> IKResult:

@@ -451,10 +451,13 @@ def ik_metric(q, data, h):  # type: ignore[no-untyped-def]
         for r in range(6):
             for i in range(n):
                 v = dd[DD_J + r, i]
-                if v == 0.0:
+                # A frozen variable (lower == upper this frame) must not couple into the
+                # free block, or H's free block is not the free variables' metric.
+                if v == 0.0 or dd[DD_LO, i] == dd[DD_HI, i]:
                     continue
                 for j in range(n):
-                    h[i, j] += 2.0 * v * dd[DD_J + r, j]
+                    if dd[DD_LO, j] != dd[DD_HI, j]:
+                        h[i, j] += 2.0 * v * dd[DD_J + r, j]
     mu = f + 1e-9
     w_post = misc[MISC_POSTURE]
     for i in range(n):

@@ -1,0 +1,26 @@
+"""Load (or compile) the numba core before the first real frame.
+
+A fresh checkout compiles the core once (tens of seconds on these machines) and
+writes it to ``solver/__pycache__``; later processes load it in about a second.
+The service calls ``warmup()`` at startup and reports ready only afterwards.
+"""
+
+from __future__ import annotations
+
+import time
+
+from .chain import EffectorMode
+from .examples import panda_arm
+from .ik import IKOptions, IKSolver, pose_targets
+
+
+def warmup() -> float:
+    """Run one small solve of every compiled path; returns the seconds it took."""
+    start = time.perf_counter()
+    for mode in (EffectorMode.POSE, EffectorMode.POSITION, EffectorMode.AIM):
+        chain = panda_arm(mode)
+        solver = IKSolver(chain, IKOptions(time_budget_us=None, max_iter=50))
+        q = chain.mid_limits() + 0.1
+        solver.solve(pose_targets(chain, q))
+        solver.track(pose_targets(chain, q + 0.01))
+    return time.perf_counter() - start

@@ -1,0 +1,276 @@
+"""IK: exact gradients, solving, streams, terminators, modes and model validation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from numpy.testing import assert_allclose
+
+from solver import (
+    DimensionMismatch,
+    Effector,
+    EffectorMode,
+    IKOptions,
+    IKSolver,
+    IKStatus,
+    InvalidModel,
+    InvalidProblem,
+    Joint,
+    JointKind,
+    Target,
+    Termination,
+    Transform,
+    build_chain,
+)
+from solver.examples import humanoid_arm, panda_arm, tail, two_arm_torso
+from solver.fk import effector_poses
+from solver.ik import pose_targets
+from solver.kinematics import ik_objective
+
+TIGHT = IKOptions(position_tolerance_m=1e-5, rotation_tolerance_rad=1e-4, time_budget_us=None)
+
+
+def slider_arm():  # type: ignore[no-untyped-def]
+    """A prismatic base, a revolute with an off-axis pivot, and an aim effector."""
+    joints = [
+        Joint(name="slide", parent="world", child="carriage", kind=JointKind.PRISMATIC,
+              axis=np.array([1.0, 1.0, 0.0]), lower=(-0.5,), upper=(0.5,)),
+        Joint(name="turn", parent="carriage", child="arm", kind=JointKind.REVOLUTE,
+              axis=np.array([0.0, 0.0, 1.0]), pivot=np.array([0.1, 0.0, 0.0]),
+              origin=Transform.from_rpy([0.0, 0.0, 0.2], 0.1, 0.2, 0.3), lower=(-2.0,), upper=(2.0,)),
+        Joint(name="tilt", parent="arm", child="head", kind=JointKind.ROTATIONAL, axes="yx",
+              origin=Transform(np.array([0.4, 0.0, 0.0])), lower=(-1.0, -1.0), upper=(1.0, 1.0)),
+    ]
+    return build_chain(joints, [
+        Effector(name="eye", link="head", tip_offset=np.array([0.05, 0.0, 0.0]), mode=EffectorMode.AIM,
+                 aim_axis=np.array([1.0, 0.0, 0.0]), position_weight=0.5, rotation_weight=0.2),
+    ])
+
+
+CHAINS = {
+    "panda-pose": lambda: panda_arm(),
+    "panda-position": lambda: panda_arm(EffectorMode.POSITION),
+    "humanoid-pose": lambda: humanoid_arm(),
+    "humanoid-aim": lambda: humanoid_arm(EffectorMode.AIM),
+    "two-arms": two_arm_torso,
+    "slider-aim": slider_arm,
+    "tail": lambda: tail(8),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CHAINS))
+@pytest.mark.parametrize(("posture", "limit"), [(0.0, 0.0), (0.3, 2.0)])
+def test_gradient_matches_central_differences(name: str, posture: float, limit: float) -> None:
+    chain = CHAINS[name]()
+    rng = np.random.default_rng(11)
+    solver = IKSolver(chain, IKOptions(posture_weight=posture, limit_weight=limit, limit_margin=0.3))
+    targets = pose_targets(chain, rng.uniform(chain.lower, chain.upper))
+    solver._load_targets(targets, solver.options)
+    data = solver._data
+    data[5][0:3] = (posture, limit, 0.3)
+    data[4][0] = rng.uniform(chain.lower, chain.upper)
+    for _ in range(4):
+        q = rng.uniform(chain.lower, chain.upper)
+        g = np.zeros(chain.n_dof)
+        ik_objective(q, g, True, data)
+        fd = np.zeros_like(g)
+        for i in range(chain.n_dof):
+            h = 1e-6
+            qp, qm = q.copy(), q.copy()
+            qp[i] += h
+            qm[i] -= h
+            fd[i] = (ik_objective(qp, np.zeros_like(g), False, data) - ik_objective(qm, np.zeros_like(g), False, data)) / (2 * h)
+        assert_allclose(g, fd, rtol=1e-5, atol=1e-7)
+
+
+def check_solution(chain, result, targets, opts: IKOptions) -> None:  # type: ignore[no-untyped-def]
+    """Success re-checked with our FK and the limits, not the solver's flag."""
+    assert np.all(result.q >= chain.lower) and np.all(result.q <= chain.upper)
+    poses = effector_poses(chain, result.q)
+    for t in targets:
+        pose = poses[chain.effector_index(t.effector)]
+        assert np.linalg.norm(pose[:3, 3] - t.position) <= opts.position_tolerance_m
+        if t.rotation is not None:
+            cos = (np.trace(pose[:3, :3] @ t.rotation.T) - 1.0) / 2.0
+            assert math.acos(min(1.0, max(-1.0, cos))) <= opts.rotation_tolerance_rad * (1 + 1e-9)
+
+
+@pytest.mark.parametrize(("factory", "floor"), [(panda_arm, 0.99), (humanoid_arm, 0.98)])
+def test_random_reachable_poses_are_solved_from_mid_limits(factory, floor: float) -> None:  # type: ignore[no-untyped-def]
+    chain = factory()
+    solver = IKSolver(chain, TIGHT)
+    rng = np.random.default_rng(5)
+    solved = 0
+    for _ in range(150):
+        targets = pose_targets(chain, rng.uniform(chain.lower, chain.upper))
+        r = solver.solve(targets, rng=rng)
+        if r.success:
+            solved += 1
+            check_solution(chain, r, targets, TIGHT)
+            assert r.status is IKStatus.SOLVED and r.termination is Termination.GOAL_REACHED
+            assert all(e.within_tolerance for e in r.effectors)
+    assert solved / 150 >= floor
+
+
+def test_unreachable_target_returns_closest_pose_and_says_so() -> None:
+    chain = panda_arm(EffectorMode.POSITION)
+    far = np.array([3.0, 0.0, 0.5])
+    r = IKSolver(chain, TIGHT).solve([Target(effector="tool", position=far)])
+    assert not r.success
+    assert r.status in (IKStatus.NOT_REACHED, IKStatus.BUDGET_EXHAUSTED)
+    reach = np.linalg.norm(effector_poses(chain, r.q)[0][:3, 3])
+    # The arm stretches towards the target: its tip is about as far out as it gets.
+    assert r.effectors[0].position_error_m == pytest.approx(np.linalg.norm(far - effector_poses(chain, r.q)[0][:3, 3]))
+    assert reach > 0.8
+
+
+def test_zero_time_budget_reports_deadline_and_best_pose() -> None:
+    chain = panda_arm()
+    r = IKSolver(chain, IKOptions(time_budget_us=0.0)).solve(pose_targets(chain, chain.lower * 0.5))
+    assert r.termination is Termination.DEADLINE
+    assert r.status is IKStatus.BUDGET_EXHAUSTED
+    assert_allclose(r.q, chain.mid_limits(), rtol=0, atol=0)
+
+
+@given(st.lists(st.floats(-5.0, 5.0, allow_nan=False), min_size=3, max_size=3), st.integers(0, 2**31 - 1))
+def test_any_finite_target_gives_finite_joints_inside_limits(pos: list[float], seed: int) -> None:
+    chain = humanoid_arm(EffectorMode.POSITION)
+    r = IKSolver(chain, IKOptions(time_budget_us=None, max_iter=60, max_restarts=2)).solve(
+        [Target(effector="hand", position=np.array(pos))], rng=np.random.default_rng(seed)
+    )
+    assert np.isfinite(r.q).all()
+    assert np.all(r.q >= chain.lower) and np.all(r.q <= chain.upper)
+
+
+def test_terminators_freeze_joints_above_the_chain() -> None:
+    chain = two_arm_torso()
+    solver = IKSolver(chain, TIGHT)
+    q_true = chain.mid_limits() + np.array([0.0, 0.3, -0.2, 0.8, 0.1, 0.1, 0.5])
+    q_true[0] = 0.0  # the spine stays where the seed has it
+    targets = [t for t in pose_targets(chain, q_true) if t.effector == "left_hand"]
+    seed = chain.mid_limits()
+    r = solver.solve(targets, seed)
+    assert r.success
+    spine = chain.dof_names.index("spine")
+    right = [i for i, n in enumerate(chain.dof_names) if n.startswith("right")]
+    assert r.q[spine] == seed[spine]
+    assert_allclose(r.q[right], seed[right], rtol=0, atol=0)
+    assert [e.name for e in r.effectors] == ["left_hand"]
+
+
+def test_two_effectors_solved_together() -> None:
+    chain = two_arm_torso()
+    q_true = np.array([0.0, 0.4, -0.3, 1.0, -0.2, 0.5, 0.7])
+    r = IKSolver(chain, TIGHT).solve(pose_targets(chain, q_true))
+    assert r.success
+    check_solution(chain, r, pose_targets(chain, q_true), TIGHT)
+
+
+def test_aim_effector_points_its_axis() -> None:
+    chain = slider_arm()
+    rng = np.random.default_rng(2)
+    q = rng.uniform(chain.lower, chain.upper) * 0.5
+    targets = pose_targets(chain, q)
+    r = IKSolver(chain, TIGHT).solve(targets)
+    assert r.success
+    pose = effector_poses(chain, r.q)[0]
+    assert_allclose(pose[:3, 0], targets[0].direction, rtol=0, atol=2e-4)
+
+
+def test_stream_tracks_a_smooth_path_without_popping() -> None:
+    chain = panda_arm()
+    solver = IKSolver(chain, IKOptions(position_tolerance_m=1e-5, rotation_tolerance_rad=1e-4,
+                                       time_budget_us=None, restart_radius_rad=0.3,
+                                       limit_weight=1e-3, limit_margin=0.02))
+    mid = chain.mid_limits()
+    amp = 0.25 * (chain.upper - chain.lower) / 2
+    ts = np.arange(240) / 60.0
+    path = mid + amp * np.sin(2 * np.pi * 0.25 * ts[:, None] + np.arange(7))
+    solver.set_pose(path[0])
+    ref_step = np.abs(np.diff(path, axis=0)).max()
+    prev = solver.q.copy()
+    worst_step = 0.0
+    for q in path[1:]:
+        r = solver.track(pose_targets(chain, q))
+        assert r.success, (r.status, r.effectors)
+        worst_step = max(worst_step, float(np.abs(r.q - prev).max()))
+        prev = r.q
+    assert worst_step <= 2.0 * ref_step
+
+
+def test_partial_targets_and_input_errors() -> None:
+    chain = two_arm_torso()
+    solver = IKSolver(chain)
+    with pytest.raises(InvalidProblem, match="unknown effector"):
+        solver.solve([Target(effector="nose", position=np.zeros(3))])
+    with pytest.raises(InvalidProblem, match="two targets"):
+        solver.solve([Target(effector="left_hand", position=np.zeros(3))] * 2)
+    with pytest.raises(DimensionMismatch):
+        solver.solve([Target(effector="left_hand", position=np.zeros(3))], np.zeros(3))
+    with pytest.raises(InvalidProblem, match="finite"):
+        solver.solve([Target(effector="left_hand", position=np.array([np.nan, 0, 0]))])
+    pose_chain = panda_arm()
+    with pytest.raises(InvalidProblem, match="rotation"):
+        IKSolver(pose_chain).solve([Target(effector="tool", position=np.zeros(3))])
+    with pytest.raises(InvalidProblem, match="orthonormal"):
+        IKSolver(pose_chain).solve([Target(effector="tool", position=np.zeros(3), rotation=2 * np.eye(3))])
+
+
+def test_all_fixed_chain_reports_errors_without_solving() -> None:
+    chain = build_chain(
+        [Joint(name="bolt", parent="base", child="tip", kind=JointKind.FIXED, origin=Transform(np.array([0.0, 0.0, 1.0])))],
+        [Effector(name="tip", link="tip")],
+    )
+    solver = IKSolver(chain)
+    assert solver.solve([Target(effector="tip", position=np.array([0.0, 0.0, 1.0]))]).success
+    miss = solver.solve([Target(effector="tip", position=np.array([0.0, 0.0, 2.0]))])
+    assert miss.status is IKStatus.NOT_REACHED
+    assert miss.effectors[0].position_error_m == pytest.approx(1.0)
+
+
+def j(name: str, parent: str, child: str, **kw: object) -> Joint:
+    base = {"kind": JointKind.REVOLUTE, "lower": (-1.0,), "upper": (1.0,)}
+    base.update(kw)
+    return Joint(name=name, parent=parent, child=child, **base)  # type: ignore[arg-type]
+
+
+EFF = [Effector(name="e", link="b")]
+
+
+@pytest.mark.parametrize(
+    ("joints", "effectors", "joint", "field"),
+    [
+        ([j("a", "w", "b"), j("a", "b", "c")], EFF, "a", "name"),
+        ([j("a", "w", "b"), j("x", "c", "d"), j("y", "d", "c")], EFF, None, "parent"),
+        ([j("a", "w", "b", lower=(1.0,), upper=(0.0,))], EFF, "a", "lower"),
+        ([j("a", "w", "b", axis=np.zeros(3))], EFF, "a", "axis"),
+        ([j("a", "w", "b", lower=(math.nan,))], EFF, "a", "lower"),
+        ([j("a", "w", "b", kind=JointKind.ROTATIONAL, axes="xx", lower=(0, 0), upper=(1, 1))], EFF, "a", "axes"),
+        ([j("a", "w", "b", pivot=np.array([math.inf, 0.0, 0.0]))], EFF, "a", "pivot"),
+        ([j("a", "w", "b")], [Effector(name="e", link="nowhere")], "e", "link"),
+        ([], EFF, None, "joints"),
+    ],
+)
+def test_model_validation_names_joint_and_field(joints, effectors, joint, field) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(InvalidModel) as err:
+        build_chain(joints, effectors)
+    assert err.value.field == field
+    if joint is not None:
+        assert err.value.joint == joint
+
+
+def test_cycle_and_too_many_joints_and_bad_quaternion() -> None:
+    with pytest.raises(InvalidModel) as err:
+        build_chain([j("a", "b", "c"), j("b", "c", "b")], EFF)
+    assert err.value.field == "parent"
+    many = [j(f"j{i}", f"l{i}", f"l{i + 1}") for i in range(10)]
+    with pytest.raises(InvalidModel) as err:
+        build_chain(many, [Effector(name="e", link="l10")], max_dof=5)
+    assert err.value.field == "joints"
+    with pytest.raises(InvalidModel) as err:
+        Transform.from_quaternion([0, 0, 0], 1.0, 0.1, 0.0, 0.0, owner="a")
+    assert (err.value.joint, err.value.field) == ("a", "rotation")
