@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -48,6 +48,7 @@ class ChainView:
     effector_modes: dict[str, EffectorMode]
     dof_index: dict[str, int]
     summary: dict[str, Any]  # n_dof, dof (with limits), effectors: JSON-ready
+    mid_limits: Vector  # the default seed: middle of each range, 0 if unbounded
 
     @classmethod
     def of(cls, chain: Chain) -> ChainView:
@@ -62,7 +63,13 @@ class ChainView:
             "effectors": [{"name": e.name, "mode": e.mode.value} for e in chain.effectors],
         }
         index = {n: i for i, n in enumerate(chain.dof_names)}
-        return cls(chain, modes, index, summary)
+        finite = np.isfinite(chain.lower) & np.isfinite(chain.upper)
+        mid = np.where(
+            finite,
+            0.5 * (np.where(finite, chain.lower, 0.0) + np.where(finite, chain.upper, 0.0)),
+            0.0,
+        )
+        return cls(chain, modes, index, summary, mid)
 
 
 def _finite_or_none(v: float) -> float | None:
@@ -79,7 +86,7 @@ def chain_from_spec(
         ServiceError: ``invalid_problem`` naming the field (``chain.joints[i].<field>``).
     """
     if isinstance(spec, S.ExampleChain):
-        factory: Callable[[], Chain] = EXAMPLES[spec.name]
+        factory = cast(Callable[[], Chain], EXAMPLES[spec.name])
         chain = factory()
     elif isinstance(spec, S.UrdfChain):
         chain = _urdf_chain(spec, settings)
@@ -182,7 +189,10 @@ def _hierarchy_field(spec: S.HierarchyChain, e: InvalidModel) -> str:
             for i, eff in enumerate(spec.effectors):
                 if eff.name == e.joint:
                     return f"chain.effectors[{i}].{field}" if field else f"chain.effectors[{i}]"
-        for i, j in enumerate(spec.joints):
+        indexed = list(enumerate(spec.joints))
+        if field == "name":  # a duplicate: the later joint is the one at fault
+            indexed.reverse()
+        for i, j in indexed:
             # A duplicate variable is named "<joint>.<axis>" for rotational joints.
             if e.joint in (j.name, *(f"{j.name}.{a}" for a in j.axes)):
                 return f"chain.joints[{i}].{field}" if field else f"chain.joints[{i}]"

@@ -129,9 +129,11 @@ def create_app(
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        sessions = store or InMemorySessionStore(
-            max_sessions=settings.max_sessions, ttl_s=settings.session_ttl_s
-        )
+        sessions = store
+        if sessions is None:  # (not `store or ...`: an empty store is falsy)
+            sessions = InMemorySessionStore(
+                max_sessions=settings.max_sessions, ttl_s=settings.session_ttl_s
+            )
         metrics = Metrics(lambda: len(sessions))
         warm = Warmup(warmup)
         runner = Runner(

@@ -164,7 +164,10 @@ def _track_all(
 
 def make_solver(view: convert.ChainView, options: IKOptions) -> IKSolver:
     """A session's solver (runs in the pool: it allocates per-chain arrays)."""
-    return IKSolver(view.chain, options)
+    # chain.mid_limits() computes -inf + inf for continuous joints (then maps it to 0);
+    # keep numpy from warning about it (reported to the solver's owner).
+    with np.errstate(invalid="ignore"):
+        return IKSolver(view.chain, options)
 
 
 def solve_once(
@@ -176,5 +179,6 @@ def solve_once(
     t0: float,
 ) -> tuple[IKResult, dict[str, Any]]:
     """A stateless one-shot solve (runs in the pool)."""
-    r = IKSolver(view.chain, options).solve(targets, seed, options=options)
+    with np.errstate(invalid="ignore"):  # see make_solver
+        r = IKSolver(view.chain, options).solve(targets, seed, options=options)
     return r, convert.result_dict(r, frame_id, (time.perf_counter() - t0) * 1e6)

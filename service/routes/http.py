@@ -274,7 +274,7 @@ async def solve(body: S.SolveRequest, request: Request, svc: ServicesDep) -> Res
     targets = convert.targets(body.targets, view, "targets")
     seed = None
     if body.seed is not None:
-        seed = convert.pose_vector(body.seed, view, view.chain.mid_limits(), "seed")
+        seed = convert.pose_vector(body.seed, view, view.mid_limits, "seed")
     r, out = await svc.runner.in_pool(solve_once, view, targets, seed, options, body.id, t0)
     svc.metrics.frame(r, out["server_us"] * 1e-6, "http")
     return ORJSONResponse(out)

@@ -1,0 +1,40 @@
+"""Helpers for the service tests: the example arm, session creation, frames."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from schemas.chain import EXAMPLE_ARM
+
+if TYPE_CHECKING:
+    from starlette.testclient import TestClient
+
+ARM = EXAMPLE_ARM
+
+
+class Created:
+    """A created session: id, token, headers, and the response body."""
+
+    def __init__(self, body: dict[str, Any]) -> None:
+        self.body = body
+        self.id: str = body["id"]
+        self.token: str = body["token"]
+        self.headers = {"Authorization": f"Bearer {self.token}"}
+
+
+def create(client: TestClient, chain: dict[str, Any] | None = None, **extra: Any) -> Created:
+    r = client.post("/v1/sessions", json={"chain": chain or ARM, **extra})
+    assert r.status_code == 201, r.text
+    return Created(r.json())
+
+
+def hand_frame(
+    frame_id: int | None, x: float = 0.3, y: float = 0.1, z: float = 0.6
+) -> dict[str, Any]:
+    """A frame for the example arm's position effector (reachable for small changes)."""
+    frame: dict[str, Any] = {
+        "targets": [{"effector": "hand", "position": {"x": x, "y": y, "z": z}}]
+    }
+    if frame_id is not None:
+        frame["id"] = frame_id
+    return frame

@@ -1,0 +1,466 @@
+"""HTTP endpoints: happy paths, status codes, error bodies ({"detail", "code"})."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pytest
+from starlette.testclient import TestClient
+
+import schemas as S
+from service.config import Settings
+from solver.examples import panda_arm
+from solver.fk import effector_poses
+
+from .helpers import ARM, Created, create, hand_frame
+
+
+def _panda_target(q: np.ndarray) -> dict[str, Any]:
+    """A pose target the Panda reaches at q (w >= 0 quaternion of the flange)."""
+    from solver.chain import matrix_to_quaternion
+
+    pose = effector_poses(panda_arm(), q)[0]
+    w, x, y, z = matrix_to_quaternion(pose[:3, :3])
+    px, py, pz = pose[:3, 3]
+    return {
+        "effector": "tool",
+        "position": {"x": px, "y": py, "z": pz},
+        "orientation": {"w": w, "x": x, "y": y, "z": z},
+    }
+
+
+# --- sessions: create / get / patch / pose / delete ------------------------------------
+def test_create_session_returns_id_token_joint_order_and_effectors(client: TestClient) -> None:
+    r = client.post("/v1/sessions", json={"chain": ARM, "initial_pose": {"joints": {"elbow": 1.0}}})
+    assert r.status_code == 201
+    body = S.SessionCreated.model_validate(r.json())
+    assert r.headers["location"] == f"/v1/sessions/{body.id}"
+    assert [d.name for d in body.dof] == ["shoulder.z", "shoulder.y", "elbow"]
+    assert body.dof[2].lower == 0.0 and body.dof[2].upper == 2.6
+    assert [e.name for e in body.effectors] == ["hand"]
+    assert body.pose.joints["elbow"] == 1.0
+    assert len(body.id) >= 16 and len(body.token) >= 32
+
+
+@pytest.mark.parametrize("name", ["panda_arm", "humanoid_arm", "tail", "two_arm_torso"])
+def test_create_session_from_each_example(client: TestClient, name: str) -> None:
+    created = create(client, {"format": "example", "name": name})
+    assert created.body["n_dof"] == len(created.body["dof"]) > 0
+
+
+def test_create_session_from_urdf(client: TestClient) -> None:
+    urdf = (
+        '<robot name="r"><link name="base"/><link name="l1"/><link name="tip"/>'
+        '<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>'
+        '<axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>'
+        '<joint name="j2" type="continuous"><parent link="l1"/><child link="tip"/>'
+        '<origin xyz="0.5 0 0"/><axis xyz="0 0 1"/></joint></robot>'
+    )
+    chain = {
+        "format": "urdf",
+        "urdf": urdf,
+        "base_link": "base",
+        "tip_links": ["tip"],
+        "mode": "position",
+    }
+    created = create(client, chain)
+    assert [d["name"] for d in created.body["dof"]] == ["j1", "j2"]
+    assert created.body["dof"][1] == {"name": "j2", "lower": None, "upper": None}
+    r = client.post(
+        f"/v1/sessions/{created.id}/frames",
+        json={"targets": [{"effector": "tip", "position": {"x": 0.0, "y": 0.5, "z": 0.0}}]},
+        headers=created.headers,
+    )
+    assert r.status_code == 200 and r.json()["results"][0]["success"] is True
+
+
+def test_get_session_summary_pose_and_counters(client: TestClient, session: Created) -> None:
+    client.post(f"/v1/sessions/{session.id}/frames", json=hand_frame(1), headers=session.headers)
+    r = client.get(f"/v1/sessions/{session.id}", headers=session.headers)
+    assert r.status_code == 200
+    info = S.SessionInfo.model_validate(r.json())
+    assert info.id == session.id and info.n_dof == 3
+    assert info.counters.frames == 1 and info.counters.solved + info.counters.not_solved == 1
+    assert info.websockets == 0 and info.idle_ttl_s == 300.0
+    assert "token" not in r.json()
+
+
+def test_patch_changes_only_the_given_options(client: TestClient, session: Created) -> None:
+    before = session.body["options"]
+    r = client.patch(
+        f"/v1/sessions/{session.id}", json={"time_budget_us": 400}, headers=session.headers
+    )
+    assert r.status_code == 200
+    after = r.json()["options"]
+    assert after["time_budget_us"] == 400
+    assert {k: v for k, v in after.items() if k != "time_budget_us"} == {
+        k: v for k, v in before.items() if k != "time_budget_us"
+    }
+
+
+def test_put_pose_sets_and_clips_the_pose(client: TestClient, session: Created) -> None:
+    r = client.put(
+        f"/v1/sessions/{session.id}/pose", json={"q": [0.5, 0.25, 9.0]}, headers=session.headers
+    )
+    assert r.status_code == 200
+    assert r.json()["q"] == [0.5, 0.25, 2.6]  # elbow clipped to its upper limit
+    r = client.put(
+        f"/v1/sessions/{session.id}/pose", json={"joints": {"elbow": 1.5}}, headers=session.headers
+    )
+    assert r.json()["joints"] == {"shoulder.z": 0.5, "shoulder.y": 0.25, "elbow": 1.5}
+    got = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()
+    assert got["pose"]["q"] == [0.5, 0.25, 1.5]
+
+
+def test_delete_then_not_found(client: TestClient, session: Created) -> None:
+    assert client.delete(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 204
+    r = client.get(f"/v1/sessions/{session.id}", headers=session.headers)
+    assert r.status_code == 404 and r.json()["code"] == "not_found"
+
+
+# --- frames ----------------------------------------------------------------------------
+def test_one_frame_result_has_every_field(client: TestClient, session: Created) -> None:
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames", json=hand_frame(42), headers=session.headers
+    )
+    assert r.status_code == 200
+    (res,) = S.FrameResults.model_validate(r.json()).results
+    assert res.id == 42 and res.success and res.status == "solved"
+    assert res.termination == "goal_reached"
+    assert list(res.joints) == ["shoulder.z", "shoulder.y", "elbow"]
+    assert res.q == list(res.joints.values())
+    (eff,) = res.effectors
+    assert eff.name == "hand" and eff.within_tolerance and eff.rotation_error_rad is None
+    assert eff.position_error_m is not None and eff.position_error_m <= 1e-4
+    assert res.solve_us > 0 and res.server_us >= res.solve_us
+    assert res.iterations >= 0 and res.passes >= 1 and res.restarts >= 0
+
+
+def test_frame_without_id_echoes_null(client: TestClient, session: Created) -> None:
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames", json=hand_frame(None), headers=session.headers
+    )
+    assert r.json()["results"][0]["id"] is None
+
+
+@pytest.mark.parametrize("budget_us", [100.0, 5000.0])  # inline (3 x 100 us) and pooled
+def test_clip_results_in_order_each_from_the_previous(
+    make_client: Callable[..., TestClient], budget_us: float
+) -> None:
+    client = make_client(Settings(inline_budget_us=1000.0))
+    s = create(client, options={"time_budget_us": budget_us})
+    frames = [hand_frame(10 + i, y=0.1 + 0.01 * i) for i in range(5)]
+    r = client.post(f"/v1/sessions/{s.id}/frames", json={"frames": frames}, headers=s.headers)
+    assert r.status_code == 200
+    results = S.FrameResults.model_validate(r.json()).results
+    assert [x.id for x in results] == [10, 11, 12, 13, 14]
+    assert all(x.success for x in results)
+    assert [x.server_us for x in results] == sorted(x.server_us for x in results)
+    pose = client.get(f"/v1/sessions/{s.id}", headers=s.headers).json()["pose"]["q"]
+    assert pose == results[-1].q  # the session continues from the last frame
+
+
+def test_panda_pose_targets_from_forward_kinematics_are_solved(client: TestClient) -> None:
+    s = create(client, {"format": "example", "name": "panda_arm"})
+    rng = np.random.default_rng(7)
+    chain = panda_arm()
+    q = chain.mid_limits()
+    frames = []
+    for i in range(10):
+        q = np.clip(q + rng.normal(0.0, 0.02, q.shape), chain.lower, chain.upper)
+        frames.append({"id": i, "targets": [_panda_target(q)]})
+    r = client.post(f"/v1/sessions/{s.id}/frames", json={"frames": frames}, headers=s.headers)
+    results = r.json()["results"]
+    # A stream of small steps: judge the success rate, not each frame.
+    assert sum(x["success"] for x in results) >= 9
+    assert all(x["effectors"][0]["rotation_error_rad"] is not None for x in results)
+
+
+def test_unreachable_target_is_a_result_not_an_error(client: TestClient, session: Created) -> None:
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames", json=hand_frame(1, x=5.0), headers=session.headers
+    )
+    assert r.status_code == 200
+    res = r.json()["results"][0]
+    assert res["success"] is False and res["status"] in ("not_reached", "budget_exhausted")
+    assert res["effectors"][0]["within_tolerance"] is False
+
+
+# --- one-shot --------------------------------------------------------------------------
+def test_solve_one_shot_with_seed(client: TestClient) -> None:
+    body = {
+        "chain": ARM,
+        "targets": hand_frame(None)["targets"],
+        "seed": {"q": [0.0, 0.0, 1.0]},
+        "id": 9,
+        "options": {"position_tolerance_m": 0.001},
+    }
+    r = client.post("/v1/solve", json=body)
+    assert r.status_code == 200
+    res = S.FrameResult.model_validate(r.json())
+    assert res.id == 9 and res.success
+
+
+def test_solve_panda_example_pose(client: TestClient) -> None:
+    q = panda_arm().mid_limits() + 0.2
+    body = {"chain": {"format": "example", "name": "panda_arm"}, "targets": [_panda_target(q)]}
+    r = client.post("/v1/solve", json=body)
+    assert r.status_code == 200 and r.json()["success"] is True
+
+
+# --- errors: auth ----------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("method", "path", "body"),
+    [
+        ("GET", "", None),
+        ("PATCH", "", {"time_budget_us": 100}),
+        ("PUT", "/pose", {"q": [0, 0, 1]}),
+        ("DELETE", "", None),
+        ("POST", "/frames", hand_frame(1)),
+    ],
+)
+def test_token_required_on_every_session_call(
+    client: TestClient, session: Created, method: str, path: str, body: Any
+) -> None:
+    url = f"/v1/sessions/{session.id}{path}"
+    missing = client.request(method, url, json=body)
+    assert missing.status_code == 401 and missing.json()["code"] == "unauthorized"
+    assert missing.headers["www-authenticate"] == "Bearer"
+    wrong = client.request(method, url, json=body, headers={"Authorization": "Bearer nope"})
+    assert wrong.status_code == 403 and wrong.json()["code"] == "forbidden"
+    basic = client.request(
+        method, url, json=body, headers={"Authorization": f"Basic {session.token}"}
+    )
+    assert basic.status_code == 401
+    other = client.request(
+        method, f"/v1/sessions/doesnotexist{path}", json=body, headers=session.headers
+    )
+    assert other.status_code == 404 and other.json()["code"] == "not_found"
+    # The session survived every failed call.
+    assert client.get(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 200
+
+
+def test_token_of_another_session_is_forbidden(client: TestClient, session: Created) -> None:
+    other = create(client)
+    r = client.get(f"/v1/sessions/{session.id}", headers=other.headers)
+    assert r.status_code == 403
+
+
+# --- errors: capacity and expiry -------------------------------------------------------
+def test_session_cap_gives_503_with_retry_after(make_client: Callable[..., TestClient]) -> None:
+    client = make_client(Settings(max_sessions=2, session_ttl_s=60.0))
+    create(client)
+    create(client)
+    r = client.post("/v1/sessions", json={"chain": ARM})
+    assert r.status_code == 503 and r.json()["code"] == "too_many_sessions"
+    assert 1 <= int(r.headers["retry-after"]) <= 60
+
+
+def test_idle_session_expires_and_frees_its_slot(make_client: Callable[..., TestClient]) -> None:
+    now = [1000.0]
+    from service.sessions import InMemorySessionStore
+
+    store = InMemorySessionStore(max_sessions=1, ttl_s=10.0, clock=lambda: now[0])
+    client = make_client(Settings(max_sessions=1, session_ttl_s=10.0), store=store)
+    s = create(client)
+    now[0] += 5.0
+    assert client.get(f"/v1/sessions/{s.id}", headers=s.headers).status_code == 200  # touches
+    now[0] += 9.0
+    assert client.get(f"/v1/sessions/{s.id}", headers=s.headers).status_code == 200
+    now[0] += 10.5
+    r = client.get(f"/v1/sessions/{s.id}", headers=s.headers)
+    assert r.status_code == 404 and r.json()["code"] == "not_found"
+    create(client)  # the slot is free again
+    now[0] += 11.0
+    create(client)  # full, but the idle one expires on the way in
+    assert len(store) == 1
+
+
+# --- errors: validation ----------------------------------------------------------------
+def _post_frame(client: TestClient, s: Created, body: Any) -> Any:
+    return client.post(f"/v1/sessions/{s.id}/frames", json=body, headers=s.headers)
+
+
+@pytest.mark.parametrize(
+    ("body", "loc_part"),
+    [
+        ({"targets": [{"effector": "hand", "position": {"x": 1, "y": 2}}]}, "z"),
+        ({"targets": [{"effector": "hand", "position": {"x": 1, "y": 2, "z": 3, "w": 4}}]}, "w"),
+        ({"targets": []}, "targets"),
+        ({"targets": [{"effector": "hand"}]}, "targets"),
+        ({"id": -1, "targets": [{"effector": "hand", "position": {"x": 0, "y": 0, "z": 0}}]}, "id"),
+        ({"frames": []}, "frames"),
+        ({"targets": [{"effector": "hand", "position": {"x": "a", "y": 0, "z": 0}}]}, "x"),
+    ],
+)
+def test_schema_errors_are_422_invalid_format_naming_the_field(
+    client: TestClient, session: Created, body: Any, loc_part: str
+) -> None:
+    r = _post_frame(client, session, body)
+    assert r.status_code == 422
+    out = r.json()
+    assert out["code"] == "invalid_format"
+    assert any(loc_part in [str(p) for p in e["loc"]] for e in out["detail"])
+
+
+def test_non_json_body_is_422(client: TestClient, session: Created) -> None:
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames",
+        content=b"{not json",
+        headers={**session.headers, "content-type": "application/json"},
+    )
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format"
+
+
+@pytest.mark.parametrize(
+    ("target", "field"),
+    [
+        ({"effector": "foot", "position": {"x": 0, "y": 0, "z": 0}}, "targets[0].effector"),
+        (
+            {"effector": "hand", "orientation": {"w": 1, "x": 0, "y": 0, "z": 0}},
+            "targets[0].position",
+        ),
+        (
+            {
+                "effector": "hand",
+                "position": {"x": 0, "y": 0, "z": 0},
+                "direction": {"x": 0, "y": 0, "z": 1},
+            },
+            "targets[0].direction",
+        ),
+    ],
+)
+def test_problem_errors_are_422_invalid_problem_naming_the_field(
+    client: TestClient, session: Created, target: dict[str, Any], field: str
+) -> None:
+    r = _post_frame(client, session, {"targets": [target]})
+    assert r.status_code == 422
+    assert r.json()["code"] == "invalid_problem" and r.json()["field"] == field
+
+
+def test_two_targets_for_one_effector(client: TestClient, session: Created) -> None:
+    t = hand_frame(None)["targets"][0]
+    r = _post_frame(client, session, {"targets": [t, t]})
+    assert r.status_code == 422 and r.json()["field"] == "targets[1].effector"
+
+
+def test_clip_longer_than_the_limit(make_client: Callable[..., TestClient]) -> None:
+    client = make_client(Settings(max_frames_per_request=3))
+    s = create(client)
+    r = _post_frame(client, s, {"frames": [hand_frame(i) for i in range(4)]})
+    assert r.status_code == 422 and r.json()["field"] == "frames"
+
+
+def test_clip_error_names_the_frame(client: TestClient, session: Created) -> None:
+    frames = [
+        hand_frame(1),
+        {"targets": [{"effector": "nope", "position": {"x": 0, "y": 0, "z": 0}}]},
+    ]
+    r = _post_frame(client, session, {"frames": frames})
+    assert r.status_code == 422 and r.json()["field"] == "frames[1].targets[0].effector"
+    # Nothing was solved: the clip is checked before the first frame runs.
+    info = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()
+    assert info["counters"]["frames"] == 0
+
+
+def _arm_with(**changes: Any) -> dict[str, Any]:
+    import copy
+
+    chain = copy.deepcopy(ARM)
+    for path, value in changes.items():
+        i, key = path.split("__")
+        chain["joints"][int(i)][key] = value
+    return chain
+
+
+@pytest.mark.parametrize(
+    ("chain", "field"),
+    [
+        (_arm_with(**{"1__lower": [3.0]}), "chain.joints[1].lower"),
+        (_arm_with(**{"1__axis": {"x": 0, "y": 0, "z": 0}}), "chain.joints[1].axis"),
+        (_arm_with(**{"0__axes": "zz"}), "chain.joints[0].axes"),
+        (_arm_with(**{"2__name": "elbow"}), "chain.joints[2].name"),
+        (_arm_with(**{"1__upper": []}), "chain.joints[1].upper"),
+        (_arm_with(**{"2__parent": "nowhere"}), "chain.joints"),
+        ({**ARM, "effectors": [{"name": "hand", "link": "nowhere"}]}, "chain.effectors[0].link"),
+        (
+            {**ARM, "effectors": [{"name": "hand", "link": "hand", "position_weight": 0}]},
+            "chain.effectors[0].position_weight",
+        ),
+    ],
+)
+def test_invalid_model_names_the_joint_and_field(
+    client: TestClient, chain: dict[str, Any], field: str
+) -> None:
+    r = client.post("/v1/sessions", json={"chain": chain})
+    assert r.status_code == 422, r.text
+    assert r.json()["code"] == "invalid_problem" and r.json()["field"] == field
+
+
+@pytest.mark.parametrize(
+    ("urdf", "field"),
+    [
+        ("<robot", "chain.urdf"),
+        ('<!DOCTYPE r [<!ENTITY a "b">]><robot name="r"/>', "chain.urdf"),
+    ],
+)
+def test_bad_urdf_is_422(client: TestClient, urdf: str, field: str) -> None:
+    chain = {"format": "urdf", "urdf": urdf, "base_link": "base", "tip_links": ["tip"]}
+    r = client.post("/v1/sessions", json={"chain": chain})
+    assert r.status_code == 422 and r.json()["field"] == field
+
+
+def test_chain_over_the_dof_limit(make_client: Callable[..., TestClient]) -> None:
+    client = make_client(Settings(max_dof=10))
+    r = client.post("/v1/sessions", json={"chain": {"format": "example", "name": "tail"}})
+    assert r.status_code == 422 and r.json()["field"] == "chain"
+
+
+def test_options_over_the_budget_cap(client: TestClient, session: Created) -> None:
+    r = client.patch(
+        f"/v1/sessions/{session.id}", json={"time_budget_us": 999_999}, headers=session.headers
+    )
+    assert r.status_code == 422 and r.json()["field"] == "body.time_budget_us"
+    r = client.patch(f"/v1/sessions/{session.id}", json={"max_iter": 0}, headers=session.headers)
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format"
+
+
+@pytest.mark.parametrize(
+    ("pose", "field"),
+    [({"q": [0.0, 1.0]}, "body.q"), ({"joints": {"knee": 1.0}}, "body.joints.knee")],
+)
+def test_bad_pose(client: TestClient, session: Created, pose: Any, field: str) -> None:
+    r = client.put(f"/v1/sessions/{session.id}/pose", json=pose, headers=session.headers)
+    assert r.status_code == 422 and r.json()["field"] == field
+
+
+def test_body_over_the_limit_is_413(make_client: Callable[..., TestClient]) -> None:
+    client = make_client(Settings(max_body_bytes=2048))
+    r = client.post("/v1/solve", json={"chain": ARM, "targets": [], "pad": "x" * 4096})
+    assert r.status_code == 413 and r.json()["code"] == "payload_too_large"
+
+
+def test_unknown_route_and_method(client: TestClient) -> None:
+    assert client.get("/v1/nothing").json()["code"] == "not_found"
+    r = client.put("/v1/solve", json={})
+    assert r.status_code == 405 and r.json()["code"] == "method_not_allowed"
+
+
+def test_not_ready_until_warm(make_client: Callable[..., TestClient]) -> None:
+    import threading
+
+    gate = threading.Event()
+
+    def slow_warmup() -> float:
+        assert gate.wait(30.0)
+        return 0.0
+
+    client = make_client(warmup=slow_warmup)
+    try:
+        r = client.post("/v1/sessions", json={"chain": ARM})
+        assert r.status_code == 503 and r.json()["code"] == "not_ready"
+        assert r.headers["retry-after"] == "1"
+    finally:
+        gate.set()
