@@ -1,0 +1,47 @@
+"""Settings from IK_* environment variables."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+from pydantic import ValidationError
+
+from service.config import Settings
+
+
+@pytest.fixture(autouse=True)
+def clean_environ(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    import os
+
+    for key in list(os.environ):
+        if key.startswith("IK_"):
+            monkeypatch.delenv(key)
+    yield
+
+
+def test_defaults() -> None:
+    s = Settings()
+    assert (s.host, s.port) == ("127.0.0.1", 8000)
+    assert s.session_ttl_s == 300.0 and s.max_sessions == 1000
+
+
+def test_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("IK_PORT", "9001")
+    monkeypatch.setenv("IK_MAX_SESSIONS", "7")
+    monkeypatch.setenv("IK_DEFAULT_TIME_BUDGET_US", "250.5")
+    monkeypatch.setenv("IK_INLINE_BUDGET_US", "0")
+    s = Settings()
+    assert s.port == 9001 and s.max_sessions == 7
+    assert s.default_time_budget_us == 250.5 and s.inline_budget_us == 0.0
+
+
+def test_bad_values_are_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("IK_MAX_SESSIONS", "0")
+    with pytest.raises(ValidationError):
+        Settings()
+
+
+def test_frozen() -> None:
+    with pytest.raises(ValidationError):
+        Settings().port = 1  # type: ignore[misc]

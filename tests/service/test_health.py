@@ -1,0 +1,92 @@
+"""/healthz, /readyz (flips after warm-up), /metrics (the series exist and count)."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+
+from starlette.testclient import TestClient
+
+from .helpers import Created, create, hand_frame
+
+
+def test_healthz(client: TestClient) -> None:
+    r = client.get("/healthz")
+    assert r.status_code == 200 and r.json() == {"status": "ok"}
+
+
+def test_readyz_is_503_until_the_warmup_returns(make_client: Callable[..., TestClient]) -> None:
+    gate = threading.Event()
+
+    def warmup() -> float:
+        assert gate.wait(30.0)
+        return 0.0
+
+    client = make_client(warmup=warmup)
+    r = client.get("/readyz")
+    assert r.status_code == 503 and r.json()["code"] == "not_ready"
+    assert client.get("/healthz").status_code == 200  # alive while warming
+    gate.set()
+    assert client.app.state.ik.runner.warmup.ready.wait(30.0)  # type: ignore[attr-defined]
+    r = client.get("/readyz")
+    assert r.status_code == 200 and r.json()["status"] == "ready"
+
+
+def test_readyz_reports_a_failed_warmup(make_client: Callable[..., TestClient]) -> None:
+    done = threading.Event()
+
+    def warmup() -> float:
+        done.set()
+        raise RuntimeError("no compiler")
+
+    client = make_client(warmup=warmup)
+    assert done.wait(30.0)
+    warm = client.app.state.ik.runner.warmup  # type: ignore[attr-defined]
+    warm._thread.join(30.0)
+    r = client.get("/readyz")
+    assert r.status_code == 503 and r.json()["code"] == "warmup_failed"
+
+
+def test_metrics_series(client: TestClient, session: Created) -> None:
+    client.post(f"/v1/sessions/{session.id}/frames", json=hand_frame(1), headers=session.headers)
+    with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
+        ws.send_json({"type": "frame", "id": 1, **hand_frame(None)})
+        ws.receive_json()
+        ws.send_text("not json")
+        ws.receive_json()
+        text = client.get("/metrics").text
+    assert 'ik_frames_total{success="true",termination="goal_reached"} 2.0' in text
+    assert "ik_solve_duration_seconds_bucket" in text
+    assert 'ik_server_duration_seconds_count{transport="http"} 1.0' in text
+    assert 'ik_server_duration_seconds_count{transport="ws"} 1.0' in text
+    assert "ik_active_sessions 1.0" in text
+    assert "ik_websockets 1.0" in text
+    assert 'ik_errors_total{code="invalid_format",transport="ws"} 1.0' in text
+    assert "ik_sessions_created_total 1.0" in text
+    assert session.id not in text and session.token not in text
+    after = client.get("/metrics").text
+    assert "ik_websockets 0.0" in after
+
+
+def test_metrics_count_sessions(client: TestClient) -> None:
+    a = create(client)
+    create(client)
+    assert "ik_active_sessions 2.0" in client.get("/metrics").text
+    client.delete(f"/v1/sessions/{a.id}", headers=a.headers)
+    assert "ik_active_sessions 1.0" in client.get("/metrics").text
+
+
+def test_openapi_documents_every_route(client: TestClient) -> None:
+    spec = client.get("/openapi.json").json()
+    assert set(spec["paths"]) >= {
+        "/v1/sessions",
+        "/v1/sessions/{session_id}",
+        "/v1/sessions/{session_id}/pose",
+        "/v1/sessions/{session_id}/frames",
+        "/v1/solve",
+        "/healthz",
+        "/readyz",
+        "/metrics",
+    }
+    assert "HTTPBearer" in spec["components"]["securitySchemes"]
+    assert client.get("/docs").status_code == 200 and client.get("/redoc").status_code == 200

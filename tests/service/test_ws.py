@@ -1,0 +1,225 @@
+"""WebSocket protocol over the TestClient: order, ids, encodings, errors, closes."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from typing import Any
+
+import msgpack
+import pytest
+from pydantic import TypeAdapter
+from starlette.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+import schemas as S
+from service.config import Settings
+
+from .helpers import Created, create, hand_frame
+
+SERVER_MESSAGE: TypeAdapter[Any] = TypeAdapter(S.ServerMessage)
+
+
+def frame_msg(frame_id: int, **pos: float) -> dict[str, Any]:
+    return {"type": "frame", "id": frame_id, **hand_frame(None, **pos)}
+
+
+def url(s: Created) -> str:
+    return f"/v1/sessions/{s.id}/ws"
+
+
+def test_json_frames_answered_in_order_with_ids(client: TestClient, session: Created) -> None:
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ids = [3, 4, 10, 11, 12]
+        for i, fid in enumerate(ids):
+            ws.send_text(json.dumps(frame_msg(fid, y=0.1 + 0.01 * i)))
+        replies = [SERVER_MESSAGE.validate_python(ws.receive_json()) for _ in ids]
+    assert [r.id for r in replies] == ids
+    assert all(isinstance(r, S.ResultMessage) and r.success for r in replies)
+    assert all(r.result.id == r.id and r.result.server_us > 0 for r in replies)
+
+
+def test_msgpack_frames_get_msgpack_answers(client: TestClient, session: Created) -> None:
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        for fid in (1, 2):
+            ws.send_bytes(msgpack.packb(frame_msg(fid)))
+        replies = [msgpack.unpackb(ws.receive_bytes()) for _ in range(2)]
+        ws.send_bytes(msgpack.packb({"type": "ping", "id": 3}))
+        pong = msgpack.unpackb(ws.receive_bytes())
+    assert [r["id"] for r in replies] == [1, 2]
+    assert all(S.ResultMessage.model_validate(r).result.success for r in replies)
+    assert pong == {"id": 3, "type": "pong"}
+
+
+def test_token_as_query_parameter(client: TestClient, session: Created) -> None:
+    with client.websocket_connect(f"{url(session)}?token={session.token}") as ws:
+        ws.send_json({"type": "ping", "id": 0})
+        assert ws.receive_json() == {"id": 0, "type": "pong"}
+
+
+@pytest.mark.parametrize(
+    ("bad", "code"),
+    [
+        ("this is not json", "invalid_format"),
+        (json.dumps({"type": "frame", "id": 5}), "invalid_format"),
+        (json.dumps({"type": "dance", "id": 5}), "invalid_format"),
+        (json.dumps({**frame_msg(5), "extra": 1}), "invalid_format"),
+        (
+            json.dumps(
+                {
+                    "type": "frame",
+                    "id": 5,
+                    "targets": [{"effector": "foot", "position": {"x": 0, "y": 0, "z": 0}}],
+                }
+            ),
+            "invalid_problem",
+        ),
+        (b"\xc1\xc1 not msgpack", "invalid_format"),
+        (
+            msgpack.packb(
+                {
+                    **frame_msg(5),
+                    "targets": [
+                        {"effector": "hand", "position": {"x": float("nan"), "y": 0, "z": 0}}
+                    ],
+                }
+            ),
+            "invalid_format",
+        ),
+    ],
+)
+def test_recoverable_errors_keep_the_socket_open(
+    client: TestClient, session: Created, bad: str | bytes, code: str
+) -> None:
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        if isinstance(bad, bytes):
+            ws.send_bytes(bad)
+            err = msgpack.unpackb(ws.receive_bytes())
+        else:
+            ws.send_text(bad)
+            err = ws.receive_json()
+        parsed = S.ErrorMessage.model_validate(err)
+        assert parsed.error.code == code and parsed.success is False
+        ws.send_text(json.dumps(frame_msg(6)))
+        ok = ws.receive_json()
+        assert ok["id"] == 6 and ok["success"] is True
+
+
+def test_error_echoes_the_id_when_readable(client: TestClient, session: Created) -> None:
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json({"type": "frame", "id": 8, "targets": []})
+        err = ws.receive_json()
+        assert err["id"] == 8 and err["error"]["code"] == "invalid_format"
+        assert err["error"]["field"] == "frame.targets"
+
+
+def test_id_must_increase(client: TestClient, session: Created) -> None:
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json(frame_msg(5))
+        assert ws.receive_json()["success"] is True
+        ws.send_json(frame_msg(5))
+        err = ws.receive_json()
+        assert err["id"] == 5 and err["error"]["code"] == "id_reuse"
+        ws.send_json({"type": "ping", "id": 4})
+        assert ws.receive_json()["error"]["code"] == "id_reuse"
+        ws.send_json(frame_msg(6))
+        assert ws.receive_json()["success"] is True
+
+
+def test_unreachable_frame_is_a_result_with_success_false(
+    client: TestClient, session: Created
+) -> None:
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json(frame_msg(1, x=9.0))
+        reply = S.ResultMessage.model_validate(ws.receive_json())
+    assert reply.success is False and reply.result.status != "solved"
+
+
+@pytest.mark.parametrize(
+    ("headers", "path_id", "close_code"),
+    [
+        ({}, None, 4401),
+        ({"Authorization": "Bearer wrong"}, None, 4403),
+        (None, "nosuchsession", 4404),
+    ],
+)
+def test_handshake_failures_close_with_codes(
+    client: TestClient,
+    session: Created,
+    headers: dict[str, str] | None,
+    path_id: str | None,
+    close_code: int,
+) -> None:
+    path = f"/v1/sessions/{path_id or session.id}/ws"
+    with pytest.raises(WebSocketDisconnect) as info:
+        with client.websocket_connect(
+            path, headers=session.headers if headers is None else headers
+        ) as ws:
+            ws.receive_json()
+    assert info.value.code == close_code
+
+
+def test_deleted_session_closes_4404_at_the_next_message(
+    client: TestClient, session: Created
+) -> None:
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json(frame_msg(1))
+        assert ws.receive_json()["success"] is True
+        assert (
+            client.delete(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 204
+        )
+        ws.send_json(frame_msg(2))
+        with pytest.raises(WebSocketDisconnect) as info:
+            ws.receive_json()
+    assert info.value.code == 4404
+
+
+def test_message_over_the_limit_closes_1009(make_client: Callable[..., TestClient]) -> None:
+    client = make_client(Settings(ws_max_message_bytes=1024))
+    s = create(client)
+    with client.websocket_connect(url(s), headers=s.headers) as ws:
+        ws.send_text(json.dumps({**frame_msg(1), "pad": "x" * 2000}))
+        with pytest.raises(WebSocketDisconnect) as info:
+            ws.receive_json()
+    assert info.value.code == 1009
+
+
+def test_too_many_websockets_closes_1013(make_client: Callable[..., TestClient]) -> None:
+    client = make_client(Settings(max_websockets=1))
+    s = create(client)
+    with client.websocket_connect(url(s), headers=s.headers) as first:
+        first.send_json({"type": "ping", "id": 1})
+        assert first.receive_json()["type"] == "pong"
+        with pytest.raises(WebSocketDisconnect) as info:
+            with client.websocket_connect(url(s), headers=s.headers) as second:
+                second.receive_json()
+        assert info.value.code == 1013
+        first.send_json({"type": "ping", "id": 2})
+        assert first.receive_json()["id"] == 2
+
+
+def test_open_socket_keeps_the_session_alive_and_is_counted(
+    make_client: Callable[..., TestClient],
+) -> None:
+    from service.sessions import InMemorySessionStore
+
+    now = [0.0]
+    store = InMemorySessionStore(max_sessions=10, ttl_s=5.0, clock=lambda: now[0])
+    client = make_client(Settings(session_ttl_s=5.0), store=store)
+    s = create(client)
+    with client.websocket_connect(url(s), headers=s.headers) as ws:
+        ws.send_json({"type": "ping", "id": 1})
+        ws.receive_json()
+        now[0] += 60.0
+        info = client.get(f"/v1/sessions/{s.id}", headers=s.headers).json()
+        assert info["websockets"] == 1
+        ws.send_json(frame_msg(2))
+        assert ws.receive_json()["success"] is True
+
+
+def test_http_and_ws_frames_share_the_session_pose(client: TestClient, session: Created) -> None:
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json(frame_msg(1, y=0.2))
+        q_ws = ws.receive_json()["result"]["q"]
+    pose = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()["pose"]["q"]
+    assert pose == q_ws
