@@ -5,10 +5,10 @@ numpy + a numba-compiled core; no web, logging or environment access here.
 
 from .analyzer import AnalyzerPolicy
 from .bfgs import minimize
-from .errors import DimensionMismatch, IKError, InvalidModel, InvalidProblem
-from .termination import TERMINATION_MESSAGES, Action, GoalStatus, PassStart, Termination
 from .chain import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from .errors import DimensionMismatch, IKError, InvalidModel, InvalidProblem
 from .ik import IKOptions, IKResult, IKSolver, IKStatus, Target, solve
+from .termination import TERMINATION_MESSAGES, Action, GoalStatus, PassStart, Termination
 from .types import AcceptedStep, GradientMode, MinimizeOptions, MinimizeResult, PassRecord
 from .warmup import warmup
 

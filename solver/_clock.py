@@ -47,6 +47,6 @@ def now_s() -> float:
 @overload(now_s)
 def _now_s_compiled() -> Any:
     def impl() -> float:
-        return _monotonic_ns() * 1e-9
+        return _monotonic_ns() * 1e-9  # type: ignore[call-arg]  # typingctx is numba's
 
     return impl

@@ -46,7 +46,11 @@ GOAL_STATUSES: tuple[GoalStatus, ...] = (GoalStatus.NO_GOAL, GoalStatus.MET, Goa
 START_INITIAL = 0
 START_RESET_H = 1
 START_RESTART = 2
-PASS_STARTS: tuple[PassStart, ...] = (PassStart.INITIAL, PassStart.RESET_H, PassStart.RESTART_RANDOM)
+PASS_STARTS: tuple[PassStart, ...] = (
+    PassStart.INITIAL,
+    PassStart.RESET_H,
+    PassStart.RESTART_RANDOM,
+)
 
 GRAD_ANALYTIC = 0
 GRAD_FORWARD = 1

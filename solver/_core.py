@@ -19,11 +19,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from ._jit import jit
 
 from . import _codes as C
 from ._clock import now_s
 from ._dispatch import call_goal, call_metric, call_objective
+from ._jit import jit
 from .analyzer import decide
 
 _EPS = 2.220446049250313e-16
@@ -161,8 +161,25 @@ def _line_search(  # type: ignore[no-untyped-def]
             if not curvature:
                 return 0, f_new, lam
             return _curvature_phase(
-                fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters,
-                lam, f_new, slope, first, min_lambda,
+                fg,
+                data,
+                x,
+                f,
+                g,
+                d,
+                lo,
+                hi,
+                fopt,
+                iopt,
+                x_new,
+                g_new,
+                work,
+                counters,
+                lam,
+                f_new,
+                slope,
+                first,
+                min_lambda,
             )
         if counters[0] >= max_fev:
             return 3, f_new, lam
@@ -205,8 +222,25 @@ def _line_search(  # type: ignore[no-untyped-def]
 
 @jit
 def _curvature_phase(  # type: ignore[no-untyped-def]
-    fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters,
-    lam, f_new, slope, untouched, min_lambda,
+    fg,
+    data,
+    x,
+    f,
+    g,
+    d,
+    lo,
+    hi,
+    fopt,
+    iopt,
+    x_new,
+    g_new,
+    work,
+    counters,
+    lam,
+    f_new,
+    slope,
+    untouched,
+    min_lambda,
 ):
     """The article's modified search: also ask g(x+).d >= c2 g.d (Dennis & Schnabel A6.3.1mod).
 
@@ -446,7 +480,8 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
         out_x, out_g: Receive the best x and its gradient.
 
     Returns:
-        (f_best, goal_measure_best, pg_norm, code, nit, nfev, ngev, n_passes, n_restarts, n_skipped, elapsed_s)
+        (f_best, goal_measure_best, pg_norm, code, nit, nfev, ngev, n_passes,
+        n_restarts, n_skipped, elapsed_s)
     """
     t_start = now_s()
     n = x0.shape[0]
@@ -592,7 +627,11 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
                     for i in range(n):
                         h[i, i] = sy / yy
             first_step = False
-            if metric_every > 0 and pass_iters % metric_every == 0 and call_metric(fg, x_new, data, h):
+            if (
+                metric_every > 0
+                and pass_iters % metric_every == 0
+                and call_metric(fg, x_new, data, h)
+            ):
                 # Re-seed H from the objective's metric (every step: damped Gauss-Newton).
                 h_is_identity = False
             elif _bfgs_update(h, s, y, hy, eps_curv):
@@ -682,6 +721,15 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
     pg = _projected_gradient_norm(out_x, out_g, lo, hi)
     elapsed = now_s() - t_start
     return (
-        f_best, m_best, pg, final_code, nit, counters[0], counters[1], n_passes, n_restarts,
-        n_skipped, elapsed,
+        f_best,
+        m_best,
+        pg,
+        final_code,
+        nit,
+        counters[0],
+        counters[1],
+        n_passes,
+        n_restarts,
+        n_skipped,
+        elapsed,
     )

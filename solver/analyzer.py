@@ -24,9 +24,9 @@ from types import MappingProxyType
 
 import numpy as np
 import numpy.typing as npt
-from ._jit import jit
 
 from . import _codes as C
+from ._jit import jit
 from .termination import Action, GoalStatus, Termination
 
 PolicyTable = Mapping[tuple[Termination, GoalStatus], Action]
@@ -164,4 +164,4 @@ def decide(
         action = C.STOP
     if (action == C.RESET_H or action == C.RESTART_RANDOM) and not budget_left:
         action = C.STOP
-    return action
+    return int(action)

@@ -19,7 +19,15 @@ from ._core import run_solver
 from ._dispatch import registered_for
 from .analyzer import AnalyzerPolicy
 from .errors import DimensionMismatch, InvalidProblem
-from .types import AcceptedStep, GradientMode, Matrix, MinimizeOptions, MinimizeResult, PassRecord, Vector
+from .types import (
+    AcceptedStep,
+    GradientMode,
+    Matrix,
+    MinimizeOptions,
+    MinimizeResult,
+    PassRecord,
+    Vector,
+)
 
 _GRAD_MODES = {
     GradientMode.ANALYTIC: C.GRAD_ANALYTIC,
@@ -184,7 +192,9 @@ def _initial_h(n: int, h0: Matrix | None) -> Matrix:
         return np.eye(n)
     h = np.array(h0, dtype=np.float64)
     if h.shape != (n, n):
-        raise DimensionMismatch(f"initial_inverse_hessian must have shape ({n}, {n}), got {h.shape}")
+        raise DimensionMismatch(
+            f"initial_inverse_hessian must have shape ({n}, {n}), got {h.shape}"
+        )
     if not np.isfinite(h).all() or not np.allclose(h, h.T, rtol=1e-10, atol=1e-12):
         raise InvalidProblem("initial_inverse_hessian must be finite and symmetric")
     try:
@@ -197,4 +207,4 @@ def _initial_h(n: int, h0: Matrix | None) -> Matrix:
 def _jit_disabled() -> bool:
     from numba.core import config
 
-    return bool(config.DISABLE_JIT)
+    return bool(getattr(config, "DISABLE_JIT", False))

@@ -64,7 +64,13 @@ class EffectorMode(enum.StrEnum):
     AIM = "aim"  # position (if weighted) and a local axis pointing along a direction
 
 
-def _finite(values: Sequence[float] | Vector, what: str, *, joint: str, field: str) -> Vector:
+def _finite(
+    values: Sequence[float] | Sequence[Sequence[float]] | Vector,
+    what: str,
+    *,
+    joint: str,
+    field: str,
+) -> Vector:
     arr = np.asarray(values, dtype=np.float64)
     if not np.isfinite(arr).all():
         raise InvalidModel(f"{what} must be finite", joint=joint, field=field)
@@ -84,15 +90,24 @@ class Transform:
 
     @classmethod
     def from_quaternion(
-        cls, translation: Sequence[float], w: float, x: float, y: float, z: float, *,
-        owner: str = "", field_name: str = "rotation",
+        cls,
+        translation: Sequence[float],
+        w: float,
+        x: float,
+        y: float,
+        z: float,
+        *,
+        owner: str = "",
+        field_name: str = "rotation",
     ) -> Transform:
         """From a unit quaternion (w, x, y, z); |q| must be 1 within 1e-6."""
         q = _finite([w, x, y, z], "quaternion", joint=owner, field=field_name)
         norm = float(np.linalg.norm(q))
         if abs(norm - 1.0) > 1e-6:
             raise InvalidModel(
-                f"quaternion must have unit norm, got |q| = {norm:.9g}", joint=owner, field=field_name
+                f"quaternion must have unit norm, got |q| = {norm:.9g}",
+                joint=owner,
+                field=field_name,
             )
         return cls(_translation(translation, owner), quaternion_to_matrix(q / norm))
 
@@ -105,7 +120,9 @@ class Transform:
         return cls(_translation(translation, owner), rpy_to_matrix(float(r), float(p), float(y)))
 
     @classmethod
-    def from_matrix34(cls, matrix: Sequence[Sequence[float]] | Matrix, *, owner: str = "") -> Transform:
+    def from_matrix34(
+        cls, matrix: Sequence[Sequence[float]] | Matrix, *, owner: str = ""
+    ) -> Transform:
         """From a 3x4 [R | t] matrix; R must be orthonormal with det +1 within 1e-6."""
         m = _finite(matrix, "matrix", joint=owner, field="matrix")
         if m.shape != (3, 4):
@@ -114,7 +131,8 @@ class Transform:
         if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0.0:
             raise InvalidModel(
                 "matrix rotation part must be orthonormal with determinant +1",
-                joint=owner, field="matrix",
+                joint=owner,
+                field="matrix",
             )
         return cls(m[:, 3].copy(), rot.copy())
 
@@ -128,7 +146,9 @@ class Transform:
 def _translation(values: Sequence[float], owner: str) -> Vector:
     t = _finite(values, "translation", joint=owner, field="translation")
     if t.shape != (3,):
-        raise InvalidModel(f"translation must have 3 components, got {t.shape}", joint=owner, field="translation")
+        raise InvalidModel(
+            f"translation must have 3 components, got {t.shape}", joint=owner, field="translation"
+        )
     return t
 
 
@@ -149,7 +169,9 @@ def matrix_to_quaternion(r: Matrix) -> Vector:
     tr = float(np.trace(r))
     if tr > 0.0:
         s = math.sqrt(tr + 1.0) * 2.0
-        q = np.array([0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s])
+        q = np.array(
+            [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+        )
     else:
         i = int(np.argmax(np.diag(r)))
         j, k = (i + 1) % 3, (i + 2) % 3
@@ -161,7 +183,8 @@ def matrix_to_quaternion(r: Matrix) -> Vector:
         q[1 + k] = (r[k, i] + r[i, k]) / s
     if q[0] < 0.0:
         q = -q
-    return q / np.linalg.norm(q)
+    out: Vector = q / np.linalg.norm(q)
+    return out
 
 
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> Matrix:
@@ -289,7 +312,9 @@ class Chain:
         for i, e in enumerate(self.effectors):
             if e.name == name:
                 return i
-        raise InvalidProblem(f"unknown effector {name!r}; this chain has {list(self.effector_names)}")
+        raise InvalidProblem(
+            f"unknown effector {name!r}; this chain has {list(self.effector_names)}"
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -313,7 +338,11 @@ class CompiledChain:
         return int(self.ni.shape[0])
 
 
-MODE_CODES = {EffectorMode.POSITION: MODE_POSITION, EffectorMode.POSE: MODE_POSE, EffectorMode.AIM: MODE_AIM}
+MODE_CODES = {
+    EffectorMode.POSITION: MODE_POSITION,
+    EffectorMode.POSE: MODE_POSE,
+    EffectorMode.AIM: MODE_AIM,
+}
 
 
 def _check_unit_axis(axis: Vector, joint: str, field: str) -> Vector:
@@ -339,9 +368,15 @@ def _check_joint(j: Joint) -> Joint:
     n = 0
     if j.kind is JointKind.ROTATIONAL:
         axes = j.axes.lower()
-        if not 1 <= len(axes) <= 3 or any(a not in _AXIS_VECTORS for a in axes) or len(set(axes)) != len(axes):
+        if (
+            not 1 <= len(axes) <= 3
+            or any(a not in _AXIS_VECTORS for a in axes)
+            or len(set(axes)) != len(axes)
+        ):
             raise InvalidModel(
-                f"axes must be 1-3 distinct letters of 'xyz', got {j.axes!r}", joint=j.name, field="axes"
+                f"axes must be 1-3 distinct letters of 'xyz', got {j.axes!r}",
+                joint=j.name,
+                field="axes",
             )
         n = len(axes)
     elif j.kind is not JointKind.FIXED:
@@ -356,7 +391,8 @@ def _check_joint(j: Joint) -> Joint:
     if len(lower) != n or len(upper) != n:
         raise InvalidModel(
             f"expected {n} lower and upper limits, got {len(lower)} and {len(upper)}",
-            joint=j.name, field="lower" if len(lower) != n else "upper",
+            joint=j.name,
+            field="lower" if len(lower) != n else "upper",
         )
     for k in range(n):
         lo, hi = lower[k], upper[k]
@@ -365,13 +401,23 @@ def _check_joint(j: Joint) -> Joint:
         if j.kind is not JointKind.CONTINUOUS and not (math.isfinite(lo) and math.isfinite(hi)):
             raise InvalidModel(
                 "limits must be finite (use a continuous joint for unlimited rotation)",
-                joint=j.name, field="lower" if not math.isfinite(lo) else "upper",
+                joint=j.name,
+                field="lower" if not math.isfinite(lo) else "upper",
             )
         if lo > hi:
             raise InvalidModel(f"lower > upper ({lo!r} > {hi!r})", joint=j.name, field="lower")
     return Joint(
-        name=j.name, parent=j.parent, child=j.child, kind=j.kind, origin=j.origin, pivot=pivot,
-        axis=axis, axes=axes, lower=lower, upper=upper, terminator=j.terminator,
+        name=j.name,
+        parent=j.parent,
+        child=j.child,
+        kind=j.kind,
+        origin=j.origin,
+        pivot=pivot,
+        axis=axis,
+        axes=axes,
+        lower=lower,
+        upper=upper,
+        terminator=j.terminator,
     )
 
 
@@ -384,20 +430,38 @@ def _check_effector(e: Effector, links: set[str]) -> Effector:
     if tip.shape != (3,):
         raise InvalidModel("tip_offset must have 3 components", joint=e.name, field="tip_offset")
     rot = _finite(e.tip_rotation, "tip_rotation", joint=e.name, field="tip_rotation")
-    if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-        raise InvalidModel("tip_rotation must be a rotation matrix", joint=e.name, field="tip_rotation")
+    if (
+        rot.shape != (3, 3)
+        or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6)
+        or np.linalg.det(rot) < 0
+    ):
+        raise InvalidModel(
+            "tip_rotation must be a rotation matrix", joint=e.name, field="tip_rotation"
+        )
     aim = _check_unit_axis(e.aim_axis, e.name, "aim_axis")
     for name in ("position_weight", "rotation_weight"):
         w = float(getattr(e, name))
         if not (math.isfinite(w) and w >= 0.0):
             raise InvalidModel(f"{name} must be finite and >= 0", joint=e.name, field=name)
     if e.mode is EffectorMode.POSITION and e.position_weight == 0.0:
-        raise InvalidModel("a position effector needs position_weight > 0", joint=e.name, field="position_weight")
-    if e.mode is not EffectorMode.POSITION and e.position_weight == 0.0 and e.rotation_weight == 0.0:
+        raise InvalidModel(
+            "a position effector needs position_weight > 0", joint=e.name, field="position_weight"
+        )
+    if (
+        e.mode is not EffectorMode.POSITION
+        and e.position_weight == 0.0
+        and e.rotation_weight == 0.0
+    ):
         raise InvalidModel("all weights are zero", joint=e.name, field="rotation_weight")
     return Effector(
-        name=e.name, link=e.link, tip_offset=tip, tip_rotation=rot, mode=e.mode, aim_axis=aim,
-        position_weight=float(e.position_weight), rotation_weight=float(e.rotation_weight),
+        name=e.name,
+        link=e.link,
+        tip_offset=tip,
+        tip_rotation=rot,
+        mode=e.mode,
+        aim_axis=aim,
+        position_weight=float(e.position_weight),
+        rotation_weight=float(e.rotation_weight),
     )
 
 
@@ -422,7 +486,8 @@ def build_chain(
         if j.child in by_child:
             raise InvalidModel(
                 f"link {j.child!r} already has parent joint {by_child[j.child].name!r}",
-                joint=j.name, field="child",
+                joint=j.name,
+                field="child",
             )
         by_child[j.child] = j
     parents = {j.parent for j in checked}
@@ -457,7 +522,9 @@ def build_chain(
         frontier = nxt
     dof_names = tuple(name for j in ordered for name in j.dof_names)
     if len(dof_names) > max_dof:
-        raise InvalidModel(f"too many degrees of freedom: {len(dof_names)} > {max_dof}", field="joints")
+        raise InvalidModel(
+            f"too many degrees of freedom: {len(dof_names)} > {max_dof}", field="joints"
+        )
     if len(set(dof_names)) != len(dof_names):
         dup = next(n for n in dof_names if dof_names.count(n) > 1)
         raise InvalidModel("duplicate variable name", joint=dup, field="name")
@@ -510,7 +577,11 @@ def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> Comp
     for j in ordered:
         p = link_node[j.parent]
         has_pivot = bool(np.any(j.pivot != 0.0))
-        base = _compose(j.origin.as_matrix34(), _translation_only(j.pivot)) if has_pivot else j.origin.as_matrix34()
+        base = (
+            _compose(j.origin.as_matrix34(), _translation_only(j.pivot))
+            if has_pivot
+            else j.origin.as_matrix34()
+        )
         first = -1
         if j.kind is JointKind.FIXED:
             p = add(p, base, NODE_FIXED, np.zeros(3), -1, j.name)
@@ -557,8 +628,8 @@ def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> Comp
     nd = np.zeros((n_nodes, ND_WIDTH))
     for k in range(n_nodes):
         ni[k] = (parent[k], kind[k], dof[k])
-        nd[k, ND_PRE:ND_PRE + 12] = pre[k].reshape(-1)
-        nd[k, ND_AXIS:ND_AXIS + 3] = axis[k]
+        nd[k, ND_PRE : ND_PRE + 12] = pre[k].reshape(-1)
+        nd[k, ND_AXIS : ND_AXIS + 3] = axis[k]
     ei = np.zeros((len(effectors), 3), dtype=np.int64)
     ed = np.zeros((len(effectors), ED_WIDTH))
     for i, e in enumerate(effectors):
@@ -567,8 +638,8 @@ def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> Comp
         tip = np.empty((3, 4))
         tip[:, :3] = e.tip_rotation
         tip[:, 3] = e.tip_offset
-        ed[i, ED_TIP:ED_TIP + 12] = tip.reshape(-1)
-        ed[i, ED_AIM:ED_AIM + 3] = e.aim_axis
+        ed[i, ED_TIP : ED_TIP + 12] = tip.reshape(-1)
+        ed[i, ED_AIM : ED_AIM + 3] = e.aim_axis
         ed[i, ED_WP] = e.position_weight
         ed[i, ED_WR] = e.rotation_weight
     return CompiledChain(ni=ni, nd=nd, ei=ei, ed=ed, link_node=link_node, eff_dofs=tuple(eff_dofs))

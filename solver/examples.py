@@ -51,13 +51,26 @@ def panda_arm(mode: EffectorMode = EffectorMode.POSE) -> Chain:
         origin = Transform(np.array([a, 0.0, 0.0]) + rot @ np.array([0.0, 0.0, d]), rot)
         child = f"link{i + 1}"
         joints.append(
-            Joint(name=f"joint{i + 1}", parent=parent, child=child, kind=JointKind.REVOLUTE,
-                  origin=origin, axis=np.array([0.0, 0.0, 1.0]), lower=(lo,), upper=(hi,))
+            Joint(
+                name=f"joint{i + 1}",
+                parent=parent,
+                child=child,
+                kind=JointKind.REVOLUTE,
+                origin=origin,
+                axis=np.array([0.0, 0.0, 1.0]),
+                lower=(lo,),
+                upper=(hi,),
+            )
         )
         parent = child
     joints.append(
-        Joint(name="flange_joint", parent=parent, child="flange", kind=JointKind.FIXED,
-              origin=Transform(np.array([0.0, 0.0, 0.107])))
+        Joint(
+            name="flange_joint",
+            parent=parent,
+            child="flange",
+            kind=JointKind.FIXED,
+            origin=Transform(np.array([0.0, 0.0, 0.107])),
+        )
     )
     return build_chain(joints, [Effector(name="tool", link="flange", mode=mode)])
 
@@ -66,22 +79,57 @@ def humanoid_arm(mode: EffectorMode = EffectorMode.POSE) -> Chain:
     """A humanoid arm: 3-axis shoulder with a pivot, elbow, twist, 2-axis wrist (7 DOF)."""
     deg = math.pi / 180.0
     joints = [
-        Joint(name="clavicle", parent="torso", child="shoulder_base", kind=JointKind.FIXED,
-              origin=Transform(np.array([0.0, 0.18, 0.45]))),
-        Joint(name="shoulder", parent="shoulder_base", child="upper_arm", kind=JointKind.ROTATIONAL,
-              axes="zxy", pivot=np.array([0.0, 0.02, 0.0]),
-              lower=(-90 * deg, -30 * deg, -90 * deg), upper=(120 * deg, 170 * deg, 90 * deg)),
-        Joint(name="elbow", parent="upper_arm", child="forearm", kind=JointKind.ROTATIONAL, axes="x",
-              origin=Transform(np.array([0.0, 0.30, 0.0])), lower=(0.0,), upper=(150 * deg,)),
-        Joint(name="forearm_twist", parent="forearm", child="forearm_distal", kind=JointKind.REVOLUTE,
-              origin=Transform(np.array([0.0, 0.12, 0.0])), axis=np.array([0.0, 1.0, 0.0]),
-              lower=(-80 * deg,), upper=(80 * deg,)),
-        Joint(name="wrist", parent="forearm_distal", child="hand", kind=JointKind.ROTATIONAL, axes="zx",
-              origin=Transform(np.array([0.0, 0.13, 0.0])),
-              lower=(-30 * deg, -70 * deg), upper=(30 * deg, 70 * deg)),
+        Joint(
+            name="clavicle",
+            parent="torso",
+            child="shoulder_base",
+            kind=JointKind.FIXED,
+            origin=Transform(np.array([0.0, 0.18, 0.45])),
+        ),
+        Joint(
+            name="shoulder",
+            parent="shoulder_base",
+            child="upper_arm",
+            kind=JointKind.ROTATIONAL,
+            axes="zxy",
+            pivot=np.array([0.0, 0.02, 0.0]),
+            lower=(-90 * deg, -30 * deg, -90 * deg),
+            upper=(120 * deg, 170 * deg, 90 * deg),
+        ),
+        Joint(
+            name="elbow",
+            parent="upper_arm",
+            child="forearm",
+            kind=JointKind.ROTATIONAL,
+            axes="x",
+            origin=Transform(np.array([0.0, 0.30, 0.0])),
+            lower=(0.0,),
+            upper=(150 * deg,),
+        ),
+        Joint(
+            name="forearm_twist",
+            parent="forearm",
+            child="forearm_distal",
+            kind=JointKind.REVOLUTE,
+            origin=Transform(np.array([0.0, 0.12, 0.0])),
+            axis=np.array([0.0, 1.0, 0.0]),
+            lower=(-80 * deg,),
+            upper=(80 * deg,),
+        ),
+        Joint(
+            name="wrist",
+            parent="forearm_distal",
+            child="hand",
+            kind=JointKind.ROTATIONAL,
+            axes="zx",
+            origin=Transform(np.array([0.0, 0.13, 0.0])),
+            lower=(-30 * deg, -70 * deg),
+            upper=(30 * deg, 70 * deg),
+        ),
     ]
     return build_chain(
-        joints, [Effector(name="hand", link="hand", tip_offset=np.array([0.0, 0.08, 0.0]), mode=mode)]
+        joints,
+        [Effector(name="hand", link="hand", tip_offset=np.array([0.0, 0.08, 0.0]), mode=mode)],
     )
 
 
@@ -93,14 +141,26 @@ def tail(n_links: int = 20, mode: EffectorMode = EffectorMode.POSITION) -> Chain
     for i in range(n_links):
         child = f"seg{i + 1}"
         joints.append(
-            Joint(name=f"j{i + 1}", parent=parent, child=child, kind=JointKind.ROTATIONAL, axes="xz",
-                  origin=Transform(np.array([0.0, 0.0, 0.1 if i else 0.0])),
-                  lower=(-lim, -lim), upper=(lim, lim))
+            Joint(
+                name=f"j{i + 1}",
+                parent=parent,
+                child=child,
+                kind=JointKind.ROTATIONAL,
+                axes="xz",
+                origin=Transform(np.array([0.0, 0.0, 0.1 if i else 0.0])),
+                lower=(-lim, -lim),
+                upper=(lim, lim),
+            )
         )
         parent = child
     joints.append(
-        Joint(name="tip_joint", parent=parent, child="tip", kind=JointKind.FIXED,
-              origin=Transform(np.array([0.0, 0.0, 0.1])))
+        Joint(
+            name="tip_joint",
+            parent=parent,
+            child="tip",
+            kind=JointKind.FIXED,
+            origin=Transform(np.array([0.0, 0.0, 0.1])),
+        )
     )
     return build_chain(joints, [Effector(name="tip", link="tip", mode=mode)])
 
@@ -110,20 +170,47 @@ def two_arm_torso() -> Chain:
     for one arm alone), two position effectors."""
     lim = (-2.0,), (2.0,)
     joints = [
-        Joint(name="spine", parent="pelvis", child="chest", kind=JointKind.REVOLUTE,
-              axis=np.array([0.0, 0.0, 1.0]), lower=lim[0], upper=lim[1],
-              origin=Transform(np.array([0.0, 0.0, 0.5]))),
+        Joint(
+            name="spine",
+            parent="pelvis",
+            child="chest",
+            kind=JointKind.REVOLUTE,
+            axis=np.array([0.0, 0.0, 1.0]),
+            lower=lim[0],
+            upper=lim[1],
+            origin=Transform(np.array([0.0, 0.0, 0.5])),
+        ),
     ]
     for side, y in (("left", 0.2), ("right", -0.2)):
         joints += [
-            Joint(name=f"{side}_shoulder", parent="chest", child=f"{side}_upper", kind=JointKind.ROTATIONAL,
-                  axes="xy", origin=Transform(np.array([0.0, y, 0.3])), lower=(-2.0, -2.0),
-                  upper=(2.0, 2.0), terminator=True),
-            Joint(name=f"{side}_elbow", parent=f"{side}_upper", child=f"{side}_fore", kind=JointKind.REVOLUTE,
-                  axis=np.array([1.0, 0.0, 0.0]), origin=Transform(np.array([0.0, 0.0, -0.3])),
-                  lower=(0.0,), upper=(2.5,)),
-            Joint(name=f"{side}_wrist", parent=f"{side}_fore", child=f"{side}_hand", kind=JointKind.FIXED,
-                  origin=Transform(np.array([0.0, 0.0, -0.25]))),
+            Joint(
+                name=f"{side}_shoulder",
+                parent="chest",
+                child=f"{side}_upper",
+                kind=JointKind.ROTATIONAL,
+                axes="xy",
+                origin=Transform(np.array([0.0, y, 0.3])),
+                lower=(-2.0, -2.0),
+                upper=(2.0, 2.0),
+                terminator=True,
+            ),
+            Joint(
+                name=f"{side}_elbow",
+                parent=f"{side}_upper",
+                child=f"{side}_fore",
+                kind=JointKind.REVOLUTE,
+                axis=np.array([1.0, 0.0, 0.0]),
+                origin=Transform(np.array([0.0, 0.0, -0.3])),
+                lower=(0.0,),
+                upper=(2.5,),
+            ),
+            Joint(
+                name=f"{side}_wrist",
+                parent=f"{side}_fore",
+                child=f"{side}_hand",
+                kind=JointKind.FIXED,
+                origin=Transform(np.array([0.0, 0.0, -0.25])),
+            ),
         ]
     effectors = [
         Effector(name="left_hand", link="left_hand"),
@@ -132,4 +219,9 @@ def two_arm_torso() -> Chain:
     return build_chain(joints, effectors)
 
 
-EXAMPLES = {"panda_arm": panda_arm, "humanoid_arm": humanoid_arm, "tail": tail, "two_arm_torso": two_arm_torso}
+EXAMPLES = {
+    "panda_arm": panda_arm,
+    "humanoid_arm": humanoid_arm,
+    "tail": tail,
+    "two_arm_torso": two_arm_torso,
+}

@@ -26,8 +26,8 @@ def link_poses(chain: Chain, q: Vector) -> dict[str, Matrix]:
     for link, node in chain.compiled.link_node.items():
         m = np.eye(4)
         if node >= 0:
-            m[:3, :3] = nd[node, ND_R:ND_R + 9].reshape(3, 3)
-            m[:3, 3] = nd[node, ND_T:ND_T + 3]
+            m[:3, :3] = nd[node, ND_R : ND_R + 9].reshape(3, 3)
+            m[:3, 3] = nd[node, ND_T : ND_T + 3]
         out[link] = m
     return out
 

@@ -16,20 +16,20 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from ._jit import jit
 
 from . import _codes as C
 from ._core import run_solver
 from ._dispatch import register_objective
+from ._jit import jit
 from .analyzer import AnalyzerPolicy
 from .bfgs import pack_options, unpack_pass_log
 from .chain import Chain, EffectorMode
 from .errors import DimensionMismatch, InvalidProblem
 from .kinematics import (
     DD_HI,
-    DD_ROWS,
     DD_LO,
     DD_QREF,
+    DD_ROWS,
     ED_ERR_P,
     ED_ERR_R,
     ED_TDIR,
@@ -64,7 +64,8 @@ class IKStatus(enum.StrEnum):
     """The IK outcome a client acts on."""
 
     SOLVED = "solved"  # every effector within its tolerances
-    NOT_REACHED = "not_reached"  # converged outside tolerance: unreachable or a local minimum; closest pose returned
+    # Converged outside tolerance (unreachable, or a local minimum): closest pose returned.
+    NOT_REACHED = "not_reached"
     BUDGET_EXHAUSTED = "budget_exhausted"  # time or iterations ran out first; best pose returned
     NONFINITE = "nonfinite"  # the model produced NaN/inf (bad numbers); best finite pose returned
 
@@ -138,7 +139,12 @@ class IKOptions:
     policy: AnalyzerPolicy = field(default_factory=AnalyzerPolicy.default)
 
     def __post_init__(self) -> None:
-        for name in ("position_tolerance_m", "rotation_tolerance_rad", "max_step_rad", "restart_radius_rad"):
+        for name in (
+            "position_tolerance_m",
+            "rotation_tolerance_rad",
+            "max_step_rad",
+            "restart_radius_rad",
+        ):
             v = getattr(self, name)
             if not v > 0.0 or math.isnan(v):
                 raise InvalidProblem(f"{name} must be > 0, got {v!r}")
@@ -253,7 +259,7 @@ class IKSolver:
         n = chain.n_dof
         self._ei = cc.ei.copy()
         self._ed = cc.ed.copy()
-        self._ed[:, ED_TROT:ED_TROT + 9] = np.eye(3).reshape(-1)
+        self._ed[:, ED_TROT : ED_TROT + 9] = np.eye(3).reshape(-1)
         self._ed[:, ED_TDIR + 2] = 1.0
         self._dd = np.zeros((DD_ROWS, n))
         self._dd[DD_LO] = chain.lower
@@ -265,7 +271,9 @@ class IKSolver:
         self._every_effector_moves_all = all(d.shape[0] == n for d in cc.eff_dofs)
         self._mid = chain.mid_limits()
         self._identity = np.eye(n)
-        self._packed: dict[int, tuple[IKOptions, MinimizeOptions, np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._packed: dict[
+            int, tuple[IKOptions, MinimizeOptions, np.ndarray, np.ndarray, np.ndarray]
+        ] = {}
         self._rng = np.random.default_rng(0)
         self._seeds = np.empty(0, dtype=np.int64)
         self.q = self._mid.copy()  # the stream's current pose
@@ -344,7 +352,7 @@ class IKSolver:
         ei = self._ei
         ed = self._ed
         ei[:, EI_ACTIVE] = 0
-        ed[:, ED_WP:ED_WP + 2] = chain.compiled.ed[:, ED_WP:ED_WP + 2]
+        ed[:, ED_WP : ED_WP + 2] = chain.compiled.ed[:, ED_WP : ED_WP + 2]
         ed[:, ED_TOL_P] = opts.position_tolerance_m
         ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
         for t in targets:
@@ -353,7 +361,7 @@ class IKSolver:
                 raise InvalidProblem(f"two targets for effector {t.effector!r}")
             eff = chain.effectors[i]
             if t.position is not None:
-                ed[i, ED_TPOS:ED_TPOS + 3] = _vec3(t.position, t.effector, "position")
+                ed[i, ED_TPOS : ED_TPOS + 3] = _vec3(t.position, t.effector, "position")
             elif eff.mode is EffectorMode.POSITION:
                 raise InvalidProblem(f"target for {t.effector!r} needs a position")
             else:
@@ -361,7 +369,7 @@ class IKSolver:
             if eff.mode is EffectorMode.POSE:
                 if t.rotation is None:
                     raise InvalidProblem(f"target for {t.effector!r} (pose) needs a rotation")
-                ed[i, ED_TROT:ED_TROT + 9] = _rotation(t.rotation, t.effector).reshape(-1)
+                ed[i, ED_TROT : ED_TROT + 9] = _rotation(t.rotation, t.effector).reshape(-1)
             elif eff.mode is EffectorMode.AIM:
                 if t.direction is None:
                     raise InvalidProblem(f"target for {t.effector!r} (aim) needs a direction")
@@ -369,7 +377,7 @@ class IKSolver:
                 norm = float(np.linalg.norm(d))
                 if norm < 1e-12:
                     raise InvalidProblem(f"target direction for {t.effector!r} must not be zero")
-                ed[i, ED_TDIR:ED_TDIR + 3] = d / norm
+                ed[i, ED_TDIR : ED_TDIR + 3] = d / norm
             ei[i, EI_ACTIVE] = 1
 
     def _free_bounds(self, q0: Vector) -> tuple[Vector, Vector]:
@@ -410,7 +418,12 @@ class IKSolver:
         return seed
 
     def _run(
-        self, q0: Vector, lo: Vector, hi: Vector, opts: IKOptions, rng: np.random.Generator | None,
+        self,
+        q0: Vector,
+        lo: Vector,
+        hi: Vector,
+        opts: IKOptions,
+        rng: np.random.Generator | None,
         h0: Matrix | None,
     ) -> IKResult:
         n = self.chain.n_dof
@@ -441,8 +454,17 @@ class IKSolver:
         else:
             status = IKStatus.NOT_REACHED
         return self._result(
-            out_x, status, termination, int(nit), int(nfev), int(npass), int(nrest),
-            float(elapsed) * 1e6, unpack_pass_log(log, int(npass)), h, opts,
+            out_x,
+            status,
+            termination,
+            int(nit),
+            int(nfev),
+            int(npass),
+            int(nrest),
+            float(elapsed) * 1e6,
+            unpack_pass_log(log, int(npass)),
+            h,
+            opts,
         )
 
     def _effector_report(self, opts: IKOptions) -> tuple[EffectorError, ...]:
@@ -460,15 +482,33 @@ class IKSolver:
         return tuple(out)
 
     def _result(
-        self, q: Vector, status: IKStatus, termination: Termination, nit: int, nfev: int,
-        npass: int, nrest: int, solve_us: float, pass_log: tuple[PassRecord, ...], h: Matrix,
+        self,
+        q: Vector,
+        status: IKStatus,
+        termination: Termination,
+        nit: int,
+        nfev: int,
+        npass: int,
+        nrest: int,
+        solve_us: float,
+        pass_log: tuple[PassRecord, ...],
+        h: Matrix,
         opts: IKOptions,
     ) -> IKResult:
         return IKResult(
-            q=q, dof_names=self.chain.dof_names, status=status, success=status is IKStatus.SOLVED,
-            termination=termination, effectors=self._effector_report(opts), iterations=nit,
-            function_evals=nfev, passes=npass, restarts=nrest, solve_us=solve_us,
-            pass_log=pass_log, inverse_hessian=h,
+            q=q,
+            dof_names=self.chain.dof_names,
+            status=status,
+            success=status is IKStatus.SOLVED,
+            termination=termination,
+            effectors=self._effector_report(opts),
+            iterations=nit,
+            function_evals=nfev,
+            passes=npass,
+            restarts=nrest,
+            solve_us=solve_us,
+            pass_log=pass_log,
+            inverse_hessian=h,
         )
 
 

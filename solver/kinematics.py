@@ -107,10 +107,14 @@ def forward_kinematics(q, ni, nd):  # type: ignore[no-untyped-def]
                 p2 = nd[p, ND_R + 3 * i + 2]
                 for j in range(3):
                     nd[k, ND_R + 3 * i + j] = (
-                        p0 * nd[k, ND_PRE + j] + p1 * nd[k, ND_PRE + 4 + j] + p2 * nd[k, ND_PRE + 8 + j]
+                        p0 * nd[k, ND_PRE + j]
+                        + p1 * nd[k, ND_PRE + 4 + j]
+                        + p2 * nd[k, ND_PRE + 8 + j]
                     )
                 nd[k, ND_T + i] = (
-                    p0 * nd[k, ND_PRE + 3] + p1 * nd[k, ND_PRE + 7] + p2 * nd[k, ND_PRE + 11]
+                    p0 * nd[k, ND_PRE + 3]
+                    + p1 * nd[k, ND_PRE + 7]
+                    + p2 * nd[k, ND_PRE + 11]
                     + nd[p, ND_T + i]
                 )
         d = ni[k, NI_DOF]
@@ -143,7 +147,9 @@ def forward_kinematics(q, ni, nd):  # type: ignore[no-untyped-def]
         elif ni[k, NI_KIND] == NODE_TRANSLATION:
             for i in range(3):
                 nd[k, ND_T + i] += (
-                    nd[k, ND_R + 3 * i] * ux + nd[k, ND_R + 3 * i + 1] * uy + nd[k, ND_R + 3 * i + 2] * uz
+                    nd[k, ND_R + 3 * i] * ux
+                    + nd[k, ND_R + 3 * i + 1] * uy
+                    + nd[k, ND_R + 3 * i + 2] * uz
                 ) * q[d]
 
 
@@ -153,8 +159,18 @@ def effector_frame(e, ei, ed, nd):  # type: ignore[no-untyped-def]
     node = ei[e, EI_NODE]
     if node < 0:
         return (
-            ed[e, 0], ed[e, 1], ed[e, 2], ed[e, 4], ed[e, 5], ed[e, 6], ed[e, 8], ed[e, 9], ed[e, 10],
-            ed[e, 3], ed[e, 7], ed[e, 11],
+            ed[e, 0],
+            ed[e, 1],
+            ed[e, 2],
+            ed[e, 4],
+            ed[e, 5],
+            ed[e, 6],
+            ed[e, 8],
+            ed[e, 9],
+            ed[e, 10],
+            ed[e, 3],
+            ed[e, 7],
+            ed[e, 11],
         )
     a00 = nd[node, ND_R]
     a01 = nd[node, ND_R + 1]
@@ -288,7 +304,9 @@ def _effector_terms(q, g, need_grad, ni, nd, ei, ed):  # type: ignore[no-untyped
                     jx = wy * lz - wz * ly
                     jy = wz * lx - wx * lz
                     jz = wx * ly - wy * lx
-                    g[d] += 2.0 * (wp * (jx * rx + jy * ry + jz * rz) + wr * (wx * ox + wy * oy + wz * oz))
+                    g[d] += 2.0 * (
+                        wp * (jx * rx + jy * ry + jz * rz) + wr * (wx * ox + wy * oy + wz * oz)
+                    )
                 else:
                     g[d] += 2.0 * wp * (wx * rx + wy * ry + wz * rz)
             k = ni[k, NI_PARENT]

@@ -10,7 +10,10 @@ from hypothesis import HealthCheck, settings
 
 # Deterministic by default (CI); "explore" for longer local searches.
 settings.register_profile(
-    "deterministic", derandomize=True, max_examples=60, deadline=None,
+    "deterministic",
+    derandomize=True,
+    max_examples=60,
+    deadline=None,
     suppress_health_check=[HealthCheck.too_slow],
 )
 settings.register_profile("explore", max_examples=1000, deadline=None)

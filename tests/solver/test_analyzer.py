@@ -15,20 +15,36 @@ ROWS = sorted(DEFAULT_TABLE.items(), key=lambda kv: (kv[0][0].value, kv[0][1].va
 
 
 def run_decide(
-    code: Termination, goal: GoalStatus, *, restarts_left: int = 3, budget_left: bool = True,
-    fresh: bool = False, improved: bool = True, was_reset: bool = False,
+    code: Termination,
+    goal: GoalStatus,
+    *,
+    restarts_left: int = 3,
+    budget_left: bool = True,
+    fresh: bool = False,
+    improved: bool = True,
+    was_reset: bool = False,
     policy: AnalyzerPolicy | None = None,
 ) -> Action:
     table = (policy or AnalyzerPolicy.default()).as_array()
     out = decide(
-        table, C.TERMINATIONS.index(code), C.GOAL_STATUSES.index(goal), restarts_left,
-        budget_left, fresh, improved, was_reset,
+        table,
+        C.TERMINATIONS.index(code),
+        C.GOAL_STATUSES.index(goal),
+        restarts_left,
+        budget_left,
+        fresh,
+        improved,
+        was_reset,
     )
     return C.ACTIONS[int(out)]
 
 
-@pytest.mark.parametrize(("key", "action"), ROWS, ids=[f"{k[0].value}-{k[1].value}" for k, _ in ROWS])
-def test_each_default_row_is_applied_as_written(key: tuple[Termination, GoalStatus], action: Action) -> None:
+@pytest.mark.parametrize(
+    ("key", "action"), ROWS, ids=[f"{k[0].value}-{k[1].value}" for k, _ in ROWS]
+)
+def test_each_default_row_is_applied_as_written(
+    key: tuple[Termination, GoalStatus], action: Action
+) -> None:
     code, goal = key
     assert run_decide(code, goal) is action
 
@@ -43,18 +59,30 @@ def test_default_rows_have_the_documented_meaning() -> None:
 
 
 def test_reset_after_a_fresh_pass_without_progress_escalates() -> None:
-    missed = run_decide(Termination.LINE_SEARCH_FAILED, GoalStatus.MISSED, fresh=True, improved=False)
+    missed = run_decide(
+        Termination.LINE_SEARCH_FAILED, GoalStatus.MISSED, fresh=True, improved=False
+    )
     assert missed is Action.RESTART_RANDOM
-    no_goal = run_decide(Termination.LINE_SEARCH_FAILED, GoalStatus.NO_GOAL, fresh=True, improved=False)
+    no_goal = run_decide(
+        Termination.LINE_SEARCH_FAILED, GoalStatus.NO_GOAL, fresh=True, improved=False
+    )
     assert no_goal is Action.ACCEPT
-    none_left = run_decide(Termination.STALLED, GoalStatus.MISSED, fresh=True, improved=False, restarts_left=0)
+    none_left = run_decide(
+        Termination.STALLED, GoalStatus.MISSED, fresh=True, improved=False, restarts_left=0
+    )
     assert none_left is Action.STOP
 
 
 def test_second_reset_in_a_row_with_goal_missed_escalates_to_restart() -> None:
-    assert run_decide(Termination.STALLED, GoalStatus.MISSED, fresh=True, was_reset=True) is Action.RESTART_RANDOM
+    assert (
+        run_decide(Termination.STALLED, GoalStatus.MISSED, fresh=True, was_reset=True)
+        is Action.RESTART_RANDOM
+    )
     # Without a goal the article's multi-pass keeps resetting while f improves.
-    assert run_decide(Termination.STALLED, GoalStatus.NO_GOAL, fresh=True, was_reset=True) is Action.RESET_H
+    assert (
+        run_decide(Termination.STALLED, GoalStatus.NO_GOAL, fresh=True, was_reset=True)
+        is Action.RESET_H
+    )
 
 
 def test_restart_without_restarts_left_stops() -> None:
@@ -90,8 +118,12 @@ def test_custom_rule_changes_behaviour_end_to_end() -> None:
     opts = MinimizeOptions(f_goal=-100.0, max_restarts=4)
     box = (np.full(3, -2.0), np.full(3, 2.0))
     restarting = minimize(toy_objective, np.zeros(3), bounds=box, data=data, options=opts)
-    stopping_policy = AnalyzerPolicy.default().with_rule(Termination.GTOL, GoalStatus.MISSED, Action.STOP)
-    stopping = minimize(toy_objective, np.zeros(3), bounds=box, data=data, options=opts, policy=stopping_policy)
+    stopping_policy = AnalyzerPolicy.default().with_rule(
+        Termination.GTOL, GoalStatus.MISSED, Action.STOP
+    )
+    stopping = minimize(
+        toy_objective, np.zeros(3), bounds=box, data=data, options=opts, policy=stopping_policy
+    )
     assert restarting.restarts == 4
     assert stopping.restarts == 0
     assert stopping.pass_log[-1].action is Action.STOP

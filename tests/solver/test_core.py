@@ -56,7 +56,9 @@ def scipy_fg(data: tuple[np.ndarray, ...]):  # type: ignore[no-untyped-def]
 def test_quadratic_reaches_exact_minimizer(rng: np.random.Generator) -> None:
     a = spd(rng, 6)
     b = rng.normal(size=6)
-    res = minimize(toy_objective, np.zeros(6), data=quadratic(a, b), options=MinimizeOptions(gtol=1e-10))
+    res = minimize(
+        toy_objective, np.zeros(6), data=quadratic(a, b), options=MinimizeOptions(gtol=1e-10)
+    )
     assert res.termination in (Termination.GTOL, Termination.STEP_SMALL)
     assert_allclose(res.x, np.linalg.solve(a, b), rtol=0, atol=1e-9)
     assert res.projected_gradient_norm <= 1e-9
@@ -66,8 +68,11 @@ def test_exact_initial_inverse_hessian_takes_one_newton_step(rng: np.random.Gene
     a = spd(rng, 5)
     b = rng.normal(size=5)
     res = minimize(
-        toy_objective, np.zeros(5), data=quadratic(a, b),
-        initial_inverse_hessian=np.linalg.inv(a), options=MinimizeOptions(gtol=1e-10),
+        toy_objective,
+        np.zeros(5),
+        data=quadratic(a, b),
+        initial_inverse_hessian=np.linalg.inv(a),
+        options=MinimizeOptions(gtol=1e-10),
     )
     assert res.iterations == 1
     assert_allclose(res.x, np.linalg.solve(a, b), rtol=0, atol=1e-10)
@@ -77,14 +82,20 @@ def test_exact_initial_inverse_hessian_takes_one_newton_step(rng: np.random.Gene
 @pytest.mark.parametrize("gradient", list(GradientMode))
 def test_rosenbrock_from_standard_start(n: int, gradient: GradientMode) -> None:
     x0 = np.tile([-1.2, 1.0], n // 2)
-    res = minimize(toy_objective, x0, data=rosenbrock(n), options=MinimizeOptions(gradient=gradient))
+    res = minimize(
+        toy_objective, x0, data=rosenbrock(n), options=MinimizeOptions(gradient=gradient)
+    )
     tol = 1e-6 if gradient is GradientMode.FORWARD else 1e-9
     assert res.f <= tol
-    assert_allclose(res.x, np.ones(n), rtol=0, atol=1e-3 if gradient is GradientMode.FORWARD else 1e-5)
+    assert_allclose(
+        res.x, np.ones(n), rtol=0, atol=1e-3 if gradient is GradientMode.FORWARD else 1e-5
+    )
 
 
 @pytest.mark.parametrize("mode", [GradientMode.FORWARD, GradientMode.CENTRAL])
-def test_finite_difference_gradient_agrees_with_analytic(rng: np.random.Generator, mode: GradientMode) -> None:
+def test_finite_difference_gradient_agrees_with_analytic(
+    rng: np.random.Generator, mode: GradientMode
+) -> None:
     data = make_data(NONCONVEX, rng.normal(size=4), spd(rng, 4))
     lo = np.full(4, -np.inf)
     hi = np.full(4, np.inf)
@@ -107,7 +118,18 @@ def test_finite_differences_never_step_outside_the_box() -> None:
     x = np.array([1.0, 1.0])
     g = np.zeros(2)
     counters = np.zeros(2, dtype=np.int64)
-    f = _evaluate(None, data, x, g, True, C.GRAD_FORWARD, np.full(2, -1.0), np.full(2, 1.0), np.zeros(2), counters)
+    f = _evaluate(
+        None,
+        data,
+        x,
+        g,
+        True,
+        C.GRAD_FORWARD,
+        np.full(2, -1.0),
+        np.full(2, 1.0),
+        np.zeros(2),
+        counters,
+    )
     assert math.isfinite(f)
     assert np.isfinite(g).all()
     assert_allclose(g, [1.0, 1.0], rtol=0, atol=1e-6)
@@ -127,11 +149,24 @@ def test_bound_constrained_minimum_matches_scipy_lbfgsb(seed: int) -> None:
     hi[k] = x_free[k] - 0.3
     lo[k] = hi[k] - 1.0
     data = quadratic(a, b)
-    ours = minimize(toy_objective, (lo + hi) / 2, bounds=(lo, hi), data=data, options=MinimizeOptions(gtol=1e-9))
-    ref = scipy_minimize(scipy_fg(data), (lo + hi) / 2, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)), options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 10_000})
+    ours = minimize(
+        toy_objective, (lo + hi) / 2, bounds=(lo, hi), data=data, options=MinimizeOptions(gtol=1e-9)
+    )
+    ref = scipy_minimize(
+        scipy_fg(data),
+        (lo + hi) / 2,
+        jac=True,
+        method="L-BFGS-B",
+        bounds=list(zip(lo, hi, strict=True)),
+        options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 10_000},
+    )
     # Near the minimum, f ~ 10 leaves sufficient decrease below rounding: the search may
     # end LINE_SEARCH_FAILED there (Dennis & Schnabel's "x may already be a minimum").
-    assert ours.termination in (Termination.GTOL, Termination.STEP_SMALL, Termination.LINE_SEARCH_FAILED)
+    assert ours.termination in (
+        Termination.GTOL,
+        Termination.STEP_SMALL,
+        Termination.LINE_SEARCH_FAILED,
+    )
     assert ours.projected_gradient_norm <= 1e-6
     assert ours.x[k] == hi[k]  # the active bound is held exactly
     assert_allclose(ours.x, ref.x, rtol=0, atol=1e-6)
@@ -141,14 +176,29 @@ def test_bound_constrained_minimum_matches_scipy_lbfgsb(seed: int) -> None:
 def test_rosenbrock_minimum_on_a_bound_matches_scipy() -> None:
     data = rosenbrock(2)
     lo, hi = np.array([-2.0, 1.5]), np.array([2.0, 3.0])
-    ours = minimize(toy_objective, [1.0, 2.0], bounds=(lo, hi), data=data, options=MinimizeOptions(gtol=1e-12))
-    ref = scipy_minimize(scipy_fg(data), [1.0, 2.0], jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)), options={"ftol": 1e-15, "gtol": 1e-12})
+    ours = minimize(
+        toy_objective, [1.0, 2.0], bounds=(lo, hi), data=data, options=MinimizeOptions(gtol=1e-12)
+    )
+    ref = scipy_minimize(
+        scipy_fg(data),
+        [1.0, 2.0],
+        jac=True,
+        method="L-BFGS-B",
+        bounds=list(zip(lo, hi, strict=True)),
+        options={"ftol": 1e-15, "gtol": 1e-12},
+    )
     assert ours.x[1] == 1.5
     assert_allclose(ours.x, ref.x, rtol=0, atol=1e-6)
 
 
 def test_start_outside_the_box_is_projected() -> None:
-    res = minimize(toy_objective, [5.0, -5.0], bounds=([-1.0, -1.0], [1.0, 1.0]), data=rosenbrock(2), record_steps=True)
+    res = minimize(
+        toy_objective,
+        [5.0, -5.0],
+        bounds=([-1.0, -1.0], [1.0, 1.0]),
+        data=rosenbrock(2),
+        record_steps=True,
+    )
     assert np.all(res.x >= -1.0) and np.all(res.x <= 1.0)
     assert all(s.bound_slack >= 0.0 for s in res.steps)
 
@@ -181,7 +231,12 @@ def test_wrong_gradient_ends_in_line_search_failure_after_a_reset() -> None:
 
 
 def test_deadline_is_honoured_and_reported() -> None:
-    res = minimize(toy_objective, np.tile([-1.2, 1.0], 50), data=rosenbrock(100), options=MinimizeOptions(time_budget_s=0.0))
+    res = minimize(
+        toy_objective,
+        np.tile([-1.2, 1.0], 50),
+        data=rosenbrock(100),
+        options=MinimizeOptions(time_budget_s=0.0),
+    )
     assert res.termination is Termination.DEADLINE
     assert res.iterations == 0
 
@@ -195,13 +250,20 @@ def test_iteration_budget_is_shared_by_all_passes() -> None:
 
 
 def test_evaluation_budget() -> None:
-    res = minimize(toy_objective, np.tile([-1.2, 1.0], 5), data=rosenbrock(10), options=MinimizeOptions(max_fev=15))
+    res = minimize(
+        toy_objective,
+        np.tile([-1.2, 1.0], 5),
+        data=rosenbrock(10),
+        options=MinimizeOptions(max_fev=15),
+    )
     assert res.termination is Termination.MAX_FEV
     assert res.function_evals <= 15 + 1
 
 
 def test_iteration_limit() -> None:
-    res = minimize(toy_objective, [-1.2, 1.0], data=rosenbrock(2), options=MinimizeOptions(max_iter=3))
+    res = minimize(
+        toy_objective, [-1.2, 1.0], data=rosenbrock(2), options=MinimizeOptions(max_iter=3)
+    )
     assert res.termination is Termination.MAX_ITER
     assert res.iterations == 3
 
@@ -209,7 +271,9 @@ def test_iteration_limit() -> None:
 def test_step_cap_limits_every_step() -> None:
     a = np.eye(3)
     b = np.full(3, 10.0)
-    capped = minimize(toy_objective, np.zeros(3), data=quadratic(a, b), options=MinimizeOptions(max_step=0.5))
+    capped = minimize(
+        toy_objective, np.zeros(3), data=quadratic(a, b), options=MinimizeOptions(max_step=0.5)
+    )
     assert capped.iterations >= 20  # 10 units at <= 0.5 per step
     assert_allclose(capped.x, b, rtol=0, atol=1e-8)
 
@@ -218,7 +282,14 @@ def test_step_cap_limits_every_step() -> None:
 def test_every_accepted_step_satisfies_armijo_and_stays_feasible(curvature: bool) -> None:
     lo, hi = np.full(6, -1.5), np.full(6, 0.8)
     opts = MinimizeOptions(curvature=curvature)
-    res = minimize(toy_objective, np.full(6, -1.0), bounds=(lo, hi), data=rosenbrock(6), options=opts, record_steps=True)
+    res = minimize(
+        toy_objective,
+        np.full(6, -1.0),
+        bounds=(lo, hi),
+        data=rosenbrock(6),
+        options=opts,
+        record_steps=True,
+    )
     assert res.steps
     for s in res.steps:
         assert s.f_after <= s.f_before + opts.armijo_c1 * s.decrease
@@ -249,8 +320,22 @@ def test_restarts_are_reproducible_from_the_rng() -> None:
     data = make_data(NONCONVEX, np.zeros(4), 0.1 * np.eye(4))
     opts = MinimizeOptions(f_goal=-10.0, max_restarts=5)
     box = (np.full(4, -3.0), np.full(4, 3.0))
-    r1 = minimize(toy_objective, np.zeros(4), bounds=box, data=data, options=opts, rng=np.random.default_rng(7))
-    r2 = minimize(toy_objective, np.zeros(4), bounds=box, data=data, options=opts, rng=np.random.default_rng(7))
+    r1 = minimize(
+        toy_objective,
+        np.zeros(4),
+        bounds=box,
+        data=data,
+        options=opts,
+        rng=np.random.default_rng(7),
+    )
+    r2 = minimize(
+        toy_objective,
+        np.zeros(4),
+        bounds=box,
+        data=data,
+        options=opts,
+        rng=np.random.default_rng(7),
+    )
     assert r1.restarts == 5
     assert_allclose(r1.x, r2.x, rtol=0, atol=0)
     assert [p.f_end for p in r1.pass_log] == [p.f_end for p in r2.pass_log]

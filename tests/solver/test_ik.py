@@ -37,18 +37,51 @@ TIGHT = IKOptions(position_tolerance_m=1e-5, rotation_tolerance_rad=1e-4, time_b
 def slider_arm():  # type: ignore[no-untyped-def]
     """A prismatic base, a revolute with an off-axis pivot, and an aim effector."""
     joints = [
-        Joint(name="slide", parent="world", child="carriage", kind=JointKind.PRISMATIC,
-              axis=np.array([1.0, 1.0, 0.0]), lower=(-0.5,), upper=(0.5,)),
-        Joint(name="turn", parent="carriage", child="arm", kind=JointKind.REVOLUTE,
-              axis=np.array([0.0, 0.0, 1.0]), pivot=np.array([0.1, 0.0, 0.0]),
-              origin=Transform.from_rpy([0.0, 0.0, 0.2], 0.1, 0.2, 0.3), lower=(-2.0,), upper=(2.0,)),
-        Joint(name="tilt", parent="arm", child="head", kind=JointKind.ROTATIONAL, axes="yx",
-              origin=Transform(np.array([0.4, 0.0, 0.0])), lower=(-1.0, -1.0), upper=(1.0, 1.0)),
+        Joint(
+            name="slide",
+            parent="world",
+            child="carriage",
+            kind=JointKind.PRISMATIC,
+            axis=np.array([1.0, 1.0, 0.0]),
+            lower=(-0.5,),
+            upper=(0.5,),
+        ),
+        Joint(
+            name="turn",
+            parent="carriage",
+            child="arm",
+            kind=JointKind.REVOLUTE,
+            axis=np.array([0.0, 0.0, 1.0]),
+            pivot=np.array([0.1, 0.0, 0.0]),
+            origin=Transform.from_rpy([0.0, 0.0, 0.2], 0.1, 0.2, 0.3),
+            lower=(-2.0,),
+            upper=(2.0,),
+        ),
+        Joint(
+            name="tilt",
+            parent="arm",
+            child="head",
+            kind=JointKind.ROTATIONAL,
+            axes="yx",
+            origin=Transform(np.array([0.4, 0.0, 0.0])),
+            lower=(-1.0, -1.0),
+            upper=(1.0, 1.0),
+        ),
     ]
-    return build_chain(joints, [
-        Effector(name="eye", link="head", tip_offset=np.array([0.05, 0.0, 0.0]), mode=EffectorMode.AIM,
-                 aim_axis=np.array([1.0, 0.0, 0.0]), position_weight=0.5, rotation_weight=0.2),
-    ])
+    return build_chain(
+        joints,
+        [
+            Effector(
+                name="eye",
+                link="head",
+                tip_offset=np.array([0.05, 0.0, 0.0]),
+                mode=EffectorMode.AIM,
+                aim_axis=np.array([1.0, 0.0, 0.0]),
+                position_weight=0.5,
+                rotation_weight=0.2,
+            ),
+        ],
+    )
 
 
 CHAINS = {
@@ -67,7 +100,9 @@ CHAINS = {
 def test_gradient_matches_central_differences(name: str, posture: float, limit: float) -> None:
     chain = CHAINS[name]()
     rng = np.random.default_rng(11)
-    solver = IKSolver(chain, IKOptions(posture_weight=posture, limit_weight=limit, limit_margin=0.3))
+    solver = IKSolver(
+        chain, IKOptions(posture_weight=posture, limit_weight=limit, limit_margin=0.3)
+    )
     targets = pose_targets(chain, rng.uniform(chain.lower, chain.upper))
     solver._load_targets(targets, solver.options)
     data = solver._data
@@ -83,7 +118,10 @@ def test_gradient_matches_central_differences(name: str, posture: float, limit: 
             qp, qm = q.copy(), q.copy()
             qp[i] += h
             qm[i] -= h
-            fd[i] = (ik_objective(qp, np.zeros_like(g), False, data) - ik_objective(qm, np.zeros_like(g), False, data)) / (2 * h)
+            fd[i] = (
+                ik_objective(qp, np.zeros_like(g), False, data)
+                - ik_objective(qm, np.zeros_like(g), False, data)
+            ) / (2 * h)
         assert_allclose(g, fd, rtol=1e-5, atol=1e-7)
 
 
@@ -124,7 +162,9 @@ def test_unreachable_target_returns_closest_pose_and_says_so() -> None:
     assert r.status in (IKStatus.NOT_REACHED, IKStatus.BUDGET_EXHAUSTED)
     reach = np.linalg.norm(effector_poses(chain, r.q)[0][:3, 3])
     # The arm stretches towards the target: its tip is about as far out as it gets.
-    assert r.effectors[0].position_error_m == pytest.approx(np.linalg.norm(far - effector_poses(chain, r.q)[0][:3, 3]))
+    assert r.effectors[0].position_error_m == pytest.approx(
+        np.linalg.norm(far - effector_poses(chain, r.q)[0][:3, 3])
+    )
     assert reach > 0.8
 
 
@@ -136,7 +176,10 @@ def test_zero_time_budget_reports_deadline_and_best_pose() -> None:
     assert_allclose(r.q, chain.mid_limits(), rtol=0, atol=0)
 
 
-@given(st.lists(st.floats(-5.0, 5.0, allow_nan=False), min_size=3, max_size=3), st.integers(0, 2**31 - 1))
+@given(
+    st.lists(st.floats(-5.0, 5.0, allow_nan=False), min_size=3, max_size=3),
+    st.integers(0, 2**31 - 1),
+)
 def test_any_finite_target_gives_finite_joints_inside_limits(pos: list[float], seed: int) -> None:
     chain = humanoid_arm(EffectorMode.POSITION)
     r = IKSolver(chain, IKOptions(time_budget_us=None, max_iter=60, max_restarts=2)).solve(
@@ -183,9 +226,17 @@ def test_aim_effector_points_its_axis() -> None:
 
 def test_stream_tracks_a_smooth_path_without_popping() -> None:
     chain = panda_arm()
-    solver = IKSolver(chain, IKOptions(position_tolerance_m=1e-5, rotation_tolerance_rad=1e-4,
-                                       time_budget_us=None, restart_radius_rad=0.3,
-                                       limit_weight=1e-3, limit_margin=0.02))
+    solver = IKSolver(
+        chain,
+        IKOptions(
+            position_tolerance_m=1e-5,
+            rotation_tolerance_rad=1e-4,
+            time_budget_us=None,
+            restart_radius_rad=0.3,
+            limit_weight=1e-3,
+            limit_margin=0.02,
+        ),
+    )
     mid = chain.mid_limits()
     amp = 0.25 * (chain.upper - chain.lower) / 2
     ts = np.arange(240) / 60.0
@@ -217,12 +268,22 @@ def test_partial_targets_and_input_errors() -> None:
     with pytest.raises(InvalidProblem, match="rotation"):
         IKSolver(pose_chain).solve([Target(effector="tool", position=np.zeros(3))])
     with pytest.raises(InvalidProblem, match="orthonormal"):
-        IKSolver(pose_chain).solve([Target(effector="tool", position=np.zeros(3), rotation=2 * np.eye(3))])
+        IKSolver(pose_chain).solve(
+            [Target(effector="tool", position=np.zeros(3), rotation=2 * np.eye(3))]
+        )
 
 
 def test_all_fixed_chain_reports_errors_without_solving() -> None:
     chain = build_chain(
-        [Joint(name="bolt", parent="base", child="tip", kind=JointKind.FIXED, origin=Transform(np.array([0.0, 0.0, 1.0])))],
+        [
+            Joint(
+                name="bolt",
+                parent="base",
+                child="tip",
+                kind=JointKind.FIXED,
+                origin=Transform(np.array([0.0, 0.0, 1.0])),
+            )
+        ],
         [Effector(name="tip", link="tip")],
     )
     solver = IKSolver(chain)
@@ -249,7 +310,12 @@ EFF = [Effector(name="e", link="b")]
         ([j("a", "w", "b", lower=(1.0,), upper=(0.0,))], EFF, "a", "lower"),
         ([j("a", "w", "b", axis=np.zeros(3))], EFF, "a", "axis"),
         ([j("a", "w", "b", lower=(math.nan,))], EFF, "a", "lower"),
-        ([j("a", "w", "b", kind=JointKind.ROTATIONAL, axes="xx", lower=(0, 0), upper=(1, 1))], EFF, "a", "axes"),
+        (
+            [j("a", "w", "b", kind=JointKind.ROTATIONAL, axes="xx", lower=(0, 0), upper=(1, 1))],
+            EFF,
+            "a",
+            "axes",
+        ),
         ([j("a", "w", "b", pivot=np.array([math.inf, 0.0, 0.0]))], EFF, "a", "pivot"),
         ([j("a", "w", "b")], [Effector(name="e", link="nowhere")], "e", "link"),
         ([], EFF, None, "joints"),
