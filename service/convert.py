@@ -22,7 +22,6 @@ from solver.chain import (
     JointKind,
     Transform,
     build_chain,
-    quaternion_to_matrix,
 )
 from solver.errors import IKError, InvalidModel
 from solver.examples import EXAMPLES
@@ -128,8 +127,16 @@ def _vec(v: S.Vec3) -> Vector:
 
 
 def _rotation(q: S.Quaternion) -> Vector:
-    wxyz = np.array((q.w, q.x, q.y, q.z), dtype=np.float64)
-    return quaternion_to_matrix(wxyz / np.linalg.norm(wxyz))
+    """Rotation matrix of the normalised quaternion (plain floats: this is per frame)."""
+    n = math.sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z)
+    w, x, y, z = q.w / n, q.x / n, q.y / n, q.z / n
+    return np.array(
+        (
+            (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
+        )
+    )
 
 
 def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
@@ -320,9 +327,10 @@ def targets(ts: Sequence[S.Target], view: ChainView, field: str) -> list[SolverT
             )
         direction = None
         if t.direction is not None:
-            direction = _vec(t.direction)
-            if not float(np.linalg.norm(direction)) > 1e-9:
+            d = t.direction
+            if not math.sqrt(d.x * d.x + d.y * d.y + d.z * d.z) > 1e-9:
                 raise invalid_problem("direction must not be zero", f"{where}.direction")
+            direction = _vec(d)
         out.append(
             SolverTarget(
                 effector=t.effector,

@@ -1,0 +1,114 @@
+"""Where frames run (inline or pool) and that one session's frames never overlap."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import pytest
+from starlette.testclient import TestClient
+
+import schemas as S
+from service import convert, solving
+from service.config import Settings
+from service.metrics import Metrics
+from service.sessions import InMemorySessionStore, new_session
+from solver.ik import IKSolver
+
+from .helpers import ARM, create, hand_frame
+
+
+@pytest.mark.parametrize(("inline_budget_us", "inline"), [(1e9, True), (0.0, False)])
+def test_frames_run_inline_or_in_the_pool(
+    make_client: Callable[..., TestClient],
+    monkeypatch: pytest.MonkeyPatch,
+    inline_budget_us: float,
+    inline: bool,
+) -> None:
+    threads: list[str] = []
+    real = solving._track_all
+
+    def spy(*args: Any) -> Any:
+        threads.append(threading.current_thread().name)
+        return real(*args)
+
+    monkeypatch.setattr(solving, "_track_all", spy)
+    client = make_client(Settings(inline_budget_us=inline_budget_us))
+    s = create(client)
+    r = client.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(1), headers=s.headers)
+    assert r.status_code == 200
+    (name,) = threads
+    assert name.startswith("ik-solve") is not inline
+
+
+def test_inline_rule_is_frames_times_budget() -> None:
+    warm = solving.Warmup(lambda: 0.0)
+    runner = solving.Runner(
+        inline_budget_us=1000.0, threads=1, metrics=Metrics(lambda: 0), warmup=warm
+    )
+    try:
+        base = convert.session_defaults(Settings())
+        assert runner.inline(1, replace(base, time_budget_us=1000.0))
+        assert not runner.inline(2, replace(base, time_budget_us=1000.0))
+        assert runner.inline(10, replace(base, time_budget_us=100.0))
+        assert not runner.inline(1, replace(base, time_budget_us=None))
+    finally:
+        runner.shutdown()
+
+
+def test_concurrent_pooled_requests_of_one_session_run_in_arrival_order(
+    warm_solver: float,
+) -> None:
+    settings = Settings(inline_budget_us=0.0, solver_threads=2)
+    view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
+    options = convert.session_defaults(settings)
+
+    async def scenario() -> list[float]:
+        warm = solving.Warmup(lambda: 0.0)
+        warm._run()
+        runner = solving.Runner(
+            inline_budget_us=0.0, threads=2, metrics=Metrics(lambda: 1), warmup=warm
+        )
+        store = InMemorySessionStore(max_sessions=1, ttl_s=60.0)
+        session, _ = new_session(view, IKSolver(view.chain, options), options, now=store.clock())
+        await store.add(session)
+        active = 0
+        order: list[float] = []  # target y of each frame, in the order they ran
+        real_track = session.solver.track
+
+        def track(*args: Any, **kwargs: Any) -> Any:
+            nonlocal active
+            active += 1
+            assert active == 1, "two frames of one session overlapped"
+            order.append(round(float(args[0][0].position[1]), 6))
+            try:
+                return real_track(*args, **kwargs)
+            finally:
+                active -= 1
+
+        session.solver.track = track  # type: ignore[method-assign]
+        jobs = [
+            [
+                (
+                    i,
+                    convert.targets(
+                        S.Frame.model_validate(hand_frame(i, y=0.1 + 0.01 * i)).targets, view, "t"
+                    ),
+                )
+            ]
+            for i in range(8)
+        ]
+        try:
+            outs = await asyncio.gather(
+                *(runner.session_frames(session, store, j, 0.0, "http") for j in jobs)
+            )
+        finally:
+            runner.shutdown()
+        assert [out[0]["id"] for out in outs] == list(range(8))
+        assert session.frames == 8
+        return order
+
+    assert asyncio.run(scenario()) == [round(0.1 + 0.01 * i, 6) for i in range(8)]
