@@ -214,8 +214,9 @@ class IKResult:
         effectors: Errors for the effectors that had a target.
         iterations, function_evals, passes, restarts: Work done.
         solve_us: Time inside the compiled solve [us].
-        pass_log: The analyzer's decisions, pass by pass.
         inverse_hessian: Final BFGS matrix (carried between frames if asked).
+        pass_log: The analyzer's decisions, pass by pass (built on first access from
+            the raw rows: most frames never look at it, and building it costs ~15 us).
     """
 
     q: Vector
@@ -229,8 +230,12 @@ class IKResult:
     passes: int
     restarts: int
     solve_us: float
-    pass_log: tuple[PassRecord, ...]
     inverse_hessian: Matrix
+    raw_pass_log: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, C.N_LOG)))
+
+    @property
+    def pass_log(self) -> tuple[PassRecord, ...]:
+        return unpack_pass_log(self.raw_pass_log, self.raw_pass_log.shape[0])
 
     @property
     def joint_values(self) -> dict[str, float]:
@@ -268,6 +273,8 @@ class IKSolver:
         self._data = (cc.ni, cc.nd.copy(), self._ei, self._ed, self._dd, self._misc)
         _register_once(self._data)
         self._chain_dofs = cc.eff_dofs
+        self._effector_slot = {name: i for i, name in enumerate(chain.effector_names)}
+        self._n_active = 0
         self._every_effector_moves_all = all(d.shape[0] == n for d in cc.eff_dofs)
         self._mid = chain.mid_limits()
         self._identity = np.eye(n)
@@ -355,8 +362,11 @@ class IKSolver:
         ed[:, ED_WP : ED_WP + 2] = chain.compiled.ed[:, ED_WP : ED_WP + 2]
         ed[:, ED_TOL_P] = opts.position_tolerance_m
         ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
+        self._n_active = 0
         for t in targets:
-            i = chain.effector_index(t.effector)
+            i = self._effector_slot.get(t.effector, -1)
+            if i < 0:
+                chain.effector_index(t.effector)  # raises with the list of names
             if ei[i, EI_ACTIVE]:
                 raise InvalidProblem(f"two targets for effector {t.effector!r}")
             eff = chain.effectors[i]
@@ -373,20 +383,21 @@ class IKSolver:
             elif eff.mode is EffectorMode.AIM:
                 if t.direction is None:
                     raise InvalidProblem(f"target for {t.effector!r} (aim) needs a direction")
-                d = _vec3(t.direction, t.effector, "direction")
-                norm = float(np.linalg.norm(d))
+                dx, dy, dz = _vec3(t.direction, t.effector, "direction")
+                norm = math.sqrt(dx * dx + dy * dy + dz * dz)
                 if norm < 1e-12:
                     raise InvalidProblem(f"target direction for {t.effector!r} must not be zero")
-                ed[i, ED_TDIR : ED_TDIR + 3] = d / norm
+                ed[i, ED_TDIR : ED_TDIR + 3] = (dx / norm, dy / norm, dz / norm)
             ei[i, EI_ACTIVE] = 1
+            self._n_active += 1
 
     def _free_bounds(self, q0: Vector) -> tuple[Vector, Vector]:
         """Limits for this frame: variables outside every targeted chain are frozen at q0."""
-        active = np.flatnonzero(self._ei[:, EI_ACTIVE])
         lo = self.chain.lower
         hi = self.chain.upper
-        if self._every_effector_moves_all and active.shape[0] > 0:
+        if self._every_effector_moves_all and self._n_active > 0:
             return lo, hi
+        active = np.flatnonzero(self._ei[:, EI_ACTIVE])
         free = np.zeros(self.chain.n_dof, dtype=bool)
         for i in active:
             free[self._chain_dofs[i]] = True
@@ -440,7 +451,7 @@ class IKSolver:
             measure = effector_errors(q0, self._data)
             status = IKStatus.SOLVED if measure <= 1.0 else IKStatus.NOT_REACHED
             code = Termination.GOAL_REACHED if measure <= 1.0 else Termination.GTOL
-            return self._result(q0.copy(), status, code, 0, 0, 0, 0, 0.0, (), h, opts)
+            return self._result(q0.copy(), status, code, 0, 0, 0, 0, 0.0, log[:0], h, opts)
         (f, _, _, code, nit, nfev, _, npass, nrest, _, elapsed), measure = _solve_core(
             self._data, q0, lo, hi, h, fopt, iopt, policy, log, _NO_TRACE, out_x, out_g
         )
@@ -462,7 +473,7 @@ class IKSolver:
             int(npass),
             int(nrest),
             float(elapsed) * 1e6,
-            unpack_pass_log(log, int(npass)),
+            log[: min(int(npass), log.shape[0])],
             h,
             opts,
         )
@@ -491,7 +502,7 @@ class IKSolver:
         npass: int,
         nrest: int,
         solve_us: float,
-        pass_log: tuple[PassRecord, ...],
+        raw_log: np.ndarray,
         h: Matrix,
         opts: IKOptions,
     ) -> IKResult:
@@ -507,7 +518,7 @@ class IKSolver:
             passes=npass,
             restarts=nrest,
             solve_us=solve_us,
-            pass_log=pass_log,
+            raw_pass_log=raw_log,
             inverse_hessian=h,
         )
 
@@ -524,18 +535,33 @@ def _register_once(data: tuple[np.ndarray, ...]) -> None:
         _REGISTERED = True
 
 
-def _vec3(v: Vector | Sequence[float], effector: str, name: str) -> Vector:
-    a = np.asarray(v, dtype=np.float64).reshape(-1)
-    if a.shape != (3,) or not np.isfinite(a).all():
+def _vec3(v: Vector | Sequence[float], effector: str, name: str) -> list[float]:
+    a = np.asarray(v, dtype=np.float64).reshape(-1).tolist()
+    if len(a) != 3 or not (math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])):
         raise InvalidProblem(f"target {name} for {effector!r} must be 3 finite numbers")
     return a
 
 
 def _rotation(r: Matrix, effector: str) -> Matrix:
+    """A finite 3x3 rotation matrix (orthonormal within 1e-6, det +1).
+
+    Checked with plain float arithmetic: np.allclose and np.linalg.det cost ~25 us
+    per call, more than a whole compiled solve of a 7-DOF arm.
+    """
     m = np.asarray(r, dtype=np.float64)
-    if m.shape != (3, 3) or not np.isfinite(m).all():
-        raise InvalidProblem(f"target rotation for {effector!r} must be a finite 3x3 matrix")
-    if not np.allclose(m @ m.T, np.eye(3), atol=1e-6) or np.linalg.det(m) < 0.0:
+    if m.shape != (3, 3):
+        raise InvalidProblem(f"target rotation for {effector!r} must be a 3x3 matrix")
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    if not all(math.isfinite(v) for v in (a, b, c, d, e, f, g, h, i)):
+        raise InvalidProblem(f"target rotation for {effector!r} must be finite")
+    rows = ((a, b, c), (d, e, f), (g, h, i))
+    worst = 0.0
+    for k in range(3):
+        for j in range(3):
+            dot = rows[k][0] * rows[j][0] + rows[k][1] * rows[j][1] + rows[k][2] * rows[j][2]
+            worst = max(worst, abs(dot - (1.0 if k == j else 0.0)))
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if worst > 1e-6 or det < 0.0:
         raise InvalidProblem(f"target rotation for {effector!r} must be orthonormal with det +1")
     return m
 
