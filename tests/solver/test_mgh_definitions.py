@@ -392,6 +392,12 @@ def test_levenberg_marquardt_reaches_f_star(p: MGHProblem) -> None:
         matches = [v for v in p.local_minima if abs(f - v) <= 1e-8 * v]
         assert matches, f"{_id(p)}: LM stopped at {f!r}, not a documented local minimum"
         return
+    if not reached and p.name == "biggs_exp6":
+        # LM from x0 sits on the edge of two basins: rounding differences (BLAS threads,
+        # test order) decide between f* = 0 and the paper's local 5.65565e-3. Either is
+        # a correct outcome of LM; a wrong residual gives neither.
+        assert any(abs(f - v) <= 1e-8 * v for v in p.local_minima), f
+        return
     assert reached, f"{_id(p)}: LM stopped at f = {f!r} > f* = {p.f_star!r}"
     # And f* itself is right: the paper's 6 significant digits (rounding error at most
     # 5e-6 relative) agree with LM's value from both sides.
