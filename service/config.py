@@ -47,7 +47,7 @@ class Settings(BaseSettings):
 
     # Where solves run (see the README: "Inline or off the event loop").
     inline_budget_us: float = Field(
-        default=2_000.0,
+        default=1_000.0,
         ge=0,
         description="Solve inline on the event loop when frames x time_budget_us <= this [us]; "
         "otherwise in the solver thread pool",

@@ -50,3 +50,22 @@ def test_schema_examples_of_solve_and_session(client: TestClient) -> None:
         assert client.put(f"/v1/sessions/{sid}/pose", json=example, headers=h).status_code == 200
     for example in schemas["OptionsPatch"]["examples"]:
         assert client.patch(f"/v1/sessions/{sid}", json=example, headers=h).status_code == 200
+
+
+def test_readme_hierarchy_example_creates_a_session(client: TestClient) -> None:
+    import json
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    m = re.search(r"<!-- hierarchy-example:start -->\s*```json\n(.*?)```", readme, re.DOTALL)
+    assert m is not None
+    chain = json.loads(m.group(1))
+    s = create(client, chain)
+    assert [d["name"] for d in s.body["dof"]] == ["shoulder.z", "shoulder.y", "elbow"]
+    r = client.post(
+        f"/v1/sessions/{s.id}/frames",
+        json={"targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}}]},
+        headers=s.headers,
+    )
+    assert r.json()["results"][0]["success"] is True

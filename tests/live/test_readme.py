@@ -1,0 +1,71 @@
+"""The README's curl walk-through and Python WebSocket client, run against a real server."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from .conftest import ROOT, Server
+
+pytestmark = pytest.mark.live
+
+README = (ROOT / "README.md").read_text()
+
+
+def block(name: str) -> str:
+    m = re.search(
+        rf"<!-- {name}:start -->\s*```\w*\n(.*?)```\s*<!-- {name}:end -->", README, re.DOTALL
+    )
+    assert m is not None, f"README has no {name} block"
+    return m.group(1)
+
+
+@pytest.mark.skipif(
+    shutil.which("curl") is None or shutil.which("jq") is None, reason="needs curl and jq"
+)
+def test_curl_walkthrough(server: Server, tmp_path: Path) -> None:
+    script = "set -euo pipefail\n" + block("curl-walkthrough")
+    out = subprocess.run(
+        ["bash", "-c", script],
+        env={**os.environ, "IK": server.base},
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 0, out.stderr + out.stdout
+    text = out.stdout
+    assert '"status":"ready"' in text
+    assert '"success": true' in text  # the single frame (jq pretty-prints it)
+    assert '{"id":2,"success":true' in text and '{"id":3,"success":true' in text
+    assert '"code":"unauthorized"} HTTP 401' in text
+    assert '"field":"targets[0].effector"} HTTP 422' in text
+    assert '"time_budget_us":500' in text
+    assert '"joint4":-1.5' in text
+    assert 'ik_frames_total{success="true",termination="goal_reached"}' in text
+    assert text.rstrip().endswith("HTTP 204")
+
+
+def test_python_websocket_client(server: Server, tmp_path: Path) -> None:
+    code = block("ws-client")
+    assert len(code.strip().splitlines()) <= 20
+    script = tmp_path / "client.py"
+    script.write_text(code)
+    out = subprocess.run(
+        [sys.executable, str(script)],
+        env={**os.environ, "IK": server.base},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.strip().splitlines()
+    assert [line.split()[0] for line in lines] == ["0", "1", "2", "3", "4"]
+    assert all("error" not in line for line in lines)
+    assert sum("goal_reached" in line for line in lines) >= 4

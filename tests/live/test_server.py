@@ -1,0 +1,119 @@
+"""`python -m service` for real: uvicorn, WebSockets (JSON, MessagePack), limits, shutdown."""
+
+from __future__ import annotations
+
+import json
+import signal
+from collections.abc import Callable
+from typing import Any
+
+import httpx
+import msgpack
+import pytest
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import ClientConnection, connect
+
+from .conftest import Server
+
+pytestmark = pytest.mark.live
+
+TIMEOUT_S = 30.0
+PANDA = {"format": "example", "name": "panda_arm"}
+
+
+def tool_target(y: float) -> dict[str, Any]:
+    return {
+        "effector": "tool",
+        "position": {"x": 0.4, "y": y, "z": 0.5},
+        "orientation": {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0},
+    }
+
+
+def session(server: Server) -> tuple[str, dict[str, str]]:
+    r = httpx.post(f"{server.base}/v1/sessions", json={"chain": PANDA}, timeout=TIMEOUT_S)
+    assert r.status_code == 201, r.text
+    return r.json()["id"], {"Authorization": f"Bearer {r.json()['token']}"}
+
+
+def ws_connect(server: Server, sid: str, headers: dict[str, str], **kw: Any) -> ClientConnection:
+    url = server.base.replace("http", "ws", 1) + f"/v1/sessions/{sid}/ws"
+    return connect(url, additional_headers=headers, open_timeout=TIMEOUT_S, **kw)
+
+
+def test_logs_where_the_docs_are(server: Server) -> None:
+    assert f"http://127.0.0.1:{server.port}/docs" in server.log()
+    assert httpx.get(f"{server.base}/docs", timeout=TIMEOUT_S).status_code == 200
+    assert httpx.get(f"{server.base}/healthz", timeout=TIMEOUT_S).json() == {"status": "ok"}
+
+
+def test_ws_json_and_msgpack_frames_in_order(server: Server) -> None:
+    sid, headers = session(server)
+    with ws_connect(server, sid, headers) as ws:
+        # Pipelined: all sent first, answers come back in order.
+        for i in range(20):
+            ws.send(
+                json.dumps({"type": "frame", "id": i, "targets": [tool_target(0.1 + 0.002 * i)]})
+            )
+        replies = [json.loads(ws.recv(timeout=TIMEOUT_S)) for _ in range(20)]
+        assert [r["id"] for r in replies] == list(range(20))
+        assert sum(r["success"] for r in replies) >= 19
+        for i in range(20, 30):
+            ws.send(msgpack.packb({"type": "frame", "id": i, "targets": [tool_target(0.14)]}))
+        packed = [ws.recv(timeout=TIMEOUT_S) for _ in range(10)]
+    assert all(isinstance(p, bytes) for p in packed)
+    assert [msgpack.unpackb(p)["id"] for p in packed] == list(range(20, 30))
+
+
+def test_ws_recoverable_error_then_next_frame_solves(server: Server) -> None:
+    sid, headers = session(server)
+    with ws_connect(server, sid, headers) as ws:
+        ws.send("{not json")
+        err = json.loads(ws.recv(timeout=TIMEOUT_S))
+        assert err["success"] is False and err["error"]["code"] == "invalid_format"
+        ws.send(json.dumps({"type": "frame", "id": 1, "targets": [tool_target(0.1)]}))
+        assert json.loads(ws.recv(timeout=TIMEOUT_S))["result"]["id"] == 1
+
+
+def test_ws_bad_token_closes_4403(server: Server) -> None:
+    sid, _ = session(server)
+    with ws_connect(server, sid, {"Authorization": "Bearer wrong"}) as ws:
+        with pytest.raises(ConnectionClosed) as info:
+            ws.recv(timeout=TIMEOUT_S)
+    assert info.value.rcvd is not None and info.value.rcvd.code == 4403
+
+
+def test_ws_message_over_uvicorns_limit_closes_1009(
+    start_server: Callable[..., Server],
+) -> None:
+    small = start_server(IK_WS_MAX_MESSAGE_BYTES="4096")
+    sid, headers = session(small)
+    with ws_connect(small, sid, headers, max_size=None) as ws:
+        ws.send(json.dumps({"type": "ping", "id": 1, "pad": "x" * 10_000}))
+        with pytest.raises(ConnectionClosed) as info:
+            ws.recv(timeout=TIMEOUT_S)
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1009
+
+
+def test_sigterm_closes_open_websockets_with_1012(start_server: Callable[..., Server]) -> None:
+    doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="2")
+    sid, headers = session(doomed)
+    with ws_connect(doomed, sid, headers) as ws:
+        ws.send(json.dumps({"type": "ping", "id": 1}))
+        assert json.loads(ws.recv(timeout=TIMEOUT_S))["type"] == "pong"
+        doomed.proc.send_signal(signal.SIGTERM)
+        with pytest.raises(ConnectionClosed) as info:
+            ws.recv(timeout=TIMEOUT_S)
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1012
+    # uvicorn shuts down gracefully, then re-raises the signal it caught.
+    assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)
+    assert "Finished server process" in doomed.log()
+
+
+def test_token_is_redacted_from_the_access_log(server: Server) -> None:
+    sid, headers = session(server)
+    token = headers["Authorization"].removeprefix("Bearer ")
+    url = server.base.replace("http", "ws", 1) + f"/v1/sessions/{sid}/ws?token={token}"
+    with connect(url, open_timeout=TIMEOUT_S) as ws:
+        ws.send(json.dumps({"type": "ping", "id": 1}))
+        assert json.loads(ws.recv(timeout=TIMEOUT_S))["type"] == "pong"
+    assert token not in server.log()
