@@ -215,9 +215,7 @@ def main() -> None:
         f"Machine: {os.cpu_count()} cores, {platform.processor() or platform.machine()}; Python {platform.python_version()}, "
         f"numpy {np.__version__}, scipy {scipy.__version__}, numba {__import__('numba').__version__}."
     )
-    lines.append(
-        "Command: `OPENBLAS_NUM_THREADS=1 python -m bench.optimizer --reps %d`" % args.reps
-    )
+    lines.append(f"Command: `OPENBLAS_NUM_THREADS=1 python -m bench.optimizer --reps {args.reps}`")
     text = "\n".join(lines)
     print(text)
     if args.markdown:

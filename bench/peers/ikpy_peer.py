@@ -42,8 +42,8 @@ class IkpyIK:
             # the tip's joint: [origin link] + one ikpy link per URDF joint on the path
             n_path = (len(robot.path_elements()) - 1) // 2
             links = full.links[: 1 + n_path]
-            names = tuple(l.name for l in links if l.joint_type != "fixed")
-            mask = [l.joint_type != "fixed" for l in links]
+            names = tuple(link.name for link in links if link.joint_type != "fixed")
+            mask = [link.joint_type != "fixed" for link in links]
             self._chain = Chain(links, active_links_mask=mask, name=robot.name)
         if names != robot.joint_names:
             raise ValueError(f"ikpy chain {names} != URDF chain {robot.joint_names}")

@@ -57,7 +57,8 @@ def test_plain_python_mode_runs_the_same_code() -> None:
         from solver.examples import panda_arm
         from solver.ik import pose_targets
         from tests.solver.objectives import ROSENBROCK, make_data, toy_objective
-        r = minimize(toy_objective, [-1.2, 1.0], data=make_data(ROSENBROCK, np.zeros(2), np.zeros((1, 1))))
+        data = make_data(ROSENBROCK, np.zeros(2), np.zeros((1, 1)))
+        r = minimize(toy_objective, [-1.2, 1.0], data=data)
         assert r.f < 1e-10, r.f
         chain = panda_arm()
         s = IKSolver(chain, IKOptions(time_budget_us=None))
