@@ -464,3 +464,23 @@ def test_not_ready_until_warm(make_client: Callable[..., TestClient]) -> None:
         assert r.headers["retry-after"] == "1"
     finally:
         gate.set()
+
+
+def test_unexpected_error_is_500_internal_error(
+    make_client: Callable[..., TestClient], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from service import convert
+
+    client = make_client()
+    s = create(client)
+
+    def boom(*args: Any, **kwargs: Any) -> Any:
+        raise RuntimeError("bug")
+
+    monkeypatch.setattr(convert, "targets", boom)
+    quiet = TestClient(client.app, raise_server_exceptions=False)
+    r = quiet.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(1), headers=s.headers)
+    assert r.status_code == 500 and r.json() == {
+        "detail": "internal server error",
+        "code": "internal_error",
+    }

@@ -223,3 +223,23 @@ def test_http_and_ws_frames_share_the_session_pose(client: TestClient, session: 
         q_ws = ws.receive_json()["result"]["q"]
     pose = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()["pose"]["q"]
     assert pose == q_ws
+
+
+def test_unexpected_error_sends_internal_error_then_closes_1011(
+    client: TestClient, session: Created, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from service import convert
+
+    def boom(*args: Any, **kwargs: Any) -> Any:
+        raise RuntimeError("bug")
+
+    monkeypatch.setattr(convert, "targets", boom)
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json(frame_msg(1))
+        err = ws.receive_json()
+        assert err["error"]["code"] == "internal_error"
+        with pytest.raises(WebSocketDisconnect) as info:
+            ws.receive_json()
+    assert info.value.code == 1011
+    # The session survived the bug.
+    assert client.get(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 200
