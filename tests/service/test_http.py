@@ -484,3 +484,25 @@ def test_unexpected_error_is_500_internal_error(
         "detail": "internal server error",
         "code": "internal_error",
     }
+
+
+def test_aim_effector_points_along_the_direction(client: TestClient) -> None:
+    chain = {**ARM, "effectors": [{"name": "hand", "link": "hand", "mode": "aim"}]}
+    s = create(client, chain)
+    frame = {
+        "id": 1,
+        "targets": [{"effector": "hand", "direction": {"x": 2.0, "y": 0.0, "z": 0.0}}],
+    }
+    r = client.post(f"/v1/sessions/{s.id}/frames", json=frame, headers=s.headers)
+    res = r.json()["results"][0]
+    assert res["success"] is True
+    (eff,) = res["effectors"]
+    assert eff["position_error_m"] is None and eff["rotation_error_rad"] <= 1e-3
+    zero = {"targets": [{"effector": "hand", "direction": {"x": 0.0, "y": 0.0, "z": 0.0}}]}
+    r = client.post(f"/v1/sessions/{s.id}/frames", json=zero, headers=s.headers)
+    assert r.status_code == 422 and r.json()["field"] == "targets[0].direction"
+
+
+def test_initial_pose_of_the_wrong_length(client: TestClient) -> None:
+    r = client.post("/v1/sessions", json={"chain": ARM, "initial_pose": {"q": [0.0]}})
+    assert r.status_code == 422 and r.json()["field"] == "initial_pose.q"
