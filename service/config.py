@@ -22,7 +22,7 @@ class Settings(BaseSettings):
     port: int = Field(default=8000, ge=0, le=65535, description="Port to bind")
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
     graceful_shutdown_s: int = Field(
-        default=5, ge=0, description="Time open connections get to finish on SIGTERM [s]"
+        default=5, ge=0, description="Time in-flight requests get on SIGTERM [s]"
     )
 
     # Sessions.
