@@ -539,7 +539,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
     # "Fresh": H = I or the objective's own metric, i.e. no curvature learnt yet
     # (a caller's H carried from a previous solve is not fresh).
     h_fresh = h_is_identity
-    if h_is_identity and call_metric(fg, x, data, h):
+    if h_is_identity and call_metric(fg, x, g, lo, hi, data, h):
         h_is_identity = False
 
     while True:
@@ -630,7 +630,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
             if (
                 metric_every > 0
                 and pass_iters % metric_every == 0
-                and call_metric(fg, x_new, data, h)
+                and call_metric(fg, x_new, g_new, lo, hi, data, h)
             ):
                 # Re-seed H from the objective's metric (every step: damped Gauss-Newton).
                 h_is_identity = False
@@ -712,7 +712,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
                     out_x[i] = x[i]
                     out_g[i] = g[i]
         h_fresh = True
-        if call_metric(fg, x, data, h):
+        if call_metric(fg, x, g, lo, hi, data, h):
             h_is_identity = False
         else:
             _set_identity(h)

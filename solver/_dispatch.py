@@ -31,8 +31,8 @@ def register_objective(
         fg: ``fg(x, g, need_grad, data) -> f``.
         goal_fn: Optional ``goal_fn(f, x, data) -> m``: the goal is m <= f_goal.
         data_example: A data tuple of the type the objective will receive.
-        metric_fn: Optional ``metric_fn(x, data, h) -> bool`` that writes an initial
-            inverse Hessian into h at the start of a pass (True when it did).
+        metric_fn: Optional ``metric_fn(x, g, lower, upper, data, h) -> bool`` that
+            writes an inverse Hessian for the free variables into h (True when it did).
     """
     data_type = numba.typeof(data_example)
     for ty, f, _, _ in _REGISTRY:
@@ -102,27 +102,27 @@ def _call_goal_compiled(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def
     return impl_f
 
 
-def call_metric(fg: Any, x: Any, data: Any, h: Any) -> bool:
-    """Write the registered initial inverse Hessian at x into h; False if there is none."""
+def call_metric(fg: Any, x: Any, g: Any, lo: Any, hi: Any, data: Any, h: Any) -> bool:
+    """Write the registered inverse-Hessian metric at x into h; False if there is none."""
     if fg is None:
         metric = _lookup(numba.typeof(data))[2]
         if metric is not None:
-            return bool(metric(x, data, h))
+            return bool(metric(x, g, lo, hi, data, h))
     return False
 
 
 @overload(call_metric)
-def _call_metric_compiled(fg, x, data, h):  # type: ignore[no-untyped-def]
+def _call_metric_compiled(fg, x, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
     if isinstance(fg, types.NoneType):
         metric = _lookup(data)[2]
         if metric is not None:
 
-            def impl_metric(fg, x, data, h):  # type: ignore[no-untyped-def]
-                return metric(x, data, h)
+            def impl_metric(fg, x, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
+                return metric(x, g, lo, hi, data, h)
 
             return impl_metric
 
-    def impl_none(fg, x, data, h):  # type: ignore[no-untyped-def]
+    def impl_none(fg, x, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
         return False
 
     return impl_none

@@ -14,6 +14,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,9 +40,13 @@ from .kinematics import (
     ED_TROT,
     ED_WP,
     EI_ACTIVE,
+    EI_MODE,
     MISC_LIMIT,
     MISC_MARGIN,
     MISC_POSTURE,
+    MODE_AIM,
+    MODE_POSE,
+    MODE_POSITION,
     effector_errors,
     ik_goal,
     ik_metric,
@@ -52,12 +57,91 @@ from .types import Matrix, MinimizeOptions, PassRecord, Vector
 
 
 @jit
-def _solve_core(data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g):  # type: ignore[no-untyped-def]
+def _check_targets(data):  # type: ignore[no-untyped-def]
+    """-1 if the loaded targets are valid, else 3 * effector + problem (0 non-finite,
+    1 rotation not orthonormal with det +1, 2 zero direction); normalises directions.
+
+    Checked here, in compiled code, because the same checks in numpy cost ~25 us per
+    target (np.allclose, det), more than a 7-DOF solve.
+    """
+    ei = data[2]
+    ed = data[3]
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] == 0:
+            continue
+        for k in range(ED_TPOS, ED_TDIR + 3):
+            if not math.isfinite(ed[e, k]):
+                return 3 * e
+        if ei[e, EI_MODE] == MODE_POSE:
+            t = ED_TROT
+            worst = 0.0
+            for a in range(3):
+                for b in range(3):
+                    dot = 0.0
+                    for c in range(3):
+                        dot += ed[e, t + 3 * a + c] * ed[e, t + 3 * b + c]
+                    worst = max(worst, abs(dot - (1.0 if a == b else 0.0)))
+            r = ed[e, t : t + 9]
+            det = (
+                r[0] * (r[4] * r[8] - r[5] * r[7])
+                - r[1] * (r[3] * r[8] - r[5] * r[6])
+                + r[2] * (r[3] * r[7] - r[4] * r[6])
+            )
+            if worst > 1e-6 or det < 0.0:
+                return 3 * e + 1
+        elif ei[e, EI_MODE] == MODE_AIM:
+            d = ED_TDIR
+            norm = math.sqrt(ed[e, d] ** 2 + ed[e, d + 1] ** 2 + ed[e, d + 2] ** 2)
+            if norm < 1e-12:
+                return 3 * e + 2
+            for c in range(3):
+                ed[e, d + c] /= norm
+    return -1
+
+
+@jit
+def _solve_core(data, x0, h, fopt, iopt, policy, log, out_x, errors):  # type: ignore[no-untyped-def]
+    """One compiled call per frame: validate targets, solve, report errors.
+
+    Returns (bad_target, solver outputs, goal measure); ``errors`` receives, per
+    effector, the position error (nan if not targeted), the rotation error (nan if
+    not constrained) and 1.0 when it was targeted.
+    """
+    bad = _check_targets(data)
+    dd = data[4]
+    n = x0.shape[0]
+    out_g = np.empty(n)
+    if bad >= 0:
+        return bad, (0.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0, 0.0), 0.0
+    trace = np.empty((0, 5))
     # fg=None: the core binds the objective registered for this data type (cacheable).
-    # The final errors are computed here too: one compiled call per frame, not two.
-    out = run_solver(None, None, data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g)
-    measure = effector_errors(out_x, data)
-    return out, measure
+    out = run_solver(
+        None, None, data, x0, dd[DD_LO], dd[DD_HI], h, fopt, iopt, policy, log, trace, out_x, out_g
+    )
+    return bad, out, _report(data, out_x, errors)
+
+
+@jit
+def _report(data, q, errors):  # type: ignore[no-untyped-def]
+    """Errors at q into ``errors`` (see ``_solve_core``); returns the goal measure."""
+    measure = effector_errors(q, data)
+    ei = data[2]
+    ed = data[3]
+    for e in range(ei.shape[0]):
+        active = ei[e, EI_ACTIVE] != 0
+        errors[e, 0] = ed[e, ED_ERR_P] if active and ed[e, ED_WP] > 0.0 else math.nan
+        errors[e, 1] = ed[e, ED_ERR_R] if active and ei[e, EI_MODE] != MODE_POSITION else math.nan
+        errors[e, 2] = 1.0 if active else 0.0
+    return measure
+
+
+@jit
+def _report_only(data, q, errors):  # type: ignore[no-untyped-def]
+    """Validate targets and report errors at q without solving (chains with no variables)."""
+    bad = _check_targets(data)
+    if bad >= 0:
+        return bad, 0.0
+    return bad, _report(data, q, errors)
 
 
 class IKStatus(enum.StrEnum):
@@ -201,9 +285,12 @@ class EffectorError:
     within_tolerance: bool
 
 
-@dataclass(frozen=True, slots=True)
-class IKResult:
-    """Answer to one frame.
+class IKResult(NamedTuple):
+    """Answer to one frame (immutable).
+
+    A NamedTuple rather than a frozen dataclass: it is built once per frame, and a
+    frozen dataclass's __init__ (object.__setattr__ per field) cost ~8 us of a
+    ~100 us frame.
 
     Attributes:
         q: Joint values, shape (n_dof,), in ``dof_names`` order, inside the limits.
@@ -211,7 +298,9 @@ class IKResult:
         status: SOLVED / NOT_REACHED / BUDGET_EXHAUSTED / NONFINITE.
         success: status is SOLVED.
         termination: How the optimizer's last pass ended.
-        effectors: Errors for the effectors that had a target.
+        effectors: Errors for the effectors that had a target (built on access from
+            ``raw_errors``: rows of position error, rotation error (nan where not
+            constrained) and a targeted flag, one per effector of the chain).
         iterations, function_evals, passes, restarts: Work done.
         solve_us: Time inside the compiled solve [us].
         inverse_hessian: Final BFGS matrix (carried between frames if asked).
@@ -224,18 +313,35 @@ class IKResult:
     status: IKStatus
     success: bool
     termination: Termination
-    effectors: tuple[EffectorError, ...]
+    raw_errors: np.ndarray
+    effector_names: tuple[str, ...]
+    tolerances: tuple[float, float]
     iterations: int
     function_evals: int
     passes: int
     restarts: int
     solve_us: float
     inverse_hessian: Matrix
-    raw_pass_log: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, C.N_LOG)))
+    raw_pass_log: np.ndarray
 
     @property
     def pass_log(self) -> tuple[PassRecord, ...]:
         return unpack_pass_log(self.raw_pass_log, self.raw_pass_log.shape[0])
+
+    @property
+    def effectors(self) -> tuple[EffectorError, ...]:
+        tol_p, tol_r = self.tolerances
+        out = []
+        for name, (pos, rot, targeted) in zip(
+            self.effector_names, self.raw_errors.tolist(), strict=True
+        ):
+            if not targeted:
+                continue
+            p = None if math.isnan(pos) else pos
+            r = None if math.isnan(rot) else rot
+            ok = (p is None or p <= tol_p) and (r is None or r <= tol_r)
+            out.append(EffectorError(name, p, r, ok))
+        return tuple(out)
 
     @property
     def joint_values(self) -> dict[str, float]:
@@ -274,6 +380,12 @@ class IKSolver:
         _register_once(self._data)
         self._chain_dofs = cc.eff_dofs
         self._effector_slot = {name: i for i, name in enumerate(chain.effector_names)}
+        self._modes = tuple(e.mode for e in chain.effectors)
+        self._static_weights = chain.compiled.ed[:, ED_WP].copy()
+        self._active: list[int] = []
+        self._zeroed: list[int] = []
+        self._tol_for: IKOptions | None = None
+        self._bounds_are_limits = True
         self._n_active = 0
         self._every_effector_moves_all = all(d.shape[0] == n for d in cc.eff_dofs)
         self._mid = chain.mid_limits()
@@ -316,10 +428,8 @@ class IKSolver:
         self._misc[MISC_LIMIT] = opts.limit_weight
         self._misc[MISC_MARGIN] = opts.limit_margin
         self._dd[DD_QREF] = q0
-        lo, hi = self._free_bounds(q0)
-        self._dd[DD_LO] = lo
-        self._dd[DD_HI] = hi
-        return self._run(q0, lo, hi, opts, rng, initial_inverse_hessian)
+        self._set_free_bounds(q0)
+        return self._run(q0, opts, rng, initial_inverse_hessian)
 
     def track(self, targets: Sequence[Target], *, options: IKOptions | None = None) -> IKResult:
         """Solve the next frame of a stream, warm-started from the previous answer.
@@ -342,8 +452,26 @@ class IKSolver:
     def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:
         """Pose errors of q against targets with the solver's tolerances (no solving)."""
         self._load_targets(targets, self.options)
-        effector_errors(self._check_seed(q), self._data)
-        return self._effector_report(self.options)
+        errors = np.empty((len(self.chain.effectors), 3))
+        q = self._check_seed(q)
+        bad, _ = _report_only(self._data, q, errors)
+        self._raise_bad_target(bad)
+        empty = np.zeros((0, C.N_LOG))
+        result = self._result(
+            q,
+            IKStatus.SOLVED,
+            Termination.GOAL_REACHED,
+            0,
+            0,
+            0,
+            0,
+            0.0,
+            empty,
+            np.eye(0),
+            errors,
+            self.options,
+        )
+        return result.effectors
 
     # -- internals -------------------------------------------------------------
     def _check_seed(self, seed: Vector) -> Vector:
@@ -355,54 +483,71 @@ class IKSolver:
         return q
 
     def _load_targets(self, targets: Sequence[Target], opts: IKOptions) -> None:
-        chain = self.chain
+        """Copy targets into the compiled arrays (shapes checked here, values compiled)."""
         ei = self._ei
         ed = self._ed
-        ei[:, EI_ACTIVE] = 0
-        ed[:, ED_WP : ED_WP + 2] = chain.compiled.ed[:, ED_WP : ED_WP + 2]
-        ed[:, ED_TOL_P] = opts.position_tolerance_m
-        ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
-        self._n_active = 0
+        for i in self._active:
+            ei[i, EI_ACTIVE] = 0
+        for i in self._zeroed:
+            ed[i, ED_WP] = self._static_weights[i]
+        self._active = active = []
+        self._zeroed = []
+        if self._tol_for is not opts:
+            ed[:, ED_TOL_P] = opts.position_tolerance_m
+            ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
+            self._tol_for = opts
         for t in targets:
             i = self._effector_slot.get(t.effector, -1)
             if i < 0:
-                chain.effector_index(t.effector)  # raises with the list of names
+                self.chain.effector_index(t.effector)  # raises with the list of names
             if ei[i, EI_ACTIVE]:
                 raise InvalidProblem(f"two targets for effector {t.effector!r}")
-            eff = chain.effectors[i]
-            if t.position is not None:
-                ed[i, ED_TPOS : ED_TPOS + 3] = _vec3(t.position, t.effector, "position")
-            elif eff.mode is EffectorMode.POSITION:
-                raise InvalidProblem(f"target for {t.effector!r} needs a position")
-            else:
-                ed[i, ED_WP] = 0.0
-            if eff.mode is EffectorMode.POSE:
-                if t.rotation is None:
-                    raise InvalidProblem(f"target for {t.effector!r} (pose) needs a rotation")
-                ed[i, ED_TROT : ED_TROT + 9] = _rotation(t.rotation, t.effector).reshape(-1)
-            elif eff.mode is EffectorMode.AIM:
-                if t.direction is None:
-                    raise InvalidProblem(f"target for {t.effector!r} (aim) needs a direction")
-                dx, dy, dz = _vec3(t.direction, t.effector, "direction")
-                norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-                if norm < 1e-12:
-                    raise InvalidProblem(f"target direction for {t.effector!r} must not be zero")
-                ed[i, ED_TDIR : ED_TDIR + 3] = (dx / norm, dy / norm, dz / norm)
+            mode = self._modes[i]
+            try:
+                if t.position is not None:
+                    ed[i, ED_TPOS : ED_TPOS + 3] = t.position
+                elif mode is EffectorMode.POSITION:
+                    raise InvalidProblem(f"target for {t.effector!r} needs a position")
+                else:
+                    ed[i, ED_WP] = 0.0
+                    self._zeroed.append(i)
+                if mode is EffectorMode.POSE:
+                    if t.rotation is None:
+                        raise InvalidProblem(f"target for {t.effector!r} (pose) needs a rotation")
+                    ed[i, ED_TROT : ED_TROT + 9] = np.reshape(t.rotation, 9)
+                elif mode is EffectorMode.AIM:
+                    if t.direction is None:
+                        raise InvalidProblem(f"target for {t.effector!r} (aim) needs a direction")
+                    ed[i, ED_TDIR : ED_TDIR + 3] = t.direction
+            except (ValueError, TypeError) as err:
+                if isinstance(err, InvalidProblem):
+                    raise
+                raise InvalidProblem(
+                    f"target for {t.effector!r}: position and direction need 3 numbers, "
+                    "rotation a 3x3 matrix"
+                ) from None
             ei[i, EI_ACTIVE] = 1
-            self._n_active += 1
+            active.append(i)
+        self._n_active = len(active)
 
-    def _free_bounds(self, q0: Vector) -> tuple[Vector, Vector]:
-        """Limits for this frame: variables outside every targeted chain are frozen at q0."""
+    def _set_free_bounds(self, q0: Vector) -> None:
+        """Limits for this frame (DD rows): variables outside every targeted chain are
+        frozen at q0."""
         lo = self.chain.lower
         hi = self.chain.upper
         if self._every_effector_moves_all and self._n_active > 0:
-            return lo, hi
-        active = np.flatnonzero(self._ei[:, EI_ACTIVE])
+            if not self._bounds_are_limits:
+                self._dd[DD_LO] = lo
+                self._dd[DD_HI] = hi
+                self._bounds_are_limits = True
+            return
         free = np.zeros(self.chain.n_dof, dtype=bool)
-        for i in active:
+        for i in self._active:
             free[self._chain_dofs[i]] = True
         q = np.clip(q0, lo, hi)
-        return np.where(free, lo, q), np.where(free, hi, q)
+        self._dd[DD_LO] = np.where(free, lo, q)
+        self._dd[DD_HI] = np.where(free, hi, q)
+        self._bounds_are_limits = False
 
     def _packed_options(
         self, opts: IKOptions
@@ -431,8 +576,6 @@ class IKSolver:
     def _run(
         self,
         q0: Vector,
-        lo: Vector,
-        hi: Vector,
         opts: IKOptions,
         rng: np.random.Generator | None,
         h0: Matrix | None,
@@ -445,16 +588,18 @@ class IKSolver:
         h = self._identity.copy() if h0 is None else h0.copy()
         log = np.zeros((mopts.max_passes, C.N_LOG))
         out_x = np.empty(n)
-        out_g = np.empty(n)
+        errors = np.empty((len(self.chain.effectors), 3))
         if n == 0:
             # An all-fixed chain: nothing to solve, only errors to report.
-            measure = effector_errors(q0, self._data)
+            bad, measure = _report_only(self._data, q0, errors)
+            self._raise_bad_target(bad)
             status = IKStatus.SOLVED if measure <= 1.0 else IKStatus.NOT_REACHED
             code = Termination.GOAL_REACHED if measure <= 1.0 else Termination.GTOL
-            return self._result(q0.copy(), status, code, 0, 0, 0, 0, 0.0, log[:0], h, opts)
-        (f, _, _, code, nit, nfev, _, npass, nrest, _, elapsed), measure = _solve_core(
-            self._data, q0, lo, hi, h, fopt, iopt, policy, log, _NO_TRACE, out_x, out_g
+            return self._result(q0.copy(), status, code, 0, 0, 0, 0, 0.0, log[:0], h, errors, opts)
+        bad, (f, _, _, code, nit, nfev, _, npass, nrest, _, elapsed), measure = _solve_core(
+            self._data, q0, h, fopt, iopt, policy, log, out_x, errors
         )
+        self._raise_bad_target(bad)
         termination = C.TERMINATIONS[int(code)]
         if measure <= 1.0:
             status = IKStatus.SOLVED
@@ -475,22 +620,19 @@ class IKSolver:
             float(elapsed) * 1e6,
             log[: min(int(npass), log.shape[0])],
             h,
+            errors,
             opts,
         )
 
-    def _effector_report(self, opts: IKOptions) -> tuple[EffectorError, ...]:
-        out = []
-        for i, eff in enumerate(self.chain.effectors):
-            if not self._ei[i, EI_ACTIVE]:
-                continue
-            row = self._ed[i]
-            pos = float(row[ED_ERR_P]) if row[ED_WP] > 0.0 else None
-            rot = float(row[ED_ERR_R]) if eff.mode is not EffectorMode.POSITION else None
-            ok = (pos is None or pos <= opts.position_tolerance_m) and (
-                rot is None or rot <= opts.rotation_tolerance_rad
-            )
-            out.append(EffectorError(eff.name, pos, rot, ok))
-        return tuple(out)
+    def _raise_bad_target(self, bad: int) -> None:
+        if bad >= 0:
+            name = self.chain.effectors[bad // 3].name
+            what = (
+                "numbers must be finite",
+                "rotation must be orthonormal with det +1",
+                "direction must not be zero",
+            )[bad % 3]
+            raise InvalidProblem(f"target for {name!r}: {what}")
 
     def _result(
         self,
@@ -504,6 +646,7 @@ class IKSolver:
         solve_us: float,
         raw_log: np.ndarray,
         h: Matrix,
+        errors: np.ndarray,
         opts: IKOptions,
     ) -> IKResult:
         return IKResult(
@@ -512,7 +655,9 @@ class IKSolver:
             status=status,
             success=status is IKStatus.SOLVED,
             termination=termination,
-            effectors=self._effector_report(opts),
+            raw_errors=errors,
+            effector_names=self.chain.effector_names,
+            tolerances=(opts.position_tolerance_m, opts.rotation_tolerance_rad),
             iterations=nit,
             function_evals=nfev,
             passes=npass,
@@ -533,37 +678,6 @@ def _register_once(data: tuple[np.ndarray, ...]) -> None:
     if not _REGISTERED:
         register_objective(ik_objective, ik_goal, data, ik_metric)
         _REGISTERED = True
-
-
-def _vec3(v: Vector | Sequence[float], effector: str, name: str) -> list[float]:
-    a = np.asarray(v, dtype=np.float64).reshape(-1).tolist()
-    if len(a) != 3 or not (math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])):
-        raise InvalidProblem(f"target {name} for {effector!r} must be 3 finite numbers")
-    return a
-
-
-def _rotation(r: Matrix, effector: str) -> Matrix:
-    """A finite 3x3 rotation matrix (orthonormal within 1e-6, det +1).
-
-    Checked with plain float arithmetic: np.allclose and np.linalg.det cost ~25 us
-    per call, more than a whole compiled solve of a 7-DOF arm.
-    """
-    m = np.asarray(r, dtype=np.float64)
-    if m.shape != (3, 3):
-        raise InvalidProblem(f"target rotation for {effector!r} must be a 3x3 matrix")
-    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
-    if not all(math.isfinite(v) for v in (a, b, c, d, e, f, g, h, i)):
-        raise InvalidProblem(f"target rotation for {effector!r} must be finite")
-    rows = ((a, b, c), (d, e, f), (g, h, i))
-    worst = 0.0
-    for k in range(3):
-        for j in range(3):
-            dot = rows[k][0] * rows[j][0] + rows[k][1] * rows[j][1] + rows[k][2] * rows[j][2]
-            worst = max(worst, abs(dot - (1.0 if k == j else 0.0)))
-    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
-    if worst > 1e-6 or det < 0.0:
-        raise InvalidProblem(f"target rotation for {effector!r} must be orthonormal with det +1")
-    return m
 
 
 def solve(

@@ -404,21 +404,33 @@ def effector_frame_py(e, ei, ed, nd):  # type: ignore[no-untyped-def]
     return effector_frame(e, ei, ed, nd)
 
 
-@jit
-def ik_metric(q, data, h):  # type: ignore[no-untyped-def]
-    """Initial inverse Hessian at q from the exact Jacobian: (2 J^T W J + mu I)^-1.
+@jit_inline
+def _held(i, q, g, lo, hi):  # type: ignore[no-untyped-def]
+    """Variable i is frozen, or sits on a bound with the gradient pushing outward."""
+    return lo[i] == hi[i] or (q[i] <= lo[i] and g[i] > 0.0) or (q[i] >= hi[i] and g[i] < 0.0)
 
-    BFGS from H = I takes dozens of iterations on a pose problem; starting each pass
-    from the damped Gauss-Newton metric (Levenberg-Marquardt's matrix with
-    mu = f + 1e-9 (Sugihara 2011)) makes the first step a damped Gauss-Newton step
-    and lets BFGS refine it. Returns False (caller keeps H = I) for large chains.
+
+@jit
+def ik_metric(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
+    """Inverse Hessian for the free variables from the exact Jacobian: (2 J^T W J + mu I)^-1.
+
+    BFGS from H = I takes dozens of iterations on a pose problem; seeding a pass (or
+    every step, ``metric_every``) with the damped Gauss-Newton metric (Levenberg-
+    Marquardt's matrix with mu = f + 1e-9, Sugihara 2011) gives Gauss-Newton steps
+    that BFGS can refine. Held variables (frozen, or on a bound with the gradient
+    pushing out) are left out of the coupling: the direction then uses the inverse of
+    the free block, as a projected Newton method must (Bertsekas 1982), instead of a
+    block of the full inverse, which crawled for 1000+ iterations with one joint on
+    its limit. Returns False (caller keeps H = I) for large chains.
     """
     ni, nd, ei, ed, dd, misc = data
     n = q.shape[0]
     if n > METRIC_MAX_DOF:
         return False
     f = _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
+    free = dd[DD_GSCRATCH]  # reused as a 0/1 mask of the free variables
     for i in range(n):
+        free[i] = 0.0 if _held(i, q, g, lo, hi) else 1.0
         for j in range(n):
             h[i, j] = 0.0
     for e in range(ei.shape[0]):
@@ -466,16 +478,18 @@ def ik_metric(q, data, h):  # type: ignore[no-untyped-def]
                     dd[DD_J + 1, d] += sp * wy
                     dd[DD_J + 2, d] += sp * wz
             k = ni[k, NI_PARENT]
-        for r in range(6):
-            for i in range(n):
-                v = dd[DD_J + r, i]
-                # A frozen variable (lower == upper this frame) must not couple into the
-                # free block, or H's free block is not the free variables' metric.
-                if v == 0.0 or dd[DD_LO, i] == dd[DD_HI, i]:
+        for i in range(n):
+            if free[i] == 0.0:
+                continue
+            for j in range(i, n):
+                if free[j] == 0.0:
                     continue
-                for j in range(n):
-                    if dd[DD_LO, j] != dd[DD_HI, j]:
-                        h[i, j] += 2.0 * v * dd[DD_J + r, j]
+                acc = 0.0
+                for r in range(6):
+                    acc += dd[DD_J + r, i] * dd[DD_J + r, j]
+                h[i, j] += 2.0 * acc
+                if j != i:
+                    h[j, i] += 2.0 * acc
     mu = f + 1e-9
     w_post = misc[MISC_POSTURE]
     for i in range(n):
