@@ -41,9 +41,11 @@ from .kinematics import (
     ED_WP,
     EI_ACTIVE,
     EI_MODE,
+    MISC_DAMPING,
     MISC_LIMIT,
     MISC_MARGIN,
     MISC_POSTURE,
+    MISC_SIZE,
     MODE_AIM,
     MODE_POSE,
     MODE_POSITION,
@@ -51,6 +53,7 @@ from .kinematics import (
     ik_goal,
     ik_metric,
     ik_objective,
+    null_space_step,
 )
 from .termination import Termination
 from .types import Matrix, MinimizeOptions, PassRecord, Vector
@@ -136,6 +139,14 @@ def _report(data, q, errors):  # type: ignore[no-untyped-def]
 
 
 @jit
+def _null_space_frame(data, q, rest, max_step, out, errors):  # type: ignore[no-untyped-def]
+    """Null-space step from q towards rest into out; True if the pose stays in tolerance."""
+    if not null_space_step(q, data, rest, max_step, out):
+        return False
+    return _report(data, out, errors) <= 1.0
+
+
+@jit
 def _report_only(data, q, errors):  # type: ignore[no-untyped-def]
     """Validate targets and report errors at q without solving (chains with no variables)."""
     bad = _check_targets(data)
@@ -195,6 +206,13 @@ class IKOptions:
         scale_initial_h: Nocedal-Wright initial scaling of H at each pass.
         curvature: The article's curvature condition in the line search.
         carry_hessian: ``track`` starts each frame from the last frame's H.
+        null_space_step_rad: After a solved ``track`` frame, move at most this far
+            (per variable) towards the rest pose through the chain's self-motion,
+            keeping the effectors within tolerance (0: off). Stops a redundant arm's
+            slow drift into its limits over a long stream.
+        damping: Floor of the Gauss-Newton damping mu (default mu = f): damped least
+            squares near singularities takes small joint steps where pure Gauss-Newton
+            swings joints by radians for a millimetre (streams use 1e-3).
         metric_every: Re-seed H from the exact Gauss-Newton metric (2 J^T W J + mu I)^-1
             every this many iterations (1: damped Gauss-Newton steps under the same
             line search, multi-pass and analyzer; 0: the article's BFGS, with the
@@ -206,7 +224,7 @@ class IKOptions:
     position_tolerance_m: float = 1e-4
     rotation_tolerance_rad: float = 1e-3
     time_budget_us: float | None = 5000.0
-    max_iter: int = 1000
+    max_iter: int = 5000
     max_restarts: int = 50
     restart_radius_rad: float = math.inf
     max_step_rad: float = 0.5
@@ -220,6 +238,8 @@ class IKOptions:
     curvature: bool = False
     carry_hessian: bool = False
     metric_every: int = 1
+    null_space_step_rad: float = 0.0
+    damping: float = 0.0
     policy: AnalyzerPolicy = field(default_factory=AnalyzerPolicy.default)
 
     def __post_init__(self) -> None:
@@ -232,7 +252,14 @@ class IKOptions:
             v = getattr(self, name)
             if not v > 0.0 or math.isnan(v):
                 raise InvalidProblem(f"{name} must be > 0, got {v!r}")
-        for name in ("posture_weight", "limit_weight", "ftol", "gtol"):
+        for name in (
+            "posture_weight",
+            "limit_weight",
+            "ftol",
+            "gtol",
+            "damping",
+            "null_space_step_rad",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise InvalidProblem(f"{name} must be finite and >= 0, got {v!r}")
@@ -265,7 +292,13 @@ class IKOptions:
 
 # Stream defaults: local restarts and a light pull away from the limits, so a frame
 # that misses recovers without a visible jump (the user can override every field).
-STREAM_DEFAULTS = IKOptions(restart_radius_rad=0.3, limit_weight=1e-3, limit_margin=0.02)
+STREAM_DEFAULTS = IKOptions(
+    restart_radius_rad=0.3,
+    limit_weight=1e-3,
+    limit_margin=0.02,
+    null_space_step_rad=0.005,
+    damping=1e-3,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -375,7 +408,7 @@ class IKSolver:
         self._dd = np.zeros((DD_ROWS, n))
         self._dd[DD_LO] = chain.lower
         self._dd[DD_HI] = chain.upper
-        self._misc = np.zeros(4)
+        self._misc = np.zeros(MISC_SIZE)
         self._data = (cc.ni, cc.nd.copy(), self._ei, self._ed, self._dd, self._misc)
         _register_once(self._data)
         self._chain_dofs = cc.eff_dofs
@@ -396,6 +429,7 @@ class IKSolver:
         self._rng = np.random.default_rng(0)
         self._seeds = np.empty(0, dtype=np.int64)
         self.q = self._mid.copy()  # the stream's current pose
+        self._rest = self._mid.copy()
         self._h: Matrix | None = None
 
     # -- public API ------------------------------------------------------------
@@ -427,6 +461,7 @@ class IKSolver:
         self._misc[MISC_POSTURE] = opts.posture_weight
         self._misc[MISC_LIMIT] = opts.limit_weight
         self._misc[MISC_MARGIN] = opts.limit_margin
+        self._misc[MISC_DAMPING] = opts.damping
         self._dd[DD_QREF] = q0
         self._set_free_bounds(q0)
         return self._run(q0, opts, rng, initial_inverse_hessian)
@@ -440,13 +475,25 @@ class IKSolver:
         opts = options or self.options
         h0 = self._h if opts.carry_hessian else None
         result = self.solve(targets, self.q, options=opts, initial_inverse_hessian=h0)
+        if result.success and opts.null_space_step_rad > 0.0:
+            moved = np.empty(self.chain.n_dof)
+            errors = np.empty_like(result.raw_errors)
+            if _null_space_frame(
+                self._data, result.q, self._rest, opts.null_space_step_rad, moved, errors
+            ):
+                result = result._replace(q=moved, raw_errors=errors)
         self.q = result.q.copy()
         self._h = result.inverse_hessian
         return result
 
     def set_pose(self, q: Vector) -> None:
-        """Set the stream's current pose (projected into the limits)."""
+        """Set the stream's current pose and its rest pose (projected into the limits).
+
+        The rest pose is where ``null_space_step_rad`` steers a redundant chain's
+        self-motion; by default it is the middle of the limits.
+        """
         self.q = np.clip(self._check_seed(q), self.chain.lower, self.chain.upper)
+        self._rest = self.q.copy()
         self._h = None
 
     def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:

@@ -16,8 +16,8 @@ boundary costs reference counting, and numba's dispatcher type-checks each one.
                               tolerances (32, 33), last errors [m], [rad] (34, 35)
     DD  float64[11, n]        reference pose, lower, upper, last q evaluated,
                               gradient scratch, 6 rows of Jacobian scratch
-    MISC float64[4]           posture weight, limit weight, limit margin, goal
-                              measure of the last q evaluated
+    MISC float64[5]           posture weight, limit weight, limit margin, goal
+                              measure of the last q evaluated, damping floor
 
 The gradient needs no Jacobian matrix: for each effector we walk its ancestors once
 and accumulate J^T r column by column (revolute column: a x (p - o) for position and
@@ -81,6 +81,8 @@ MISC_POSTURE = 0
 MISC_LIMIT = 1
 MISC_MARGIN = 2
 MISC_GOAL = 3
+MISC_DAMPING = 4  # floor of the Gauss-Newton damping mu
+MISC_SIZE = 5
 
 NODE_FIXED = 0
 NODE_ROTATION = 1
@@ -412,6 +414,12 @@ def _held(i, q, g, lo, hi):  # type: ignore[no-untyped-def]
 
 @jit
 def ik_metric(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
+    """The registered metric (see ``_metric``), damped with mu = f + 1e-9."""
+    return _metric(q, g, lo, hi, data, h, -1.0)
+
+
+@jit_inline
+def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     """Inverse Hessian for the free variables from the exact Jacobian: (2 J^T W J + mu I)^-1.
 
     BFGS from H = I takes dozens of iterations on a pose problem; seeding a pass (or
@@ -490,7 +498,7 @@ def ik_metric(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
                 h[i, j] += 2.0 * acc
                 if j != i:
                     h[j, i] += 2.0 * acc
-    mu = f + 1e-9
+    mu = max(f + 1e-9, misc[MISC_DAMPING]) if mu_fixed < 0.0 else mu_fixed
     w_post = misc[MISC_POSTURE]
     for i in range(n):
         h[i, i] += mu + 2.0 * w_post
@@ -530,4 +538,42 @@ def _invert_spd_in_place(m):  # type: ignore[no-untyped-def]
                 s += low[k, i] * low[k, j]
             m[i, j] = s
             m[j, i] = s
+    return True
+
+
+@jit
+def null_space_step(q, data, rest, max_step, out):  # type: ignore[no-untyped-def]
+    """A step towards ``rest`` that leaves the effectors where they are (to first order).
+
+    With A = 2 J^T W J over the targeted effectors, mu (A + mu I)^-1 is the projector
+    onto A's null space as mu -> 0 (task directions are shrunk by mu / (2 sigma^2 +
+    mu)). Applied to z = rest - q it moves a redundant chain through its self-motion
+    towards its rest pose: what keeps a stream of small target moves from drifting the
+    arm into its limits or a singularity over hundreds of frames (the classic
+    pseudo-inverse drift). The step is scaled so that no variable moves more than
+    max_step. Writes q + step (clipped to the limits) into out; False if impossible.
+    """
+    ni, nd, ei, ed, dd, misc = data
+    n = q.shape[0]
+    if n > METRIC_MAX_DOF:
+        return False
+    lo = dd[DD_LO]
+    hi = dd[DD_HI]
+    h = np.empty((n, n))
+    g = np.zeros(n)  # nothing is held by a gradient: only frozen variables stay out
+    mu = 1e-6
+    if not _metric(q, g, lo, hi, data, h, mu):
+        return False
+    big = 0.0
+    for i in range(n):
+        acc = 0.0
+        for j in range(n):
+            if lo[j] != hi[j]:
+                acc += h[i, j] * (rest[j] - q[j])
+        out[i] = mu * acc if lo[i] != hi[i] else 0.0
+        big = max(big, abs(out[i]))
+    scale = 1.0 if big <= max_step else max_step / big
+    for i in range(n):
+        v = q[i] + scale * out[i]
+        out[i] = min(hi[i], max(lo[i], v))
     return True
