@@ -305,8 +305,13 @@ class Chain:
 
     def mid_limits(self) -> Vector:
         """Middle of each variable's range (0 where a side is infinite)."""
-        mid = 0.5 * (self.lower + self.upper)
-        return np.where(np.isfinite(mid), mid, 0.0)
+        finite = np.isfinite(self.lower) & np.isfinite(self.upper)
+        # -inf + inf would warn (and be NaN): only add where both sides are finite.
+        return np.where(
+            finite,
+            0.5 * (np.where(finite, self.lower, 0.0) + np.where(finite, self.upper, 0.0)),
+            0.0,
+        )
 
     def effector_index(self, name: str) -> int:
         for i, e in enumerate(self.effectors):

@@ -396,7 +396,15 @@ class IKSolver:
     serialises a session's frames with a lock).
     """
 
-    def __init__(self, chain: Chain, options: IKOptions | None = None) -> None:
+    def __init__(
+        self, chain: Chain, options: IKOptions | None = None, *, seed: int | None = None
+    ) -> None:
+        """Args:
+        chain: The model.
+        options: Default options of every call.
+        seed: Seed of the solver's own restart generator (None: 0, reproducible);
+            give each session its own so their random restarts differ.
+        """
         self.chain = chain
         self.options = options or IKOptions()
         cc = chain.compiled
@@ -426,7 +434,7 @@ class IKSolver:
         self._packed: dict[
             int, tuple[IKOptions, MinimizeOptions, np.ndarray, np.ndarray, np.ndarray]
         ] = {}
-        self._rng = np.random.default_rng(0)
+        self._rng = np.random.default_rng(0 if seed is None else seed)
         self._seeds = np.empty(0, dtype=np.int64)
         self.q = self._mid.copy()  # the stream's current pose
         self._rest = self._mid.copy()
@@ -466,7 +474,13 @@ class IKSolver:
         self._set_free_bounds(q0)
         return self._run(q0, opts, rng, initial_inverse_hessian)
 
-    def track(self, targets: Sequence[Target], *, options: IKOptions | None = None) -> IKResult:
+    def track(
+        self,
+        targets: Sequence[Target],
+        *,
+        options: IKOptions | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> IKResult:
         """Solve the next frame of a stream, warm-started from the previous answer.
 
         The pose (and, with ``carry_hessian``, the BFGS matrix) carries over; the
@@ -474,7 +488,7 @@ class IKSolver:
         """
         opts = options or self.options
         h0 = self._h if opts.carry_hessian else None
-        result = self.solve(targets, self.q, options=opts, initial_inverse_hessian=h0)
+        result = self.solve(targets, self.q, options=opts, rng=rng, initial_inverse_hessian=h0)
         if result.success and opts.null_space_step_rad > 0.0:
             moved = np.empty(self.chain.n_dof)
             errors = np.empty_like(result.raw_errors)
