@@ -130,6 +130,30 @@ def solved(p: MGHProblem, o: Outcome) -> bool:
     return o.f <= p.f_star + max(1e-8, 1e-5 * abs(p.f_star))
 
 
+def per_problem_table(
+    grad: str,
+    names: list[str],
+    labels: list[str],
+    probs: dict[str, MGHProblem],
+    results: dict[str, dict[str, Outcome]],
+    *,
+    with_f_star: bool,
+) -> list[str]:
+    """Final f (iterations) per problem and method; a cross marks a miss."""
+    head = "| problem | " + ("f* | " if with_f_star else "") + " | ".join(names) + " |"
+    lines = ["", f"### Per problem: final f (iterations) — {grad} gradients", "", head]
+    lines.append("|---|" + ("---|" if with_f_star else "") + "---|" * len(names))
+    for lab in labels:
+        cells = []
+        for m in names:
+            o = results[m][lab]
+            mark = "" if solved(probs[lab], o) else " ✗"
+            cells.append(f"{o.f:.3g} ({o.iterations}){mark}")
+        star = f"{probs[lab].f_star:.6g} | " if with_f_star else ""
+        lines.append(f"| {lab} | {star}" + " | ".join(cells) + " |")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -182,32 +206,15 @@ def main() -> None:
             med = statistics.median(r[lab].seconds for lab in labels) * 1e6
             lines.append(f"| {m} | {ok}/{len(labels)} | {its} | {fev} | {med:.0f} |")
     lines.append("")
-    lines.append("### Per problem: final f (iterations) — analytic gradients")
-    lines.append("")
-    an = [m for m in table if m.endswith("(analytic)")]
-    lines.append("| problem | f* | " + " | ".join(an) + " |")
-    lines.append("|---|---|" + "---|" * len(an))
-    for lab in labels:
-        cells = []
-        for m in an:
-            o = results[m][lab]
-            mark = "" if solved(probs[lab], o) else " ✗"
-            cells.append(f"{o.f:.3g} ({o.iterations}){mark}")
-        lines.append(f"| {lab} | {probs[lab].f_star:.6g} | " + " | ".join(cells) + " |")
-    lines.append("")
-    lines.append("### Per problem: final f (iterations) — forward differences")
-    lines.append("")
-    fd = [m for m in table if m.endswith("(forward FD)")]
-    lines.append("| problem | " + " | ".join(fd) + " |")
-    lines.append("|---|" + "---|" * len(fd))
-    for lab in labels:
-        cells = []
-        for m in fd:
-            o = results[m][lab]
-            mark = "" if solved(probs[lab], o) else " ✗"
-            cells.append(f"{o.f:.3g} ({o.iterations}){mark}")
-        lines.append(f"| {lab} | " + " | ".join(cells) + " |")
-    lines.append("")
+    for grad, with_f_star in (("analytic", True), ("forward FD", False)):
+        lines += per_problem_table(
+            grad,
+            [m for m in table if m.endswith(f"({grad})")],
+            labels,
+            probs,
+            results,
+            with_f_star=with_f_star,
+        )
     lines.append(
         f"Compile/load of the core before timing: {warm:.2f} s (objectives passed as values are compiled per process)."
     )
