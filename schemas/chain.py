@@ -7,7 +7,16 @@ from typing import Annotated, Any, Literal
 
 from pydantic import ConfigDict, Field
 
-from .common import IDENTITY, ZERO3, FiniteFloat, Quaternion, StrictModel, Vec3
+from .common import (
+    IDENTITY,
+    MAX_COORDINATE,
+    ZERO3,
+    Coordinate,
+    FiniteFloat,
+    Quaternion,
+    StrictModel,
+    Vec3,
+)
 
 Name = Annotated[str, Field(min_length=1, max_length=128)]
 JointKindName = Literal["fixed", "rotational", "revolute", "continuous", "prismatic"]
@@ -71,12 +80,12 @@ class JointSpec(StrictModel):
         pattern=r"^[xyz]{0,3}$",
         description='Rotational joints: active local axes in order, e.g. "zxy"',
     )
-    lower: list[FiniteFloat] = Field(
+    lower: list[Coordinate] = Field(
         default_factory=list,
         max_length=3,
         description="One lower limit per DOF [rad] or [m]; empty for fixed and continuous",
     )
-    upper: list[FiniteFloat] = Field(
+    upper: list[Coordinate] = Field(
         default_factory=list,
         max_length=3,
         description="One upper limit per DOF [rad] or [m]; empty for fixed and continuous",
@@ -111,11 +120,15 @@ class EffectorSpec(StrictModel):
         default=Vec3(x=0.0, y=0.0, z=1.0), description="Aim mode: tip-frame axis to point"
     )
     position_weight: FiniteFloat = Field(
-        default=1.0, ge=0.0, description="Weight of the squared position error [1/m^2]"
+        default=1.0,
+        ge=0.0,
+        le=MAX_COORDINATE,
+        description="Weight of the squared position error [1/m^2]",
     )
     rotation_weight: FiniteFloat = Field(
         default=0.01,
         ge=0.0,
+        le=MAX_COORDINATE,
         description="Weight of the squared orientation error [m^2/rad^2 relative]; "
         "0.01 makes 1 mrad count like 0.1 mm",
     )

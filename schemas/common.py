@@ -11,24 +11,36 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 # for them anyway, but MessagePack and Python clients can send them).
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 
+# Lengths, coordinates, limits and weights are bounded so that no finite input can
+# overflow the kinematics (1e308 translations would give inf in the first product):
+# 1000 km is far beyond any robot, and squares of 1e6 stay far from the float range.
+MAX_COORDINATE = 1e6
+Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
+
 # A quaternion must have unit norm within this (float32 round-off in game engines).
 QUATERNION_NORM_TOLERANCE = 1e-3
 
 
 class StrictModel(BaseModel):
-    """Base of every model: unknown fields rejected, finite floats, frozen."""
+    """Base of every model: unknown fields rejected, finite floats, frozen, strict types.
 
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
+    Strict: a number must be a JSON number (``"0.3"`` and ``"NaN"`` as strings are
+    wrong types), an integer must be an integer, a string a string (MessagePack bytes are
+    not coerced either). Integers are accepted where floats are expected.
+    """
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True, strict=True)
 
 
 class Vec3(StrictModel):
-    """A 3-vector: a point or offset [m], or a direction (unitless)."""
+    """A 3-vector: a point or offset [m], or a direction (unitless); each component
+    finite and within +-1e6."""
 
     model_config = ConfigDict(json_schema_extra={"examples": [{"x": 0.3, "y": 0.0, "z": 0.5}]})
 
-    x: FiniteFloat = Field(description="x component")
-    y: FiniteFloat = Field(description="y component")
-    z: FiniteFloat = Field(description="z component")
+    x: Coordinate = Field(description="x component")
+    y: Coordinate = Field(description="y component")
+    z: Coordinate = Field(description="z component")
 
 
 class Quaternion(StrictModel):

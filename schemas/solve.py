@@ -57,18 +57,21 @@ _OPTION_FIELDS: dict[str, dict[str, Any]] = {
     "max_restarts": {"ge": 0, "le": 10_000, "description": "Random restarts per frame"},
     "restart_radius_rad": {
         "gt": 0.0,
+        "le": 1e9,
         "description": "Restarts sample within this distance of the seed, per variable "
         "[rad] or [m]; use a large value (e.g. 100) to sample the whole range",
     },
     "max_step_rad": {
         "gt": 0.0,
+        "le": 1e3,
         "description": "Cap on any variable's change per iteration [rad] or [m]",
     },
     "posture_weight": {
         "ge": 0.0,
+        "le": 1e6,
         "description": "Pull towards the seed (previous pose in a session): w * sum(dq^2)",
     },
-    "limit_weight": {"ge": 0.0, "description": "Penalty near the joint limits"},
+    "limit_weight": {"ge": 0.0, "le": 1e6, "description": "Penalty near the joint limits"},
     "limit_margin": {
         "ge": 0.0,
         "lt": 0.5,

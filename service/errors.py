@@ -158,6 +158,17 @@ async def _solver_error(request: Request, exc: Exception) -> Response:
 
 async def _http_error(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, StarletteHTTPException)
+    if exc.status_code == status.HTTP_400_BAD_REQUEST:
+        # FastAPI answers 400 when the body cannot be decoded at all (invalid UTF-8,
+        # nesting deeper than the parser's recursion limit, an integer literal of
+        # thousands of digits); to a client that is the same as malformed JSON.
+        return ORJSONResponse(
+            {
+                "detail": [{"loc": ["body"], "msg": str(exc.detail), "type": "json_invalid"}],
+                "code": "invalid_format",
+            },
+            status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
+        )
     code = _HTTP_CODES.get(exc.status_code, "http_error")
     return ORJSONResponse(
         {"detail": exc.detail, "code": code}, status_code=exc.status_code, headers=exc.headers
