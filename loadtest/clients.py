@@ -1,0 +1,336 @@
+"""Simulated game clients: open a session, stream a path at a fixed rate, record answers.
+
+Sends are open-loop on a fixed schedule (frame k at start + k / rate): a slow answer
+does not delay the next frame over WebSocket (the server answers in order, so a client
+may pipeline), and over HTTP the next request goes out as soon as the previous answer
+is in (one request in flight per client, which is what keeps HTTP frames in order).
+Latency is measured from the scheduled time either way.
+
+Error kinds (``ClientResult.errors``): ``setup_<why>`` (the session could not be opened),
+``ws_<code>`` / ``http_<status>`` (the server answered with an error), ``closed_<code>``
+(the socket closed under us), ``out_of_order``, ``unknown_id`` (an answer to nothing in
+flight), ``unanswered`` (still in flight at the end of the drain), ``<ExceptionName>``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+from urllib.parse import urlsplit
+
+import httpx
+import orjson
+from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed
+
+from .paths import Path
+from .records import ClientResult, Progress
+
+WORKER_HEADER = "x-worker"  # set by loadtest.serve; tells which process owns the session
+
+
+class SetupError(Exception):
+    """The session could not be opened; ``kind`` is the error kind to count."""
+
+    def __init__(self, kind: str) -> None:
+        super().__init__(kind)
+        self.kind = kind
+
+
+@dataclass(frozen=True, slots=True)
+class ClientSpec:
+    """What one client does; ``offset`` staggers clients along the path and in time."""
+
+    index: int
+    url: str  # http://host:port
+    transport: str  # "ws" or "http"
+    path: Path
+    rate_hz: float
+    duration_s: float
+    drain_s: float
+    timeout_s: float
+    phase_s: float  # first frame this long after the common start (spreads the ticks)
+    options: dict[str, Any]
+
+
+def session_body(spec: ClientSpec) -> bytes:
+    body: dict[str, Any] = {"chain": {"format": "example", "name": spec.path.chain}}
+    if spec.options:
+        body["options"] = spec.options
+    return orjson.dumps(body)
+
+
+def _read_http_response(sock: socket.socket) -> tuple[int, dict[str, str], bytes]:
+    """One HTTP/1.1 response with a Content-Length body, read from a blocking socket."""
+    buf = b""
+    while b"\r\n\r\n" not in buf:
+        chunk = sock.recv(65536)
+        if not chunk:
+            raise SetupError("setup_connection_closed")
+        buf += chunk
+    head, _, rest = buf.partition(b"\r\n\r\n")
+    lines = head.decode("latin-1").split("\r\n")
+    status = int(lines[0].split(" ", 2)[1])
+    headers = {k.strip().lower(): v.strip() for k, _, v in (ln.partition(":") for ln in lines[1:])}
+    length = int(headers.get("content-length", "0"))
+    while len(rest) < length:
+        chunk = sock.recv(65536)
+        if not chunk:
+            raise SetupError("setup_connection_closed")
+        rest += chunk
+    return status, headers, rest[:length]
+
+
+def create_session_sticky(
+    host: str, port: int, body: bytes, timeout_s: float
+) -> tuple[socket.socket, dict[str, Any], str | None]:
+    """POST /v1/sessions on a fresh TCP connection and return that connection.
+
+    The WebSocket is then opened on the same connection (HTTP/1.1 keep-alive, then
+    Upgrade), so it lands on the worker process that holds the session: with several
+    workers behind one port, a second connection may be accepted by another process,
+    whose in-memory store does not know the session (close 4404).
+    """
+    sock = socket.create_connection((host, port), timeout=timeout_s)
+    try:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.sendall(
+            b"POST /v1/sessions HTTP/1.1\r\nHost: %s:%d\r\ncontent-type: application/json\r\n"
+            b"content-length: %d\r\n\r\n%s" % (host.encode(), port, len(body), body)
+        )
+        status, headers, payload = _read_http_response(sock)
+        if status != 201:
+            raise SetupError(f"setup_http_{status}")
+        return sock, orjson.loads(payload), headers.get(WORKER_HEADER)
+    except BaseException:
+        sock.close()
+        raise
+
+
+def _first_frame_at(start: float, spec: ClientSpec) -> float:
+    """The common start plus this client's phase; a client whose session took longer to
+    open than the setup allowance starts when it is ready instead of bursting to catch up."""
+    return max(start + spec.phase_s, time.perf_counter())
+
+
+async def _sleep_until(t: float) -> None:
+    delay = t - time.perf_counter()
+    if delay > 0:
+        await asyncio.sleep(delay)
+
+
+async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> ClientResult:
+    """One WebSocket client: sticky session, paced sends, in-order answers checked."""
+    res = ClientResult(spec.index, spec.path.chain, "ws")
+    parts = urlsplit(spec.url)
+    host, port = parts.hostname or "127.0.0.1", parts.port or 80
+    try:
+        sock, created, res.worker = await asyncio.to_thread(
+            create_session_sticky, host, port, session_body(spec), spec.timeout_s
+        )
+        ws = await connect(
+            f"ws://{host}:{port}/v1/sessions/{created['id']}/ws",
+            sock=sock,
+            additional_headers={"Authorization": f"Bearer {created['token']}"},
+            open_timeout=spec.timeout_s,
+            compression=None,  # 300-byte frames gain nothing from deflate; it costs CPU
+            max_size=None,
+            ping_interval=None,  # the run is short; pings would only add traffic
+        )
+    except SetupError as e:
+        res.errors[e.kind] += 1
+        progress.errors += 1
+        return res
+    except (OSError, TimeoutError, ConnectionClosed) as e:
+        res.errors[f"setup_{type(e).__name__}"] += 1
+        progress.errors += 1
+        return res
+    res.opened = True
+    period = 1.0 / spec.rate_hz
+    targets = [t.decode() for t in spec.path.targets]
+    n_path = len(targets)
+    offset = spec.index * 37  # clients on the same chain start at different points
+    in_flight: deque[tuple[int, float]] = deque()
+    first = _first_frame_at(start, spec)
+    sending_done = asyncio.Event()
+    all_answered = asyncio.Event()
+
+    async def sender() -> None:
+        k = 0
+        try:
+            while True:
+                t_sched = first + k * period
+                if t_sched - first >= spec.duration_s:
+                    break
+                await _sleep_until(t_sched)
+                now = time.perf_counter()
+                msg = f'{{"type":"frame","id":{k},"targets":{targets[(offset + k) % n_path]}}}'
+                in_flight.append((k, t_sched))
+                all_answered.clear()
+                res.send_lag_us.append((now - t_sched) * 1e6)
+                await ws.send(msg)
+                res.sent += 1
+                progress.sent += 1
+                k += 1
+        except ConnectionClosed:
+            pass  # the receiver records why
+        finally:
+            sending_done.set()
+
+    async def receiver() -> None:
+        async for raw in ws:
+            now = time.perf_counter()
+            msg = orjson.loads(raw)
+            rid = msg.get("id")
+            if in_flight and in_flight[0][0] == rid:
+                _, t_sched = in_flight.popleft()
+            else:
+                match = [x for x in in_flight if x[0] == rid]
+                if not match:
+                    res.errors["unknown_id"] += 1
+                    progress.errors += 1
+                    continue
+                res.errors["out_of_order"] += 1
+                progress.errors += 1
+                in_flight.remove(match[0])
+                t_sched = match[0][1]
+            res.answered += 1
+            progress.answered += 1
+            rtt = now - t_sched
+            if rtt > period:
+                progress.late += 1
+            if "error" in msg:
+                res.errors[f"ws_{msg['error'].get('code')}"] += 1
+                progress.errors += 1
+            else:
+                r = msg.get("result")
+                res.t_s.append(t_sched - first)
+                res.rtt_us.append(rtt * 1e6)
+                if r is None:  # a bare echo (loadtest.floors) answers with the frame itself
+                    res.solve_us.append(0.0)
+                    res.server_us.append(0.0)
+                    res.terminations["echo"] += 1
+                else:
+                    res.solve_us.append(r["solve_us"])
+                    res.server_us.append(r["server_us"])
+                    res.terminations[r["termination"]] += 1
+            if not in_flight:
+                all_answered.set()
+
+    recv_task = asyncio.create_task(receiver())
+    send_task = asyncio.create_task(sender())
+    try:
+        await send_task
+        if in_flight and not recv_task.done():
+            waiter = asyncio.create_task(all_answered.wait())
+            await asyncio.wait(
+                {waiter, recv_task}, timeout=spec.drain_s, return_when=asyncio.FIRST_COMPLETED
+            )
+            waiter.cancel()
+        if recv_task.done() and recv_task.exception() is None:
+            # The server closed the socket before the client was done with it.
+            code = ws.close_code
+            if code is not None:
+                res.lost = True
+                res.lost_reason = f"closed_{code}"
+                res.errors[f"closed_{code}"] += 1
+                progress.errors += 1
+        elif recv_task.done():
+            exc = recv_task.exception()
+            res.lost = True
+            res.lost_reason = type(exc).__name__
+            res.errors[type(exc).__name__] += 1
+            progress.errors += 1
+    finally:
+        if in_flight:
+            res.errors["unanswered"] += len(in_flight)
+            progress.errors += len(in_flight)
+        recv_task.cancel()
+        await asyncio.gather(recv_task, return_exceptions=True)
+        try:
+            await asyncio.wait_for(ws.close(), spec.timeout_s)
+        except (TimeoutError, ConnectionClosed, OSError):
+            pass
+    return res
+
+
+async def http_client(spec: ClientSpec, start: float, progress: Progress) -> ClientResult:
+    """One HTTP client: POST a frame per tick, one request in flight, answers checked."""
+    res = ClientResult(spec.index, spec.path.chain, "http")
+    limits = httpx.Limits(max_connections=1, max_keepalive_connections=1)
+    async with httpx.AsyncClient(base_url=spec.url, limits=limits, timeout=spec.timeout_s) as http:
+        try:
+            r = await http.post(
+                "/v1/sessions",
+                content=session_body(spec),
+                headers={"content-type": "application/json"},
+            )
+        except httpx.HTTPError as e:
+            res.errors[f"setup_{type(e).__name__}"] += 1
+            progress.errors += 1
+            return res
+        if r.status_code != 201:
+            res.errors[f"setup_http_{r.status_code}"] += 1
+            progress.errors += 1
+            return res
+        res.opened = True
+        res.worker = r.headers.get(WORKER_HEADER)
+        created = r.json()
+        frames_url = f"/v1/sessions/{created['id']}/frames"
+        headers = {
+            "Authorization": f"Bearer {created['token']}",
+            "content-type": "application/json",
+        }
+        period = 1.0 / spec.rate_hz
+        targets = spec.path.targets
+        n_path = len(targets)
+        offset = spec.index * 37
+        first = _first_frame_at(start, spec)
+        deadline = first + spec.duration_s + spec.drain_s  # bounds a run that falls behind
+        k = 0
+        while True:
+            t_sched = first + k * period
+            if t_sched - first >= spec.duration_s or time.perf_counter() > deadline:
+                break
+            await _sleep_until(t_sched)
+            res.send_lag_us.append((time.perf_counter() - t_sched) * 1e6)
+            body = b'{"id":%d,"targets":%s}' % (k, targets[(offset + k) % n_path])
+            res.sent += 1
+            progress.sent += 1
+            k += 1
+            try:
+                r = await http.post(frames_url, content=body, headers=headers)
+            except httpx.HTTPError as e:
+                res.errors[type(e).__name__] += 1
+                progress.errors += 1
+                continue
+            now = time.perf_counter()
+            if r.status_code != 200:
+                res.errors[f"http_{r.status_code}"] += 1
+                progress.errors += 1
+                if r.status_code == 404:  # the session is gone: nothing more to send
+                    res.lost = True
+                    res.lost_reason = "http_404"
+                    break
+                continue
+            results = orjson.loads(r.content)["results"]
+            if len(results) != 1 or results[0].get("id") != k - 1:
+                res.errors["out_of_order"] += 1
+                progress.errors += 1
+                continue
+            res.answered += 1
+            progress.answered += 1
+            rtt = now - t_sched
+            if rtt > period:
+                progress.late += 1
+            out = results[0]
+            res.t_s.append(t_sched - first)
+            res.rtt_us.append(rtt * 1e6)
+            res.solve_us.append(float(out.get("solve_us", 0.0)))
+            res.server_us.append(float(out.get("server_us", 0.0)))
+            res.terminations[str(out.get("termination", "echo"))] += 1
+    return res
