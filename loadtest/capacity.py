@@ -1,0 +1,404 @@
+"""Capacity search on this machine: the figures in bench/RESULTS.md ("Load tests and capacity").
+
+For each scenario it starts a deployment on a free loopback port (``loadtest.serve``),
+waits for /readyz, and searches for the most 60 Hz clients whose run passes: no error,
+no session lost, achieved frames/s within 5% of offered, round-trip p99 within one frame
+period (16.7 ms at 60 Hz). Clients grow by x1.5 until a run fails, then bisect to ~10%.
+Floors (``loadtest.floors``: no solving) are searched the same way in the same run.
+
+Also: how ``--balance shared`` (uvicorn --workers) and ``reuseport`` split 16 new
+connections over 2 workers, and (``--profile``) a py-spy profile of one worker under a
+steady load below capacity.
+
+Bounded: each trial is ``--duration`` seconds plus setup and drain, a search stops after
+``--max-trials`` trials or ``--max-clients`` clients.
+
+    OPENBLAS_NUM_THREADS=1 python -m loadtest.capacity --out bench/out/loadtest [--profile]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import httpx  # noqa: E402
+
+from .report import summarize  # noqa: E402
+from .run import RunConfig, run  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+READY_TIMEOUT_S = 240.0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    app: str  # "service" or "floors"
+    workers: int
+    transport: str
+    start_clients: int
+
+
+SCENARIOS = (
+    Scenario("ws-floor-1", "floors", 1, "ws", 40),
+    Scenario("ws-service-1", "service", 1, "ws", 10),
+    Scenario("ws-floor-2", "floors", 2, "ws", 60),
+    Scenario("ws-service-2", "service", 2, "ws", 16),
+    Scenario("http-floor-1", "floors", 1, "http", 10),
+    Scenario("http-service-1", "service", 1, "http", 4),
+)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Deployment:
+    """``python -m loadtest.serve`` in its own process group (ours to stop)."""
+
+    def __init__(self, app: str, workers: int, balance: str, log: Path) -> None:
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        env = {
+            **os.environ,
+            "IK_LOG_LEVEL": "warning",
+            "OPENBLAS_NUM_THREADS": "1",
+            "IK_MAX_SESSIONS": "5000",
+            "IK_MAX_WEBSOCKETS": "5000",
+        }
+        self._log = open(log, "ab")  # noqa: SIM115 (closed in stop)
+        self.proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "loadtest.serve",
+                "--app",
+                app,
+                "--workers",
+                str(workers),
+                "--balance",
+                balance,
+                "--port",
+                str(self.port),
+            ],
+            cwd=ROOT,
+            env=env,
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        self.workers = workers
+
+    def wait_ready(self) -> None:
+        """Ready when 4 x workers fresh connections in a row answer 200 (each worker warm)."""
+        deadline = time.monotonic() + READY_TIMEOUT_S
+        streak = 0
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError("deployment exited before it was ready")
+            try:
+                ok = httpx.get(f"{self.url}/readyz", timeout=2.0).status_code == 200
+            except httpx.HTTPError:
+                ok = False
+            streak = streak + 1 if ok else 0
+            if streak >= 4 * self.workers:
+                return
+            time.sleep(0.05 if ok else 0.2)
+        raise RuntimeError("deployment not ready in time")
+
+    def pids(self) -> list[int]:
+        """The worker processes (children of the launcher)."""
+        p = Path(f"/proc/{self.proc.pid}/task/{self.proc.pid}/children")
+        try:
+            return [int(x) for x in p.read_text().split()]
+        except OSError:
+            return []
+
+    def cpu_s(self) -> float:
+        """User + system CPU of the workers so far [s]."""
+        tick = os.sysconf("SC_CLK_TCK")
+        total = 0.0
+        for pid in self.pids():
+            try:
+                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                total += (int(fields[11]) + int(fields[12])) / tick
+            except (OSError, IndexError, ValueError):
+                pass
+        return total
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)  # forwarded to the workers
+            try:
+                self.proc.wait(30.0)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)  # the group we created
+                self.proc.wait(10.0)
+        self._log.close()
+
+
+def trial(dep: Deployment, sc: Scenario, clients: int, args: argparse.Namespace) -> dict[str, Any]:
+    cfg = RunConfig(
+        url=dep.url,
+        transport=sc.transport,
+        clients=clients,
+        rate_hz=args.rate,
+        duration_s=args.duration,
+        warmup_s=args.warmup,
+        drain_s=10.0,
+        processes=args.processes,
+    )
+    cpu0, t0 = dep.cpu_s(), time.perf_counter()
+    s = summarize(run(cfg))
+    s["server_cpu_s"] = dep.cpu_s() - cpu0
+    s["server_cpu_us_per_frame"] = 1e6 * s["server_cpu_s"] / max(1, s["frames"]["answered"])
+    s["trial_wall_s"] = time.perf_counter() - t0
+    s["pass"] = passes(s, args.rate)
+    fr, rt = s["frames"], s["round_trip_ms"]
+    print(
+        f"  {sc.name}: {clients:4d} clients  {fr['achieved_per_s']:8,.0f}/s  "
+        f"p50 {rt['p50'] or 0:7.2f}  p99 {rt['p99'] or 0:7.2f} ms  "
+        f"errors {sum(s['errors'].values())}  lost {s['sessions']['lost']}  "
+        f"server {s['server_cpu_us_per_frame']:5.0f} us CPU/frame  "
+        f"gen CPU {s['generator']['cpu_per_window']:.2f}  {'PASS' if s['pass'] else 'fail'}",
+        flush=True,
+    )
+    return s
+
+
+def passes(s: dict[str, Any], rate_hz: float) -> bool:
+    p99 = s["round_trip_ms"]["p99"]
+    return (
+        not s["errors"]
+        and s["sessions"]["lost"] == 0
+        and p99 is not None
+        and p99 <= 1e3 / rate_hz
+        and s["frames"]["achieved_per_s"] >= 0.95 * s["frames"]["offered_per_s"]
+    )
+
+
+def search(dep: Deployment, sc: Scenario, args: argparse.Namespace) -> dict[str, Any]:
+    trials: list[dict[str, Any]] = []
+    best: dict[str, Any] | None = None
+    fail: int | None = None
+    c = sc.start_clients
+    while len(trials) < args.max_trials and c <= args.max_clients:
+        s = trial(dep, sc, c, args)
+        trials.append(s)
+        if s["pass"]:
+            best = s
+            c = math.ceil(c * 1.5)
+        else:
+            fail = c
+            break
+    lo = best["config"]["clients"] if best else 0
+    while fail is not None and len(trials) < args.max_trials and fail - lo > max(1, 0.1 * lo):
+        mid = (lo + fail) // 2
+        if mid <= 0:
+            break
+        s = trial(dep, sc, mid, args)
+        trials.append(s)
+        if s["pass"]:
+            best, lo = s, mid
+        else:
+            fail = mid
+    return {"scenario": sc.__dict__, "best": best, "first_failing_clients": fail, "trials": trials}
+
+
+def balance(args: argparse.Namespace, log: Path) -> dict[str, list[list[int]]]:
+    """Sessions per worker when 16 clients connect at once, 5 rounds per deployment."""
+    out: dict[str, list[list[int]]] = {}
+    for mode in ("shared", "reuseport"):
+        dep = Deployment("service", 2, mode, log)
+        try:
+            dep.wait_ready()
+            rounds = []
+            for _ in range(5):
+                cfg = RunConfig(
+                    url=dep.url,
+                    clients=16,
+                    rate_hz=10.0,
+                    duration_s=1.0,
+                    warmup_s=0.0,
+                    drain_s=5.0,
+                    chains=("panda_arm",),
+                )
+                s = summarize(run(cfg))
+                split = sorted(Counter(s["sessions"]["per_worker"]).values(), reverse=True)
+                rounds.append(split + [0] * (2 - len(split)))
+            out[mode] = rounds
+            print(f"  balance {mode}: {rounds}", flush=True)
+        finally:
+            dep.stop()
+    return out
+
+
+def profile(
+    args: argparse.Namespace, log: Path, outdir: Path, transport: str, clients: int
+) -> dict[str, Any]:
+    """py-spy on the single worker while ``clients`` clients stream for the duration."""
+    spy = shutil.which("py-spy")
+    if spy is None:
+        return {"error": "py-spy not installed"}
+    dep = Deployment("service", 1, "reuseport", log)
+    try:
+        dep.wait_ready()
+        pid = dep.pids()[0]
+        raw = outdir / f"profile-{transport}.txt"
+        rec = subprocess.Popen(
+            [
+                spy,
+                "record",
+                "-p",
+                str(pid),
+                "-r",
+                "200",
+                "-d",
+                str(int(args.duration)),
+                "-f",
+                "raw",
+                "-o",
+                str(raw),
+                "--nonblocking",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        sc = Scenario(f"profile-{transport}", "service", 1, transport, clients)
+        s = trial(dep, sc, clients, args)
+        rec.wait(timeout=args.duration + 60)
+        return {"run": s, "raw": str(raw), "summary": summarize_profile(raw)}
+    finally:
+        dep.stop()
+
+
+def summarize_profile(raw: Path, top: int = 25) -> dict[str, Any]:
+    """Self and inclusive sample shares per function from py-spy's collapsed stacks."""
+    total = 0
+    self_: Counter[str] = Counter()
+    incl: Counter[str] = Counter()
+    for line in raw.read_text().splitlines():
+        stack, _, n = line.rpartition(" ")
+        if not stack:
+            continue
+        count = int(n)
+        frames = [
+            f.split(" (")[0] + " (" + f.split(" (")[-1].split(":")[0].rsplit("/", 1)[-1] + ")"
+            if " (" in f
+            else f
+            for f in stack.split(";")
+        ]
+        total += count
+        self_[frames[-1]] += count
+        for f in set(frames):
+            incl[f] += count
+    share = (lambda c: round(100.0 * c / total, 1)) if total else (lambda c: 0.0)
+    return {
+        "samples": total,
+        "self_pct": [(f, share(c)) for f, c in self_.most_common(top)],
+        "inclusive_pct": [(f, share(c)) for f, c in incl.most_common(top * 2)],
+    }
+
+
+def markdown(results: dict[str, Any]) -> str:
+    rows = [
+        "| scenario | workers | transport | clients at 60 Hz | frames/s "
+        "| round trip p50 / p99 [ms] | server_us p50 / p99 | solve_us p50 / p99 "
+        "| server CPU per frame [us] | generator CPU |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results["searches"]:
+        b, sc = r["best"], r["scenario"]
+        if b is None:
+            rows.append(
+                f"| {sc['name']} | {sc['workers']} | {sc['transport']} | none passed | | | | | | |"
+            )
+            continue
+        rt, sv, so = b["round_trip_ms"], b["server_us"], b["solve_us"]
+        rows.append(
+            f"| {sc['name']} | {sc['workers']} | {sc['transport']} | {b['config']['clients']} "
+            f"(fails at {r['first_failing_clients']}) | {b['frames']['achieved_per_s']:,.0f} | "
+            f"{rt['p50']:.2f} / {rt['p99']:.2f} | {sv['p50']:,.0f} / {sv['p99']:,.0f} | "
+            f"{so['p50']:,.0f} / {so['p99']:,.0f} | {b['server_cpu_us_per_frame']:,.0f} | "
+            f"{b['generator']['cpu_per_window']:.2f} |"
+        )
+    return "\n".join(rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m loadtest.capacity",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "loadtest")
+    ap.add_argument("--only", default="", help="comma-separated scenario names")
+    ap.add_argument("--duration", type=float, default=6.0)
+    ap.add_argument("--warmup", type=float, default=1.0)
+    ap.add_argument("--rate", type=float, default=60.0)
+    ap.add_argument("--processes", type=int, default=1, help="generator processes")
+    ap.add_argument("--max-trials", type=int, default=10)
+    ap.add_argument("--max-clients", type=int, default=1500)
+    ap.add_argument("--no-balance", action="store_true")
+    ap.add_argument("--profile", action="store_true")
+    ap.add_argument(
+        "--profile-clients",
+        type=int,
+        default=0,
+        help="clients for the profile runs (default: 60%% of ws-service-1's best)",
+    )
+    args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    log = args.out / "servers.log"
+    only = {x for x in args.only.split(",") if x}
+    results: dict[str, Any] = {
+        "started": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
+        "loadavg_start": os.getloadavg(),
+        "args": {k: str(v) for k, v in vars(args).items()},
+        "searches": [],
+    }
+    for sc in SCENARIOS:
+        if only and sc.name not in only:
+            continue
+        print(f"{sc.name}: {sc.app}, {sc.workers} worker(s), {sc.transport}", flush=True)
+        dep = Deployment(sc.app, sc.workers, "reuseport", log)
+        try:
+            dep.wait_ready()
+            results["searches"].append(search(dep, sc, args))
+        finally:
+            dep.stop()
+    if not args.no_balance and (not only or "balance" in only):
+        results["balance"] = balance(args, log)
+    if args.profile:
+        bests = {r["scenario"]["name"]: r["best"] for r in results["searches"] if r["best"]}
+        results["profile"] = {}
+        for t, name, default in (("ws", "ws-service-1", 12), ("http", "http-service-1", 3)):
+            b = bests.get(name)
+            n = args.profile_clients or (
+                max(2, int(0.6 * b["config"]["clients"])) if b else default
+            )
+            results["profile"][t] = profile(args, log, args.out, t, n)
+    results["loadavg_end"] = os.getloadavg()
+    (args.out / "capacity.json").write_text(json.dumps(results, indent=1, default=str) + "\n")
+    print(markdown(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
