@@ -172,9 +172,9 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
                 in_flight.append((k, t_sched))
                 all_answered.clear()
                 res.send_lag_us.append((now - t_sched) * 1e6)
-                await ws.send(msg)
-                res.sent += 1
+                res.sent += 1  # counted before the send: a frame lost in it is unanswered
                 progress.sent += 1
+                await ws.send(msg)
                 k += 1
         except ConnectionClosed:
             pass  # the receiver records why
@@ -231,19 +231,16 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
                 {waiter, recv_task}, timeout=spec.drain_s, return_when=asyncio.FIRST_COMPLETED
             )
             waiter.cancel()
-        if recv_task.done() and recv_task.exception() is None:
-            # The server closed the socket before the client was done with it.
-            code = ws.close_code
-            if code is not None:
-                res.lost = True
-                res.lost_reason = f"closed_{code}"
-                res.errors[f"closed_{code}"] += 1
-                progress.errors += 1
-        elif recv_task.done():
+        if recv_task.done():
+            # The socket closed (or the receiver failed) before the client was done.
             exc = recv_task.exception()
+            if exc is None or isinstance(exc, ConnectionClosed):
+                kind = f"closed_{ws.close_code}"
+            else:
+                kind = type(exc).__name__
             res.lost = True
-            res.lost_reason = type(exc).__name__
-            res.errors[type(exc).__name__] += 1
+            res.lost_reason = kind
+            res.errors[kind] += 1
             progress.errors += 1
     finally:
         if in_flight:

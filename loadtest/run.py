@@ -160,7 +160,7 @@ def _child(
 
 def _setup_allowance_s(cfg: RunConfig) -> float:
     # Session creation: chain parsing runs in the server's pool; tails are the slowest.
-    return 1.0 + 0.01 * cfg.clients
+    return 1.0 + 0.02 * cfg.clients
 
 
 def run(cfg: RunConfig, on_progress: Callable[[str], None] | None = None) -> RunOutput:
