@@ -67,7 +67,7 @@ class HttpGameClient(FastHttpUser):
     @task
     def frame(self) -> None:
         targets = self.path.targets[self.k % len(self.path.targets)]
-        body = b'{"id":%d,"targets":%s}' % (self.k, targets)
+        body = f'{{"id":{self.k},"targets":{targets.decode()}}}'
         with self.client.post(
             self.frames_url,
             data=body,

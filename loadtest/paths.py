@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import orjson
 
-from solver.chain import EffectorMode, matrix_to_quaternion
+from solver.chain import Chain, EffectorMode, matrix_to_quaternion
 from solver.examples import EXAMPLES
 from solver.fk import effector_poses
 
@@ -50,7 +50,7 @@ def make_path(chain_name: str, rate_hz: float, *, loop_s: float = LOOP_S) -> Pat
     """
     if chain_name not in EXAMPLES:
         raise ValueError(f"unknown example chain {chain_name!r}; one of {sorted(EXAMPLES)}")
-    chain = EXAMPLES[chain_name]()
+    chain: Chain = EXAMPLES[chain_name]()  # type: ignore[operator]  # untyped table
     n = max(2, round(rate_hz * loop_s))
     with np.errstate(invalid="ignore"):  # mid_limits of unbounded joints: see solver
         mid = chain.mid_limits()

@@ -51,10 +51,10 @@ def write_png(out: RunOutput, summary: dict[str, Any], path: Path) -> None:
     ax2.set_xlabel("round trip [ms]")
     ax2.set_ylabel("frames")
     fr, rt = summary["frames"], summary["round_trip_ms"]
-    p99 = "-" if rt["p99"] is None else f"{rt['p99']:.2f}"
+    p99_text = "-" if rt["p99"] is None else f"{rt['p99']:.2f}"
     fig.suptitle(
         f"{cfg.clients} {cfg.transport} clients x {cfg.rate_hz:g} Hz: "
-        f"{fr['achieved_per_s']:,.0f} frames/s, p99 {p99} ms, late {fr['late']:,}, "
+        f"{fr['achieved_per_s']:,.0f} frames/s, p99 {p99_text} ms, late {fr['late']:,}, "
         f"errors {sum(summary['errors'].values()):,}, lost {summary['sessions']['lost']}",
         fontsize=11,
     )

@@ -68,14 +68,14 @@ def service_app() -> WorkerHeader:
     from service.config import get_settings
     from service.main import create_app
 
-    return WorkerHeader(create_app(get_settings()))  # type: ignore[arg-type]
+    return WorkerHeader(create_app(get_settings()))
 
 
 def floors_app() -> WorkerHeader:
     """The bare echo / endpoint app, plus the worker header."""
     from .floors import create_floor_app
 
-    return WorkerHeader(create_floor_app())  # type: ignore[arg-type]
+    return WorkerHeader(create_floor_app())
 
 
 APPS = {"service": service_app, "floors": floors_app}
