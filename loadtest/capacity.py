@@ -338,6 +338,21 @@ def markdown(results: dict[str, Any]) -> str:
             f"{so['p50']:,.0f} / {so['p99']:,.0f} | {b['server_cpu_us_per_frame']:,.0f} | "
             f"{b['generator']['cpu_per_window']:.2f} |"
         )
+    if "balance" in results:
+        rows += [
+            "",
+            "| deployment | sessions per worker, 16 connecting at once (5 rounds) |",
+            "|---|---|",
+        ]
+        for mode, rounds in results["balance"].items():
+            rows.append(f"| {mode} | {', '.join('/'.join(map(str, r)) for r in rounds)} |")
+    for t, p in results.get("profile", {}).items():
+        if "summary" not in p:
+            continue
+        rows += ["", f"profile {t}: {p['summary']['samples']} samples; self %:"]
+        rows += [f"  {pct:5.1f}  {f}" for f, pct in p["summary"]["self_pct"][:15]]
+        rows += ["inclusive %:"]
+        rows += [f"  {pct:5.1f}  {f}" for f, pct in p["summary"]["inclusive_pct"][:40]]
     return "\n".join(rows)
 
 
@@ -367,7 +382,11 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     log = args.out / "servers.log"
     only = {x for x in args.only.split(",") if x}
+    commit = subprocess.run(
+        ["git", "describe", "--always", "--dirty"], cwd=ROOT, capture_output=True, text=True
+    ).stdout.strip()
     results: dict[str, Any] = {
+        "commit": commit,
         "started": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
         "loadavg_start": os.getloadavg(),
         "args": {k: str(v) for k, v in vars(args).items()},
