@@ -499,7 +499,9 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
     ftol = fopt[C.F_FTOL]
     f_goal = fopt[C.F_F_GOAL]
     max_step = fopt[C.F_MAX_STEP]
-    deadline = fopt[C.F_DEADLINE]
+    # The clock starts inside the compiled code, so a first call that compiles (or
+    # loads the cache) does not eat the caller's budget.
+    deadline = t_start + fopt[C.F_BUDGET]
     eps_curv = fopt[C.F_CURVATURE_EPS]
     rng_state = np.empty(1, dtype=np.int64)
     rng_state[0] = iopt[C.I_SEED] % 2147483646 + 1

@@ -7,7 +7,6 @@ options into the core's vectors and turns its integers back into typed results.
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 import numpy as np
@@ -37,9 +36,9 @@ _GRAD_MODES = {
 
 
 def pack_options(
-    options: MinimizeOptions, *, seed: int, started_at: float
+    options: MinimizeOptions, *, seed: int
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
-    """The core's option vectors (layout in ``_codes``); the deadline counts from started_at."""
+    """The core's option vectors (layout in ``_codes``)."""
     fopt = np.empty(C.N_FOPT)
     fopt[C.F_GTOL] = options.gtol
     fopt[C.F_XTOL] = options.xtol
@@ -50,7 +49,7 @@ def pack_options(
     fopt[C.F_C2] = options.curvature_c2
     fopt[C.F_STEPTOL] = options.line_search_min_step
     budget = options.time_budget_s
-    fopt[C.F_DEADLINE] = math.inf if budget is None else started_at + budget
+    fopt[C.F_BUDGET] = math.inf if budget is None else budget
     fopt[C.F_RESTART_RADIUS] = options.restart_radius
     fopt[C.F_CURVATURE_EPS] = options.skip_update_eps
     iopt = np.empty(C.N_IOPT, dtype=np.int64)
@@ -156,8 +155,7 @@ def minimize(
         )
     h = _initial_h(n, initial_inverse_hessian)
     seed = 0 if rng is None else int(rng.integers(0, 2**31 - 1))
-    started = time.perf_counter()
-    fopt, iopt = pack_options(options, seed=seed, started_at=started)
+    fopt, iopt = pack_options(options, seed=seed)
     log = np.zeros((options.max_passes, C.N_LOG))
     out_x = np.empty(n)
     out_g = np.empty(n)

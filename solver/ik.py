@@ -636,7 +636,7 @@ class IKSolver:
         hit = self._packed.get(id(opts))
         if hit is None or hit[0] is not opts:
             mopts = opts.minimize_options()
-            fopt, iopt = pack_options(mopts, seed=0, started_at=0.0)
+            fopt, iopt = pack_options(mopts, seed=0)
             if len(self._packed) > 32:
                 self._packed.clear()
             hit = (opts, mopts, fopt, iopt, opts.policy.as_array())
@@ -663,8 +663,6 @@ class IKSolver:
         n = self.chain.n_dof
         mopts, fopt, iopt, policy = self._packed_options(opts)
         iopt[C.I_SEED] = self._next_seed(rng)
-        budget = opts.time_budget_us
-        fopt[C.F_DEADLINE] = math.inf if budget is None else time.perf_counter() + budget * 1e-6
         h = self._identity.copy() if h0 is None else h0.copy()
         log = np.zeros((mopts.max_passes, C.N_LOG))
         out_x = np.empty(n)
