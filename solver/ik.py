@@ -436,6 +436,7 @@ class IKSolver:
         self._active: list[int] = []
         self._zeroed: list[int] = []
         self._tol_for: IKOptions | None = None
+        self._misc_for: IKOptions | None = None
         self._bounds_are_limits = True
         self._n_active = 0
         self._every_effector_moves_all = all(d.shape[0] == n for d in cc.eff_dofs)
@@ -476,10 +477,12 @@ class IKSolver:
         opts = options or self.options
         q0 = self._mid if seed is None else self._check_seed(seed)
         self._load_targets(targets, opts)
-        self._misc[MISC_POSTURE] = opts.posture_weight
-        self._misc[MISC_LIMIT] = opts.limit_weight
-        self._misc[MISC_MARGIN] = opts.limit_margin
-        self._misc[MISC_DAMPING] = opts.damping
+        if self._misc_for is not opts:
+            self._misc[MISC_POSTURE] = opts.posture_weight
+            self._misc[MISC_LIMIT] = opts.limit_weight
+            self._misc[MISC_MARGIN] = opts.limit_margin
+            self._misc[MISC_DAMPING] = opts.damping
+            self._misc_for = opts
         self._dd[DD_QREF] = q0
         self._set_free_bounds(q0)
         return self._run(q0, opts, rng, initial_inverse_hessian)
@@ -555,7 +558,8 @@ class IKSolver:
 
     # -- internals -------------------------------------------------------------
     def _check_seed(self, seed: Vector) -> Vector:
-        q = np.array(seed, dtype=np.float64).reshape(-1)
+        # No copy: the core projects the seed into its own buffer and never writes it.
+        q = np.asarray(seed, dtype=np.float64).reshape(-1)
         if q.shape != (self.chain.n_dof,):
             raise DimensionMismatch(f"seed must have {self.chain.n_dof} values, got {q.shape[0]}")
         if not np.isfinite(q).all():

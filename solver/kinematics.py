@@ -17,7 +17,8 @@ boundary costs reference counting, and numba's dispatcher type-checks each one.
     DD  float64[11, n]        reference pose, lower, upper, last q evaluated,
                               gradient scratch, 6 rows of Jacobian scratch
     MISC float64[5]           posture weight, limit weight, limit margin, goal
-                              measure of the last q evaluated, damping floor
+                              measure of the last q evaluated, damping floor,
+                              f of the last q evaluated
 
 The gradient needs no Jacobian matrix: for each effector we walk its ancestors once
 and accumulate J^T r column by column (revolute column: a x (p - o) for position and
@@ -82,7 +83,8 @@ MISC_LIMIT = 1
 MISC_MARGIN = 2
 MISC_GOAL = 3
 MISC_DAMPING = 4  # floor of the Gauss-Newton damping mu
-MISC_SIZE = 5
+MISC_LAST_F = 5  # f of the last q evaluated (DD_XLAST)
+MISC_SIZE = 6
 
 NODE_FIXED = 0
 NODE_ROTATION = 1
@@ -376,6 +378,7 @@ def ik_objective(q, g, need_grad, data):  # type: ignore[no-untyped-def]
     f += _regularisation(q, g, need_grad, dd, misc)
     # Remember the goal measure for this q so the goal test needs no second FK.
     misc[MISC_GOAL] = _goal_measure(ei, ed)
+    misc[MISC_LAST_F] = f
     for i in range(q.shape[0]):
         dd[DD_XLAST, i] = q[i]
     return f
@@ -397,6 +400,8 @@ def effector_errors(q, data):  # type: ignore[no-untyped-def]
     """Errors at q into ED[:, 34:36]; returns the goal measure."""
     ni, nd, ei, ed, dd, misc = data
     _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
+    # nd now holds q's frames but misc/XLAST do not describe q: mark them stale.
+    dd[DD_XLAST, 0] = math.nan
     return _goal_measure(ei, ed)
 
 
@@ -435,7 +440,16 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     n = q.shape[0]
     if n > METRIC_MAX_DOF:
         return False
-    f = _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
+    # The line search has usually just evaluated q: its frames are still in nd.
+    fresh = True
+    for i in range(n):
+        if q[i] != dd[DD_XLAST, i]:
+            fresh = False
+            break
+    if fresh:
+        f = misc[MISC_LAST_F]
+    else:
+        f = _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
     free = dd[DD_GSCRATCH]  # reused as a 0/1 mask of the free variables
     for i in range(n):
         free[i] = 0.0 if _held(i, q, g, lo, hi) else 1.0
