@@ -8,7 +8,7 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -25,9 +25,24 @@ class Settings(BaseSettings):
         default=5, ge=0, description="Time in-flight requests get on SIGTERM [s]"
     )
 
+    # Access control.
+    api_keys: SecretStr = Field(
+        default=SecretStr(""),
+        description="Comma-separated API keys for POST /v1/sessions and /v1/solve "
+        "(X-API-Key header); empty = no key needed. Never logged.",
+    )
+    cors_origins: str = Field(
+        default="",
+        description="Comma-separated origins allowed by CORS and for browser WebSockets "
+        "(Origin header); empty = none (closed)",
+    )
+
     # Sessions.
     session_ttl_s: float = Field(default=300.0, gt=0, description="Idle time before expiry [s]")
     max_sessions: int = Field(default=1000, ge=1, description="Session cap (503 when full)")
+    max_sessions_per_key: int = Field(
+        default=100, ge=1, description="Sessions per API key (429 when reached)"
+    )
     sweep_interval_s: float = Field(default=10.0, gt=0, description="Expiry sweep period [s]")
 
     # Limits.
@@ -41,6 +56,17 @@ class Settings(BaseSettings):
         default=1_048_576, ge=1024, description="WebSocket message size [bytes] (close 1009)"
     )
     max_websockets: int = Field(default=1000, ge=1, description="Open WebSockets (close 1013)")
+    max_frames_per_s: float = Field(
+        default=1000.0,
+        ge=0,
+        description="Frames per second per session, HTTP and WebSocket together "
+        "(token bucket; burst: one second's worth or a full clip); 0 = unlimited",
+    )
+    ws_send_timeout_s: float = Field(
+        default=10.0,
+        gt=0,
+        description="A WebSocket whose client does not read an answer for this long is dropped [s]",
+    )
     max_time_budget_us: float = Field(
         default=50_000.0, gt=0, description="Largest per-frame time budget a client may ask [us]"
     )
@@ -60,6 +86,14 @@ class Settings(BaseSettings):
     default_rotation_tolerance_rad: float = Field(default=1e-3, gt=0, description="[rad]")
     default_max_iter: int = Field(default=1000, ge=1, description="Iterations per frame")
     default_max_restarts: int = Field(default=50, ge=0, description="Restarts per frame")
+
+    def api_key_list(self) -> tuple[bytes, ...]:
+        """The configured API keys (UTF-8), empty when keys are off."""
+        raw = self.api_keys.get_secret_value()
+        return tuple(k.strip().encode() for k in raw.split(",") if k.strip())
+
+    def cors_origin_list(self) -> list[str]:
+        return [o.strip() for o in self.cors_origins.split(",") if o.strip()]
 
 
 @lru_cache

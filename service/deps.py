@@ -9,12 +9,14 @@ Authentication: every call that touches a session needs its token, as
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import time
 from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, Request
-from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from starlette import status
 from starlette.requests import HTTPConnection
 
@@ -35,6 +37,7 @@ class Services:
     store: SessionStore
     metrics: Metrics
     runner: Runner
+    api_keys: tuple[bytes, ...] = ()
     open_websockets: int = 0
 
 
@@ -79,6 +82,55 @@ async def authenticate(store: SessionStore, session_id: str, token: str | None) 
     return session
 
 
+API_KEY_HEADER = "X-API-Key"
+_api_key = APIKeyHeader(
+    name=API_KEY_HEADER,
+    auto_error=False,
+    description="Needed for POST /v1/sessions and /v1/solve when the server has IK_API_KEYS",
+)
+
+
+def key_fingerprint(key: bytes) -> str:
+    """What a session records about the key that created it (never the key)."""
+    return hashlib.sha256(key).hexdigest()[:16]
+
+
+def check_api_key(keys: tuple[bytes, ...], given: str | None) -> str | None:
+    """The fingerprint of ``given`` if it is one of ``keys``; None when keys are off.
+
+    Every configured key is compared (hmac.compare_digest, no early exit), so the time
+    taken says nothing about which key or how much of it matched.
+
+    Raises:
+        ServiceError: 401 ``unauthorized`` (no key), 403 ``forbidden`` (unknown key).
+    """
+    if not keys:
+        return None
+    if not given:
+        raise ServiceError(
+            "unauthorized",
+            f"this server needs an API key: {API_KEY_HEADER}: <key>",
+            status_code=status.HTTP_401_UNAUTHORIZED,
+        )
+    candidate = given.encode("utf-8", "surrogatepass")
+    match: bytes | None = None
+    for key in keys:
+        if hmac.compare_digest(candidate, key):
+            match = key
+    if match is None:
+        raise ServiceError(
+            "forbidden", "the API key is not valid", status_code=status.HTTP_403_FORBIDDEN
+        )
+    return key_fingerprint(match)
+
+
+async def api_key_auth(
+    request: Request, key: Annotated[str | None, Depends(_api_key)]
+) -> str | None:
+    """Dependency: the caller's API key fingerprint (None when keys are off)."""
+    return check_api_key(services(request).api_keys, key)
+
+
 _bearer = HTTPBearer(auto_error=False, description="The session token from POST /v1/sessions")
 
 
@@ -94,3 +146,4 @@ async def session_auth(
 
 ServicesDep = Annotated[Services, Depends(services)]
 SessionDep = Annotated[Session, Depends(session_auth)]
+OwnerDep = Annotated[str | None, Depends(api_key_auth)]

@@ -44,6 +44,7 @@ WS_FORBIDDEN = 4403
 WS_NOT_FOUND = 4404
 WS_CLOSE_CODES: dict[int, str] = {
     status.WS_1000_NORMAL_CLOSURE: "normal closure",
+    status.WS_1008_POLICY_VIOLATION: "the client did not read its answers (IK_WS_SEND_TIMEOUT_S)",
     status.WS_1009_MESSAGE_TOO_BIG: "message larger than IK_WS_MAX_MESSAGE_BYTES",
     status.WS_1011_INTERNAL_ERROR: "unexpected server error (logged)",
     status.WS_1012_SERVICE_RESTART: "the server is shutting down; reconnect",

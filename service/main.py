@@ -14,11 +14,12 @@ from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 from starlette import status
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from .config import Settings, get_settings
-from .deps import T0_KEY, Services
+from .deps import API_KEY_HEADER, T0_KEY, Services
 from .errors import install_handlers
 from .metrics import Metrics
 from .responses import ORJSONResponse, dumps
@@ -36,7 +37,8 @@ warm-started from the previous answer. `POST /v1/solve` is a stateless one-shot.
 Conventions: metres, radians, microseconds (`_us`); quaternions are objects
 `{w, x, y, z}`; finite numbers only; unknown fields are rejected. Errors are
 `{"detail", "code"}`. Session calls need `Authorization: Bearer <token>` (the token
-comes back from `POST /v1/sessions`). The WebSocket protocol
+comes back from `POST /v1/sessions`). When the server has API keys, `POST /v1/sessions`
+and `POST /v1/solve` need `X-API-Key: <key>`. The WebSocket protocol
 (`/v1/sessions/{id}/ws`) is described in the README.
 """
 
@@ -132,7 +134,9 @@ def create_app(
         sessions = store
         if sessions is None:  # (not `store or ...`: an empty store is falsy)
             sessions = InMemorySessionStore(
-                max_sessions=settings.max_sessions, ttl_s=settings.session_ttl_s
+                max_sessions=settings.max_sessions,
+                ttl_s=settings.session_ttl_s,
+                max_per_owner=settings.max_sessions_per_key,
             )
         metrics = Metrics(lambda: len(sessions))
         warm = Warmup(warmup)
@@ -141,8 +145,16 @@ def create_app(
             threads=settings.solver_threads,
             metrics=metrics,
             warmup=warm,
+            max_frames_per_s=settings.max_frames_per_s,
+            max_frames_per_request=settings.max_frames_per_request,
         )
-        app.state.ik = Services(settings=settings, store=sessions, metrics=metrics, runner=runner)
+        app.state.ik = Services(
+            settings=settings,
+            store=sessions,
+            metrics=metrics,
+            runner=runner,
+            api_keys=settings.api_key_list(),
+        )
         warm.start()
         sweeper = asyncio.create_task(_sweep(sessions, metrics, settings.sweep_interval_s))
         try:
@@ -164,6 +176,16 @@ def create_app(
     app.include_router(http.router)
     app.include_router(ws.router)
     app.include_router(health.router)
+    origins = settings.cors_origin_list()
+    if origins:  # closed by default: no CORS headers at all
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=origins,
+            allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
+            allow_headers=["Authorization", "Content-Type", API_KEY_HEADER],
+            expose_headers=["Location", "Retry-After"],
+            max_age=600,
+        )
     app.add_middleware(_TimingAndLimits, max_body_bytes=settings.max_body_bytes)
     return app
 

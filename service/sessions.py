@@ -11,6 +11,7 @@ from __future__ import annotations
 import abc
 import asyncio
 import hashlib
+import math
 import secrets
 import time
 from collections.abc import Callable
@@ -42,6 +43,8 @@ class Session:
         frames, solved: Counters.
         websockets: Open WebSocket connections (a session with one never expires).
         closed: Set when deleted or expired; waiting frames then answer not_found.
+        owner: Fingerprint of the API key that created it (None when keys are off).
+        bucket, bucket_at: Frame-rate token bucket (frames available, when counted).
     """
 
     id: str
@@ -56,13 +59,32 @@ class Session:
     solved: int = 0
     websockets: int = 0
     closed: bool = False
+    owner: str | None = None
+    bucket: float = math.inf
+    bucket_at: float = 0.0
+
+    def take_frames(self, n: int, *, now: float, rate_per_s: float, burst: float) -> float:
+        """Spend ``n`` frames from the session's token bucket.
+
+        Returns 0.0 when allowed, else the seconds until ``n`` frames are available
+        (nothing is spent then). ``rate_per_s`` 0 means unlimited.
+        """
+        if rate_per_s <= 0:
+            return 0.0
+        level = min(burst, self.bucket + (now - self.bucket_at) * rate_per_s)
+        self.bucket_at = now
+        if level >= n:
+            self.bucket = level - n
+            return 0.0
+        self.bucket = level
+        return (n - level) / rate_per_s
 
     def token_ok(self, token: str) -> bool:
         return secrets.compare_digest(token_digest(token), self.token_digest)
 
 
 def new_session(
-    view: ChainView, solver: IKSolver, options: IKOptions, *, now: float
+    view: ChainView, solver: IKSolver, options: IKOptions, *, now: float, owner: str | None = None
 ) -> tuple[Session, str]:
     """A session with fresh id and token (from ``secrets``); returns (session, token)."""
     token = secrets.token_urlsafe(32)
@@ -74,6 +96,8 @@ def new_session(
         options=options,
         created_at=time.time(),
         last_seen=now,
+        owner=owner,
+        bucket_at=now,
     )
     return session, token
 
@@ -86,6 +110,14 @@ class StoreFull(Exception):
         self.retry_after_s = retry_after_s
 
 
+class OwnerFull(Exception):
+    """The API key already holds its maximum of sessions."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__(f"this API key holds its maximum of {limit} sessions")
+        self.limit = limit
+
+
 class SessionStore(abc.ABC):
     """Where sessions live. Async so that a networked store fits the same interface."""
 
@@ -94,7 +126,8 @@ class SessionStore(abc.ABC):
 
     @abc.abstractmethod
     async def add(self, session: Session) -> None:
-        """Store a new session. Raises StoreFull at the cap (after expiring idle ones)."""
+        """Store a new session. Raises StoreFull at the cap (after expiring idle ones),
+        OwnerFull when its owner (API key) holds ``max_per_owner`` sessions."""
 
     @abc.abstractmethod
     async def get(self, session_id: str) -> Session | None:
@@ -122,9 +155,16 @@ class InMemorySessionStore(SessionStore):
     """A dict in this process (one worker). ``clock`` is injectable for tests."""
 
     def __init__(
-        self, *, max_sessions: int, ttl_s: float, clock: Callable[[], float] = time.monotonic
+        self,
+        *,
+        max_sessions: int,
+        ttl_s: float,
+        clock: Callable[[], float] = time.monotonic,
+        max_per_owner: int | None = None,
     ) -> None:
         self.max_sessions = max_sessions
+        self.max_per_owner = max_per_owner
+        self._owned: dict[str, int] = {}
         self.ttl_s = ttl_s
         self.clock = clock
         self._sessions: dict[str, Session] = {}
@@ -144,6 +184,13 @@ class InMemorySessionStore(SessionStore):
             # The most idle session expires first; with none expirable, try again in a ttl.
             retry = self.ttl_s - max(idle) if idle else self.ttl_s
             raise StoreFull(max(1.0, retry))
+        owner = session.owner
+        if owner is not None and self.max_per_owner is not None:
+            if self._owned.get(owner, 0) >= self.max_per_owner:
+                await self.expire()
+            if self._owned.get(owner, 0) >= self.max_per_owner:
+                raise OwnerFull(self.max_per_owner)
+            self._owned[owner] = self._owned.get(owner, 0) + 1
         self._sessions[session.id] = session
 
     async def get(self, session_id: str) -> Session | None:
@@ -157,6 +204,10 @@ class InMemorySessionStore(SessionStore):
         s = self._sessions.pop(session_id, None)
         if s is not None:
             s.closed = True
+            if s.owner is not None and s.owner in self._owned:
+                self._owned[s.owner] -= 1
+                if self._owned[s.owner] <= 0:
+                    del self._owned[s.owner]
         return s
 
     async def expire(self) -> list[Session]:

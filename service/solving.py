@@ -19,12 +19,13 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
 import numpy as np
+from starlette import status
 
 from solver.ik import IKOptions, IKResult, IKSolver
 from solver.ik import Target as SolverTarget
 
 from . import convert
-from .errors import not_found, not_ready
+from .errors import ServiceError, not_found, not_ready
 from .metrics import Metrics
 from .sessions import Session, SessionStore
 
@@ -83,9 +84,19 @@ class Runner:
     """Runs solves inline or in the pool, records metrics, keeps sessions in order."""
 
     def __init__(
-        self, *, inline_budget_us: float, threads: int, metrics: Metrics, warmup: Warmup
+        self,
+        *,
+        inline_budget_us: float,
+        threads: int,
+        metrics: Metrics,
+        warmup: Warmup,
+        max_frames_per_s: float = 0.0,
+        max_frames_per_request: int = 1,
     ) -> None:
         self.inline_budget_us = inline_budget_us
+        self.max_frames_per_s = max_frames_per_s
+        # One second's worth, and never less than the longest clip a request may carry.
+        self.burst = max(max_frames_per_s, float(max_frames_per_request))
         self.metrics = metrics
         self.warmup = warmup
         self.pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="ik-solve")
@@ -119,6 +130,11 @@ class Runner:
         frame is done, also when the caller goes away while a pooled solve runs.
         """
         self.check_ready()
+        wait_s = session.take_frames(
+            len(jobs), now=store.clock(), rate_per_s=self.max_frames_per_s, burst=self.burst
+        )
+        if wait_s > 0:
+            raise rate_limited(wait_s, self.max_frames_per_s)
         await session.lock.acquire()
         released = False
         try:
@@ -139,6 +155,15 @@ class Runner:
                 session.lock.release()
         store.touch(session)
         return out
+
+
+def rate_limited(wait_s: float, rate: float) -> ServiceError:
+    return ServiceError(
+        "rate_limited",
+        f"more than {rate:g} frames per second on this session (IK_MAX_FRAMES_PER_S)",
+        status_code=status.HTTP_429_TOO_MANY_REQUESTS,
+        retry_after_s=wait_s,
+    )
 
 
 def _track_all(

@@ -16,10 +16,10 @@ import schemas as S
 from schemas.chain import EXAMPLE_ARM
 
 from .. import convert
-from ..deps import ServicesDep, SessionDep, received_at
+from ..deps import OwnerDep, ServicesDep, SessionDep, received_at
 from ..errors import ServiceError, invalid_problem, not_found
 from ..responses import ORJSONResponse
-from ..sessions import Session, SessionStore, StoreFull, new_session
+from ..sessions import OwnerFull, Session, SessionStore, StoreFull, new_session
 from ..solving import make_solver, solve_once
 
 router = APIRouter(prefix="/v1")
@@ -35,6 +35,19 @@ _422: dict[int | str, dict[str, Any]] = {
 }
 _503: dict[int | str, dict[str, Any]] = {
     503: {**_E, "description": "`not_ready` (warming up) or `too_many_sessions`; see Retry-After"}
+}
+_KEY_ERRORS: dict[int | str, dict[str, Any]] = {
+    401: {**_E, "description": "No API key while the server requires one (`unauthorized`)"},
+    403: {**_E, "description": "Unknown API key (`forbidden`)"},
+}
+_429_KEY: dict[int | str, dict[str, Any]] = {
+    429: {**_E, "description": "This API key holds its maximum of sessions (`key_session_limit`)"}
+}
+_429_RATE: dict[int | str, dict[str, Any]] = {
+    429: {**_E, "description": "Over IK_MAX_FRAMES_PER_S for this session (`rate_limited`)"}
+}
+_413: dict[int | str, dict[str, Any]] = {
+    413: {**_E, "description": "Body over IK_MAX_BODY_BYTES (`payload_too_large`)"}
 }
 
 _CREATE_EXAMPLES = {
@@ -132,11 +145,13 @@ def _session_info(session: Session, store: SessionStore) -> dict[str, Any]:
     "/sessions",
     status_code=status.HTTP_201_CREATED,
     response_model=S.SessionCreated,
-    responses={**_422, **_503},
+    responses={**_KEY_ERRORS, **_413, **_422, **_429_KEY, **_503},
     tags=["sessions"],
 )
 async def create_session(
-    body: Annotated[S.SessionCreate, Body(openapi_examples=_CREATE_EXAMPLES)], svc: ServicesDep
+    body: Annotated[S.SessionCreate, Body(openapi_examples=_CREATE_EXAMPLES)],
+    svc: ServicesDep,
+    owner: OwnerDep,
 ) -> Response:
     """Create a session: a chain, solver options and an optional initial pose."""
     svc.runner.check_ready()
@@ -146,9 +161,16 @@ async def create_session(
     solver = await svc.runner.in_pool(make_solver, view, options)
     if body.initial_pose is not None:
         solver.set_pose(convert.pose_vector(body.initial_pose, view, solver.q, "initial_pose"))
-    session, token = new_session(view, solver, options, now=svc.store.clock())
+    session, token = new_session(view, solver, options, now=svc.store.clock(), owner=owner)
     try:
         await svc.store.add(session)
+    except OwnerFull as e:
+        raise ServiceError(
+            "key_session_limit",
+            f"this API key holds its maximum of {e.limit} sessions (IK_MAX_SESSIONS_PER_KEY); "
+            "delete one first",
+            status_code=status.HTTP_429_TOO_MANY_REQUESTS,
+        ) from None
     except StoreFull as e:
         raise ServiceError(
             "too_many_sessions",
@@ -236,7 +258,7 @@ async def delete_session(session: SessionDep, svc: ServicesDep) -> Response:
 @router.post(
     "/sessions/{session_id}/frames",
     response_model=S.FrameResults,
-    responses={**_AUTH_ERRORS, **_422, **_503},
+    responses={**_AUTH_ERRORS, **_413, **_422, **_429_RATE, **_503},
     tags=["sessions"],
 )
 async def post_frames(
@@ -263,8 +285,15 @@ async def post_frames(
     return ORJSONResponse({"results": results})
 
 
-@router.post("/solve", response_model=S.FrameResult, responses={**_422, **_503}, tags=["one-shot"])
-async def solve(body: S.SolveRequest, request: Request, svc: ServicesDep) -> Response:
+@router.post(
+    "/solve",
+    response_model=S.FrameResult,
+    responses={**_KEY_ERRORS, **_413, **_422, **_503},
+    tags=["one-shot"],
+)
+async def solve(
+    body: S.SolveRequest, request: Request, svc: ServicesDep, owner: OwnerDep
+) -> Response:
     """Stateless one-shot solve: a chain, one frame of targets, an optional seed."""
     t0 = received_at(request)
     svc.runner.check_ready()

@@ -5,7 +5,8 @@ server answers each one, in order, before reading the next. JSON text messages g
 text answers, MessagePack binary messages get MessagePack answers.
 
 Recoverable errors (an error ``result`` message; the socket stays open): invalid_format,
-invalid_problem, id_reuse, not_ready. Closes: 4401 unauthorized, 4403 forbidden,
+invalid_problem, id_reuse, not_ready, rate_limited. Closes: 4401 unauthorized, 4403
+forbidden (wrong token, or an Origin not in IK_CORS_ORIGINS),
 4404 not_found (at connect, or when the session was deleted / expired), 1009 message
 too big, 1013 too many WebSockets, 1011 unexpected error (after an internal_error
 message), 1012 server shutting down (uvicorn).
@@ -13,6 +14,8 @@ message), 1012 server shutting down (uvicorn).
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 import time
 from typing import Any
@@ -47,13 +50,30 @@ _AUTH_CLOSE = {
 }
 
 
+SUBPROTOCOL = "ik.v1"
+TOKEN_SUBPROTOCOL_PREFIX = "ik.token."
+
+
 def _token(ws: WebSocket) -> str | None:
+    """The session token: ``Authorization: Bearer``, else a ``ik.token.<token>``
+    subprotocol (browsers can set subprotocols, not headers), else ``?token=``."""
     auth = ws.headers.get("authorization")
     if auth is not None:
         scheme, _, value = auth.partition(" ")
         if scheme.lower() == "bearer" and value.strip():
             return value.strip()
+    for proto in ws.scope.get("subprotocols", ()):
+        if proto.startswith(TOKEN_SUBPROTOCOL_PREFIX) and len(proto) > len(
+            TOKEN_SUBPROTOCOL_PREFIX
+        ):
+            return str(proto[len(TOKEN_SUBPROTOCOL_PREFIX) :])
     return ws.query_params.get("token")
+
+
+def _subprotocol(ws: WebSocket) -> str | None:
+    """Echo ``ik.v1`` when offered (browsers fail a handshake that offered subprotocols
+    and got none back); never echo the token."""
+    return SUBPROTOCOL if SUBPROTOCOL in ws.scope.get("subprotocols", ()) else None
 
 
 def _error(msg_id: int | None, code: str, message: str, field: str | None = None) -> dict[str, Any]:
@@ -72,6 +92,17 @@ def _raw_id(raw: Any) -> int | None:
     return None
 
 
+class _SlowReader(Exception):
+    """The client stopped reading its answers."""
+
+
+def _origin_ok(ws: WebSocket, allowed: list[str]) -> bool:
+    """Browsers send Origin; other clients usually do not. Only configured origins
+    (IK_CORS_ORIGINS) may open a WebSocket from a browser."""
+    origin = ws.headers.get("origin")
+    return origin is None or origin in allowed or "*" in allowed
+
+
 class _Connection:
     """One open socket: decoding, the id sequence, replies in the request's encoding."""
 
@@ -82,10 +113,20 @@ class _Connection:
         self.last_id = -1
 
     async def send(self, payload: dict[str, Any], binary: bool) -> None:
-        if binary:
-            await self.ws.send_bytes(msgpack.packb(payload))
-        else:
-            await self.ws.send_text(orjson.dumps(payload).decode())
+        """Send one answer; a client that has not read for ws_send_timeout_s is dropped.
+
+        uvicorn's send waits while the transport's write buffer is above its high-water
+        mark, and the server reads the next message only after answering this one, so a
+        client that stops reading costs at most one answer plus the socket buffers.
+        """
+        timeout = self.svc.settings.ws_send_timeout_s
+        try:
+            if binary:
+                await asyncio.wait_for(self.ws.send_bytes(msgpack.packb(payload)), timeout)
+            else:
+                await asyncio.wait_for(self.ws.send_text(orjson.dumps(payload).decode()), timeout)
+        except TimeoutError:
+            raise _SlowReader from None
 
     async def reply_error(
         self, binary: bool, msg_id: int | None, code: str, message: str, field: str | None = None
@@ -146,7 +187,11 @@ class _Connection:
 async def session_ws(ws: WebSocket, session_id: str) -> None:
     """Frames over a WebSocket (protocol in the README)."""
     svc = services(ws)
-    await ws.accept()
+    await ws.accept(subprotocol=_subprotocol(ws))
+    if not _origin_ok(ws, svc.settings.cors_origin_list()):
+        svc.metrics.error("forbidden_origin", "ws")
+        await ws.close(code=WS_FORBIDDEN, reason="forbidden_origin")
+        return
     try:
         session = await authenticate(svc.store, session_id, _token(ws))
     except ServiceError as e:
@@ -185,6 +230,16 @@ async def session_ws(ws: WebSocket, session_id: str) -> None:
                 await ws.close(code=WS_NOT_FOUND, reason=e.code)
                 return
     except WebSocketDisconnect:
+        return
+    except _SlowReader:
+        svc.metrics.error("slow_reader", "ws")
+        log.info("dropped a WebSocket whose client stopped reading")
+        # The close frame queues behind the unread answers; if even that cannot be
+        # written, give up: returning lets the server close the transport.
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(
+                ws.close(code=status.WS_1008_POLICY_VIOLATION, reason="slow_reader"), 1.0
+            )
         return
     except Exception:
         log.exception("unexpected error on a WebSocket")
