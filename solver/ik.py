@@ -58,6 +58,8 @@ from .kinematics import (
 from .termination import Termination
 from .types import Matrix, MinimizeOptions, PassRecord, Vector
 
+SEED_NOT_FINITE = -2  # _solve_core's "bad" code for a seed with NaN or inf
+
 
 @jit
 def _check_targets(data):  # type: ignore[no-untyped-def]
@@ -114,7 +116,10 @@ def _solve_core(data, x0, h, fopt, iopt, policy, log, out_x, errors):  # type: i
     dd = data[4]
     n = x0.shape[0]
     out_g = np.empty(n)
-    if bad >= 0:
+    for i in range(n):
+        if not math.isfinite(x0[i]):
+            bad = SEED_NOT_FINITE
+    if bad != -1:
         return bad, (0.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0, 0.0), 0.0
     trace = np.empty((0, 5))
     # fg=None: the core binds the objective registered for this data type (cacheable).
@@ -150,7 +155,10 @@ def _null_space_frame(data, q, rest, max_step, out, errors):  # type: ignore[no-
 def _report_only(data, q, errors):  # type: ignore[no-untyped-def]
     """Validate targets and report errors at q without solving (chains with no variables)."""
     bad = _check_targets(data)
-    if bad >= 0:
+    for i in range(q.shape[0]):
+        if not math.isfinite(q[i]):
+            bad = SEED_NOT_FINITE
+    if bad != -1:
         return bad, 0.0
     return bad, _report(data, q, errors)
 
@@ -430,7 +438,8 @@ class IKSolver:
         self._data = (cc.ni, cc.nd.copy(), self._ei, self._ed, self._dd, self._misc)
         _register_once(self._data)
         self._chain_dofs = cc.eff_dofs
-        self._effector_slot = {name: i for i, name in enumerate(chain.effector_names)}
+        self._effector_names = chain.effector_names
+        self._effector_slot = {name: i for i, name in enumerate(self._effector_names)}
         self._modes = tuple(e.mode for e in chain.effectors)
         self._static_weights = chain.compiled.ed[:, ED_WP].copy()
         self._active: list[int] = []
@@ -559,11 +568,10 @@ class IKSolver:
     # -- internals -------------------------------------------------------------
     def _check_seed(self, seed: Vector) -> Vector:
         # No copy: the core projects the seed into its own buffer and never writes it.
+        # Finiteness is checked in the compiled call (``_solve_core``), not here.
         q = np.asarray(seed, dtype=np.float64).reshape(-1)
         if q.shape != (self.chain.n_dof,):
             raise DimensionMismatch(f"seed must have {self.chain.n_dof} values, got {q.shape[0]}")
-        if not np.isfinite(q).all():
-            raise InvalidProblem("seed must be finite")
         return q
 
     def _load_targets(self, targets: Sequence[Target], opts: IKOptions) -> None:
@@ -668,7 +676,7 @@ class IKSolver:
         mopts, fopt, iopt, policy = self._packed_options(opts)
         iopt[C.I_SEED] = self._next_seed(rng)
         h = self._identity.copy() if h0 is None else h0.copy()
-        log = np.zeros((mopts.max_passes, C.N_LOG))
+        log = np.empty((mopts.max_passes, C.N_LOG))  # the core fills the rows it reports
         out_x = np.empty(n)
         errors = np.empty((len(self.chain.effectors), 3))
         if n == 0:
@@ -707,6 +715,8 @@ class IKSolver:
         )
 
     def _raise_bad_target(self, bad: int) -> None:
+        if bad == SEED_NOT_FINITE:
+            raise InvalidProblem("seed must be finite")
         if bad >= 0:
             name = self.chain.effectors[bad // 3].name
             what = (
@@ -738,7 +748,7 @@ class IKSolver:
             success=status is IKStatus.SOLVED,
             termination=termination,
             raw_errors=errors,
-            effector_names=self.chain.effector_names,
+            effector_names=self._effector_names,
             tolerances=(opts.position_tolerance_m, opts.rotation_tolerance_rad),
             iterations=nit,
             function_evals=nfev,
