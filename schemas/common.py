@@ -61,7 +61,8 @@ class Quaternion(StrictModel):
 
     @model_validator(mode="after")
     def _unit_norm(self) -> Quaternion:
-        norm = math.sqrt(self.w**2 + self.x**2 + self.y**2 + self.z**2)
+        # hypot, not sqrt of squares: 1e200**2 overflows (found by schemathesis: a 500).
+        norm = math.hypot(self.w, self.x, self.y, self.z)
         if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
             raise ValueError(
                 f"quaternion must have unit norm (within {QUATERNION_NORM_TOLERANCE}), "

@@ -254,6 +254,14 @@ HTTP_ROWS = [
         "invalid_format",
         "origin.rotation",
     ),
+    Row(  # found by schemathesis: the norm check squared 1e218 (OverflowError, a 500)
+        "quaternion-1e218",
+        S,
+        body(arm(a=joint(1, origin={"rotation": {"w": 0, "x": 0, "y": 0, "z": 1e218}}))),
+        422,
+        "invalid_format",
+        "origin.rotation",
+    ),
     Row(
         "1e308-translation",
         S,
