@@ -7,8 +7,12 @@ import os
 # Before numpy is imported: one BLAS thread (solves are tiny; threads only contend).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import asyncio  # noqa: E402
 import logging  # noqa: E402
 import re  # noqa: E402
+import socket  # noqa: E402
+import time  # noqa: E402
+from typing import Any  # noqa: E402
 
 import uvicorn  # noqa: E402
 
@@ -30,6 +34,28 @@ class _RedactTokens(logging.Filter):
         return True
 
 
+class DrainingServer(uvicorn.Server):
+    """uvicorn's server, with one step before its shutdown: stop accepting, then let the
+    WebSocket messages in flight be answered (each such socket then closes 1012),
+    within IK_GRACEFUL_SHUTDOWN_S. uvicorn then closes the remaining (idle) WebSockets
+    with 1012 and gives HTTP requests in flight the rest of the graceful time."""
+
+    def __init__(self, config: uvicorn.Config, app: Any) -> None:
+        super().__init__(config)
+        self.app = app
+
+    async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+        for server in self.servers:  # refuse new connections from now on
+            server.close()
+        svc = getattr(self.app.state, "ik", None)
+        if svc is not None:
+            svc.draining = True
+            deadline = time.monotonic() + float(self.config.timeout_graceful_shutdown or 0)
+            while svc.ws_in_flight > 0 and time.monotonic() < deadline:
+                await asyncio.sleep(0.005)
+        await super().shutdown(sockets)
+
+
 def main() -> None:
     settings = get_settings()
     logging.basicConfig(level=settings.log_level.upper(), format="%(levelname)s:     %(message)s")
@@ -43,8 +69,9 @@ def main() -> None:
         host,
         settings.port,
     )
-    uvicorn.run(
-        create_app(settings),
+    app = create_app(settings)
+    config = uvicorn.Config(
+        app,
         host=settings.host,
         port=settings.port,
         ws="websockets-sansio",
@@ -53,6 +80,7 @@ def main() -> None:
         log_level=settings.log_level,
         log_config=None,
     )
+    DrainingServer(config, app).run()
 
 
 if __name__ == "__main__":

@@ -39,6 +39,8 @@ class Services:
     runner: Runner
     api_keys: tuple[bytes, ...] = ()
     open_websockets: int = 0
+    ws_in_flight: int = 0  # WebSocket messages received and not yet answered
+    draining: bool = False  # set on SIGTERM (python -m service): answer, then close 1012
 
 
 def services(conn: HTTPConnection) -> Services:

@@ -224,10 +224,16 @@ async def session_ws(ws: WebSocket, session_id: str) -> None:
             if session.closed:
                 await ws.close(code=WS_NOT_FOUND, reason="not_found")
                 return
+            svc.ws_in_flight += 1
             try:
                 await conn.handle(data, t0)
             except ServiceError as e:  # the session went away while the frame waited
                 await ws.close(code=WS_NOT_FOUND, reason=e.code)
+                return
+            finally:
+                svc.ws_in_flight -= 1
+            if svc.draining:  # shutting down: this message was answered; no more
+                await ws.close(code=status.WS_1012_SERVICE_RESTART, reason="shutting_down")
                 return
     except WebSocketDisconnect:
         return

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import signal
+import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -117,3 +119,77 @@ def test_token_is_redacted_from_the_access_log(server: Server) -> None:
         ws.send(json.dumps({"type": "ping", "id": 1}))
         assert json.loads(ws.recv(timeout=TIMEOUT_S))["type"] == "pong"
     assert token not in server.log()
+
+
+def _slow_session(server: Server) -> tuple[str, dict[str, str]]:
+    """A session whose frames each burn a 50 ms budget (unreachable target, pooled)."""
+    r = httpx.post(
+        f"{server.base}/v1/sessions",
+        json={"chain": PANDA, "options": {"time_budget_us": 50_000, "max_iter": 100_000}},
+        timeout=TIMEOUT_S,
+    )
+    assert r.status_code == 201, r.text
+    return r.json()["id"], {"Authorization": f"Bearer {r.json()['token']}"}
+
+
+def _refused(server: Server) -> bool:
+    """True once a new connection is refused (polled, bounded: at most 5 s)."""
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline:
+        try:
+            httpx.get(f"{server.base}/healthz", timeout=1.0)
+        except httpx.ConnectError:
+            return True
+        except httpx.HTTPError:
+            pass
+        time.sleep(0.02)
+    return False
+
+
+def test_sigterm_answers_http_frames_in_flight_and_refuses_new_connections(
+    start_server: Callable[..., Server],
+) -> None:
+    doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="10")
+    sid, headers = _slow_session(doomed)
+    far = {**tool_target(0.1), "position": {"x": 9.0, "y": 0.0, "z": 0.0}}
+    clip = {"frames": [{"id": i, "targets": [far]} for i in range(20)]}  # about 1 s
+    result: dict[str, Any] = {}
+
+    def post() -> None:
+        result["r"] = httpx.post(
+            f"{doomed.base}/v1/sessions/{sid}/frames", json=clip, headers=headers, timeout=30.0
+        )
+
+    t = threading.Thread(target=post)
+    t.start()
+    time.sleep(0.3)  # the clip is being solved (a 20 x 50 ms clip)
+    doomed.proc.send_signal(signal.SIGTERM)
+    assert _refused(doomed)
+    t.join(TIMEOUT_S)
+    r = result["r"]
+    assert r.status_code == 200
+    assert [x["id"] for x in r.json()["results"]] == list(range(20))
+    assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)
+
+
+def test_sigterm_answers_the_ws_frame_in_flight_then_closes_1012(
+    start_server: Callable[..., Server],
+) -> None:
+    doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="10")
+    sid, headers = _slow_session(doomed)
+    far = {**tool_target(0.1), "position": {"x": 9.0, "y": 0.0, "z": 0.0}}
+    with ws_connect(doomed, sid, headers) as ws:
+        for i in range(20):  # pipelined, 50 ms each
+            ws.send(json.dumps({"type": "frame", "id": i, "targets": [far]}))
+        first = json.loads(ws.recv(timeout=TIMEOUT_S))
+        assert first["id"] == 0
+        doomed.proc.send_signal(signal.SIGTERM)
+        answered = []
+        with pytest.raises(ConnectionClosed) as info:
+            while True:
+                answered.append(json.loads(ws.recv(timeout=TIMEOUT_S)))
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1012
+    # The frame in flight when SIGTERM came was answered (a result, not lost).
+    assert answered and all(a["type"] == "result" and "result" in a for a in answered)
+    assert [a["id"] for a in answered] == list(range(1, 1 + len(answered)))
+    assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)
