@@ -31,6 +31,7 @@ from fastapi.exceptions import RequestValidationError
 from starlette import status
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import Response
+from starlette.routing import compile_path
 
 from solver.errors import IKError
 
@@ -171,9 +172,35 @@ async def _http_error(request: Request, exc: Exception) -> Response:
             status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
         )
     code = _HTTP_CODES.get(exc.status_code, "http_error")
+    headers = dict(exc.headers or {})
+    if exc.status_code == status.HTTP_405_METHOD_NOT_ALLOWED:
+        headers["Allow"] = _allowed_methods(request)
     return ORJSONResponse(
-        {"detail": exc.detail, "code": code}, status_code=exc.status_code, headers=exc.headers
+        {"detail": exc.detail, "code": code}, status_code=exc.status_code, headers=headers
     )
+
+
+def _allowed_methods(request: Request) -> str:
+    """Every method of every route on this path (found by schemathesis: starlette's
+    405 names only the first route's methods, here GET of GET/PATCH/DELETE). Read
+    from the app's own OpenAPI paths, compiled once."""
+    table = getattr(request.app.state, "allow_table", None)
+    if table is None:
+        table = [
+            (compile_path(path)[0], {m.upper() for m in ops if m.upper() in _METHODS})
+            for path, ops in request.app.openapi().get("paths", {}).items()
+        ]
+        request.app.state.allow_table = table
+    methods: set[str] = set()
+    for regex, ms in table:
+        if regex.match(request.url.path):
+            methods |= ms
+    if "GET" in methods:
+        methods.add("HEAD")
+    return ", ".join(sorted(methods))
+
+
+_METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"})
 
 
 async def _internal_error(request: Request, exc: Exception) -> Response:

@@ -628,3 +628,13 @@ def test_ws_frames_for_an_expired_session_close_4404(
         with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
             ws.receive_json()
     assert info.value.code == 4404
+
+
+def test_405_lists_every_method_of_the_path(client: TestClient) -> None:
+    # Found by schemathesis: starlette named only the first route's methods (GET).
+    s = new_session(client)
+    r = client.request("OPTIONS", f"/v1/sessions/{s.id}", headers=s.headers)
+    assert r.status_code == 405 and r.json()["code"] == "method_not_allowed"
+    assert set(r.headers["allow"].split(", ")) == {"GET", "HEAD", "PATCH", "DELETE"}
+    r = client.put("/v1/sessions", headers=s.headers)
+    assert r.status_code == 405 and r.headers["allow"] == "POST"
