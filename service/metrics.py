@@ -4,11 +4,12 @@ Series: ``ik_frames_total{termination,success}``, ``ik_restarts_total``,
 ``ik_solve_duration_seconds`` (the solver alone), ``ik_server_duration_seconds{transport}``
 (message received to reply ready), ``ik_active_sessions``, ``ik_websockets``
 (open WebSockets), ``ik_errors_total{code,transport}``, ``ik_sessions_created_total``,
-``ik_sessions_expired_total``. Labels are enum values, never session ids.
+``ik_sessions_expired_total``, ``ik_event_loop_tasks``. Labels are enum values, never session ids.
 """
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
@@ -18,6 +19,13 @@ from solver.termination import Termination
 
 # 10 us .. ~0.33 s, x2 steps: solves take microseconds to the frame's budget.
 _BUCKETS = tuple(10e-6 * 2**k for k in range(16))
+
+
+def _loop_tasks() -> float:
+    try:
+        return float(len(asyncio.all_tasks()))
+    except RuntimeError:  # scraped outside a running loop (tests)
+        return 0.0
 
 
 class Metrics:
@@ -54,6 +62,9 @@ class Metrics:
             ["code", "transport"],
             registry=r,
         )
+        # Read at scrape time, on the event loop: what a soak watches for leaks.
+        self.tasks = Gauge("ik_event_loop_tasks", "Tasks on the server's event loop", registry=r)
+        self.tasks.set_function(_loop_tasks)
         self.sessions_created = Counter("ik_sessions_created", "Sessions created", registry=r)
         self.sessions_expired = Counter("ik_sessions_expired", "Sessions expired", registry=r)
         # Bind label children once: .labels() costs a dict lookup and a lock per call.

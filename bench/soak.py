@@ -1,0 +1,355 @@
+"""Soak: steady WebSocket and HTTP traffic with session churn against a real
+`python -m service` on 127.0.0.1, for a bounded time; reports the server's memory
+(RSS), round-trip p99 over time, and what is left behind (sessions, WebSockets,
+event-loop tasks, threads).
+
+    python -m bench.soak [--duration 600] [--ws-clients 3] [--http-clients 1]
+                         [--rate 50] [--churn 10] [--append]
+
+Each WebSocket client creates a session, opens a socket, streams panda frames at
+``--rate`` per second, and every ``--churn`` seconds closes the socket, deletes the
+session and starts over; each HTTP client does the same with POST frames (a 5-frame
+clip every tenth request). After the run every client has deleted its session, so
+sessions, WebSockets and event-loop tasks must be back to where they started.
+Exit status 1 when RSS grew more than ``--max-growth`` after warm-up or anything was
+left behind (the CI test, tests/live/test_soak.py, runs it for 60 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import math
+import os
+import re
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+import psutil
+from websockets.sync.client import connect
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "bench" / "RESULTS.md"
+PANDA = {"format": "example", "name": "panda_arm"}
+
+
+def _target(t: float) -> dict[str, Any]:
+    return {
+        "effector": "tool",
+        "position": {"x": 0.4, "y": 0.1 + 0.05 * math.sin(t), "z": 0.5},
+        "orientation": {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0},
+    }
+
+
+@dataclass
+class Shared:
+    """What the clients record; one lock (the rates are low)."""
+
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    rtts: list[tuple[float, float]] = field(default_factory=list)  # (time, seconds)
+    errors: dict[str, int] = field(default_factory=dict)
+    frames: int = 0
+    sessions: int = 0
+    stop: threading.Event = field(default_factory=threading.Event)
+
+    def rtt(self, t: float, s: float) -> None:
+        with self.lock:
+            self.rtts.append((t, s))
+            self.frames += 1
+
+    def error(self, what: str) -> None:
+        with self.lock:
+            self.errors[what] = self.errors.get(what, 0) + 1
+
+
+def _session(base: str) -> tuple[str, dict[str, str]]:
+    r = httpx.post(f"{base}/v1/sessions", json={"chain": PANDA}, timeout=30.0)
+    r.raise_for_status()
+    return r.json()["id"], {"Authorization": f"Bearer {r.json()['token']}"}
+
+
+def _delete(base: str, sid: str, headers: dict[str, str]) -> None:
+    httpx.delete(f"{base}/v1/sessions/{sid}", headers=headers, timeout=30.0)
+
+
+def ws_client(base: str, shared: Shared, rate: float, churn_s: float) -> None:
+    period = 1.0 / rate
+    while not shared.stop.is_set():
+        try:
+            sid, headers = _session(base)
+            with shared.lock:
+                shared.sessions += 1
+            url = base.replace("http", "ws", 1) + f"/v1/sessions/{sid}/ws"
+            with connect(url, additional_headers=headers, open_timeout=30.0) as ws:
+                until = time.monotonic() + churn_s
+                i = 0
+                while time.monotonic() < until and not shared.stop.is_set():
+                    t0 = time.perf_counter()
+                    ws.send(json.dumps({"type": "frame", "id": i, "targets": [_target(i * 0.05)]}))
+                    reply = json.loads(ws.recv(timeout=30.0))
+                    shared.rtt(time.monotonic(), time.perf_counter() - t0)
+                    if "error" in reply:
+                        shared.error(reply["error"]["code"])
+                    i += 1
+                    time.sleep(max(0.0, period - (time.perf_counter() - t0)))
+            _delete(base, sid, headers)
+        except Exception as e:  # counted, and the client starts over
+            shared.error(type(e).__name__)
+            time.sleep(0.1)
+
+
+def http_client(base: str, shared: Shared, rate: float, churn_s: float) -> None:
+    period = 1.0 / rate
+    with httpx.Client(timeout=30.0) as client:
+        while not shared.stop.is_set():
+            try:
+                sid, headers = _session(base)
+                with shared.lock:
+                    shared.sessions += 1
+                until = time.monotonic() + churn_s
+                i = 0
+                while time.monotonic() < until and not shared.stop.is_set():
+                    t0 = time.perf_counter()
+                    n = 5 if i % 10 == 9 else 1
+                    frames = [{"id": i + k, "targets": [_target((i + k) * 0.05)]} for k in range(n)]
+                    body = frames[0] if n == 1 else {"frames": frames}
+                    r = client.post(f"{base}/v1/sessions/{sid}/frames", json=body, headers=headers)
+                    shared.rtt(time.monotonic(), time.perf_counter() - t0)
+                    if r.status_code != 200:
+                        shared.error(f"http_{r.status_code}")
+                    i += n
+                    time.sleep(max(0.0, period - (time.perf_counter() - t0)))
+                client.delete(f"{base}/v1/sessions/{sid}", headers=headers)
+            except Exception as e:
+                shared.error(type(e).__name__)
+                time.sleep(0.1)
+
+
+def _metric(text: str, name: str) -> float:
+    m = re.search(rf"^{name} ([0-9.e+-]+)$", text, re.M)
+    return float(m.group(1)) if m else float("nan")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Sample:
+    t_s: float
+    rss_mb: float
+    p99_ms: float
+    frames: int
+    sessions: float
+    websockets: float
+    tasks: float
+    threads: int
+
+
+def run(
+    *,
+    duration_s: float = 600.0,
+    ws_clients: int = 3,
+    http_clients: int = 1,
+    rate: float = 50.0,
+    churn_s: float = 10.0,
+    sample_s: float = 5.0,
+    warmup_s: float | None = None,
+    log: Any = print,
+) -> dict[str, Any]:
+    """Run a soak; returns the samples and the verdict figures."""
+    port = _free_port()
+    base = f"http://127.0.0.1:{port}"
+    env = {
+        **os.environ,
+        "IK_HOST": "127.0.0.1",
+        "IK_PORT": str(port),
+        "IK_LOG_LEVEL": "warning",
+        "IK_GRACEFUL_SHUTDOWN_S": "2",
+    }
+    env.pop("OPENBLAS_NUM_THREADS", None)
+    server = subprocess.Popen(
+        [sys.executable, "-m", "service"],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 240.0
+        while True:
+            try:
+                if httpx.get(f"{base}/readyz", timeout=2.0).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            if server.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError("server did not become ready")
+            time.sleep(0.2)
+        proc = psutil.Process(server.pid)
+
+        def scrape() -> str:
+            return httpx.get(f"{base}/metrics", timeout=10.0).text
+
+        before = scrape()
+        tasks0 = _metric(before, "ik_event_loop_tasks")
+        threads0 = proc.num_threads()
+        shared = Shared()
+        clients = [
+            threading.Thread(target=ws_client, args=(base, shared, rate, churn_s), daemon=True)
+            for _ in range(ws_clients)
+        ] + [
+            threading.Thread(target=http_client, args=(base, shared, rate, churn_s), daemon=True)
+            for _ in range(http_clients)
+        ]
+        t_start = time.monotonic()
+        for c in clients:
+            c.start()
+        samples: list[Sample] = []
+        seen = 0
+        while (now := time.monotonic()) - t_start < duration_s:
+            time.sleep(min(sample_s, max(0.0, duration_s - (now - t_start))))
+            text = scrape()
+            with shared.lock:
+                window = [s for _, s in shared.rtts[seen:]]
+                seen = len(shared.rtts)
+                frames = shared.frames
+            window.sort()
+            p99 = window[min(len(window) - 1, int(0.99 * len(window)))] * 1e3 if window else 0.0
+            sample = Sample(
+                t_s=time.monotonic() - t_start,
+                rss_mb=proc.memory_info().rss / 2**20,
+                p99_ms=p99,
+                frames=frames,
+                sessions=_metric(text, "ik_active_sessions"),
+                websockets=_metric(text, "ik_websockets"),
+                tasks=_metric(text, "ik_event_loop_tasks"),
+                threads=proc.num_threads(),
+            )
+            samples.append(sample)
+            log(
+                f"t={sample.t_s:6.0f} s  rss={sample.rss_mb:7.1f} MB  p99={p99:6.2f} ms  "
+                f"frames={frames:7d}  sessions={sample.sessions:.0f}  "
+                f"ws={sample.websockets:.0f}  tasks={sample.tasks:.0f}  threads={sample.threads}"
+            )
+        shared.stop.set()
+        for c in clients:
+            c.join(60.0)
+        # Let the server see the last closes and deletes (bounded).
+        settle = time.monotonic() + 10.0
+        while True:
+            after = scrape()
+            left = (
+                _metric(after, "ik_active_sessions"),
+                _metric(after, "ik_websockets"),
+                _metric(after, "ik_event_loop_tasks") - tasks0,
+            )
+            if left == (0.0, 0.0, 0.0) or time.monotonic() > settle:
+                break
+            time.sleep(0.2)
+        warm = warmup_s if warmup_s is not None else max(sample_s, 0.25 * duration_s)
+        after_warm = [s for s in samples if s.t_s >= warm] or samples
+        rss_warm = after_warm[0].rss_mb
+        rss_end = samples[-1].rss_mb
+        return {
+            "samples": samples,
+            "rss_after_warmup_mb": rss_warm,
+            "rss_end_mb": rss_end,
+            "rss_growth": (rss_end - rss_warm) / rss_warm,
+            "sessions_left": left[0],
+            "websockets_left": left[1],
+            "tasks_left": left[2],
+            "threads_start": threads0,
+            "threads_end": proc.num_threads(),
+            "frames": shared.frames,
+            "sessions_created": shared.sessions,
+            "errors": dict(shared.errors),
+            "duration_s": duration_s,
+            "clients": f"{ws_clients} WebSocket + {http_clients} HTTP at {rate:g} frames/s each",
+            "churn_s": churn_s,
+        }
+    finally:
+        server.terminate()
+        try:
+            server.wait(30.0)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait(10.0)
+
+
+def verdict(out: dict[str, Any], max_growth: float) -> list[str]:
+    problems = []
+    if out["rss_growth"] > max_growth:
+        problems.append(f"RSS grew {out['rss_growth']:.1%} after warm-up (> {max_growth:.0%})")
+    for what in ("sessions_left", "websockets_left", "tasks_left"):
+        if out[what] != 0:
+            problems.append(f"{what}: {out[what]:g}")
+    return problems
+
+
+def _markdown(out: dict[str, Any], cmd: str, problems: list[str]) -> str:
+    when = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    rows = "\n".join(
+        f"| {s.t_s:.0f} | {s.rss_mb:.1f} | {s.p99_ms:.2f} | {s.frames} | {s.sessions:.0f} | "
+        f"{s.websockets:.0f} | {s.tasks:.0f} | {s.threads} |"
+        for s in out["samples"]
+    )
+    return (
+        f"\nCommand: `{cmd}` (run {when}, 2 shared cores; client and server on the same "
+        f"machine). Traffic: {out['clients']}, session churn every {out['churn_s']:g} s.\n\n"
+        f"| t [s] | server RSS [MB] | round-trip p99 [ms] | frames so far | sessions | "
+        f"WebSockets | loop tasks | threads |\n|---|---|---|---|---|---|---|---|\n{rows}\n\n"
+        f"- frames {out['frames']}, sessions created {out['sessions_created']}, client-side "
+        f"errors {out['errors'] or 'none'}\n"
+        f"- RSS after warm-up {out['rss_after_warmup_mb']:.1f} MB, at the end "
+        f"{out['rss_end_mb']:.1f} MB: growth {out['rss_growth']:+.1%}\n"
+        f"- left behind after the clients stopped: sessions {out['sessions_left']:g}, "
+        f"WebSockets {out['websockets_left']:g}, event-loop tasks {out['tasks_left']:+g}; "
+        f"threads {out['threads_start']} at the start, {out['threads_end']} at the end\n"
+        f"- verdict: {'PASS' if not problems else 'FAIL: ' + '; '.join(problems)}\n"
+    )
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
+    ap.add_argument("--ws-clients", type=int, default=3)
+    ap.add_argument("--http-clients", type=int, default=1)
+    ap.add_argument("--rate", type=float, default=50.0, help="frames/s per client")
+    ap.add_argument("--churn", type=float, default=10.0, help="seconds per session")
+    ap.add_argument("--sample", type=float, default=10.0, help="seconds between samples")
+    ap.add_argument("--max-growth", type=float, default=0.10)
+    ap.add_argument("--append", action="store_true", help="append to bench/RESULTS.md")
+    args = ap.parse_args()
+    out = run(
+        duration_s=args.duration,
+        ws_clients=args.ws_clients,
+        http_clients=args.http_clients,
+        rate=args.rate,
+        churn_s=args.churn,
+        sample_s=args.sample,
+    )
+    problems = verdict(out, args.max_growth)
+    cmd = "python -m bench.soak " + " ".join(sys.argv[1:])
+    text = _markdown(out, cmd.strip(), problems)
+    print(text)
+    if args.append:
+        body = RESULTS.read_text()
+        if "\n## Soak\n" not in body:
+            body += "\n## Soak\n"
+        RESULTS.write_text(body + text)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
