@@ -27,8 +27,10 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -37,6 +39,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import httpx  # noqa: E402
 
+from .clients import create_session_sticky  # noqa: E402
 from .report import summarize  # noqa: E402
 from .run import RunConfig, run  # noqa: E402
 
@@ -221,8 +224,26 @@ def search(dep: Deployment, sc: Scenario, args: argparse.Namespace) -> dict[str,
     return {"scenario": sc.__dict__, "best": best, "first_failing_clients": fail, "trials": trials}
 
 
+def _burst(dep: Deployment, n: int) -> list[int]:
+    """Sessions per worker when n connections open at the same moment (n threads)."""
+    body = b'{"chain": {"format": "example", "name": "panda_arm"}}'
+    barrier = threading.Barrier(n)
+
+    def one(_: int) -> str | None:
+        barrier.wait(timeout=30.0)
+        sock, _created, worker = create_session_sticky("127.0.0.1", dep.port, body, 30.0)
+        sock.close()
+        return worker
+
+    with ThreadPoolExecutor(max_workers=n) as pool:
+        workers = list(pool.map(one, range(n)))
+    split = sorted(Counter(workers).values(), reverse=True)
+    return split + [0] * (dep.workers - len(split))
+
+
 def balance(args: argparse.Namespace, log: Path) -> dict[str, list[list[int]]]:
-    """Sessions per worker when 16 clients connect at once, 5 rounds per deployment."""
+    """Sessions per worker for 16 new connections over 2 workers, 5 rounds each way:
+    through the generator (6 connecting at a time) and as a burst (16 at the same moment)."""
     out: dict[str, list[list[int]]] = {}
     for mode in ("shared", "reuseport"):
         dep = Deployment("service", 2, mode, log)
@@ -243,7 +264,8 @@ def balance(args: argparse.Namespace, log: Path) -> dict[str, list[list[int]]]:
                 split = sorted(Counter(s["sessions"]["per_worker"]).values(), reverse=True)
                 rounds.append(split + [0] * (2 - len(split)))
             out[mode] = rounds
-            print(f"  balance {mode}: {rounds}", flush=True)
+            out[f"{mode}, burst"] = [_burst(dep, 16) for _ in range(5)]
+            print(f"  balance {mode}: {rounds}; burst {out[f'{mode}, burst']}", flush=True)
         finally:
             dep.stop()
     return out
