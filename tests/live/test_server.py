@@ -193,3 +193,81 @@ def test_sigterm_answers_the_ws_frame_in_flight_then_closes_1012(
     assert answered and all(a["type"] == "result" and "result" in a for a in answered)
     assert [a["id"] for a in answered] == list(range(1, 1 + len(answered)))
     assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)
+
+
+def _ws_frame(payload: bytes) -> bytes:
+    """A masked client text frame (RFC 6455), payload < 126 bytes."""
+    assert len(payload) < 126
+    mask = b"\x01\x02\x03\x04"
+    masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+    return bytes([0x81, 0x80 | len(payload)]) + mask + masked
+
+
+def test_client_that_stops_reading_is_bounded_and_dropped(
+    start_server: Callable[..., Server],
+) -> None:
+    """A raw client with a tiny receive buffer pipelines pings and never reads: the
+    server stops reading once its write buffer is full (it answers before it reads),
+    then drops the socket after IK_WS_SEND_TIMEOUT_S; the session keeps working."""
+    import base64
+    import os
+    import socket
+
+    srv = start_server(IK_WS_SEND_TIMEOUT_S="1")
+    sid, headers = session(srv)
+    token = headers["Authorization"].removeprefix("Bearer ")
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", srv.port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall(
+        (
+            f"GET /v1/sessions/{sid}/ws?token={token} HTTP/1.1\r\n"
+            f"Host: 127.0.0.1:{srv.port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+            f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n"
+        ).encode()
+    )
+    sock.settimeout(TIMEOUT_S)
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += sock.recv(1)
+    assert head.startswith(b"HTTP/1.1 101")
+    sock.setblocking(False)
+    sent = 0
+    stalled_since: float | None = None
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline:  # bounded in time and count
+        frame = _ws_frame(json.dumps({"type": "ping", "id": sent}).encode())
+        try:
+            sock.send(frame)  # a partial write cannot happen for frames this small here
+            sent += 1
+            stalled_since = None
+        except BlockingIOError:
+            stalled_since = stalled_since or time.monotonic()
+            if time.monotonic() - stalled_since > 2.0:
+                break  # the server stopped reading: backpressure reached the client
+            time.sleep(0.01)
+        if sent >= 500_000:
+            break
+    assert stalled_since is not None, f"never back-pressured after {sent} pings"
+
+    def metric(name: str) -> float:
+        text = httpx.get(f"{srv.base}/metrics", timeout=TIMEOUT_S).text
+        for line in text.splitlines():
+            if line.startswith(name):
+                return float(line.rsplit(" ", 1)[1])
+        return 0.0
+
+    until = time.monotonic() + 15.0
+    while metric("ik_websockets") != 0.0 and time.monotonic() < until:
+        time.sleep(0.1)
+    assert metric("ik_websockets") == 0.0
+    assert metric('ik_errors_total{code="slow_reader",transport="ws"}') == 1.0
+    sock.close()
+    r = httpx.post(
+        f"{srv.base}/v1/sessions/{sid}/frames",
+        json={"id": 1, "targets": [tool_target(0.1)]},
+        headers=headers,
+        timeout=TIMEOUT_S,
+    )
+    assert r.status_code == 200 and r.json()["results"][0]["id"] == 1
