@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import time
 
-from .chain import EffectorMode
+import numpy as np
+
+from .chain import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
 from .examples import panda_arm
-from .ik import IKOptions, IKSolver, pose_targets
+from .ik import IKOptions, IKSolver, Target, pose_targets
 
 
 def warmup() -> float:
@@ -23,4 +25,14 @@ def warmup() -> float:
         q = chain.mid_limits() + 0.1
         solver.solve(pose_targets(chain, q))
         solver.track(pose_targets(chain, q + 0.01))
+    # A chain with no variables takes its own compiled path (errors only).
+    bolt = Joint(
+        name="bolt",
+        parent="base",
+        child="tip",
+        kind=JointKind.FIXED,
+        origin=Transform(np.array([0.0, 0.0, 1.0])),
+    )
+    fixed = IKSolver(build_chain([bolt], [Effector(name="tip", link="tip")]))
+    fixed.solve([Target(effector="tip", position=np.array([0.0, 0.0, 1.0]))])
     return time.perf_counter() - start
