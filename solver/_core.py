@@ -722,6 +722,9 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
 
     pg = _projected_gradient_norm(out_x, out_g, lo, hi)
     elapsed = now_s() - t_start
+    # Hand the generator's state back: a caller that keeps iopt (IKSolver does, per
+    # options) continues the same stream on its next call with no new seed to draw.
+    iopt[C.I_SEED] = rng_state[0] - 1
     return (
         f_best,
         m_best,

@@ -30,6 +30,7 @@ from .kinematics import (
     DD_HI,
     DD_LO,
     DD_QREF,
+    DD_REST,
     DD_ROWS,
     ED_ERR_P,
     ED_ERR_R,
@@ -58,7 +59,8 @@ from .kinematics import (
 from .termination import Termination
 from .types import Matrix, MinimizeOptions, PassRecord, Vector
 
-SEED_NOT_FINITE = -2  # _solve_core's "bad" code for a seed with NaN or inf
+TERMINATIONS = C.TERMINATIONS  # _solve_frame's termination codes, in order
+SEED_NOT_FINITE = -2  # _solve_frame's "bad" code for a seed with NaN or inf
 
 
 @jit
@@ -105,28 +107,65 @@ def _check_targets(data):  # type: ignore[no-untyped-def]
 
 
 @jit
-def _solve_core(data, x0, h, fopt, iopt, policy, log, out_x, errors):  # type: ignore[no-untyped-def]
-    """One compiled call per frame: validate targets, solve, report errors.
+def _solve_frame(data, x0, h0, fopt, iopt, policy, out_x, out, null_space_step_rad):  # type: ignore[no-untyped-def]
+    """One compiled call per frame: validate targets and seed, solve, report errors,
+    and (``null_space_step_rad`` > 0, solved frames only) take the null-space step
+    towards the rest pose (DD_REST).
 
-    Returns (bad_target, solver outputs, goal measure); ``errors`` receives, per
-    effector, the position error (nan if not targeted), the rotation error (nan if
-    not constrained) and 1.0 when it was targeted.
+    One call and flat outputs because at ~20-40 us per solve, every Python-level
+    step around it showed up in bench/ik.py: a numba dispatch type-checks each
+    array argument, and each returned array or nested tuple is boxed.
+
+    Writes the pose into ``out_x`` and, into ``out``: per-effector errors (m x 3:
+    position error, nan if not targeted; rotation error, nan if not constrained;
+    1.0 if targeted), the final inverse Hessian (n x n), then the pass log.
+    ``h0`` (the initial H) is read, never written.
+
+    Returns (bad_target, status, termination code, iterations, evaluations,
+    passes, restarts, solve seconds); status indexes ``STATUSES``.
     """
     bad = _check_targets(data)
+    ei = data[2]
     dd = data[4]
     n = x0.shape[0]
-    out_g = np.empty(n)
+    m = ei.shape[0]
     for i in range(n):
         if not math.isfinite(x0[i]):
             bad = SEED_NOT_FINITE
     if bad != -1:
-        return bad, (0.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0, 0.0), 0.0
+        return bad, 0, 0, 0, 0, 0, 0, 0.0
+    for i in range(n):
+        dd[DD_QREF, i] = x0[i]  # the posture pull is towards the seed
+    errors = out[: 3 * m].reshape((m, 3))
+    h = out[3 * m : 3 * m + n * n].reshape((n, n))
+    log = out[3 * m + n * n :].reshape((-1, C.N_LOG))
+    for i in range(n):
+        for j in range(n):
+            h[i, j] = h0[i, j]
     trace = np.empty((0, 5))
+    out_g = np.empty(n)
     # fg=None: the core binds the objective registered for this data type (cacheable).
-    out = run_solver(
+    res = run_solver(
         None, None, data, x0, dd[DD_LO], dd[DD_HI], h, fopt, iopt, policy, log, trace, out_x, out_g
     )
-    return bad, out, _report(data, out_x, errors)
+    code = res[3]
+    measure = _report(data, out_x, errors)
+    if measure <= 1.0 and null_space_step_rad > 0.0:
+        moved = np.empty(n)
+        moved_errors = np.empty((m, 3))
+        if null_space_step(out_x, data, dd[DD_REST], null_space_step_rad, moved):
+            if _report(data, moved, moved_errors) <= 1.0:
+                out_x[:] = moved
+                errors[:, :] = moved_errors
+    if measure <= 1.0:
+        status = 0
+    elif code == C.NONFINITE or not math.isfinite(measure):
+        status = 3
+    elif code == C.MAX_ITER or code == C.MAX_FEV or code == C.DEADLINE:
+        status = 2
+    else:
+        status = 1
+    return bad, status, code, res[4], res[5], res[7], res[8], res[10]
 
 
 @jit
@@ -144,16 +183,11 @@ def _report(data, q, errors):  # type: ignore[no-untyped-def]
 
 
 @jit
-def _null_space_frame(data, q, rest, max_step, out, errors):  # type: ignore[no-untyped-def]
-    """Null-space step from q towards rest into out; True if the pose stays in tolerance."""
-    if not null_space_step(q, data, rest, max_step, out):
-        return False
-    return _report(data, out, errors) <= 1.0
-
-
-@jit
-def _report_only(data, q, errors):  # type: ignore[no-untyped-def]
-    """Validate targets and report errors at q without solving (chains with no variables)."""
+def _report_only(data, q, out):  # type: ignore[no-untyped-def]
+    """Validate targets and report errors at q into the head of ``out`` (the errors
+    block of ``_solve_frame``'s layout) without solving."""
+    m = data[2].shape[0]
+    errors = out[: 3 * m].reshape((m, 3))
     bad = _check_targets(data)
     for i in range(q.shape[0]):
         if not math.isfinite(q[i]):
@@ -173,6 +207,30 @@ class IKStatus(enum.StrEnum):
     NONFINITE = "nonfinite"  # the model produced NaN/inf (bad numbers); best finite pose returned
 
 
+# _solve_frame's status codes, in order.
+STATUSES: tuple[IKStatus, ...] = (
+    IKStatus.SOLVED,
+    IKStatus.NOT_REACHED,
+    IKStatus.BUDGET_EXHAUSTED,
+    IKStatus.NONFINITE,
+)
+
+# Bits of Target.given, and what each effector mode needs.
+GIVEN_POSITION = 1
+GIVEN_ROTATION = 2
+GIVEN_DIRECTION = 4
+_NEEDS = {
+    EffectorMode.POSITION: GIVEN_POSITION,
+    EffectorMode.POSE: GIVEN_ROTATION,
+    EffectorMode.AIM: GIVEN_DIRECTION,
+}
+# A packed target row: position (3), rotation (9, row-major), direction (3). Parts a
+# target leaves out keep these finite placeholders (the compiled check rejects
+# non-finite numbers anywhere in the row; a missing part's weight is zero).
+TARGET_ROW = 15
+_PLACEHOLDER_ROW = np.array([0.0, 0.0, 0.0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.0, 0.0, 1.0])
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Target:
     """What one effector should reach in this frame (world frame of the chain's root).
@@ -183,12 +241,50 @@ class Target:
             POSE and AIM optional (None drops the position term this frame).
         rotation: Target tip orientation, 3x3 rotation matrix (POSE).
         direction: Unit direction the aim axis should point along (AIM).
+        packed: The numbers as one float64 row (position, rotation, direction),
+            built once here so that a solve copies one row per target; a target
+            reused across solves (a benchmark, a replayed clip) is packed once.
+        given: Which parts were given (GIVEN_* bits).
+
+    Raises:
+        InvalidProblem: a part of the wrong shape (finiteness and orthonormality
+            are checked in the compiled solve).
     """
 
     effector: str
     position: Vector | None = None
     rotation: Matrix | None = None
     direction: Vector | None = None
+    packed: np.ndarray = field(init=False, repr=False, compare=False)
+    given: int = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        row = _PLACEHOLDER_ROW.copy()
+        given = 0
+        try:
+            if self.position is not None:
+                row[0:3] = _exact_shape(self.position, (3,))
+                given |= GIVEN_POSITION
+            if self.rotation is not None:
+                row[3:12] = _exact_shape(self.rotation, (3, 3)).reshape(9)
+                given |= GIVEN_ROTATION
+            if self.direction is not None:
+                row[12:15] = _exact_shape(self.direction, (3,))
+                given |= GIVEN_DIRECTION
+        except (ValueError, TypeError):
+            raise InvalidProblem(
+                f"target for {self.effector!r}: position and direction need 3 numbers, "
+                "rotation a 3x3 matrix"
+            ) from None
+        object.__setattr__(self, "packed", row)
+        object.__setattr__(self, "given", given)
+
+
+def _exact_shape(value: object, shape: tuple[int, ...]) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape != shape:
+        raise ValueError(shape)
+    return a
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -336,44 +432,91 @@ class EffectorError:
     within_tolerance: bool
 
 
+@dataclass(frozen=True, slots=True)
+class ResultLayout:
+    """What every result of one solver under one set of options shares: names,
+    tolerances, and where the parts of the core's output block lie."""
+
+    dof_names: tuple[str, ...]
+    effector_names: tuple[str, ...]
+    tolerances: tuple[float, float]  # position [m], rotation [rad]
+    n_dof: int
+    n_effectors: int
+
+    @property
+    def hessian_start(self) -> int:
+        return 3 * self.n_effectors
+
+    @property
+    def log_start(self) -> int:
+        return 3 * self.n_effectors + self.n_dof * self.n_dof
+
+
 class IKResult(NamedTuple):
     """Answer to one frame (immutable).
 
-    A NamedTuple rather than a frozen dataclass: it is built once per frame, and a
-    frozen dataclass's __init__ (object.__setattr__ per field) cost ~8 us of a
-    ~100 us frame.
+    A NamedTuple of the few values every caller reads; the rest (errors per effector,
+    the final H, the pass log) stay in the core's output block ``raw`` and are built on
+    access. Building a frozen dataclass per frame cost ~8 us, and a 15-field tuple
+    with converted arrays another ~5 us, of a ~40 us solve (bench/ik.py).
 
     Attributes:
         q: Joint values, shape (n_dof,), in ``dof_names`` order, inside the limits.
-        dof_names: Variable names.
         status: SOLVED / NOT_REACHED / BUDGET_EXHAUSTED / NONFINITE.
-        success: status is SOLVED.
         termination: How the optimizer's last pass ended.
-        effectors: Errors for the effectors that had a target (built on access from
-            ``raw_errors``: rows of position error, rotation error (nan where not
-            constrained) and a targeted flag, one per effector of the chain).
         iterations, function_evals, passes, restarts: Work done.
         solve_us: Time inside the compiled solve [us].
-        inverse_hessian: Final BFGS matrix (carried between frames if asked).
-        pass_log: The analyzer's decisions, pass by pass (built on first access from
-            the raw rows: most frames never look at it, and building it costs ~15 us).
+        raw: The core's output block (layout in ``ResultLayout`` / ``_solve_frame``).
+        layout: Names and tolerances shared by this solver's results.
+
+    Properties: success (status is SOLVED), dof_names, effector_names, tolerances,
+    effectors (errors of the targeted effectors), raw_errors, inverse_hessian (final
+    BFGS matrix, carried between frames if asked), pass_log (the analyzer's
+    decisions, pass by pass), joint_values.
     """
 
     q: Vector
-    dof_names: tuple[str, ...]
     status: IKStatus
-    success: bool
     termination: Termination
-    raw_errors: np.ndarray
-    effector_names: tuple[str, ...]
-    tolerances: tuple[float, float]
     iterations: int
     function_evals: int
     passes: int
     restarts: int
     solve_us: float
-    inverse_hessian: Matrix
-    raw_pass_log: np.ndarray
+    raw: np.ndarray
+    layout: ResultLayout
+
+    @property
+    def success(self) -> bool:
+        return self.status is IKStatus.SOLVED
+
+    @property
+    def dof_names(self) -> tuple[str, ...]:
+        return self.layout.dof_names
+
+    @property
+    def effector_names(self) -> tuple[str, ...]:
+        return self.layout.effector_names
+
+    @property
+    def tolerances(self) -> tuple[float, float]:
+        return self.layout.tolerances
+
+    @property
+    def raw_errors(self) -> np.ndarray:
+        """Rows of (position error, rotation error, targeted flag), one per effector."""
+        m = self.layout.n_effectors
+        return self.raw[: 3 * m].reshape(m, 3)
+
+    @property
+    def inverse_hessian(self) -> Matrix:
+        n = self.layout.n_dof
+        start = self.layout.hessian_start
+        return self.raw[start : start + n * n].reshape(n, n)
+
+    @property
+    def raw_pass_log(self) -> np.ndarray:
+        return self.raw[self.layout.log_start :].reshape(-1, C.N_LOG)
 
     @property
     def pass_log(self) -> tuple[PassRecord, ...]:
@@ -381,10 +524,10 @@ class IKResult(NamedTuple):
 
     @property
     def effectors(self) -> tuple[EffectorError, ...]:
-        tol_p, tol_r = self.tolerances
+        tol_p, tol_r = self.layout.tolerances
         out = []
         for name, (pos, rot, targeted) in zip(
-            self.effector_names, self.raw_errors.tolist(), strict=True
+            self.layout.effector_names, self.raw_errors.tolist(), strict=True
         ):
             if not targeted:
                 continue
@@ -396,7 +539,7 @@ class IKResult(NamedTuple):
 
     @property
     def joint_values(self) -> dict[str, float]:
-        return dict(zip(self.dof_names, (float(v) for v in self.q), strict=True))
+        return dict(zip(self.layout.dof_names, self.q.tolist(), strict=True))
 
     @property
     def max_position_error_m(self) -> float:
@@ -405,6 +548,20 @@ class IKResult(NamedTuple):
     @property
     def max_rotation_error_rad(self) -> float:
         return max((e.rotation_error_rad or 0.0 for e in self.effectors), default=0.0)
+
+
+class _Packed(NamedTuple):
+    """One IKOptions object as the core takes it, built once per solver and options."""
+
+    options: IKOptions
+    fopt: np.ndarray
+    iopt: np.ndarray  # iopt[I_SEED] carries this solver's restart generator along
+    policy: np.ndarray
+    out_size: int  # length of a frame's output block
+    layout: ResultLayout
+
+
+_F64 = np.dtype(np.float64)
 
 
 class IKSolver:
@@ -427,10 +584,9 @@ class IKSolver:
         self.options = options or IKOptions()
         cc = chain.compiled
         n = chain.n_dof
+        self._n = n
         self._ei = cc.ei.copy()
         self._ed = cc.ed.copy()
-        self._ed[:, ED_TROT : ED_TROT + 9] = np.eye(3).reshape(-1)
-        self._ed[:, ED_TDIR + 2] = 1.0
         self._dd = np.zeros((DD_ROWS, n))
         self._dd[DD_LO] = chain.lower
         self._dd[DD_HI] = chain.upper
@@ -438,16 +594,14 @@ class IKSolver:
         self._data = (cc.ni, cc.nd.copy(), self._ei, self._ed, self._dd, self._misc)
         _register_once(self._data)
         self._chain_dofs = cc.eff_dofs
-        # Views into ed: assigning a (3, 3) rotation to a view row costs ~1 us where
-        # np.reshape(rotation, 9) into a slice cost ~7 us (line profile of solve()).
-        n_eff = len(chain.effectors)
-        self._tpos = self._ed[:, ED_TPOS : ED_TPOS + 3]
-        self._trot = self._ed[:, ED_TROT : ED_TROT + 9].reshape(n_eff, 3, 3)
-        self._tdir = self._ed[:, ED_TDIR : ED_TDIR + 3]
-        assert np.shares_memory(self._trot, self._ed)
+        # One row per effector: what a Target's ``packed`` row is copied into.
+        self._target_rows = self._ed[:, ED_TPOS : ED_TDIR + 3]
+        assert self._target_rows.shape[1] == TARGET_ROW
+        self._target_rows[:] = _PLACEHOLDER_ROW
+        assert np.shares_memory(self._target_rows, self._ed)
         self._effector_names = chain.effector_names
         self._effector_slot = {name: i for i, name in enumerate(self._effector_names)}
-        self._modes = tuple(e.mode for e in chain.effectors)
+        self._needs = tuple(_NEEDS[e.mode] for e in chain.effectors)
         self._static_weights = chain.compiled.ed[:, ED_WP].copy()
         self._active: list[int] = []
         self._zeroed: list[int] = []
@@ -459,16 +613,11 @@ class IKSolver:
         self._mid = chain.mid_limits()
         self._identity = np.eye(n)
         self._shape = (n,)
-        self._packed: dict[
-            int, tuple[IKOptions, MinimizeOptions, np.ndarray, np.ndarray, np.ndarray]
-        ] = {}
+        self._packed: dict[int, _Packed] = {}
+        self._last_packed: _Packed | None = None
         self._rng = np.random.default_rng(0 if seed is None else seed)
-        self._seeds: list[int] = []
-        self._last_packed: (
-            tuple[IKOptions, MinimizeOptions, np.ndarray, np.ndarray, np.ndarray] | None
-        ) = None
         self.q = self._mid.copy()  # the stream's current pose
-        self._rest = self._mid.copy()
+        self._dd[DD_REST] = self._mid
         self._h: Matrix | None = None
 
     # -- public API ------------------------------------------------------------
@@ -487,7 +636,8 @@ class IKSolver:
             targets: At most one per effector; effectors without one are not pulled.
             seed: Start, shape (n_dof,); projected into the limits.
             options: Overrides the solver's options for this call.
-            rng: Source of the restart seed; default a generator owned by the solver.
+            rng: Source of the restart seed; default the solver's own generator,
+                which carries on from call to call.
             initial_inverse_hessian: Start H (shape (n_dof, n_dof)); default I.
 
         Raises:
@@ -496,16 +646,7 @@ class IKSolver:
         """
         opts = options or self.options
         q0 = self._mid if seed is None else self._check_seed(seed)
-        self._load_targets(targets, opts)
-        if self._misc_for is not opts:
-            self._misc[MISC_POSTURE] = opts.posture_weight
-            self._misc[MISC_LIMIT] = opts.limit_weight
-            self._misc[MISC_MARGIN] = opts.limit_margin
-            self._misc[MISC_DAMPING] = opts.damping
-            self._misc_for = opts
-        self._dd[DD_QREF] = q0
-        self._set_free_bounds(q0)
-        return self._run(q0, opts, rng, initial_inverse_hessian)
+        return self._frame(targets, q0, opts, rng, initial_inverse_hessian, 0.0)
 
     def track(
         self,
@@ -522,24 +663,18 @@ class IKSolver:
         opts = options or self.options
         h0 = self._h if opts.carry_hessian else None
         started = time.perf_counter()
-        result = self.solve(targets, self.q, options=opts, rng=rng, initial_inverse_hessian=h0)
+        step = opts.null_space_step_rad
+        result = self._frame(targets, self.q, opts, rng, h0, step)
         if not result.success and opts.global_fallback and math.isfinite(opts.restart_radius_rad):
             budget = opts.time_budget_us
             left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
             if left is None or left > 0.0:
                 wide = replace(opts, restart_radius_rad=math.inf, time_budget_us=left)
-                retry = self.solve(targets, self.q, options=wide, rng=rng)
+                retry = self._frame(targets, self.q, wide, rng, None, step)
                 if retry.success:
                     result = retry
-        if result.success and opts.null_space_step_rad > 0.0:
-            moved = np.empty(self.chain.n_dof)
-            errors = np.empty_like(result.raw_errors)
-            if _null_space_frame(
-                self._data, result.q, self._rest, opts.null_space_step_rad, moved, errors
-            ):
-                result = result._replace(q=moved, raw_errors=errors)
         self.q = result.q.copy()
-        self._h = result.inverse_hessian
+        self._h = result.inverse_hessian if opts.carry_hessian else None
         return result
 
     def set_pose(self, q: Vector) -> None:
@@ -549,88 +684,84 @@ class IKSolver:
         self-motion; by default it is the middle of the limits.
         """
         self.q = np.clip(self._check_seed(q), self.chain.lower, self.chain.upper)
-        self._rest = self.q.copy()
+        self._dd[DD_REST] = self.q
         self._h = None
 
     def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:
         """Pose errors of q against targets with the solver's tolerances (no solving)."""
         self._load_targets(targets, self.options)
-        errors = np.empty((len(self.chain.effectors), 3))
+        packed = self._packed_options(self.options)
+        raw = np.full(packed.out_size, math.nan)
         q = self._check_seed(q)
-        bad, _ = _report_only(self._data, q, errors)
+        bad, _ = _report_only(self._data, q, raw)
         self._raise_bad_target(bad)
-        empty = np.zeros((0, C.N_LOG))
-        result = self._result(
-            q,
-            IKStatus.SOLVED,
-            Termination.GOAL_REACHED,
-            0,
-            0,
-            0,
-            0,
-            0.0,
-            empty,
-            np.eye(0),
-            errors,
-            self.options,
+        result = IKResult(
+            q, IKStatus.SOLVED, Termination.GOAL_REACHED, 0, 0, 0, 0, 0.0, raw, packed.layout
         )
         return result.effectors
 
     # -- internals -------------------------------------------------------------
     def _check_seed(self, seed: Vector) -> Vector:
-        # No copy: the core projects the seed into its own buffer and never writes it.
-        # Finiteness is checked in the compiled call (``_solve_core``), not here.
-        if type(seed) is np.ndarray and seed.dtype == np.float64 and seed.shape == self._shape:
+        # No copy: the core reads the seed and never writes it. ``carray`` (C-contiguous,
+        # aligned, writeable) matters: numba compiles a new specialisation, tens of
+        # seconds, for any other array layout. Finiteness is checked in compiled code.
+        if (
+            type(seed) is np.ndarray
+            and seed.dtype == _F64
+            and seed.shape == self._shape
+            and seed.flags.carray
+        ):
             return seed
-        q = np.asarray(seed, dtype=np.float64).reshape(-1)
-        if q.shape != (self.chain.n_dof,):
-            raise DimensionMismatch(f"seed must have {self.chain.n_dof} values, got {q.shape[0]}")
+        q = np.array(seed, dtype=np.float64).reshape(-1)
+        if q.shape != self._shape:
+            raise DimensionMismatch(f"seed must have {self._n} values, got {q.shape[0]}")
         return q
 
     def _load_targets(self, targets: Sequence[Target], opts: IKOptions) -> None:
-        """Copy targets into the compiled arrays (shapes checked here, values compiled)."""
+        """Copy targets into the compiled arrays (shapes were checked by Target, values
+        are checked in compiled code)."""
+        if self._tol_for is not opts:
+            self._ed[:, ED_TOL_P] = opts.position_tolerance_m
+            self._ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
+            self._tol_for = opts
+        active = self._active
+        if len(targets) == 1 and len(active) == 1 and not self._zeroed:
+            # A stream's usual frame: one target for the effector of the last frame.
+            t = targets[0]
+            i = active[0]
+            need = self._needs[i]
+            if (
+                t.effector == self._effector_names[i]
+                and t.given & need == need
+                and t.given & GIVEN_POSITION
+            ):
+                self._target_rows[i] = t.packed
+                return
         ei = self._ei
         ed = self._ed
-        for i in self._active:
+        for i in active:
             ei[i, EI_ACTIVE] = 0
         for i in self._zeroed:
             ed[i, ED_WP] = self._static_weights[i]
         self._active = active = []
         self._zeroed = []
-        if self._tol_for is not opts:
-            ed[:, ED_TOL_P] = opts.position_tolerance_m
-            ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
-            self._tol_for = opts
         for t in targets:
             i = self._effector_slot.get(t.effector, -1)
             if i < 0:
                 self.chain.effector_index(t.effector)  # raises with the list of names
             if ei[i, EI_ACTIVE]:
                 raise InvalidProblem(f"two targets for effector {t.effector!r}")
-            mode = self._modes[i]
-            try:
-                if t.position is not None:
-                    self._tpos[i] = t.position
-                elif mode is EffectorMode.POSITION:
-                    raise InvalidProblem(f"target for {t.effector!r} needs a position")
-                else:
-                    ed[i, ED_WP] = 0.0
-                    self._zeroed.append(i)
-                if mode is EffectorMode.POSE:
-                    if t.rotation is None:
-                        raise InvalidProblem(f"target for {t.effector!r} (pose) needs a rotation")
-                    self._trot[i] = t.rotation
-                elif mode is EffectorMode.AIM:
-                    if t.direction is None:
-                        raise InvalidProblem(f"target for {t.effector!r} (aim) needs a direction")
-                    self._tdir[i] = t.direction
-            except (ValueError, TypeError) as err:
-                if isinstance(err, InvalidProblem):
-                    raise
-                raise InvalidProblem(
-                    f"target for {t.effector!r}: position and direction need 3 numbers, "
-                    "rotation a 3x3 matrix"
-                ) from None
+            need = self._needs[i]
+            if t.given & need != need:
+                part = {GIVEN_POSITION: "a position", GIVEN_ROTATION: "a rotation"}.get(
+                    need, "a direction"
+                )
+                mode = self.chain.effectors[i].mode.value
+                raise InvalidProblem(f"target for {t.effector!r} ({mode}) needs {part}")
+            if not t.given & GIVEN_POSITION:
+                ed[i, ED_WP] = 0.0
+                self._zeroed.append(i)
+            self._target_rows[i] = t.packed
             ei[i, EI_ACTIVE] = 1
             active.append(i)
         self._n_active = len(active)
@@ -646,7 +777,7 @@ class IKSolver:
                 self._dd[DD_HI] = hi
                 self._bounds_are_limits = True
             return
-        free = np.zeros(self.chain.n_dof, dtype=bool)
+        free = np.zeros(self._n, dtype=bool)
         for i in self._active:
             free[self._chain_dofs[i]] = True
         q = np.clip(q0, lo, hi)
@@ -654,80 +785,105 @@ class IKSolver:
         self._dd[DD_HI] = np.where(free, hi, q)
         self._bounds_are_limits = False
 
-    def _packed_options(
-        self, opts: IKOptions
-    ) -> tuple[MinimizeOptions, np.ndarray, np.ndarray, np.ndarray]:
-        """Option vectors and policy table, built once per IKOptions object."""
+    def _packed_options(self, opts: IKOptions) -> _Packed:
+        """Option vectors, policy table and result layout, built once per IKOptions."""
         last = self._last_packed
-        if last is not None and last[0] is opts:
-            return last[1], last[2], last[3], last[4]
+        if last is not None and last.options is opts:
+            return last
         hit = self._packed.get(id(opts))
-        if hit is None or hit[0] is not opts:
+        if hit is None or hit.options is not opts:
             mopts = opts.minimize_options()
-            fopt, iopt = pack_options(mopts, seed=0)
+            seed = int(self._rng.integers(0, 2**31 - 1))
+            fopt, iopt = pack_options(mopts, seed=seed)
             if len(self._packed) > 32:
                 self._packed.clear()
-            hit = (opts, mopts, fopt, iopt, opts.policy.as_array())
+            n = self._n
+            m = len(self._effector_names)
+            layout = ResultLayout(
+                self.chain.dof_names,
+                self._effector_names,
+                (opts.position_tolerance_m, opts.rotation_tolerance_rad),
+                n,
+                m,
+            )
+            out_size = 3 * m + n * n + mopts.max_passes * C.N_LOG
+            hit = _Packed(opts, fopt, iopt, opts.policy.as_array(), out_size, layout)
             self._packed[id(opts)] = hit
         self._last_packed = hit
-        return hit[1], hit[2], hit[3], hit[4]
+        return hit
 
-    def _next_seed(self, rng: np.random.Generator | None) -> int:
-        if rng is not None:
-            return int(rng.integers(0, 2**31 - 1))
-        if not self._seeds:
-            # Drawing one integer costs ~4 us; a batch of 256 costs about the same.
-            self._seeds = self._rng.integers(0, 2**31 - 1, size=256).tolist()
-        return self._seeds.pop()
-
-    def _run(
+    def _frame(
         self,
+        targets: Sequence[Target],
         q0: Vector,
         opts: IKOptions,
         rng: np.random.Generator | None,
         h0: Matrix | None,
+        null_space_step_rad: float,
     ) -> IKResult:
-        n = self.chain.n_dof
-        mopts, fopt, iopt, policy = self._packed_options(opts)
-        iopt[C.I_SEED] = self._next_seed(rng)
-        h = self._identity.copy() if h0 is None else h0.copy()
-        log = np.empty((mopts.max_passes, C.N_LOG))  # the core fills the rows it reports
-        out_x = np.empty(n)
-        errors = np.empty((len(self.chain.effectors), 3))
-        if n == 0:
+        self._load_targets(targets, opts)
+        if self._misc_for is not opts:
+            self._misc[MISC_POSTURE] = opts.posture_weight
+            self._misc[MISC_LIMIT] = opts.limit_weight
+            self._misc[MISC_MARGIN] = opts.limit_margin
+            self._misc[MISC_DAMPING] = opts.damping
+            self._misc_for = opts
+        if not (self._bounds_are_limits and self._every_effector_moves_all and self._n_active):
+            self._set_free_bounds(q0)
+        packed = self._last_packed
+        if packed is None or packed.options is not opts:
+            packed = self._packed_options(opts)
+        if rng is not None:
+            packed.iopt[C.I_SEED] = int(rng.integers(0, 2**31 - 1))
+        out = np.empty(packed.out_size)
+        if self._n == 0:
             # An all-fixed chain: nothing to solve, only errors to report.
-            bad, measure = _report_only(self._data, q0, errors)
+            bad, measure = _report_only(self._data, q0, out)
             self._raise_bad_target(bad)
-            status = IKStatus.SOLVED if measure <= 1.0 else IKStatus.NOT_REACHED
-            code = Termination.GOAL_REACHED if measure <= 1.0 else Termination.GTOL
-            return self._result(q0.copy(), status, code, 0, 0, 0, 0, 0.0, log[:0], h, errors, opts)
-        bad, (f, _, _, code, nit, nfev, _, npass, nrest, _, elapsed), measure = _solve_core(
-            self._data, q0, h, fopt, iopt, policy, log, out_x, errors
+            ok = measure <= 1.0
+            return IKResult(
+                q0.copy(),
+                IKStatus.SOLVED if ok else IKStatus.NOT_REACHED,
+                Termination.GOAL_REACHED if ok else Termination.GTOL,
+                0,
+                0,
+                0,
+                0,
+                0.0,
+                out,
+                packed.layout,
+            )
+        if h0 is None:
+            h0 = self._identity
+        elif not (type(h0) is np.ndarray and h0.dtype == _F64 and h0.flags.carray):
+            h0 = np.array(h0, dtype=np.float64)
+        if h0.shape != self._identity.shape:
+            raise DimensionMismatch(f"initial_inverse_hessian must be {self._n}x{self._n}")
+        out_x = np.empty(self._n)
+        bad, status, code, nit, nfev, npass, nrest, elapsed = _solve_frame(
+            self._data,
+            q0,
+            h0,
+            packed.fopt,
+            packed.iopt,
+            packed.policy,
+            out_x,
+            out,
+            null_space_step_rad,
         )
         if bad != -1:
             self._raise_bad_target(bad)
-        termination = C.TERMINATIONS[int(code)]
-        if measure <= 1.0:
-            status = IKStatus.SOLVED
-        elif termination is Termination.NONFINITE or not math.isfinite(measure):
-            status = IKStatus.NONFINITE
-        elif termination.budget_exhausted:
-            status = IKStatus.BUDGET_EXHAUSTED
-        else:
-            status = IKStatus.NOT_REACHED
-        return self._result(
+        return IKResult(
             out_x,
-            status,
-            termination,
-            int(nit),
-            int(nfev),
-            int(npass),
-            int(nrest),
-            float(elapsed) * 1e6,
-            log,
-            h,
-            errors,
-            opts,
+            STATUSES[status],
+            TERMINATIONS[code],
+            nit,
+            nfev,
+            npass,
+            nrest,
+            elapsed * 1e6,
+            out,
+            packed.layout,
         )
 
     def _raise_bad_target(self, bad: int) -> None:
@@ -742,42 +898,8 @@ class IKSolver:
             )[bad % 3]
             raise InvalidProblem(f"target for {name!r}: {what}")
 
-    def _result(
-        self,
-        q: Vector,
-        status: IKStatus,
-        termination: Termination,
-        nit: int,
-        nfev: int,
-        npass: int,
-        nrest: int,
-        solve_us: float,
-        raw_log: np.ndarray,
-        h: Matrix,
-        errors: np.ndarray,
-        opts: IKOptions,
-    ) -> IKResult:
-        return IKResult(
-            q=q,
-            dof_names=self.chain.dof_names,
-            status=status,
-            success=status is IKStatus.SOLVED,
-            termination=termination,
-            raw_errors=errors,
-            effector_names=self._effector_names,
-            tolerances=(opts.position_tolerance_m, opts.rotation_tolerance_rad),
-            iterations=nit,
-            function_evals=nfev,
-            passes=npass,
-            restarts=nrest,
-            solve_us=solve_us,
-            raw_pass_log=raw_log,
-            inverse_hessian=h,
-        )
-
 
 _REGISTERED = False
-_NO_TRACE = np.empty((0, 5))
 
 
 def _register_once(data: tuple[np.ndarray, ...]) -> None:

@@ -14,8 +14,8 @@ boundary costs reference counting, and numba's dispatcher type-checks each one.
                               weights w_p, w_r (15, 16), target position (17:20),
                               target rotation (20:29), target direction (29:32),
                               tolerances (32, 33), last errors [m], [rad] (34, 35)
-    DD  float64[11, n]        reference pose, lower, upper, last q evaluated,
-                              gradient scratch, 6 rows of Jacobian scratch
+    DD  float64[12, n]        reference pose, lower, upper, last q evaluated,
+                              gradient scratch, 6 rows of Jacobian scratch, rest pose
     MISC float64[5]           posture weight, limit weight, limit margin, goal
                               measure of the last q evaluated, damping floor,
                               f of the last q evaluated
@@ -74,7 +74,8 @@ DD_HI = 2
 DD_XLAST = 3
 DD_GSCRATCH = 4
 DD_J = 5  # rows 5..10: one effector's weighted Jacobian (metric)
-DD_ROWS = 11
+DD_REST = 11  # rest pose: where a stream's null-space step steers a redundant chain
+DD_ROWS = 12
 # Above this many variables the Gauss-Newton metric (O(n^3)) costs more than it saves.
 METRIC_MAX_DOF = 64
 # MISC
