@@ -82,7 +82,8 @@ I_HAS_GOAL = 7
 I_SCALE_H0 = 8
 I_MAX_PASSES = 9
 I_METRIC_EVERY = 10
-N_IOPT = 11
+I_METRIC_UNTIL = 11  # 0: no limit
+N_IOPT = 12
 
 # Columns of the pass log the core fills.
 L_START = 0

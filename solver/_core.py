@@ -494,6 +494,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
     scale_h0 = iopt[C.I_SCALE_H0] != 0
     max_passes = min(iopt[C.I_MAX_PASSES], log.shape[0])
     metric_every = iopt[C.I_METRIC_EVERY]
+    metric_until = iopt[C.I_METRIC_UNTIL]
     gtol = fopt[C.F_GTOL]
     xtol = fopt[C.F_XTOL]
     ftol = fopt[C.F_FTOL]
@@ -632,6 +633,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
             if (
                 metric_every > 0
                 and pass_iters % metric_every == 0
+                and (metric_until == 0 or pass_iters < metric_until)
                 and call_metric(fg, x_new, g_new, lo, hi, data, h)
             ):
                 # Re-seed H from the objective's metric (every step: damped Gauss-Newton).

@@ -64,6 +64,7 @@ def pack_options(
     iopt[C.I_SCALE_H0] = int(options.scale_initial_h)
     iopt[C.I_MAX_PASSES] = options.max_passes
     iopt[C.I_METRIC_EVERY] = options.metric_every
+    iopt[C.I_METRIC_UNTIL] = options.metric_until
     return fopt, iopt
 
 

@@ -326,6 +326,10 @@ class IKOptions:
             line search, multi-pass and analyzer; 0: the article's BFGS, with the
             metric only at the start of each pass). 1 is the default because it
             took ~10 iterations against ~37 on 7-DOF pose problems (bench/ik.py).
+        metric_until: Re-seed only during a pass's first this many iterations, then
+            BFGS updates (0: always). Near a singularity damped Gauss-Newton crawls
+            (hundreds of iterations per frame, bench/ik.py part (c), iiwa); BFGS
+            learns the missing curvature in a few steps. Streams use 8.
         policy: The analyzer's table.
     """
 
@@ -346,6 +350,7 @@ class IKOptions:
     curvature: bool = False
     carry_hessian: bool = False
     metric_every: int = 1
+    metric_until: int = 0
     null_space_step_rad: float = 0.0
     damping: float = 0.0
     global_fallback: bool = False
@@ -376,6 +381,8 @@ class IKOptions:
             raise InvalidProblem(f"limit_margin must be in [0, 0.5), got {self.limit_margin!r}")
         if self.time_budget_us is not None and not self.time_budget_us >= 0.0:
             raise InvalidProblem(f"time_budget_us must be >= 0, got {self.time_budget_us!r}")
+        if self.metric_every < 0 or self.metric_until < 0:
+            raise InvalidProblem("metric_every and metric_until must be >= 0")
         if self.max_iter < 1 or self.max_restarts < 0 or self.stall_window < 0:
             raise InvalidProblem("max_iter must be >= 1, max_restarts and stall_window >= 0")
 
@@ -396,6 +403,7 @@ class IKOptions:
             scale_initial_h=self.scale_initial_h,
             max_passes=min(4 * (self.max_restarts + 1) + 8, 512),
             metric_every=self.metric_every,
+            metric_until=self.metric_until,
         )
 
 
@@ -404,7 +412,9 @@ class IKOptions:
 # damped least squares near singularities and a null-space pull towards the rest pose
 # against drift; and, when all that fails, one global re-solve (a visible jump) rather
 # than a stream that misses every later frame (bench/ik.py, iiwa stream 1: 306/599
-# frames without it, 598/599 with it and one 4.3 rad jump).
+# frames without it, 598/599 with it and one 4.3 rad jump). metric_until=8: near a
+# singularity the damped Gauss-Newton steps crawled (p99 154 iterations per frame on
+# the iiwa streams, 3-5 frames out of time); BFGS after 8 steps: p99 15, none missed.
 STREAM_DEFAULTS = IKOptions(
     restart_radius_rad=0.3,
     limit_weight=1e-3,
@@ -412,6 +422,7 @@ STREAM_DEFAULTS = IKOptions(
     null_space_step_rad=0.005,
     damping=1e-3,
     global_fallback=True,
+    metric_until=8,
 )
 
 

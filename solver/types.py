@@ -61,6 +61,11 @@ class MinimizeOptions:
         metric_every: With an objective that supplies a metric (the IK's
             Gauss-Newton matrix), re-seed H from it every this many iterations
             instead of the BFGS update; 0 uses it only at the start of each pass.
+        metric_until: Re-seed only during a pass's first this many iterations,
+            then let BFGS updates refine H (0: no limit). Damped Gauss-Newton
+            converges linearly, at rate mu / (sigma^2 + mu), along a direction the
+            model barely moves (near a singularity): hundreds of iterations, where
+            BFGS learns that curvature from a few steps.
     """
 
     gtol: float = 1e-8
@@ -83,6 +88,7 @@ class MinimizeOptions:
     skip_update_eps: float = 1e-10
     max_passes: int = 64
     metric_every: int = 0
+    metric_until: int = 0
 
     def __post_init__(self) -> None:
         if not 0.0 < self.armijo_c1 < 0.5:
@@ -106,7 +112,7 @@ class MinimizeOptions:
         for name in ("max_iter", "max_fev", "max_passes"):
             if getattr(self, name) < 1:
                 raise InvalidProblem(f"{name} must be >= 1, got {getattr(self, name)!r}")
-        for name in ("stall_window", "max_restarts", "metric_every"):
+        for name in ("stall_window", "max_restarts", "metric_every", "metric_until"):
             if getattr(self, name) < 0:
                 raise InvalidProblem(f"{name} must be >= 0, got {getattr(self, name)!r}")
 

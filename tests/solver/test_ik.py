@@ -28,7 +28,7 @@ from solver import (
 )
 from solver.examples import humanoid_arm, panda_arm, tail, two_arm_torso
 from solver.fk import effector_poses
-from solver.ik import pose_targets
+from solver.ik import IKResult, pose_targets, with_options
 from solver.kinematics import ik_objective
 
 TIGHT = IKOptions(position_tolerance_m=1e-5, rotation_tolerance_rad=1e-4, time_budget_us=None)
@@ -340,3 +340,27 @@ def test_cycle_and_too_many_joints_and_bad_quaternion() -> None:
     with pytest.raises(InvalidModel) as err:
         Transform.from_quaternion([0, 0, 0], 1.0, 0.1, 0.0, 0.0, owner="a")
     assert (err.value.joint, err.value.field) == ("a", "rotation")
+
+
+def test_metric_until_switches_from_gauss_newton_to_bfgs_updates() -> None:
+    """metric_until=k re-seeds H from the Gauss-Newton metric only in a pass's first k
+    iterations: k=1 is the article's BFGS (metric at the pass start only), and a k
+    beyond the iterations taken is the unlimited metric_every=1."""
+    chain = panda_arm()
+    rng = np.random.default_rng(7)
+    q = rng.uniform(chain.lower, chain.upper)
+    targets = pose_targets(chain, q)
+    base = IKOptions(max_restarts=0, time_budget_us=None)
+
+    def run(**changes: object) -> IKResult:
+        return IKSolver(chain, with_options(base, **changes)).solve(targets)
+
+    bfgs, until_1 = run(metric_every=0), run(metric_until=1)
+    assert until_1.iterations == bfgs.iterations
+    assert_allclose(until_1.q, bfgs.q, rtol=0, atol=0)
+    gauss_newton, until_big = run(metric_until=0), run(metric_until=10_000)
+    assert until_big.iterations == gauss_newton.iterations
+    assert_allclose(until_big.q, gauss_newton.q, rtol=0, atol=0)
+    assert gauss_newton.iterations != bfgs.iterations  # the switch is observable
+    with pytest.raises(InvalidProblem, match="metric_until"):
+        IKOptions(metric_until=-1)
