@@ -75,7 +75,8 @@ def free_port() -> int:
 class Deployment:
     """``python -m loadtest.serve`` in its own process group (ours to stop)."""
 
-    def __init__(self, app: str, workers: int, balance: str, log: Path) -> None:
+    def __init__(self, app: str, workers: int, balance: str, log: Path, root: Path = ROOT) -> None:
+        """``root``: the checkout to run (another one compares two versions)."""
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         env = {
@@ -85,6 +86,8 @@ class Deployment:
             "IK_MAX_SESSIONS": "5000",
             "IK_MAX_WEBSOCKETS": "5000",
         }
+        if root != ROOT:
+            env["PYTHONPATH"] = str(root)
         self._log = open(log, "ab")  # noqa: SIM115 (closed in stop)
         self.proc = subprocess.Popen(
             [
@@ -100,7 +103,7 @@ class Deployment:
                 "--port",
                 str(self.port),
             ],
-            cwd=ROOT,
+            cwd=root,
             env=env,
             stdout=self._log,
             stderr=subprocess.STDOUT,

@@ -1,0 +1,124 @@
+"""Server CPU per frame at one fixed load: the service and the floors, in one short run.
+
+For each app given (``service``, ``floors``) it starts a one-worker deployment
+(``loadtest.serve``, as ``loadtest.capacity`` does), waits for /readyz, runs
+``--clients`` clients at ``--rate`` for ``--duration`` seconds and prints the worker's
+user + system CPU per answered frame, with the ratio to the floor when both ran.
+Unlike ``loadtest.capacity`` it does not search for a client count: the load is fixed,
+so before/after figures of a change are taken at the same load (per-frame cost depends
+on it: a busier loop does more per wake-up). ``--repeat`` alternates the apps.
+
+    OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --transport ws --clients 12 --duration 6
+    OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --apps service --profile /tmp/p.txt
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from .capacity import ROOT, Deployment, Scenario, summarize_profile, trial
+
+
+def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None) -> dict[str, Any]:
+    """One deployment, one trial (optionally under py-spy); the trial's summary.
+
+    ``app`` is ``service``, ``floors``, or ``service@DIR``: the service of another
+    checkout (e.g. ``git archive HEAD service schemas loadtest | tar -x -C DIR`` plus a
+    link to this solver/), to compare two versions of service/ at the same load.
+    """
+    name, _, root = app.partition("@")
+    dep = Deployment(name, 1, "reuseport", log, Path(root) if root else ROOT)
+    try:
+        dep.wait_ready()
+        rec = None
+        if profile is not None:
+            spy = shutil.which("py-spy")
+            if spy is None:
+                raise SystemExit("py-spy is not installed")
+            rec = subprocess.Popen(
+                [spy, "record", "-p", str(dep.pids()[0]), "-r", "200", "-d",
+                 str(int(args.duration)), "-f", "raw", "-o", str(profile), 
+                 *(["--native"] if args.native else ["--nonblocking"])],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+            )  # fmt: skip
+        sc = Scenario(f"{app}-{args.transport}", name, 1, args.transport, args.clients)
+        s = trial(dep, sc, args.clients, args)
+        if rec is not None:
+            _, err = rec.communicate(timeout=args.duration + 60)
+            if profile is not None and profile.exists():
+                s["profile"] = summarize_profile(profile)
+            else:
+                print(f"py-spy failed: {err.decode(errors='replace').strip()}", file=sys.stderr)
+        return s
+    finally:
+        dep.stop()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m loadtest.cost",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    ap.add_argument("--apps", default="service,floors", help="comma-separated: service, floors")
+    ap.add_argument("--transport", choices=("ws", "http"), default="ws")
+    ap.add_argument("--clients", type=int, default=12)
+    ap.add_argument("--rate", type=float, default=60.0)
+    ap.add_argument("--duration", type=float, default=6.0)
+    ap.add_argument("--warmup", type=float, default=1.0)
+    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--processes", type=int, default=1, help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--profile",
+        type=Path,
+        help="py-spy raw stacks of each worker, to <stem>-<app><suffix> (e.g. /tmp/p-service.txt)",
+    )
+    ap.add_argument("--native", action="store_true", help="py-spy --native (C frames too)")
+    ap.add_argument("--json", type=Path, help="write the summaries here")
+    args = ap.parse_args(argv)
+    apps = [a for a in args.apps.split(",") if a]
+    if not apps or any(a.partition("@")[0] not in ("service", "floors") for a in apps):
+        ap.error("--apps: service, floors or service@DIR")
+    out: dict[str, list[dict[str, Any]]] = {a: [] for a in apps}
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(tmp) / "servers.log"
+        for _ in range(args.repeat):
+            for app in apps:
+                prof = None
+                if args.profile is not None:
+                    tag = app.replace("@", "-").replace("/", "_")
+                    prof = args.profile.with_name(f"{args.profile.stem}-{tag}{args.profile.suffix}")
+                out[app].append(measure(app, args, log, prof))
+    cost = {a: [s["server_cpu_us_per_frame"] for s in runs] for a, runs in out.items()}
+    for a, c in cost.items():
+        print(f"{a}: server CPU per frame [us]: {', '.join(f'{x:.0f}' for x in c)}")
+    if "floors" in cost:
+        for a in cost:
+            if a != "floors":
+                ratios = [f / s for s, f in zip(cost[a], cost["floors"], strict=True)]
+                print(f"floors / {a} CPU per frame: {', '.join(f'{r:.0%}' for r in ratios)}")
+    for app, runs in out.items():
+        prof_summary = runs[-1].get("profile")
+        if not prof_summary:
+            continue
+        print(f"profile of {app}: {prof_summary['samples']} samples; self %:")
+        for f, pct in prof_summary["self_pct"][:20]:
+            print(f"  {pct:5.1f}  {f}")
+        print("inclusive %:")
+        for f, pct in prof_summary["inclusive_pct"][:45]:
+            print(f"  {pct:5.1f}  {f}")
+    if args.json is not None:
+        args.json.write_text(json.dumps(out, indent=1, default=str) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
