@@ -44,6 +44,18 @@ class Services:
 
 
 def services(conn: HTTPConnection) -> Services:
+    """The app's ``Services`` (for handlers that hold the connection)."""
+    svc: Services = conn.app.state.ik
+    return svc
+
+
+async def services_dep(conn: HTTPConnection) -> Services:
+    """Dependency: the app's ``Services``.
+
+    ``async`` on purpose: FastAPI runs a plain ``def`` dependency in its thread pool,
+    a hand-off and a wake-up per request that cost more than the whole lookup (py-spy:
+    23% of a worker's busy samples under HTTP frames, bench/RESULTS.md).
+    """
     svc: Services = conn.app.state.ik
     return svc
 
@@ -146,6 +158,6 @@ async def session_auth(
     return await authenticate(services(request).store, session_id, token)
 
 
-ServicesDep = Annotated[Services, Depends(services)]
+ServicesDep = Annotated[Services, Depends(services_dep)]
 SessionDep = Annotated[Session, Depends(session_auth)]
 OwnerDep = Annotated[str | None, Depends(api_key_auth)]
