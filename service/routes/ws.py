@@ -111,6 +111,37 @@ class _Connection:
         self.svc = svc
         self.session = session
         self.last_id = -1
+        self._loop = asyncio.get_running_loop()
+        self._task = asyncio.current_task()
+        self._send_timeout_s = svc.settings.ws_send_timeout_s
+        self._sending_since: float | None = None  # loop.time() when a send started
+        self._timed_out = False
+        self._watch: asyncio.TimerHandle | None = None
+
+    def start_watch(self) -> None:
+        """Arm the send watchdog: one timer per connection, not one per send."""
+        self._watch = self._loop.call_later(self._send_timeout_s, self._check_send)
+
+    def stop_watch(self) -> None:
+        if self._watch is not None:
+            self._watch.cancel()
+            self._watch = None
+
+    def _check_send(self) -> None:
+        """Timer callback: cancel the handler if a send has waited ws_send_timeout_s.
+
+        It runs while the handler is suspended; a send in progress means the handler is
+        suspended inside that send, so the cancellation lands there (see ``send``).
+        """
+        now = self._loop.time()
+        since = self._sending_since
+        if since is not None and now - since >= self._send_timeout_s and self._task is not None:
+            self._timed_out = True
+            self._watch = None
+            self._task.cancel()
+            return
+        start = now if since is None else since
+        self._watch = self._loop.call_at(start + self._send_timeout_s, self._check_send)
 
     async def send(self, payload: dict[str, Any], binary: bool) -> None:
         """Send one answer; a client that has not read for ws_send_timeout_s is dropped.
@@ -118,15 +149,25 @@ class _Connection:
         uvicorn's send waits while the transport's write buffer is above its high-water
         mark, and the server reads the next message only after answering this one, so a
         client that stops reading costs at most one answer plus the socket buffers.
+
+        The time limit is the connection's watchdog timer (``_check_send``), not
+        ``asyncio.wait_for`` per send: wait_for wraps each send in a new task, a timer and
+        a future, and costs the loop two more turns per answer (measured: the largest
+        per-frame cost of the WebSocket path after the transport itself).
         """
-        timeout = self.svc.settings.ws_send_timeout_s
+        self._sending_since = self._loop.time()
         try:
             if binary:
-                await asyncio.wait_for(self.ws.send_bytes(msgpack.packb(payload)), timeout)
+                await self.ws.send_bytes(msgpack.packb(payload))
             else:
-                await asyncio.wait_for(self.ws.send_text(orjson.dumps(payload).decode()), timeout)
-        except TimeoutError:
-            raise _SlowReader from None
+                await self.ws.send_text(orjson.dumps(payload).decode())
+        except asyncio.CancelledError:
+            task = self._task
+            if self._timed_out and task is not None and task.uncancel() == 0:
+                raise _SlowReader from None
+            raise
+        finally:
+            self._sending_since = None
 
     async def reply_error(
         self, binary: bool, msg_id: int | None, code: str, message: str, field: str | None = None
@@ -207,6 +248,7 @@ async def session_ws(ws: WebSocket, session_id: str) -> None:
     svc.open_websockets += 1
     svc.metrics.websockets.inc()
     session.websockets += 1
+    conn.start_watch()
     try:
         while True:
             message = await ws.receive()
@@ -255,6 +297,7 @@ async def session_ws(ws: WebSocket, session_id: str) -> None:
         except Exception:  # the socket may be gone already
             pass
     finally:
+        conn.stop_watch()
         session.websockets -= 1
         svc.open_websockets -= 1
         svc.metrics.websockets.dec()
