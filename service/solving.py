@@ -11,6 +11,7 @@ the GIL, so the loop keeps serving other clients. Model building and one-shot so
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import threading
 import time
@@ -141,11 +142,19 @@ class Runner:
             if session.closed:
                 raise not_found()
             options = session.options
-            args = (session, jobs, options, t0, self.metrics, transport)
+            metrics = self.metrics
             if self.inline(len(jobs), options):
-                out = _track_all(*args)
+                out = _track_all(session, jobs, options, t0, metrics.frames, transport)
             else:
-                fut = asyncio.get_running_loop().run_in_executor(self.pool, _track_all, *args)
+                loop = asyncio.get_running_loop()
+
+                def record(batch: list[tuple[IKResult, float]], transport: str) -> None:
+                    # The metrics are the loop's: hand the batch over (one wake-up).
+                    with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                        loop.call_soon_threadsafe(metrics.frames, batch, transport)
+
+                args = (session, jobs, options, t0, record, transport)
+                fut = loop.run_in_executor(self.pool, _track_all, *args)
                 # The lock is released when the thread is done, never earlier.
                 fut.add_done_callback(lambda _: session.lock.release())
                 released = True
@@ -171,19 +180,24 @@ def _track_all(
     jobs: Sequence[FrameJob],
     options: IKOptions,
     t0: float,
-    metrics: Metrics,
+    record: Callable[[list[tuple[IKResult, float]], str], None],
     transport: str,
 ) -> list[dict[str, Any]]:
-    """Runs under the session's lock (inline or in the pool); counts as it goes."""
+    """Runs under the session's lock (inline or in the pool); counts as it goes and
+    hands the frames solved to ``record`` (metrics), also when a later frame fails."""
     out = []
+    done: list[tuple[IKResult, float]] = []
     solver = session.solver
-    for frame_id, targets in jobs:
-        r = solver.track(targets, options=options)
-        server_us = (time.perf_counter() - t0) * 1e6
-        out.append(convert.result_dict(r, frame_id, server_us))
-        session.frames += 1
-        session.solved += int(r.success)
-        metrics.frame(r, server_us * 1e-6, transport)
+    try:
+        for frame_id, targets in jobs:
+            r = solver.track(targets, options=options)
+            server_us = (time.perf_counter() - t0) * 1e6
+            out.append(convert.result_dict(r, frame_id, server_us))
+            done.append((r, server_us * 1e-6))
+            session.frames += 1
+            session.solved += int(r.success)
+    finally:
+        record(done, transport)
     return out
 
 

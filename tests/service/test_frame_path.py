@@ -1,5 +1,6 @@
-"""The per-frame path stays cheap (issue #5): no thread hop per HTTP request, and the
-WebSocket send limit is one watchdog per connection that only fires on a stuck send."""
+"""The per-frame path stays cheap (issue #5): no thread hop per HTTP request, the
+WebSocket send limit is one watchdog per connection that only fires on a stuck send,
+and frame metrics are plain numbers exported at scrape time."""
 
 from __future__ import annotations
 
@@ -9,13 +10,16 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 from fastapi.dependencies.models import Dependant
 from fastapi.routing import APIRoute, APIWebSocketRoute
+from prometheus_client import CollectorRegistry, Histogram
 from starlette.testclient import TestClient
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from service.config import Settings
+from service.metrics import _BUCKETS, Metrics
 from service.routes import health, http, ws
 
 from .helpers import create, hand_frame
@@ -99,3 +103,43 @@ def test_ws_stuck_send_after_quiet_time_is_dropped(
         waited = time.monotonic() - t0
     assert info.value.code == 1008
     assert 0.15 <= waited < 2.0, waited
+
+
+# -- metrics without a lock per increment ------------------------------------------------
+def test_frame_histograms_match_prometheus_client(rng: np.random.Generator) -> None:
+    """The hand-kept histograms expose the same buckets, count and sum as
+    prometheus_client's Histogram fed the same values (bucket bounds included)."""
+    values = [*rng.exponential(1e-3, size=300), *_BUCKETS, 0.0, 10.0]
+    reference = CollectorRegistry()
+    h = Histogram("ik_solve_duration_seconds", "x", buckets=_BUCKETS, registry=reference)
+    ours = Metrics(lambda: 0)
+    for v in values:
+        h.observe(v)
+        ours.series.solve.observe(v)
+
+    def samples(registry: CollectorRegistry) -> dict[tuple[str, str], float]:
+        return {
+            (s.name, s.labels.get("le", "")): s.value
+            for m in registry.collect()
+            if m.name == "ik_solve_duration_seconds"
+            for s in m.samples
+            if not s.name.endswith("_created")
+        }
+
+    expected = samples(reference)
+    got = samples(ours.registry)
+    assert got.keys() == expected.keys()
+    for key, value in expected.items():
+        assert got[key] == pytest.approx(value, rel=1e-12, abs=0.0), key
+
+
+def test_pooled_clip_frames_are_counted(make_client: Callable[..., TestClient]) -> None:
+    """Frames solved in the pool reach the metrics (handed to the loop's thread)."""
+    client = make_client(Settings(inline_budget_us=0))
+    s = create(client)
+    clip = {"frames": [{"id": i, **hand_frame(None)} for i in range(3)]}
+    r = client.post(f"/v1/sessions/{s.id}/frames", json=clip, headers=s.headers)
+    assert r.status_code == 200 and len(r.json()["results"]) == 3
+    text = client.get("/metrics").text
+    assert 'ik_server_duration_seconds_count{transport="http"} 3.0' in text
+    assert 'ik_frames_total{success="true",termination="goal_reached"} 3.0' in text
