@@ -45,7 +45,8 @@ def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None)
             rec = subprocess.Popen(
                 [spy, "record", "-p", str(dep.pids()[0]), "-r", "200", "-d",
                  str(int(args.duration)), "-f", "raw", "-o", str(profile), 
-                 *(["--native"] if args.native else ["--nonblocking"])],
+                 *(["--native"] if args.native else ["--nonblocking"]),
+                 *(["--gil"] if args.gil else [])],
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.PIPE,
             )  # fmt: skip
@@ -82,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         help="py-spy raw stacks of each worker, to <stem>-<app><suffix> (e.g. /tmp/p-service.txt)",
     )
     ap.add_argument("--native", action="store_true", help="py-spy --native (C frames too)")
+    ap.add_argument("--gil", action="store_true", help="py-spy --gil (GIL holders only)")
     ap.add_argument("--json", type=Path, help="write the summaries here")
     args = ap.parse_args(argv)
     apps = [a for a in args.apps.split(",") if a]
