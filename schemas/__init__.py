@@ -27,6 +27,8 @@ from .chain import (
 from .common import ErrorBody, FiniteFloat, Quaternion, StrictModel, Vec3
 from .solve import (
     ClipRequest,
+    CompactFrameResult,
+    CompactFrameResults,
     DofInfo,
     EffectorErrorOut,
     EffectorInfo,
@@ -38,6 +40,7 @@ from .solve import (
     OptionsPatch,
     Pose,
     PoseIn,
+    ResultView,
     SessionCounters,
     SessionCreate,
     SessionCreated,
@@ -61,6 +64,8 @@ __all__ = [
     "ChainSpec",
     "ClientMessage",
     "ClipRequest",
+    "CompactFrameResult",
+    "CompactFrameResults",
     "DofInfo",
     "EffectorErrorOut",
     "EffectorInfo",
@@ -86,6 +91,7 @@ __all__ = [
     "PoseIn",
     "Quaternion",
     "ResultMessage",
+    "ResultView",
     "ServerMessage",
     "SessionCounters",
     "SessionCreate",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 from typing import Annotated, Any, Literal
 
 from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
@@ -272,6 +273,59 @@ class FrameResults(StrictModel):
     """One result per frame, in the order of the frames."""
 
     results: list[FrameResult]
+
+
+class ResultView(enum.StrEnum):
+    """How much each frame result carries (query parameter ``results``)."""
+
+    FULL = "full"  # every field of FrameResult (the default)
+    COMPACT = "compact"  # CompactFrameResult: no ``joints`` by name, no ``effectors``
+
+
+class CompactFrameResult(StrictModel):
+    """A frame result without ``joints`` (the same values as ``q``, by name) and without
+    ``effectors`` (per-effector errors): what ``?results=compact`` answers. ``success``
+    and ``status`` still say whether every targeted effector is within tolerance."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "id": 1,
+                    "success": True,
+                    "status": "solved",
+                    "termination": "goal_reached",
+                    "q": [0.3217, 0.1301, 1.9611],
+                    "iterations": 12,
+                    "function_evals": 15,
+                    "passes": 1,
+                    "restarts": 0,
+                    "solve_us": 21.4,
+                    "server_us": 160.2,
+                }
+            ]
+        }
+    )
+
+    id: int | None = Field(description="The client's frame id, echoed (null if none was sent)")
+    success: bool = Field(description="Every targeted effector is within the tolerances")
+    status: IKStatusName = Field(description="As in FrameResult")
+    termination: TerminationName = Field(description="How the optimizer's last pass ended")
+    q: list[float] = Field(description="Joint values in the session's DOF order [rad] or [m]")
+    iterations: int = Field(description="Optimizer iterations, all passes")
+    function_evals: int = Field(description="Objective evaluations")
+    passes: int = Field(description="Optimizer passes (H resets and restarts start new ones)")
+    restarts: int = Field(description="Random restarts")
+    solve_us: float = Field(description="Time in the compiled solver [us]")
+    server_us: float = Field(
+        description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
+    )
+
+
+class CompactFrameResults(StrictModel):
+    """One compact result per frame (``?results=compact``), in the order of the frames."""
+
+    results: list[CompactFrameResult]
 
 
 # --- poses -----------------------------------------------------------------------------

@@ -12,7 +12,7 @@ from typing import Annotated, Literal
 from pydantic import Field
 
 from .common import StrictModel
-from .solve import HARD_MAX_TARGETS, FrameId, FrameResult, Target
+from .solve import HARD_MAX_TARGETS, CompactFrameResult, FrameId, FrameResult, Target
 
 
 class FrameMessage(StrictModel):
@@ -39,7 +39,9 @@ class ResultMessage(StrictModel):
     id: int
     type: Literal["result"]
     success: bool
-    result: FrameResult
+    result: FrameResult | CompactFrameResult = Field(
+        description="A CompactFrameResult on a socket opened with ?results=compact"
+    )
 
 
 class ErrorPayload(StrictModel):

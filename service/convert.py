@@ -376,6 +376,9 @@ def pose_dict(view: ChainView, q: Vector) -> dict[str, Any]:
 
 
 # --- results ---------------------------------------------------------------------------
+ResultBuilder = Callable[[IKResult, int | None, float], dict[str, Any]]
+
+
 def result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str, Any]:
     """A FrameResult as a JSON/MessagePack-ready dict (the hot path: no re-validation;
     tests check the shape against ``schemas.FrameResult``)."""
@@ -403,3 +406,34 @@ def result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str
         "solve_us": r.solve_us,
         "server_us": server_us,
     }
+
+
+def compact_result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str, Any]:
+    """A CompactFrameResult (``?results=compact``): no ``joints`` by name and no
+    per-effector errors, which a stream reading ``q`` does not need. About a third of
+    a panda answer's bytes and less work to build and encode; tests check the shape
+    against ``schemas.CompactFrameResult``."""
+    return {
+        "id": frame_id,
+        "success": r.success,
+        "status": r.status.value,
+        "termination": r.termination.value,
+        "q": r.q.tolist(),
+        "iterations": r.iterations,
+        "function_evals": r.function_evals,
+        "passes": r.passes,
+        "restarts": r.restarts,
+        "solve_us": r.solve_us,
+        "server_us": server_us,
+    }
+
+
+_RESULT_BUILDERS: dict[S.ResultView, ResultBuilder] = {
+    S.ResultView.FULL: result_dict,
+    S.ResultView.COMPACT: compact_result_dict,
+}
+
+
+def result_builder(view: S.ResultView) -> ResultBuilder:
+    """What turns an IKResult into the answer ``view`` asks for."""
+    return _RESULT_BUILDERS[view]

@@ -124,8 +124,11 @@ class Runner:
         jobs: Sequence[FrameJob],
         t0: float,
         transport: str,
+        build: convert.ResultBuilder = convert.result_dict,
     ) -> list[dict[str, Any]]:
         """Solve a session's frames in order, each warm-started from the previous answer.
+
+        ``build`` turns each IKResult into its answer (``convert.result_builder``).
 
         Frames of one session never overlap: the session's lock is held until the last
         frame is done, also when the caller goes away while a pooled solve runs.
@@ -144,7 +147,7 @@ class Runner:
             options = session.options
             metrics = self.metrics
             if self.inline(len(jobs), options):
-                out = _track_all(session, jobs, options, t0, metrics.frames, transport)
+                out = _track_all(session, jobs, options, t0, metrics.frames, transport, build)
             else:
                 loop = asyncio.get_running_loop()
 
@@ -153,7 +156,7 @@ class Runner:
                     with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
                         loop.call_soon_threadsafe(metrics.frames, batch, transport)
 
-                args = (session, jobs, options, t0, record, transport)
+                args = (session, jobs, options, t0, record, transport, build)
                 fut = loop.run_in_executor(self.pool, _track_all, *args)
                 # The lock is released when the thread is done, never earlier.
                 fut.add_done_callback(lambda _: session.lock.release())
@@ -182,6 +185,7 @@ def _track_all(
     t0: float,
     record: Callable[[list[tuple[IKResult, float]], str], None],
     transport: str,
+    build: convert.ResultBuilder,
 ) -> list[dict[str, Any]]:
     """Runs under the session's lock (inline or in the pool); counts as it goes and
     hands the frames solved to ``record`` (metrics), also when a later frame fails."""
@@ -192,7 +196,7 @@ def _track_all(
         for frame_id, targets in jobs:
             r = solver.track(targets, options=options)
             server_us = (time.perf_counter() - t0) * 1e6
-            out.append(convert.result_dict(r, frame_id, server_us))
+            out.append(build(r, frame_id, server_us))
             done.append((r, server_us * 1e-6))
             session.frames += 1
             session.solved += int(r.success)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Request, Response
+from fastapi import APIRouter, Body, Query, Request, Response
 from starlette import status
 
 import schemas as S
@@ -255,9 +255,15 @@ async def delete_session(session: SessionDep, svc: ServicesDep) -> Response:
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
+_RESULTS_QUERY = Query(
+    description="`full` (default): every FrameResult field; `compact`: CompactFrameResult, "
+    "without `joints` by name and per-effector `effectors` (`q` carries the values)"
+)
+
+
 @router.post(
     "/sessions/{session_id}/frames",
-    response_model=S.FrameResults,
+    response_model=S.FrameResults | S.CompactFrameResults,
     responses={**_AUTH_ERRORS, **_413, **_422, **_429_RATE, **_503},
     tags=["sessions"],
 )
@@ -266,6 +272,7 @@ async def post_frames(
     request: Request,
     session: SessionDep,
     svc: ServicesDep,
+    results: Annotated[S.ResultView, _RESULTS_QUERY] = S.ResultView.FULL,
 ) -> Response:
     """Solve one frame, or a clip of frames in order; one result per frame."""
     t0 = received_at(request)
@@ -281,8 +288,10 @@ async def post_frames(
         ]
     else:
         jobs = [(body.id, convert.targets(body.targets, session.view, "targets"))]
-    results = await svc.runner.session_frames(session, svc.store, jobs, t0, "http")
-    return ORJSONResponse({"results": results})
+    out = await svc.runner.session_frames(
+        session, svc.store, jobs, t0, "http", convert.result_builder(results)
+    )
+    return ORJSONResponse({"results": out})
 
 
 @router.post(

@@ -18,11 +18,11 @@ import asyncio
 import contextlib
 import logging
 import time
-from typing import Any
+from typing import Annotated, Any
 
 import msgpack
 import orjson
-from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 from pydantic import TypeAdapter, ValidationError
 from starlette import status
 
@@ -106,10 +106,17 @@ def _origin_ok(ws: WebSocket, allowed: list[str]) -> bool:
 class _Connection:
     """One open socket: decoding, the id sequence, replies in the request's encoding."""
 
-    def __init__(self, ws: WebSocket, svc: Services, session: Session) -> None:
+    def __init__(
+        self,
+        ws: WebSocket,
+        svc: Services,
+        session: Session,
+        build: convert.ResultBuilder = convert.result_dict,
+    ) -> None:
         self.ws = ws
         self.svc = svc
         self.session = session
+        self.build = build
         self.last_id = -1
         self._loop = asyncio.get_running_loop()
         self._task = asyncio.current_task()
@@ -212,7 +219,7 @@ class _Connection:
         try:
             jobs = [(msg.id, convert.targets(msg.targets, self.session.view, "targets"))]
             (result,) = await self.svc.runner.session_frames(
-                self.session, self.svc.store, jobs, t0, "ws"
+                self.session, self.svc.store, jobs, t0, "ws", self.build
             )
         except ServiceError as e:
             if e.code == "not_found":
@@ -225,8 +232,13 @@ class _Connection:
 
 
 @router.websocket("/sessions/{session_id}/ws")
-async def session_ws(ws: WebSocket, session_id: str) -> None:
-    """Frames over a WebSocket (protocol in the README)."""
+async def session_ws(
+    ws: WebSocket,
+    session_id: str,
+    results: Annotated[S.ResultView, Query()] = S.ResultView.FULL,
+) -> None:
+    """Frames over a WebSocket (protocol in the README); ``?results=compact`` answers
+    with CompactFrameResults. A bad ``results`` value closes 1008 (FastAPI's check)."""
     svc = services(ws)
     await ws.accept(subprotocol=_subprotocol(ws))
     if not _origin_ok(ws, svc.settings.cors_origin_list()):
@@ -243,7 +255,7 @@ async def session_ws(ws: WebSocket, session_id: str) -> None:
         svc.metrics.error("too_many_websockets", "ws")
         await ws.close(code=status.WS_1013_TRY_AGAIN_LATER, reason="too_many_websockets")
         return
-    conn = _Connection(ws, svc, session)
+    conn = _Connection(ws, svc, session, convert.result_builder(results))
     limit = svc.settings.ws_max_message_bytes
     svc.open_websockets += 1
     svc.metrics.websockets.inc()
