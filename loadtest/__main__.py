@@ -69,6 +69,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help="session option time_budget_us (server default if left out)",
     )
+    ap.add_argument(
+        "--results",
+        choices=("full", "compact"),
+        default="full",
+        help="ask for full frame results (default) or compact ones (?results=compact)",
+    )
     ap.add_argument("--json", type=Path, help="write the summary as JSON here ('-': stdout)")
     ap.add_argument("--png", type=Path, help="write latency over time + histogram here")
     ap.add_argument("--quiet", action="store_true", help="no progress line")
@@ -94,6 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         chains=tuple(c.strip() for c in a.chains.split(",") if c.strip()),
         processes=a.processes,
         options=options,
+        results=a.results,
         allow_remote=a.allow_remote,
     )
     try:

@@ -169,6 +169,7 @@ def trial(dep: Deployment, sc: Scenario, clients: int, args: argparse.Namespace)
         warmup_s=args.warmup,
         drain_s=10.0,
         processes=args.processes,
+        results=getattr(args, "results", "full"),
     )
     cpu0, t0 = dep.cpu_s(), time.perf_counter()
     s = summarize(run(cfg))
@@ -393,6 +394,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--warmup", type=float, default=1.0)
     ap.add_argument("--rate", type=float, default=60.0)
     ap.add_argument("--processes", type=int, default=1, help="generator processes")
+    ap.add_argument(
+        "--results",
+        choices=("full", "compact"),
+        default="full",
+        help="frame results the generator asks the service for (?results=compact)",
+    )
     ap.add_argument("--max-trials", type=int, default=10)
     ap.add_argument("--max-clients", type=int, default=1500)
     ap.add_argument("--no-balance", action="store_true")

@@ -55,6 +55,7 @@ class ClientSpec:
     timeout_s: float
     phase_s: float  # first frame this long after the common start (spreads the ticks)
     options: dict[str, Any]
+    results: str = "full"  # ?results= of the service: "full" or "compact"
 
 
 def session_body(spec: ClientSpec) -> bytes:
@@ -111,6 +112,12 @@ def create_session_sticky(
         raise
 
 
+def _query(spec: ClientSpec) -> str:
+    """``?results=compact`` when asked for; nothing for the default (the floors, which
+    ignore query strings, get the same URL either way)."""
+    return "" if spec.results == "full" else f"?results={spec.results}"
+
+
 def _first_frame_at(start: float, spec: ClientSpec) -> float:
     """The common start plus this client's phase; a client whose session took longer to
     open than the setup allowance starts when it is ready instead of bursting to catch up."""
@@ -133,7 +140,7 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
             create_session_sticky, host, port, session_body(spec), spec.timeout_s
         )
         ws = await connect(
-            f"ws://{host}:{port}/v1/sessions/{created['id']}/ws",
+            f"ws://{host}:{port}/v1/sessions/{created['id']}/ws{_query(spec)}",
             sock=sock,
             additional_headers={"Authorization": f"Bearer {created['token']}"},
             open_timeout=spec.timeout_s,
@@ -277,7 +284,7 @@ async def http_client(spec: ClientSpec, start: float, progress: Progress) -> Cli
         res.opened = True
         res.worker = r.headers.get(WORKER_HEADER)
         created = r.json()
-        frames_url = f"/v1/sessions/{created['id']}/frames"
+        frames_url = f"/v1/sessions/{created['id']}/frames{_query(spec)}"
         headers = {
             "Authorization": f"Bearer {created['token']}",
             "content-type": "application/json",

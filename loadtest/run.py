@@ -43,6 +43,7 @@ class RunConfig:
     chains: tuple[str, ...] = DEFAULT_CHAINS
     processes: int = 1
     options: dict[str, Any] = field(default_factory=dict)  # session options (PATCH fields)
+    results: str = "full"  # the service's ?results= view: "full" or "compact"
     allow_remote: bool = False
 
     def check(self) -> None:
@@ -63,6 +64,8 @@ class RunConfig:
             raise ValueError("warmup must be shorter than the duration")
         if not 1 <= self.processes <= max(1, self.clients):
             raise ValueError("processes must be in 1..clients")
+        if self.results not in ("full", "compact"):
+            raise ValueError("results must be full or compact")
 
     @property
     def hard_deadline_s(self) -> float:
@@ -104,6 +107,7 @@ def _specs(cfg: RunConfig, indices: list[int], paths: dict[str, Path]) -> list[C
             # Spread the clients' ticks over one period, so they do not all send at once.
             phase_s=period * i / cfg.clients,
             options=cfg.options,
+            results=cfg.results,
         )
         for i in indices
     ]
