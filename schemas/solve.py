@@ -5,7 +5,7 @@ from __future__ import annotations
 import enum
 from typing import Annotated, Any, Literal
 
-from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
 from solver.termination import Termination
 
@@ -319,6 +319,20 @@ class CompactFrameResult(StrictModel):
     solve_us: float = Field(description="Time in the compiled solver [us]")
     server_us: float = Field(
         description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
+    )
+
+
+class FramesQuery(BaseModel):
+    """Query parameters of ``POST /v1/sessions/{id}/frames``; unknown ones are rejected
+    (422), as unknown body fields are. Not strict: query values arrive as text."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    results: ResultView = Field(
+        default=ResultView.FULL,
+        description="`full` (default): every FrameResult field; `compact`: "
+        "CompactFrameResult, without `joints` by name and per-effector `effectors` "
+        "(`q` carries the values)",
     )
 
 

@@ -255,12 +255,6 @@ async def delete_session(session: SessionDep, svc: ServicesDep) -> Response:
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
-_RESULTS_QUERY = Query(
-    description="`full` (default): every FrameResult field; `compact`: CompactFrameResult, "
-    "without `joints` by name and per-effector `effectors` (`q` carries the values)"
-)
-
-
 @router.post(
     "/sessions/{session_id}/frames",
     response_model=S.FrameResults | S.CompactFrameResults,
@@ -272,7 +266,7 @@ async def post_frames(
     request: Request,
     session: SessionDep,
     svc: ServicesDep,
-    results: Annotated[S.ResultView, _RESULTS_QUERY] = S.ResultView.FULL,
+    query: Annotated[S.FramesQuery, Query()],
 ) -> Response:
     """Solve one frame, or a clip of frames in order; one result per frame."""
     t0 = received_at(request)
@@ -289,7 +283,7 @@ async def post_frames(
     else:
         jobs = [(body.id, convert.targets(body.targets, session.view, "targets"))]
     out = await svc.runner.session_frames(
-        session, svc.store, jobs, t0, "http", convert.result_builder(results)
+        session, svc.store, jobs, t0, "http", convert.result_builder(query.results)
     )
     return ORJSONResponse({"results": out})
 

@@ -125,3 +125,16 @@ def test_http_bad_results_value_is_422_naming_the_parameter(
     body = r.json()
     assert body["code"] == "invalid_format"
     assert body["detail"][0]["loc"] == ["query", "results"]
+
+
+def test_http_unknown_query_parameter_is_422(client: TestClient, session: Created) -> None:
+    """As unknown body fields are (found by schemathesis once the operation had a query)."""
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames?results=compact&colour=red",
+        json=hand_frame(1),
+        headers=session.headers,
+    )
+    assert r.status_code == 422
+    body = r.json()
+    assert body["code"] == "invalid_format"
+    assert body["detail"][0]["loc"] == ["query", "colour"]
