@@ -170,7 +170,7 @@ def _solve_frame(data, x0, h0, fopt, iopt, policy, out_x, out, null_space_step_r
 
 @jit
 def _report(data, q, errors):  # type: ignore[no-untyped-def]
-    """Errors at q into ``errors`` (see ``_solve_core``); returns the goal measure."""
+    """Errors at q into ``errors`` (see ``_solve_frame``); returns the goal measure."""
     measure = effector_errors(q, data)
     ei = data[2]
     ed = data[3]

@@ -364,3 +364,36 @@ def test_metric_until_switches_from_gauss_newton_to_bfgs_updates() -> None:
     assert gauss_newton.iterations != bfgs.iterations  # the switch is observable
     with pytest.raises(InvalidProblem, match="metric_until"):
         IKOptions(metric_until=-1)
+
+
+def test_target_parts_of_the_wrong_shape_are_rejected_when_built() -> None:
+    with pytest.raises(InvalidProblem, match="'tool'.*3 numbers"):
+        Target(effector="tool", position=np.zeros(2))
+    with pytest.raises(InvalidProblem, match="3x3 matrix"):
+        Target(effector="tool", position=np.zeros(3), rotation=np.eye(3).reshape(9))
+    with pytest.raises(InvalidProblem, match="3 numbers"):
+        Target(effector="tool", direction=["a", "b", "c"])  # type: ignore[arg-type]
+
+
+def test_a_result_keeps_its_own_numbers_after_later_solves() -> None:
+    """Results read errors, H and the pass log lazily from their own output block: a
+    later solve on the same solver must not change an earlier result."""
+    chain = panda_arm()
+    solver = IKSolver(chain)
+    rng = np.random.default_rng(3)
+    first = solver.solve(pose_targets(chain, rng.uniform(chain.lower, chain.upper)))
+    kept = (
+        first.q.copy(),
+        first.raw_errors.copy(),
+        first.inverse_hessian.copy(),
+        first.pass_log,
+        first.effectors,
+    )
+    for _ in range(3):
+        solver.track(pose_targets(chain, rng.uniform(chain.lower, chain.upper)))
+    assert_allclose(first.q, kept[0], rtol=0, atol=0)
+    assert_allclose(first.raw_errors, kept[1], rtol=0, atol=0)
+    assert_allclose(first.inverse_hessian, kept[2], rtol=0, atol=0)
+    assert first.pass_log == kept[3]
+    assert first.effectors == kept[4]
+    assert first.joint_values == dict(zip(chain.dof_names, kept[0].tolist(), strict=True))
