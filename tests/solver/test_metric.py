@@ -1,0 +1,80 @@
+"""The Gauss-Newton metric H = (2 J^T W J + c I)^-1 against numpy, on both of its paths:
+the direct n x n inverse and the low-rank (Woodbury) form used when the task has at
+most half as many rows as variables."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from solver import EffectorMode, IKOptions, IKSolver
+from solver.chain import Chain
+from solver.examples import humanoid_arm, panda_arm, tail, two_arm_torso
+from solver.fk import effector_poses
+from solver.ik import pose_targets
+from solver.kinematics import DD_HI, DD_LO, ED_WP, ED_WR, ik_metric, ik_objective
+
+
+def _weighted_jacobian_fd(chain: Chain, q: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """sqrt(W) J by central differences of our FK: 3 position rows per effector, plus 3
+    angular-velocity rows for pose effectors."""
+    blocks = []
+    for e, eff in enumerate(chain.effectors):
+        jp = np.empty((3, chain.n_dof))
+        jw = np.empty((3, chain.n_dof))
+        r0 = effector_poses(chain, q)[e][:3, :3]
+        for i in range(chain.n_dof):
+            dq = np.zeros(chain.n_dof)
+            dq[i] = eps
+            up = effector_poses(chain, q + dq)[e]
+            down = effector_poses(chain, q - dq)[e]
+            jp[:, i] = (up[:3, 3] - down[:3, 3]) / (2 * eps)
+            w = (up[:3, :3] - down[:3, :3]) / (2 * eps) @ r0.T
+            jw[:, i] = [w[2, 1], w[0, 2], w[1, 0]]
+        blocks.append(np.sqrt(chain.compiled.ed[e, ED_WP]) * jp)
+        if eff.mode is EffectorMode.POSE:
+            blocks.append(np.sqrt(chain.compiled.ed[e, ED_WR]) * jw)
+    return np.vstack(blocks)
+
+
+@pytest.mark.parametrize(
+    ("factory", "low_rank"),
+    [
+        (lambda: panda_arm(EffectorMode.POSITION), True),  # 3 rows, 7 variables
+        (panda_arm, False),  # 6 rows, 7 variables
+        (humanoid_arm, False),
+        (two_arm_torso, False),  # two position effectors: 6 rows, 7 variables
+        (lambda: tail(3, EffectorMode.POSE), False),  # 6 rows, 6 variables
+        (lambda: tail(20), True),  # 3 rows, 40 variables
+    ],
+)
+@pytest.mark.parametrize("damping", [0.0, 1e-3])
+def test_metric_is_the_damped_gauss_newton_inverse(factory, low_rank: bool, damping: float) -> None:  # type: ignore[no-untyped-def]
+    chain = factory()
+    rows = sum(3 if e.mode is EffectorMode.POSITION else 6 for e in chain.effectors)
+    assert (2 * rows <= chain.n_dof) is low_rank
+    rng = np.random.default_rng(11)
+    lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
+    hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
+    solver = IKSolver(chain, IKOptions(damping=damping))
+    targets = pose_targets(chain, rng.uniform(lo, hi) * 0.5)
+    solver.solve(targets)  # loads the targets and options into the compiled arrays
+    data = solver._data
+    q = rng.uniform(lo, hi) * 0.8  # strictly inside the limits: nothing held
+    g = np.empty(chain.n_dof)
+    f = ik_objective(q, g, True, data)
+    h = np.empty((chain.n_dof, chain.n_dof))
+    assert ik_metric(q, np.zeros(chain.n_dof), data[4][DD_LO], data[4][DD_HI], data, h)
+    jac = _weighted_jacobian_fd(chain, q)
+    # Variables no targeted effector moves (above a terminator) are frozen for the
+    # solve: they stay out of the coupling and get 1/c on the diagonal.
+    frozen = data[4][DD_LO] == data[4][DD_HI]
+    assert frozen.any() == (factory is two_arm_torso)
+    jac[:, frozen] = 0.0
+    c = max(f + 1e-9, damping)
+    expected = np.linalg.inv(2 * jac.T @ jac + c * np.eye(chain.n_dof))
+    assert_allclose(h, h.T, rtol=0, atol=1e-9 * np.abs(h).max())
+    # Compare the steps the metric gives, -H g, and H itself, relative to their size.
+    assert_allclose(h @ g, expected @ g, rtol=1e-5, atol=1e-7 * np.linalg.norm(expected @ g))
+    assert_allclose(h, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
