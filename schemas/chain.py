@@ -18,7 +18,9 @@ from .common import (
     Vec3,
 )
 
-Name = Annotated[str, Field(min_length=1, max_length=128)]
+# Longest name (joint, link, effector) a request may use.
+MAX_NAME_LENGTH = 128
+Name = Annotated[str, Field(min_length=1, max_length=MAX_NAME_LENGTH)]
 JointKindName = Literal["fixed", "rotational", "revolute", "continuous", "prismatic"]
 EffectorModeName = Literal["position", "pose", "aim"]
 ExampleName = Literal["panda_arm", "humanoid_arm", "tail", "two_arm_torso"]

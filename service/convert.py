@@ -12,8 +12,12 @@ from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
+import orjson
 
 import schemas as S
+from schemas.chain import MAX_NAME_LENGTH
+from schemas.common import MAX_COORDINATE, QUATERNION_NORM_TOLERANCE
+from schemas.solve import HARD_MAX_TARGETS, MAX_FRAME_ID
 from solver.chain import (
     Chain,
     Effector,
@@ -48,6 +52,8 @@ class ChainView:
     dof_index: dict[str, int]
     summary: dict[str, Any]  # n_dof, dof (with limits), effectors: JSON-ready
     mid_limits: Vector  # the default seed: middle of each range, 0 if unbounded
+    # The effectors a target may name (a valid Name) -> mode: the fast path's lookup.
+    fast_modes: dict[str, EffectorMode]
 
     @classmethod
     def of(cls, chain: Chain) -> ChainView:
@@ -68,7 +74,8 @@ class ChainView:
             0.5 * (np.where(finite, chain.lower, 0.0) + np.where(finite, chain.upper, 0.0)),
             0.0,
         )
-        return cls(chain, modes, index, summary, mid)
+        fast = {n: m for n, m in modes.items() if 1 <= len(n) <= MAX_NAME_LENGTH}
+        return cls(chain, modes, index, summary, mid, fast)
 
 
 def _finite_or_none(v: float) -> float | None:
@@ -127,15 +134,22 @@ def _vec(v: S.Vec3) -> Vector:
 
 
 def _rotation(q: S.Quaternion) -> Vector:
-    """Rotation matrix of the normalised quaternion (plain floats: this is per frame)."""
-    n = math.sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z)
-    w, x, y, z = q.w / n, q.x / n, q.y / n, q.z / n
-    return np.array(
-        (
-            (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
-            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
-            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
-        )
+    """Rotation matrix of the normalised quaternion."""
+    return np.array(_rotation_rows(q.w, q.x, q.y, q.z))
+
+
+Rows3 = tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]
+
+
+def _rotation_rows(qw: float, qx: float, qy: float, qz: float) -> Rows3:
+    """Rotation matrix of the normalised quaternion (w, x, y, z), as rows of plain
+    floats: this is per frame, and the fast path hands the rows to Target as they are."""
+    n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    w, x, y, z = qw / n, qx / n, qy / n, qz / n
+    return (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
     )
 
 
@@ -347,6 +361,140 @@ def _require(ok: bool, message: str, where: str, name: str) -> None:
         raise invalid_problem(message, f"{where}.{name}")
 
 
+# --- the per-frame fast path -----------------------------------------------------------
+# A well-formed frame message, decoded by orjson or msgpack, is checked here by hand and
+# turned into solver targets directly: pydantic's validation plus ``targets`` cost about
+# 10x more per frame. The checks are those of the schema (``FrameMessage``, ``Target``,
+# ``Vec3``, ``Quaternion``) and of ``targets``; anything else (a missing or extra key,
+# a wrong type, a bound, an unknown effector, a missing part, ...) returns None, and the
+# caller takes the pydantic path, which gives the one documented error. So the fast path
+# only decides how fast a good frame goes, never what an answer says
+# (tests/service/test_fast_path.py feeds both paths the same messages).
+FastFrame = tuple[int, list[SolverTarget]]
+_TARGET_KEYS = frozenset(("effector", "position", "orientation", "direction"))
+
+
+def fast_frame(raw: object, view: ChainView) -> FastFrame | None:
+    """``(id, targets)`` of a decoded ``frame`` message that the schema and ``targets``
+    accept, else None (then validate the message with pydantic for the error)."""
+    try:
+        return _fast_frame(raw, view.fast_modes)
+    except Exception:  # never expected; the pydantic path gives the answer
+        return None
+
+
+def fast_frame_json(text: str | bytes, view: ChainView) -> FastFrame | None:
+    """``fast_frame`` of a JSON text (None when orjson cannot read it)."""
+    try:
+        raw = orjson.loads(text)
+    except orjson.JSONDecodeError:
+        return None
+    return fast_frame(raw, view)
+
+
+def _fast_frame(raw: object, modes: dict[str, EffectorMode]) -> FastFrame | None:
+    if type(raw) is not dict or len(raw) != 3 or raw.get("type") != "frame":
+        return None
+    frame_id = raw.get("id")
+    ts = raw.get("targets")
+    if type(frame_id) is not int or not 0 <= frame_id <= MAX_FRAME_ID:
+        return None  # also: no "id" key (None), a bool, a float
+    if type(ts) is not list or not 0 < len(ts) <= HARD_MAX_TARGETS:
+        return None
+    out: list[SolverTarget] = []
+    seen: set[str] = set()
+    for t in ts:
+        if type(t) is not dict:
+            return None
+        name = t.get("effector")
+        if type(name) is not str:
+            return None
+        mode = modes.get(name)
+        if mode is None or name in seen:
+            return None
+        seen.add(name)
+        for key in t:
+            if key not in _TARGET_KEYS:
+                return None
+        position = t.get("position")
+        orientation = t.get("orientation")
+        direction = t.get("direction")
+        if mode is EffectorMode.POSITION:
+            if position is None or orientation is not None or direction is not None:
+                return None
+        elif mode is EffectorMode.POSE:
+            if orientation is None or direction is not None:
+                return None
+        elif direction is None or orientation is not None:
+            return None
+        p = d = r = None
+        if position is not None and (p := _fast_vec3(position)) is None:
+            return None
+        if direction is not None:
+            if (d := _fast_vec3(direction)) is None:
+                return None
+            dx, dy, dz = d
+            if not math.sqrt(dx * dx + dy * dy + dz * dz) > 1e-9:
+                return None
+        if orientation is not None and (r := _fast_rotation(orientation)) is None:
+            return None
+        # Tuples, not arrays: Target packs them with np.asarray, and building arrays
+        # here first only to have them copied costs more (measured).
+        out.append(SolverTarget(effector=name, position=p, rotation=r, direction=d))  # type: ignore[arg-type]
+    return frame_id, out
+
+
+def _fast_vec3(v: object) -> tuple[float, float, float] | None:
+    """A ``Vec3``: exactly x, y, z, each a number (not a bool) within +-MAX_COORDINATE."""
+    if type(v) is not dict or len(v) != 3:
+        return None
+    x = v.get("x")
+    y = v.get("y")
+    z = v.get("z")
+    if not (
+        (type(x) is float or type(x) is int)
+        and (type(y) is float or type(y) is int)
+        and (type(z) is float or type(z) is int)
+    ):
+        return None  # also: a key missing (None) or another key instead
+    x = float(x)
+    y = float(y)
+    z = float(z)
+    lim = MAX_COORDINATE
+    if -lim <= x <= lim and -lim <= y <= lim and -lim <= z <= lim:  # NaN fails too
+        return x, y, z
+    return None
+
+
+def _fast_rotation(q: object) -> Rows3 | None:
+    """A ``Quaternion`` (exactly w, x, y, z, finite, unit norm within the tolerance) as
+    the rows ``targets`` would build."""
+    if type(q) is not dict or len(q) != 4:
+        return None
+    w = q.get("w")
+    x = q.get("x")
+    y = q.get("y")
+    z = q.get("z")
+    if not (
+        (type(w) is float or type(w) is int)
+        and (type(x) is float or type(x) is int)
+        and (type(y) is float or type(y) is int)
+        and (type(z) is float or type(z) is int)
+    ):
+        return None
+    w = float(w)
+    x = float(x)
+    y = float(y)
+    z = float(z)
+    isfinite = math.isfinite
+    if not (isfinite(w) and isfinite(x) and isfinite(y) and isfinite(z)):
+        return None
+    # The schema's test, computed the same way (hypot: no overflow).
+    if abs(math.hypot(w, x, y, z) - 1.0) > QUATERNION_NORM_TOLERANCE:
+        return None
+    return _rotation_rows(w, x, y, z)
+
+
 def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str) -> Vector:
     """A full q from a PoseIn (``joints`` fills in ``current``), clipped into the limits."""
     chain = view.chain
@@ -381,24 +529,41 @@ ResultBuilder = Callable[[IKResult, int | None, float], dict[str, Any]]
 
 def result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str, Any]:
     """A FrameResult as a JSON/MessagePack-ready dict (the hot path: no re-validation;
-    tests check the shape against ``schemas.FrameResult``)."""
+    tests check the shape against ``schemas.FrameResult``).
+
+    The per-effector errors are read from the result's raw rows (position error or NaN,
+    rotation error or NaN, targeted flag) with the names and tolerances the solver's
+    ``layout`` holds once per session and options, not through ``IKResult.effectors``,
+    which builds an object per effector first (the same values; tests compare them).
+    """
+    layout = r.layout
     values = r.q.tolist()
+    tol_p, tol_r = layout.tolerances
+    isnan = math.isnan
+    effectors = []
+    for name, (pos, rot, targeted) in zip(
+        layout.effector_names, r.raw_errors.tolist(), strict=True
+    ):
+        if not targeted:
+            continue
+        p = None if isnan(pos) else pos
+        e = None if isnan(rot) else rot
+        effectors.append(
+            {
+                "name": name,
+                "position_error_m": p,
+                "rotation_error_rad": e,
+                "within_tolerance": (p is None or p <= tol_p) and (e is None or e <= tol_r),
+            }
+        )
     return {
         "id": frame_id,
         "success": r.success,
         "status": r.status.value,
         "termination": r.termination.value,
-        "joints": dict(zip(r.dof_names, values, strict=True)),
+        "joints": dict(zip(layout.dof_names, values, strict=True)),
         "q": values,
-        "effectors": [
-            {
-                "name": e.name,
-                "position_error_m": e.position_error_m,
-                "rotation_error_rad": e.rotation_error_rad,
-                "within_tolerance": e.within_tolerance,
-            }
-            for e in r.effectors
-        ],
+        "effectors": effectors,
         "iterations": r.iterations,
         "function_evals": r.function_evals,
         "passes": r.passes,

@@ -27,6 +27,7 @@ from pydantic import TypeAdapter, ValidationError
 from starlette import status
 
 import schemas as S
+from solver.ik import Target as SolverTarget
 
 from .. import convert
 from ..deps import Services, authenticate, services
@@ -184,13 +185,21 @@ class _Connection:
 
     async def handle(self, data: str | bytes, t0: float) -> None:
         binary = isinstance(data, bytes)
+        view = self.session.view
         raw: Any = None
+        msg: S.FrameMessage | S.PingMessage | None = None
+        # A well-formed frame takes the fast path (convert.fast_frame); anything else is
+        # validated by pydantic, which gives the documented error.
         try:
             if binary:
                 raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
-                msg = _CLIENT_MESSAGE.validate_python(raw)
+                fast = convert.fast_frame(raw, view)
+                if fast is None:
+                    msg = _CLIENT_MESSAGE.validate_python(raw)
             else:
-                msg = _CLIENT_MESSAGE.validate_json(data)
+                fast = convert.fast_frame_json(data, view)
+                if fast is None:
+                    msg = _CLIENT_MESSAGE.validate_json(data)
         except ValidationError as e:
             if raw is None and not binary:
                 try:
@@ -207,6 +216,10 @@ class _Connection:
                 binary, None, "invalid_format", f"not MessagePack: {type(e).__name__}"
             )
             return
+        if fast is not None:
+            await self.frame(binary, *fast, t0)
+            return
+        assert msg is not None
         if msg.id <= self.last_id:
             await self.reply_error(
                 binary, msg.id, "id_reuse", f"id must be greater than {self.last_id}", "id"
@@ -217,17 +230,41 @@ class _Connection:
             await self.send({"id": msg.id, "type": "pong"}, binary)
             return
         try:
-            jobs = [(msg.id, convert.targets(msg.targets, self.session.view, "targets"))]
+            targets = convert.targets(msg.targets, view, "targets")
+        except ServiceError as e:
+            await self.reply_error(binary, msg.id, e.code, e.detail, e.field)
+            return
+        await self.frame(binary, msg.id, targets, t0, checked_id=True)
+
+    async def frame(
+        self,
+        binary: bool,
+        msg_id: int,
+        targets: list[SolverTarget],
+        t0: float,
+        *,
+        checked_id: bool = False,
+    ) -> None:
+        """Solve one valid frame (from the fast path, or validated by pydantic) and
+        answer it."""
+        if not checked_id:
+            if msg_id <= self.last_id:
+                await self.reply_error(
+                    binary, msg_id, "id_reuse", f"id must be greater than {self.last_id}", "id"
+                )
+                return
+            self.last_id = msg_id
+        try:
             (result,) = await self.svc.runner.session_frames(
-                self.session, self.svc.store, jobs, t0, "ws", self.build
+                self.session, self.svc.store, [(msg_id, targets)], t0, "ws", self.build
             )
         except ServiceError as e:
             if e.code == "not_found":
                 raise
-            await self.reply_error(binary, msg.id, e.code, e.detail, e.field)
+            await self.reply_error(binary, msg_id, e.code, e.detail, e.field)
             return
         await self.send(
-            {"id": msg.id, "type": "result", "success": result["success"], "result": result}, binary
+            {"id": msg_id, "type": "result", "success": result["success"], "result": result}, binary
         )
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numpy.testing import assert_allclose
 
@@ -27,3 +29,30 @@ def test_rotation_normalises_slightly_off_quaternions() -> None:
     rz = convert._rotation(S.Quaternion(w=s, x=0.0, y=0.0, z=s))
     assert_allclose(rz @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], rtol=0.0, atol=1e-12)
     assert_allclose(matrix_to_quaternion(rz), [s, 0.0, 0.0, s], rtol=0.0, atol=1e-12)
+
+
+def test_result_dict_effectors_match_ikresult_effectors() -> None:
+    """result_dict reads the raw error rows; IKResult.effectors is the reference."""
+    from solver.examples import EXAMPLES
+    from solver.ik import IKSolver, pose_targets
+
+    for factory in EXAMPLES.values():
+        chain = factory()
+        solver = IKSolver(chain)
+        targets = pose_targets(chain, chain.mid_limits() + 0.1)
+        far = [replace(targets[0], position=np.array([50.0, 0.0, 0.0]))]
+        for ts in (targets, targets[:1], far):  # all, some (others untargeted), missed
+            r = solver.track(ts)
+            out = convert.result_dict(r, 5, 1.0)
+            want = [
+                {
+                    "name": e.name,
+                    "position_error_m": e.position_error_m,
+                    "rotation_error_rad": e.rotation_error_rad,
+                    "within_tolerance": e.within_tolerance,
+                }
+                for e in r.effectors
+            ]
+            assert out["effectors"] == want
+            assert out["joints"] == r.joint_values
+            assert S.FrameResult.model_validate(out).id == 5

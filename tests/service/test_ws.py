@@ -234,6 +234,7 @@ def test_unexpected_error_sends_internal_error_then_closes_1011(
         raise RuntimeError("bug")
 
     monkeypatch.setattr(convert, "targets", boom)
+    monkeypatch.setattr(convert, "fast_frame", lambda *args: None)  # take pydantic's path
     with client.websocket_connect(url(session), headers=session.headers) as ws:
         ws.send_json(frame_msg(1))
         err = ws.receive_json()
@@ -243,3 +244,21 @@ def test_unexpected_error_sends_internal_error_then_closes_1011(
     assert info.value.code == 1011
     # The session survived the bug.
     assert client.get(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 200
+
+
+def test_unexpected_error_on_the_fast_path_sends_internal_error_then_closes_1011(
+    client: TestClient, session: Created, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from service import solving
+
+    def boom(*args: Any, **kwargs: Any) -> Any:
+        raise RuntimeError("bug")
+
+    monkeypatch.setattr(solving, "_track_all", boom)
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json(frame_msg(1))
+        err = ws.receive_json()
+        assert err["error"]["code"] == "internal_error"
+        with pytest.raises(WebSocketDisconnect) as info:
+            ws.receive_json()
+    assert info.value.code == 1011
