@@ -397,3 +397,21 @@ def test_a_result_keeps_its_own_numbers_after_later_solves() -> None:
     assert first.pass_log == kept[3]
     assert first.effectors == kept[4]
     assert first.joint_values == dict(zip(chain.dof_names, kept[0].tolist(), strict=True))
+
+
+def test_targets_from_sequences_and_from_arrays_pack_the_same_row() -> None:
+    rotation = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    from_arrays = Target(effector="tool", position=np.array([0.1, 0.2, 0.3]), rotation=rotation)
+    from_tuples = Target(
+        effector="tool", position=(0.1, 0.2, 0.3), rotation=tuple(map(tuple, rotation.tolist()))
+    )
+    from_lists = Target(effector="tool", position=[0.1, 0.2, 0.3], rotation=rotation.tolist())
+    for t in (from_tuples, from_lists):
+        assert_allclose(t.packed, from_arrays.packed, rtol=0, atol=0)
+        assert t.given == from_arrays.given
+    aim = Target(effector="tool", direction=(0.0, 1.0, 0.0))
+    assert_allclose(aim.packed[12:], [0.0, 1.0, 0.0])
+    with pytest.raises(InvalidProblem, match="3x3 matrix"):
+        Target(effector="tool", rotation=((1.0, 0.0), (0.0, 1.0), (0.0, 0.0)))
+    with pytest.raises(InvalidProblem, match="3 numbers"):
+        Target(effector="tool", position=(0.1, (0.2,), 0.3))
