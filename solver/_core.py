@@ -351,7 +351,9 @@ def _uniform(state):  # type: ignore[no-untyped-def]
 
     The restart generator lives in the state array rather than numba's global
     np.random so that a solve is reproducible from its seed alone and never shares
-    state with another solve (threads, sessions).
+    state with another thread's or session's solves. ``run_solver`` writes the final
+    state back into iopt[I_SEED], so a caller that keeps its option vector (an
+    IKSolver) continues one stream across its own solves.
     """
     state[0] = (state[0] * 48271) % 2147483647
     return (state[0] - 1) / 2147483646.0
@@ -471,7 +473,8 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
         lo, hi: Bounds, shape (n,); +-inf allowed; lo <= hi checked by the caller.
         h: Inverse-Hessian approximation, shape (n, n): the initial H on entry
             (identity or the caller's), the final H on return.
-        fopt, iopt: Option vectors laid out as in ``_codes`` (F_*, I_*).
+        fopt, iopt: Option vectors laid out as in ``_codes`` (F_*, I_*); iopt[I_SEED]
+            is written on return (the restart generator's state, as a seed).
         policy: Analyzer table int64[n_codes, 3].
         log: float64[max_passes, N_LOG] pass log, filled row by row.
         trace: float64[rows, 5]: for each accepted step (while rows last) f before,

@@ -241,9 +241,11 @@ class Target:
             POSE and AIM optional (None drops the position term this frame).
         rotation: Target tip orientation, 3x3 rotation matrix (POSE).
         direction: Unit direction the aim axis should point along (AIM).
-        packed: The numbers as one float64 row (position, rotation, direction),
-            built once here so that a solve copies one row per target; a target
-            reused across solves (a benchmark, a replayed clip) is packed once.
+        packed: The numbers as one read-only float64 row (position, rotation,
+            direction), built once here so that a solve copies one row per target;
+            a target reused across solves (a benchmark, a replayed clip) is packed
+            once. The given parts then read as views of this row: a Target is a
+            snapshot, later edits to the arrays it was built from do not reach it.
         given: Which parts were given (GIVEN_* bits).
 
     Raises:
@@ -261,12 +263,11 @@ class Target:
     def __post_init__(self) -> None:
         try:
             fast = _pack_sequences(self.position, self.rotation, self.direction)
-            if fast is not None:
-                object.__setattr__(self, "packed", fast[0])
-                object.__setattr__(self, "given", fast[1])
-                return
         except (ValueError, TypeError):
-            pass  # the array path below names the problem
+            fast = None  # the array path below names the problem
+        if fast is not None:
+            self._freeze(*fast)
+            return
         row = _PLACEHOLDER_ROW.copy()
         given = 0
         try:
@@ -284,8 +285,22 @@ class Target:
                 f"target for {self.effector!r}: position and direction need 3 numbers, "
                 "rotation a 3x3 matrix"
             ) from None
-        object.__setattr__(self, "packed", row)
-        object.__setattr__(self, "given", given)
+        self._freeze(row, given)
+
+    def _freeze(self, row: np.ndarray, given: int) -> None:
+        """Keep the packed row, read-only, and show the given parts as views of it: a
+        Target is a snapshot (later edits to the arrays it was built from do not
+        reach it), and what it shows is exactly what a solve copies."""
+        row.flags.writeable = False
+        set_field = object.__setattr__
+        set_field(self, "packed", row)
+        set_field(self, "given", given)
+        if given & GIVEN_POSITION:
+            set_field(self, "position", row[0:3])
+        if given & GIVEN_ROTATION:
+            set_field(self, "rotation", row[3:12].reshape(3, 3))
+        if given & GIVEN_DIRECTION:
+            set_field(self, "direction", row[12:15])
 
 
 _SEQUENCES = (tuple, list)
@@ -326,7 +341,10 @@ def _pack_sequences(
         given |= GIVEN_DIRECTION
     else:
         return None
-    return np.array(values, dtype=np.float64), given
+    row = np.array(values, dtype=np.float64)
+    if row.shape != (TARGET_ROW,):  # e.g. nested sequences where numbers belong
+        return None
+    return row, given
 
 
 def _exact_shape(value: object, shape: tuple[int, ...]) -> np.ndarray:
@@ -638,7 +656,7 @@ class IKSolver:
         chain: The model.
         options: Default options of every call.
         seed: Seed of the solver's own restart generator (None: 0, reproducible);
-            give each session its own so their random restarts differ.
+            give sessions their own if their random restarts should differ.
         """
         self.chain = chain
         self.options = options or IKOptions()
@@ -668,7 +686,6 @@ class IKSolver:
         self._tol_for: IKOptions | None = None
         self._misc_for: IKOptions | None = None
         self._bounds_are_limits = True
-        self._n_active = 0
         self._every_effector_moves_all = all(d.shape[0] == n for d in cc.eff_dofs)
         self._mid = chain.mid_limits()
         self._identity = np.eye(n)
@@ -723,18 +740,22 @@ class IKSolver:
         opts = options or self.options
         h0 = self._h if opts.carry_hessian else None
         started = time.perf_counter()
-        step = opts.null_space_step_rad
-        result = self._frame(targets, self.q, opts, rng, h0, step)
+        # float(): an int here would make numba compile another specialisation.
+        step = float(opts.null_space_step_rad)
+        # ``q`` is public: check it as a seed (length, dtype, layout) every frame.
+        q0 = self._check_seed(self.q)
+        result = self._frame(targets, q0, opts, rng, h0, step)
         if not result.success and opts.global_fallback and math.isfinite(opts.restart_radius_rad):
             budget = opts.time_budget_us
             left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
             if left is None or left > 0.0:
                 wide = replace(opts, restart_radius_rad=math.inf, time_budget_us=left)
-                retry = self._frame(targets, self.q, wide, rng, None, step)
+                retry = self._frame(targets, q0, wide, rng, None, step)
                 if retry.success:
                     result = retry
         self.q = result.q.copy()
-        self._h = result.inverse_hessian if opts.carry_hessian else None
+        # A copy: the result's block is the caller's to keep (and to write to).
+        self._h = result.inverse_hessian.copy() if opts.carry_hessian else None
         return result
 
     def set_pose(self, q: Vector) -> None:
@@ -824,14 +845,13 @@ class IKSolver:
             self._target_rows[i] = t.packed
             ei[i, EI_ACTIVE] = 1
             active.append(i)
-        self._n_active = len(active)
 
     def _set_free_bounds(self, q0: Vector) -> None:
         """Limits for this frame (DD rows): variables outside every targeted chain are
         frozen at q0."""
         lo = self.chain.lower
         hi = self.chain.upper
-        if self._every_effector_moves_all and self._n_active > 0:
+        if self._every_effector_moves_all and self._active:
             if not self._bounds_are_limits:
                 self._dd[DD_LO] = lo
                 self._dd[DD_HI] = hi
@@ -888,7 +908,7 @@ class IKSolver:
             self._misc[MISC_MARGIN] = opts.limit_margin
             self._misc[MISC_DAMPING] = opts.damping
             self._misc_for = opts
-        if not (self._bounds_are_limits and self._every_effector_moves_all and self._n_active):
+        if not (self._bounds_are_limits and self._every_effector_moves_all and self._active):
             self._set_free_bounds(q0)
         packed = self._last_packed
         if packed is None or packed.options is not opts:
@@ -916,7 +936,7 @@ class IKSolver:
         if h0 is None:
             h0 = self._identity
         elif not (type(h0) is np.ndarray and h0.dtype == _F64 and h0.flags.carray):
-            h0 = np.array(h0, dtype=np.float64)
+            h0 = np.array(h0, dtype=np.float64, order="C")  # one layout: one compilation
         if h0.shape != self._identity.shape:
             raise DimensionMismatch(f"initial_inverse_hessian must be {self._n}x{self._n}")
         out_x = np.empty(self._n)

@@ -16,7 +16,7 @@ boundary costs reference counting, and numba's dispatcher type-checks each one.
                               tolerances (32, 33), last errors [m], [rad] (34, 35)
     DD  float64[12, n]        reference pose, lower, upper, last q evaluated,
                               gradient scratch, 6 rows of Jacobian scratch, rest pose
-    MISC float64[5]           posture weight, limit weight, limit margin, goal
+    MISC float64[6]           posture weight, limit weight, limit margin, goal
                               measure of the last q evaluated, damping floor,
                               f of the last q evaluated
 
@@ -29,7 +29,9 @@ R = exp([phi]) and dR/dt = [w] R, dphi = J_l^-1(phi) w, and phi^T J_l^-1(phi) = 
 so d|phi|^2/dq = 2 phi^T J_w exactly (J_w the angular Jacobian): the same cheap
 form as for position, with no approximation of the log map's derivative.
 
-Nothing here allocates: the objective runs thousands of times per second per session.
+The objective and its gradient allocate nothing: they run thousands of times per second
+per session. The metric allocates its small scratch matrices (rows x n, rows x rows, or
+n x n for the direct inverse) once per call.
 """
 
 from __future__ import annotations
@@ -77,7 +79,8 @@ DD_J = 5  # rows 5..10: one effector's weighted Jacobian (metric)
 DD_REST = 11  # rest pose: where a stream's null-space step steers a redundant chain
 DD_ROWS = 12
 # Above this many variables the direct Gauss-Newton metric (O(n^3)) costs more than it
-# saves; the low-rank form (at most n / 2 task rows, O(n^2 rows)) has no limit.
+# saves; the low-rank form (at most n / 2 task rows, O(n^2 rows)) is used at any size in
+# the solve (the null-space step keeps this limit).
 METRIC_MAX_DOF = 64
 # MISC
 MISC_POSTURE = 0

@@ -28,7 +28,7 @@ from solver import (
 )
 from solver.examples import humanoid_arm, panda_arm, tail, two_arm_torso
 from solver.fk import effector_poses
-from solver.ik import IKResult, pose_targets, with_options
+from solver.ik import STREAM_DEFAULTS, IKResult, pose_targets, with_options
 from solver.kinematics import ik_objective
 
 TIGHT = IKOptions(position_tolerance_m=1e-5, rotation_tolerance_rad=1e-4, time_budget_us=None)
@@ -415,3 +415,39 @@ def test_targets_from_sequences_and_from_arrays_pack_the_same_row() -> None:
         Target(effector="tool", rotation=((1.0, 0.0), (0.0, 1.0), (0.0, 0.0)))
     with pytest.raises(InvalidProblem, match="3 numbers"):
         Target(effector="tool", position=(0.1, (0.2,), 0.3))
+
+
+def test_a_target_is_a_snapshot_of_its_numbers() -> None:
+    position = np.array([0.3, 0.1, 0.5])
+    t = Target(effector="tool", position=position)
+    position[:] = 9.0
+    assert_allclose(t.position, [0.3, 0.1, 0.5])  # type: ignore[arg-type]
+    assert not t.packed.flags.writeable
+    assert np.shares_memory(t.position, t.packed)  # type: ignore[arg-type]
+    with pytest.raises(InvalidProblem, match="3 numbers"):
+        Target(effector="tool", position=[[0.1, 0.2, 0.3]] * 3)
+
+
+def test_track_checks_the_stream_pose_it_starts_from() -> None:
+    chain = panda_arm()
+    solver = IKSolver(chain)
+    solver.q = np.zeros(3)
+    with pytest.raises(DimensionMismatch):
+        solver.track(pose_targets(chain, chain.mid_limits()))
+
+
+def test_odd_layouts_and_number_types_reuse_the_compiled_frame() -> None:
+    """A Fortran-ordered H, an int null-space step or a float32 stream pose must not
+    make numba compile another specialisation of the frame (seconds, at run time)."""
+    from solver.ik import _solve_frame
+
+    chain = panda_arm()
+    targets = pose_targets(chain, chain.mid_limits() + 0.05)
+    IKSolver(chain, STREAM_DEFAULTS).track(targets)  # the usual signature
+    before = len(_solve_frame.signatures)
+    solver = IKSolver(chain, with_options(STREAM_DEFAULTS, null_space_step_rad=0))
+    solver.q = chain.mid_limits().astype(np.float32)
+    assert solver.track(targets).success
+    h = np.asfortranarray(np.eye(chain.n_dof) * 0.5)
+    assert solver.solve(targets, initial_inverse_hessian=h).success
+    assert len(_solve_frame.signatures) == before
