@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, cast
+from typing import Any, TypeGuard, cast
 
 import numpy as np
 import orjson
@@ -444,6 +444,11 @@ def _fast_frame(raw: object, modes: dict[str, EffectorMode]) -> FastFrame | None
     return frame_id, out
 
 
+def _is_number(v: object) -> TypeGuard[float | int]:
+    """A JSON / MessagePack number as pydantic's strict float takes it (not a bool)."""
+    return type(v) is float or type(v) is int
+
+
 def _fast_vec3(v: object) -> tuple[float, float, float] | None:
     """A ``Vec3``: exactly x, y, z, each a number (not a bool) within +-MAX_COORDINATE."""
     if type(v) is not dict or len(v) != 3:
@@ -451,11 +456,7 @@ def _fast_vec3(v: object) -> tuple[float, float, float] | None:
     x = v.get("x")
     y = v.get("y")
     z = v.get("z")
-    if not (
-        (type(x) is float or type(x) is int)
-        and (type(y) is float or type(y) is int)
-        and (type(z) is float or type(z) is int)
-    ):
+    if not (_is_number(x) and _is_number(y) and _is_number(z)):
         return None  # also: a key missing (None) or another key instead
     x = float(x)
     y = float(y)
@@ -475,12 +476,7 @@ def _fast_rotation(q: object) -> Rows3 | None:
     x = q.get("x")
     y = q.get("y")
     z = q.get("z")
-    if not (
-        (type(w) is float or type(w) is int)
-        and (type(x) is float or type(x) is int)
-        and (type(y) is float or type(y) is int)
-        and (type(z) is float or type(z) is int)
-    ):
+    if not (_is_number(w) and _is_number(x) and _is_number(y) and _is_number(z)):
         return None
     w = float(w)
     x = float(x)

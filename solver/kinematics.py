@@ -240,6 +240,19 @@ def rotation_log(r00, r01, r02, r10, r11, r12, r20, r21, r22):  # type: ignore[n
 
 
 @jit_inline
+def _world_axis(k, nd):  # type: ignore[no-untyped-def]
+    """World axis of node k's motion: R_k a (a rotation leaves its own axis fixed)."""
+    ux = nd[k, ND_AXIS]
+    uy = nd[k, ND_AXIS + 1]
+    uz = nd[k, ND_AXIS + 2]
+    return (
+        nd[k, ND_R] * ux + nd[k, ND_R + 1] * uy + nd[k, ND_R + 2] * uz,
+        nd[k, ND_R + 3] * ux + nd[k, ND_R + 4] * uy + nd[k, ND_R + 5] * uz,
+        nd[k, ND_R + 6] * ux + nd[k, ND_R + 7] * uy + nd[k, ND_R + 8] * uz,
+    )
+
+
+@jit_inline
 def _effector_terms(q, g, need_grad, ni, nd, ei, ed):  # type: ignore[no-untyped-def]
     """Pose part of f (and of g); stores each effector's errors in ed[:, 34:36]."""
     forward_kinematics(q, ni, nd)
@@ -299,13 +312,7 @@ def _effector_terms(q, g, need_grad, ni, nd, ei, ed):  # type: ignore[no-untyped
         while k >= 0:
             d = ni[k, NI_DOF]
             if d >= 0:
-                # World axis of node k's motion: R_k a (a rotation leaves its own axis fixed).
-                ux = nd[k, ND_AXIS]
-                uy = nd[k, ND_AXIS + 1]
-                uz = nd[k, ND_AXIS + 2]
-                wx = nd[k, ND_R] * ux + nd[k, ND_R + 1] * uy + nd[k, ND_R + 2] * uz
-                wy = nd[k, ND_R + 3] * ux + nd[k, ND_R + 4] * uy + nd[k, ND_R + 5] * uz
-                wz = nd[k, ND_R + 6] * ux + nd[k, ND_R + 7] * uy + nd[k, ND_R + 8] * uz
+                wx, wy, wz = _world_axis(k, nd)
                 if ni[k, NI_KIND] == NODE_ROTATION:
                     lx = px - nd[k, ND_T]
                     ly = py - nd[k, ND_T + 1]
@@ -575,12 +582,7 @@ def _weighted_jacobian(e, ni, nd, ei, ed, dd):  # type: ignore[no-untyped-def]
     while k >= 0:
         d = ni[k, NI_DOF]
         if d >= 0:
-            ux = nd[k, ND_AXIS]
-            uy = nd[k, ND_AXIS + 1]
-            uz = nd[k, ND_AXIS + 2]
-            wx = nd[k, ND_R] * ux + nd[k, ND_R + 1] * uy + nd[k, ND_R + 2] * uz
-            wy = nd[k, ND_R + 3] * ux + nd[k, ND_R + 4] * uy + nd[k, ND_R + 5] * uz
-            wz = nd[k, ND_R + 6] * ux + nd[k, ND_R + 7] * uy + nd[k, ND_R + 8] * uz
+            wx, wy, wz = _world_axis(k, nd)
             if ni[k, NI_KIND] == NODE_ROTATION:
                 lx = px - nd[k, ND_T]
                 ly = py - nd[k, ND_T + 1]
