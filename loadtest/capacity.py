@@ -3,15 +3,18 @@
 For each scenario it starts a deployment on a free loopback port (``loadtest.serve``),
 waits for /readyz, and searches for the most 60 Hz clients whose run passes: no error,
 no session lost, achieved frames/s within 5% of offered, round-trip p99 within one frame
-period (16.7 ms at 60 Hz). Clients grow by x1.5 until a run fails, then bisect to ~10%.
+period (16.7 ms at 60 Hz). Clients grow by x1.5 until a point fails, then bisect to ~5%.
 Floors (``loadtest.floors``: no solving) are searched the same way in the same run.
 
 Also: how ``--balance shared`` (uvicorn --workers) and ``reuseport`` split 16 new
 connections over 2 workers, and (``--profile``) a py-spy profile of one worker under a
 steady load below capacity.
 
+A client count passes when the majority of ``--repeats`` trials (default 3) pass, so one
+scheduling stall on the shared cores does not decide a figure.
+
 Bounded: each trial is ``--duration`` seconds plus setup and drain, a search stops after
-``--max-trials`` trials or ``--max-clients`` clients.
+``--max-points`` client counts or ``--max-clients`` clients.
 
     OPENBLAS_NUM_THREADS=1 python -m loadtest.capacity --out bench/out/loadtest [--profile]
 """
@@ -57,10 +60,10 @@ class Scenario:
 
 
 SCENARIOS = (
-    Scenario("ws-floor-1", "floors", 1, "ws", 40),
-    Scenario("ws-service-1", "service", 1, "ws", 10),
+    Scenario("ws-floor-1", "floors", 1, "ws", 60),
+    Scenario("ws-service-1", "service", 1, "ws", 30),
     Scenario("ws-floor-2", "floors", 2, "ws", 60),
-    Scenario("ws-service-2", "service", 2, "ws", 16),
+    Scenario("ws-service-2", "service", 2, "ws", 30),
     Scenario("http-floor-1", "floors", 1, "http", 10),
     Scenario("http-service-1", "service", 1, "http", 4),
 )
@@ -200,32 +203,69 @@ def passes(s: dict[str, Any], rate_hz: float) -> bool:
     )
 
 
+def point(
+    dep: Deployment, sc: Scenario, clients: int, args: argparse.Namespace
+) -> tuple[bool, dict[str, Any], list[dict[str, Any]]]:
+    """The verdict on one client count: the majority of up to ``--repeats`` trials
+    (stopping once a majority agrees). On 2 shared cores one scheduling stall of ~50 ms
+    fails a single trial, so single trials moved the searches by 20-50% between runs.
+    Returns (passes, the trial to report, every trial run): for a pass, the passing
+    trial with the highest p99 (the conservative one)."""
+    runs: list[dict[str, Any]] = []
+    need = args.repeats // 2 + 1
+    while len(runs) < args.repeats:
+        runs.append(trial(dep, sc, clients, args))
+        passed = [r for r in runs if r["pass"]]
+        if len(passed) >= need or len(runs) - len(passed) >= need:
+            break
+    passed = [r for r in runs if r["pass"]]
+    ok = len(passed) >= need
+    if ok:
+        shown = max(passed, key=lambda r: r["round_trip_ms"]["p99"] or 0.0)
+    else:
+        shown = runs[-1]
+    return ok, shown, runs
+
+
 def search(dep: Deployment, sc: Scenario, args: argparse.Namespace) -> dict[str, Any]:
+    """x1.5 from the scenario's start until a point fails, then bisect to ~5%."""
     trials: list[dict[str, Any]] = []
+    points: list[dict[str, Any]] = []
     best: dict[str, Any] | None = None
     fail: int | None = None
+
+    def judge(c: int) -> bool:
+        ok, shown, runs = point(dep, sc, c, args)
+        trials.extend(runs)
+        points.append({"clients": c, "pass": ok, "trials": [r["pass"] for r in runs]})
+        nonlocal best
+        if ok:
+            best = shown
+        return ok
+
     c = sc.start_clients
-    while len(trials) < args.max_trials and c <= args.max_clients:
-        s = trial(dep, sc, c, args)
-        trials.append(s)
-        if s["pass"]:
-            best = s
+    while len(points) < args.max_points and c <= args.max_clients:
+        if judge(c):
             c = math.ceil(c * 1.5)
         else:
             fail = c
             break
     lo = best["config"]["clients"] if best else 0
-    while fail is not None and len(trials) < args.max_trials and fail - lo > max(1, 0.1 * lo):
+    while fail is not None and len(points) < args.max_points and fail - lo > max(1, 0.05 * lo):
         mid = (lo + fail) // 2
         if mid <= 0:
             break
-        s = trial(dep, sc, mid, args)
-        trials.append(s)
-        if s["pass"]:
-            best, lo = s, mid
+        if judge(mid):
+            lo = mid
         else:
             fail = mid
-    return {"scenario": sc.__dict__, "best": best, "first_failing_clients": fail, "trials": trials}
+    return {
+        "scenario": sc.__dict__,
+        "best": best,
+        "first_failing_clients": fail,
+        "points": points,
+        "trials": trials,
+    }
 
 
 def _burst(dep: Deployment, n: int) -> list[int]:
@@ -400,7 +440,13 @@ def main(argv: list[str] | None = None) -> int:
         default="full",
         help="frame results the generator asks the service for (?results=compact)",
     )
-    ap.add_argument("--max-trials", type=int, default=10)
+    ap.add_argument(
+        "--repeats",
+        type=int,
+        default=3,
+        help="trials per client count; the majority decides (1: a single trial)",
+    )
+    ap.add_argument("--max-points", type=int, default=14, help="client counts per search")
     ap.add_argument("--max-clients", type=int, default=1500)
     ap.add_argument("--no-balance", action="store_true")
     ap.add_argument("--profile", action="store_true")
