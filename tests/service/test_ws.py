@@ -249,12 +249,12 @@ def test_unexpected_error_sends_internal_error_then_closes_1011(
 def test_unexpected_error_on_the_fast_path_sends_internal_error_then_closes_1011(
     client: TestClient, session: Created, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from service import solving
+    from solver.ik import IKSolver
 
     def boom(*args: Any, **kwargs: Any) -> Any:
         raise RuntimeError("bug")
 
-    monkeypatch.setattr(solving, "_track_all", boom)
+    monkeypatch.setattr(IKSolver, "track", boom)  # the inline and the pooled path call it
     with client.websocket_connect(url(session), headers=session.headers) as ws:
         ws.send_json(frame_msg(1))
         err = ws.receive_json()
