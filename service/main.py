@@ -176,6 +176,9 @@ def create_app(
     app.include_router(http.router)
     app.include_router(ws.router)
     app.include_router(health.router)
+    # Added before CORS, so CORS wraps it: a 413 it answers early carries the CORS
+    # headers too (a browser shows a CORS failure instead of a 413 otherwise).
+    app.add_middleware(_TimingAndLimits, max_body_bytes=settings.max_body_bytes)
     origins = settings.cors_origin_list()
     if origins:  # closed by default: no CORS headers at all
         app.add_middleware(
@@ -186,7 +189,6 @@ def create_app(
             expose_headers=["Location", "Retry-After"],
             max_age=600,
         )
-    app.add_middleware(_TimingAndLimits, max_body_bytes=settings.max_body_bytes)
     return app
 
 

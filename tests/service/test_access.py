@@ -150,6 +150,22 @@ def test_cors_allows_only_configured_origins(make_client: Callable[..., TestClie
     assert "access-control-allow-origin" not in bad.headers
 
 
+def test_body_too_large_answer_carries_cors_headers(
+    make_client: Callable[..., TestClient],
+) -> None:
+    """The 413 is answered before the app reads the body; a browser must still see it
+    as a 413 (with the CORS headers), not as a CORS failure."""
+    client = make_client(Settings(cors_origins="https://app.example", max_body_bytes=2048))
+    r = client.post(
+        "/v1/sessions",
+        content=b"x" * 5000,
+        headers={"Origin": "https://app.example", "Content-Type": "application/json"},
+    )
+    assert r.status_code == 413
+    assert r.json()["code"] == "payload_too_large"
+    assert r.headers["access-control-allow-origin"] == "https://app.example"
+
+
 def test_ws_from_an_unlisted_browser_origin_closes_4403(
     make_client: Callable[..., TestClient],
 ) -> None:
