@@ -225,36 +225,23 @@ def test_http_and_ws_frames_share_the_session_pose(client: TestClient, session: 
     assert pose == q_ws
 
 
+@pytest.mark.parametrize("path", ["pydantic", "fast"])
 def test_unexpected_error_sends_internal_error_then_closes_1011(
-    client: TestClient, session: Created, monkeypatch: pytest.MonkeyPatch
+    client: TestClient, session: Created, monkeypatch: pytest.MonkeyPatch, path: str
 ) -> None:
+    """A bug while handling a frame, on either decoding path: an internal_error message,
+    close 1011, and the session survives."""
     from service import convert
-
-    def boom(*args: Any, **kwargs: Any) -> Any:
-        raise RuntimeError("bug")
-
-    monkeypatch.setattr(convert, "targets", boom)
-    monkeypatch.setattr(convert, "fast_frame", lambda *args: None)  # take pydantic's path
-    with client.websocket_connect(url(session), headers=session.headers) as ws:
-        ws.send_json(frame_msg(1))
-        err = ws.receive_json()
-        assert err["error"]["code"] == "internal_error"
-        with pytest.raises(WebSocketDisconnect) as info:
-            ws.receive_json()
-    assert info.value.code == 1011
-    # The session survived the bug.
-    assert client.get(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 200
-
-
-def test_unexpected_error_on_the_fast_path_sends_internal_error_then_closes_1011(
-    client: TestClient, session: Created, monkeypatch: pytest.MonkeyPatch
-) -> None:
     from solver.ik import IKSolver
 
     def boom(*args: Any, **kwargs: Any) -> Any:
         raise RuntimeError("bug")
 
-    monkeypatch.setattr(IKSolver, "track", boom)  # the inline and the pooled path call it
+    if path == "pydantic":
+        monkeypatch.setattr(convert, "targets", boom)
+        monkeypatch.setattr(convert, "fast_frame", lambda *args: None)  # take pydantic's path
+    else:
+        monkeypatch.setattr(IKSolver, "track", boom)  # what every solved frame calls
     with client.websocket_connect(url(session), headers=session.headers) as ws:
         ws.send_json(frame_msg(1))
         err = ws.receive_json()
@@ -262,3 +249,4 @@ def test_unexpected_error_on_the_fast_path_sends_internal_error_then_closes_1011
         with pytest.raises(WebSocketDisconnect) as info:
             ws.receive_json()
     assert info.value.code == 1011
+    assert client.get(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 200
