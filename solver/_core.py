@@ -23,7 +23,7 @@ import numpy as np
 from . import _codes as C
 from ._clock import now_s
 from ._dispatch import call_goal, call_metric, call_objective
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .analyzer import decide
 
 _EPS = 2.220446049250313e-16
@@ -31,7 +31,7 @@ _SQRT_EPS = 1.4901161193847656e-08
 _CBRT_EPS = 6.055454452393343e-06
 
 
-@jit
+@jit_inline
 def _project(x, lo, hi, out):  # type: ignore[no-untyped-def]
     for i in range(x.shape[0]):
         v = x[i]
@@ -42,7 +42,7 @@ def _project(x, lo, hi, out):  # type: ignore[no-untyped-def]
         out[i] = v
 
 
-@jit
+@jit_inline
 def _projected_gradient_norm(x, g, lo, hi):  # type: ignore[no-untyped-def]
     """inf-norm of P(x - g) - x: zero exactly at a KKT point of the box problem."""
     worst = 0.0
@@ -58,7 +58,7 @@ def _projected_gradient_norm(x, g, lo, hi):  # type: ignore[no-untyped-def]
     return worst
 
 
-@jit
+@jit_inline
 def _all_finite(v):  # type: ignore[no-untyped-def]
     for i in range(v.shape[0]):
         if not math.isfinite(v[i]):
@@ -66,7 +66,7 @@ def _all_finite(v):  # type: ignore[no-untyped-def]
     return True
 
 
-@jit
+@jit_inline
 def _evaluate(fg, data, x, g, need_grad, grad_mode, lo, hi, work, counters):  # type: ignore[no-untyped-def]
     """f(x) and, if asked, g(x); counters = [nfev, ngev].
 
@@ -114,7 +114,7 @@ def _evaluate(fg, data, x, g, need_grad, grad_mode, lo, hi, work, counters):  # 
     return f
 
 
-@jit
+@jit_inline
 def _line_search(  # type: ignore[no-untyped-def]
     fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters
 ):
@@ -380,7 +380,7 @@ def _random_point(x_center, lo, hi, radius, rng_state, out):  # type: ignore[no-
         out[i] = lo[i] if v < lo[i] else (hi[i] if v > hi[i] else v)
 
 
-@jit
+@jit_inline
 def _descent_direction(h, g, x, lo, hi, d, gm):  # type: ignore[no-untyped-def]
     """d = -H_FF g_F on the free variables, 0 on those held at a bound.
 
@@ -405,7 +405,7 @@ def _descent_direction(h, g, x, lo, hi, d, gm):  # type: ignore[no-untyped-def]
     return slope
 
 
-@jit
+@jit_inline
 def _set_identity(h):  # type: ignore[no-untyped-def]
     n = h.shape[0]
     for i in range(n):
@@ -413,7 +413,7 @@ def _set_identity(h):  # type: ignore[no-untyped-def]
             h[i, j] = 1.0 if i == j else 0.0
 
 
-@jit
+@jit_inline
 def _bfgs_update(h, s, y, hy, eps_curv):  # type: ignore[no-untyped-def]
     """Inverse BFGS update (Nocedal & Wright eq. 6.17); False when skipped.
 
@@ -446,7 +446,7 @@ def _bfgs_update(h, s, y, hy, eps_curv):  # type: ignore[no-untyped-def]
     return True
 
 
-@jit
+@jit_inline
 def _better(f, m, f_best, m_best, has_goal, f_goal):  # type: ignore[no-untyped-def]
     """Order of points: meeting the goal first, then lower f."""
     if has_goal:
@@ -507,20 +507,24 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
     # loads the cache) does not eat the caller's budget.
     deadline = t_start + fopt[C.F_BUDGET]
     eps_curv = fopt[C.F_CURVATURE_EPS]
-    rng_state = np.empty(1, dtype=np.int64)
+    # One block for the work vectors and one for the integer state: an allocation
+    # costs about as much as a solver iteration's bookkeeping, and a warm-started
+    # stream frame takes only a few iterations.
+    ints = np.zeros(3, dtype=np.int64)
+    counters = ints[0:2]  # nfev, ngev
+    rng_state = ints[2:3]
     rng_state[0] = iopt[C.I_SEED] % 2147483646 + 1
-
-    x = np.empty(n)
-    g = np.empty(n)
-    x_new = np.empty(n)
-    g_new = np.empty(n)
-    d = np.empty(n)
-    gm = np.empty(n)
-    s = np.empty(n)
-    y = np.empty(n)
-    hy = np.empty(n)
-    work = np.empty(n)
-    counters = np.zeros(2, dtype=np.int64)  # nfev, ngev
+    vectors = np.empty((10, n))
+    x = vectors[0]
+    g = vectors[1]
+    x_new = vectors[2]
+    g_new = vectors[3]
+    d = vectors[4]
+    gm = vectors[5]
+    s = vectors[6]
+    y = vectors[7]
+    hy = vectors[8]
+    work = vectors[9]
 
     _project(x0, lo, hi, x)
     f = _evaluate(fg, data, x, g, True, grad_mode, lo, hi, work, counters)

@@ -68,7 +68,7 @@ def call_goal(goal_fn: Any, fg: Any, f: float, x: Any, data: Any) -> float:
     return f
 
 
-@overload(call_objective)
+@overload(call_objective, inline="always")
 def _call_objective_compiled(fg, x, g, need_grad, data):  # type: ignore[no-untyped-def]
     # No annotations: numba compares the overload's parameters with the impl's.
     if isinstance(fg, types.NoneType):
@@ -85,7 +85,7 @@ def _call_objective_compiled(fg, x, g, need_grad, data):  # type: ignore[no-unty
     return impl_value
 
 
-@overload(call_goal)
+@overload(call_goal, inline="always")
 def _call_goal_compiled(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def]
     if isinstance(fg, types.NoneType):
         goal = _lookup(data)[1]
@@ -111,7 +111,7 @@ def call_metric(fg: Any, x: Any, g: Any, lo: Any, hi: Any, data: Any, h: Any) ->
     return False
 
 
-@overload(call_metric)
+@overload(call_metric, inline="always")
 def _call_metric_compiled(fg, x, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
     if isinstance(fg, types.NoneType):
         metric = _lookup(data)[2]
