@@ -89,7 +89,8 @@ MISC_MARGIN = 2
 MISC_GOAL = 3
 MISC_DAMPING = 4  # floor of the Gauss-Newton damping mu
 MISC_LAST_F = 5  # f of the last q evaluated (DD_XLAST)
-MISC_SIZE = 6
+MISC_DAMPING_SCALE = 6  # mu = scale x f (Levenberg-Marquardt damping relative to the error)
+MISC_SIZE = 7
 
 NODE_FIXED = 0
 NODE_ROTATION = 1
@@ -485,10 +486,12 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
         f = misc[MISC_LAST_F]
     else:
         f = _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
+        # ND and ED's errors now describe q, not the point in DD_XLAST: mark it stale.
+        dd[DD_XLAST, 0] = math.nan
     free = dd[DD_GSCRATCH]  # reused as a 0/1 mask of the free variables
     for i in range(n):
         free[i] = 0.0 if _held(q[i], g[i], lo[i], hi[i]) else 1.0
-    mu = max(f + 1e-9, misc[MISC_DAMPING]) if mu_fixed < 0.0 else mu_fixed
+    mu = max(misc[MISC_DAMPING_SCALE] * f + 1e-9, misc[MISC_DAMPING]) if mu_fixed < 0.0 else mu_fixed
     c = mu + 2.0 * misc[MISC_POSTURE]
     if 2 * rows <= n:
         return _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h)
@@ -522,13 +525,22 @@ def _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h):  # type: ignore[no-u
     a task with at most half as many rows as variables (position-only arms, long
     chains; at 6 rows for 7 variables the direct inverse measured as fast).
 
-    Woodbury: (c I + 2 J^T J)^-1 = (I - 2 J^T M^-1 J) / c, and with M = L L^T,
-    J^T M^-1 J = Y^T Y for Y = L^-1 J. Costs O(n^2 rows) instead of O(n^3): the 40-DOF
-    tail's 40x40 inverse (three n^3/6 loops) becomes a 3x3 Cholesky and one n x n
-    product. J holds sqrt(W)-weighted rows with the held variables' columns zeroed,
-    so a held variable gets 1/c on the diagonal and no coupling, as in the direct path.
+    J holds sqrt(W)-weighted rows with the held variables' columns zeroed, so a held
+    variable gets 1/c on the diagonal and no coupling, as in the direct path. With
+    one targeted effector (the usual case) J stays in DD's Jacobian rows, so an
+    iteration allocates nothing; several effectors stack their rows in a new array.
     """
     n = h.shape[0]
+    only = -1
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] != 0:
+            only = e if only == -1 else -2
+    if only >= 0:
+        _weighted_jacobian(only, ni, nd, ei, ed, dd)
+        for r in range(rows):
+            for i in range(n):
+                dd[DD_J + r, i] *= free[i]
+        return _woodbury_inverse(dd[DD_J : DD_J + rows], c, h)
     y = np.empty((rows, n))
     r0 = 0
     for e in range(ei.shape[0]):
@@ -540,7 +552,21 @@ def _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h):  # type: ignore[no-u
             for i in range(n):
                 y[r0 + r, i] = dd[DD_J + r, i] * free[i]
         r0 += k
-    low = np.empty((rows, rows))
+    return _woodbury_inverse(y, c, h)
+
+
+@jit
+def _woodbury_inverse(y, c, h):  # type: ignore[no-untyped-def]
+    """h <- (c I + 2 Y^T Y)^-1 for Y (rows x n, rows <= n / 2); Y is overwritten.
+
+    Woodbury: (c I + 2 J^T J)^-1 = (I - 2 J^T M^-1 J) / c with M = c I + 2 J J^T,
+    and with M = L L^T, J^T M^-1 J = Y^T Y for Y = L^-1 J. Costs O(n^2 rows) instead
+    of O(n^3): the 40-DOF tail's 40x40 inverse becomes a 3x3 Cholesky and one n x n
+    product. L lives in h's top-left rows x rows block until the last loop, which
+    reads only Y.
+    """
+    rows, n = y.shape
+    low = h
     for a in range(rows):
         for b in range(a + 1):
             acc = 0.0

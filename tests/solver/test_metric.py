@@ -9,7 +9,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from solver import EffectorMode, IKOptions, IKSolver
-from solver.chain import Chain
+from solver.chain import Chain, Effector, build_chain
 from solver.examples import humanoid_arm, panda_arm, tail, two_arm_torso
 from solver.fk import effector_poses
 from solver.ik import pose_targets
@@ -38,6 +38,16 @@ def _weighted_jacobian_fd(chain: Chain, q: np.ndarray, eps: float = 1e-6) -> np.
     return np.vstack(blocks)
 
 
+def _tail_with_two_points() -> Chain:
+    """The 20-segment tail with a second position effector half-way along: the
+    low-rank metric then stacks two effectors' rows."""
+    base = tail(20)
+    return build_chain(
+        list(base.joints),
+        [*base.effectors, Effector(name="middle", link="seg10", mode=EffectorMode.POSITION)],
+    )
+
+
 @pytest.mark.parametrize(
     ("factory", "low_rank"),
     [
@@ -47,17 +57,19 @@ def _weighted_jacobian_fd(chain: Chain, q: np.ndarray, eps: float = 1e-6) -> np.
         (two_arm_torso, False),  # two position effectors: 6 rows, 7 variables
         (lambda: tail(3, EffectorMode.POSE), False),  # 6 rows, 6 variables
         (lambda: tail(20), True),  # 3 rows, 40 variables
+        (_tail_with_two_points, True),  # two position effectors: 6 rows, 40 variables
     ],
 )
 @pytest.mark.parametrize("damping", [0.0, 1e-3])
-def test_metric_is_the_damped_gauss_newton_inverse(factory, low_rank: bool, damping: float) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize("damping_scale", [IKOptions().damping_scale, 1.0])
+def test_metric_is_the_damped_gauss_newton_inverse(factory, low_rank: bool, damping: float, damping_scale: float) -> None:  # type: ignore[no-untyped-def]
     chain = factory()
     rows = sum(3 if e.mode is EffectorMode.POSITION else 6 for e in chain.effectors)
     assert (2 * rows <= chain.n_dof) is low_rank
     rng = np.random.default_rng(11)
     lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
     hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
-    solver = IKSolver(chain, IKOptions(damping=damping))
+    solver = IKSolver(chain, IKOptions(damping=damping, damping_scale=damping_scale))
     targets = pose_targets(chain, rng.uniform(lo, hi) * 0.5)
     solver.solve(targets)  # loads the targets and options into the compiled arrays
     data = solver._data
@@ -72,7 +84,7 @@ def test_metric_is_the_damped_gauss_newton_inverse(factory, low_rank: bool, damp
     frozen = data[4][DD_LO] == data[4][DD_HI]
     assert frozen.any() == (factory is two_arm_torso)
     jac[:, frozen] = 0.0
-    c = max(f + 1e-9, damping)
+    c = max(damping_scale * f + 1e-9, damping)
     expected = np.linalg.inv(2 * jac.T @ jac + c * np.eye(chain.n_dof))
     assert_allclose(h, h.T, rtol=0, atol=1e-9 * np.abs(h).max())
     # Compare the steps the metric gives, -H g, and H itself, relative to their size.
