@@ -414,7 +414,7 @@ def ik_objective(q, g, need_grad, data):  # type: ignore[no-untyped-def]
     return f
 
 
-@jit
+@jit_inline
 def ik_goal(f, q, data):  # type: ignore[no-untyped-def]
     """Normalised pose error at q (cached from the last objective call when q matches)."""
     dd = data[4]
