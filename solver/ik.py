@@ -658,6 +658,9 @@ class IKResult(NamedTuple):
         return max((e.rotation_error_rad or 0.0 for e in self.effectors), default=0.0)
 
 
+_tuple_new = tuple.__new__
+
+
 class _Packed(NamedTuple):
     """One IKOptions object as the core takes it, built once per solver and options."""
 
@@ -989,17 +992,21 @@ class IKSolver:
             self._solve_call = _compiled_entry(_solve_frame, args)
         if bad != -1:
             self._raise_bad_target(bad)
-        return IKResult(
-            out_x,
-            STATUSES[status],
-            TERMINATIONS[code],
-            nit,
-            nfev,
-            npass,
-            nrest,
-            elapsed * 1e6,
-            out,
-            packed.layout,
+        # tuple.__new__ directly: the NamedTuple's generated __new__ is Python code.
+        return _tuple_new(
+            IKResult,
+            (
+                out_x,
+                STATUSES[status],
+                TERMINATIONS[code],
+                nit,
+                nfev,
+                npass,
+                nrest,
+                elapsed * 1e6,
+                out,
+                packed.layout,
+            ),
         )
 
     def _raise_bad_target(self, bad: int) -> None:
