@@ -151,7 +151,8 @@ def ours_options(
 def ours_settings(o: IKOptions) -> str:
     rr = "inf" if math.isinf(o.restart_radius_rad) else f"{o.restart_radius_rad:g}"
     s = (
-        f"metric_every={o.metric_every}, max_restarts={o.max_restarts}, restart_radius={rr}, "
+        f"metric_every={o.metric_every}, damping_scale={o.damping_scale:g}, "
+        f"max_restarts={o.max_restarts}, restart_radius={rr}, "
         f"max_iter={o.max_iter}, tol {o.position_tolerance_m:g} m / {o.rotation_tolerance_rad:g} rad, "
         f"budget {o.time_budget_us:g} us"
     )
