@@ -406,7 +406,7 @@ class IKOptions:
             restarts over the whole range inside the remaining budget: a stream stuck
             on a branch that cannot follow the target jumps once instead of missing
             every later frame.
-        damping: Floor of the Gauss-Newton damping mu (default mu = f): damped least
+        damping: Floor of the Gauss-Newton damping mu (mu = damping_scale x f): damped least
             squares near singularities takes small joint steps where pure Gauss-Newton
             swings joints by radians for a millimetre (streams use 1e-3).
         damping_scale: mu = damping_scale x f (Levenberg-Marquardt's damping relative

@@ -450,7 +450,7 @@ def _held(qi, gi, lo_i, hi_i):  # type: ignore[no-untyped-def]
 
 @jit
 def ik_metric(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
-    """The registered metric (see ``_metric``), damped with mu = f + 1e-9."""
+    """The registered metric (see ``_metric``), damped with mu = scale x f + 1e-9."""
     return _metric(q, g, lo, hi, data, h, -1.0)
 
 
@@ -460,7 +460,8 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
 
     BFGS from H = I takes dozens of iterations on a pose problem; seeding a pass (or
     every step, ``metric_every``) with the damped Gauss-Newton metric (Levenberg-
-    Marquardt's matrix with mu = f + 1e-9, Sugihara 2011) gives Gauss-Newton steps
+    Marquardt's matrix with mu = s f + 1e-9, s = MISC_DAMPING_SCALE, Sugihara 2011,
+    floored at MISC_DAMPING) gives Gauss-Newton steps
     that BFGS can refine. Held variables (frozen, or on a bound with the gradient
     pushing out) are left out of the coupling: the direction then uses the inverse of
     the free block, as a projected Newton method must (Bertsekas 1982), instead of a
