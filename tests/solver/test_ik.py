@@ -451,3 +451,26 @@ def test_odd_layouts_and_number_types_reuse_the_compiled_frame() -> None:
     h = np.asfortranarray(np.eye(chain.n_dof) * 0.5)
     assert solver.solve(targets, initial_inverse_hessian=h).success
     assert len(_solve_frame.signatures) == before
+
+
+def test_later_solves_skip_type_dispatch_and_still_convert_odd_seeds() -> None:
+    """After its first solve an IKSolver calls the compiled frame's entry point directly
+    (no per-call type dispatch), so every argument must reach it with the compiled
+    types: strided, float32, read-only and list seeds are converted first, and give
+    the same answer as a solver that has not cached the entry point."""
+    from solver.ik import _solve_frame
+
+    chain = panda_arm()
+    targets = pose_targets(chain, chain.mid_limits() + 0.05)
+    solver = IKSolver(chain)
+    assert solver.solve(targets).success
+    assert solver._solve_call is not _solve_frame
+    seed = chain.mid_limits() + 0.01
+    readonly = seed.copy()
+    readonly.flags.writeable = False
+    for odd in (np.repeat(seed, 2)[::2], seed.astype(np.float32), readonly, list(seed)):
+        cached = solver.solve(targets, odd)
+        reference = IKSolver(chain).solve(targets, np.array(odd, dtype=np.float64))
+        assert cached.success
+        assert_allclose(cached.q, reference.q, rtol=0, atol=0)
+        assert cached.iterations == reference.iterations
