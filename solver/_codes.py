@@ -83,7 +83,8 @@ I_SCALE_H0 = 8
 I_MAX_PASSES = 9
 I_METRIC_EVERY = 10
 I_METRIC_UNTIL = 11  # 0: no limit
-N_IOPT = 12
+I_FINAL_METRIC = 12  # 1: re-seed H at the answer too (the caller carries H to its next solve)
+N_IOPT = 13
 
 # Columns of the pass log the core fills.
 L_START = 0

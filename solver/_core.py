@@ -498,6 +498,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
     max_passes = min(iopt[C.I_MAX_PASSES], log.shape[0])
     metric_every = iopt[C.I_METRIC_EVERY]
     metric_until = iopt[C.I_METRIC_UNTIL]
+    final_metric = iopt[C.I_FINAL_METRIC] != 0
     gtol = fopt[C.F_GTOL]
     xtol = fopt[C.F_XTOL]
     ftol = fopt[C.F_FTOL]
@@ -639,13 +640,14 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
             first_step = False
             # The goal at the new point first: when it is met the pass ends at the top
             # of the loop, and a metric for a step never taken would be wasted (a
-            # third of a warm-started stream frame's work).
+            # third of a warm-started stream frame's work) unless the caller carries
+            # this H to its next solve (final_metric).
             m_new = call_goal(goal_fn, fg, f_trial, x_new, data) if has_goal else f_trial
             if (
                 metric_every > 0
                 and pass_iters % metric_every == 0
                 and (metric_until == 0 or pass_iters < metric_until)
-                and not (has_goal and m_new <= f_goal)
+                and (final_metric or not (has_goal and m_new <= f_goal))
                 and call_metric(fg, x_new, g_new, lo, hi, data, h)
             ):
                 # Re-seed H from the objective's metric (every step: damped Gauss-Newton).

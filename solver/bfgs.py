@@ -65,6 +65,7 @@ def pack_options(
     iopt[C.I_MAX_PASSES] = options.max_passes
     iopt[C.I_METRIC_EVERY] = options.metric_every
     iopt[C.I_METRIC_UNTIL] = options.metric_until
+    iopt[C.I_FINAL_METRIC] = int(options.final_metric)
     return fopt, iopt
 
 

@@ -397,7 +397,8 @@ class IKOptions:
         gtol: Projected-gradient tolerance (a stationary point ends the pass).
         scale_initial_h: Nocedal-Wright initial scaling of H at each pass.
         curvature: The article's curvature condition in the line search.
-        carry_hessian: ``track`` starts each frame from the last frame's H.
+        carry_hessian: ``track`` starts each frame from the last frame's H (the
+            metric is then also computed at each answer, for the next frame).
         null_space_step_rad: After a solved ``track`` frame, move at most this far
             (per variable) towards the rest pose through the chain's self-motion,
             keeping the effectors within tolerance (0: off). Stops a redundant arm's
@@ -500,6 +501,7 @@ class IKOptions:
             max_passes=min(4 * (self.max_restarts + 1) + 8, 512),
             metric_every=self.metric_every,
             metric_until=self.metric_until,
+            final_metric=self.carry_hessian,
         )
 
 

@@ -66,6 +66,9 @@ class MinimizeOptions:
             converges linearly, at rate mu / (sigma^2 + mu), along a direction the
             model barely moves (near a singularity): hundreds of iterations, where
             BFGS learns that curvature from a few steps.
+        final_metric: Also re-seed H at the point that meets the goal. Off, the
+            last step's metric is skipped (the solve ends there, one metric per
+            solve saved); on for a caller that starts its next solve from this H.
     """
 
     gtol: float = 1e-8
@@ -89,6 +92,7 @@ class MinimizeOptions:
     max_passes: int = 64
     metric_every: int = 0
     metric_until: int = 0
+    final_metric: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 < self.armijo_c1 < 0.5:

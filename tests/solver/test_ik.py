@@ -474,3 +474,24 @@ def test_later_solves_skip_type_dispatch_and_still_convert_odd_seeds() -> None:
         assert cached.success
         assert_allclose(cached.q, reference.q, rtol=0, atol=0)
         assert cached.iterations == reference.iterations
+
+
+@pytest.mark.parametrize("carry", [True, False])
+def test_carried_h_is_the_metric_at_the_answer(carry: bool) -> None:
+    """A solve that meets the goal skips the Gauss-Newton metric for the step it will
+    not take, unless the caller carries H to its next solve (carry_hessian): then
+    the H handed back is the metric at the answer, as before that saving."""
+    from solver.kinematics import DD_HI, DD_LO, ik_metric
+
+    chain = panda_arm()
+    targets = pose_targets(chain, chain.mid_limits() + 0.1)
+    solver = IKSolver(chain, IKOptions(carry_hessian=carry))
+    result = solver.solve(targets)
+    assert result.success and result.iterations >= 1
+    data = solver._data
+    h = np.empty((chain.n_dof, chain.n_dof))
+    g = np.zeros(chain.n_dof)  # the answer is inside the limits: nothing is held
+    ik_objective(result.q, np.empty(chain.n_dof), True, data)
+    assert ik_metric(result.q, g, data[4][DD_LO], data[4][DD_HI], data, h)
+    same = np.allclose(result.inverse_hessian, h, rtol=1e-9, atol=1e-12)
+    assert same is carry
