@@ -23,7 +23,7 @@ import numpy as np
 from . import _codes as C
 from ._clock import now_s
 from ._dispatch import call_goal, call_metric, call_objective
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_inline, jit_leaf
 from .analyzer import decide
 
 _EPS = 2.220446049250313e-16
@@ -116,7 +116,7 @@ def _evaluate(fg, data, x, g, need_grad, grad_mode, lo, hi, work, counters):  # 
 
 @jit_inline
 def _line_search(  # type: ignore[no-untyped-def]
-    fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters
+    fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters, keep
 ):
     """Projected backtracking along d; returns (status, f_new, lambda).
 
@@ -180,6 +180,7 @@ def _line_search(  # type: ignore[no-untyped-def]
                 slope,
                 first,
                 min_lambda,
+                keep,
             )
         if counters[0] >= max_fev:
             return 3, f_new, lam
@@ -241,6 +242,7 @@ def _curvature_phase(  # type: ignore[no-untyped-def]
     slope,
     untouched,
     min_lambda,
+    keep,
 ):
     """The article's modified search: also ask g(x+).d >= c2 g.d (Dennis & Schnabel A6.3.1mod).
 
@@ -261,8 +263,8 @@ def _curvature_phase(  # type: ignore[no-untyped-def]
     if new_slope >= c2 * slope:
         return 0, f_new, lam
     # The last point that satisfied Armijo, kept apart from x_new (the trial buffer).
-    x_keep = np.empty(n)
-    g_keep = np.empty(n)
+    x_keep = keep[0]
+    g_keep = keep[1]
     for i in range(n):
         x_keep[i] = x_new[i]
         g_keep[i] = g_new[i]
@@ -457,8 +459,38 @@ def _better(f, m, f_best, m_best, has_goal, f_goal):  # type: ignore[no-untyped-
     return f < f_best
 
 
+# Rows of the work block the core's vectors live in (x, g, trial point and gradient,
+# direction, s, y, ...; the last two: the curvature search's kept point).
+WORK_ROWS = 12
+
+
 @jit
 def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g):  # type: ignore[no-untyped-def]
+    """The core for any objective (``minimize``: user objectives, MGH); see
+    ``_run_solver``. Allocates its work arrays, so the objective may allocate too."""
+    work = np.empty((WORK_ROWS, x0.shape[0]))
+    ints = np.empty(3, dtype=np.int64)
+    return _run_solver(
+        fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g, work, ints
+    )
+
+
+@jit_leaf
+def run_solver_leaf(  # type: ignore[no-untyped-def]
+    fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g, work, ints
+):
+    """The same core compiled without reference counting (``jit_leaf``), for the IK
+    objective, which allocates nothing: ~2.4x faster per iteration, same iterates.
+    ``work`` is float64[WORK_ROWS, n] and ``ints`` int64[3], both the caller's."""
+    return _run_solver(
+        fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g, work, ints
+    )
+
+
+@jit_inline
+def _run_solver(  # type: ignore[no-untyped-def]
+    fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
+):
     """Multi-pass projected BFGS under the analyzer; the whole solve in one call.
 
     Args:
@@ -481,6 +513,8 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
             f after, g.(x+ - x), lambda, and the smallest distance of x+ to a bound
             (negative would mean it left the box). Shape (0, 5) records nothing.
         out_x, out_g: Receive the best x and its gradient.
+        vectors, ints: Work blocks, float64[WORK_ROWS, n] and int64[3] (contents
+            ignored): the caller's, so that this body allocates nothing.
 
     Returns:
         (f_best, goal_measure_best, pg_norm, code, nit, nfev, ngev, n_passes,
@@ -508,14 +542,14 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
     # loads the cache) does not eat the caller's budget.
     deadline = t_start + fopt[C.F_BUDGET]
     eps_curv = fopt[C.F_CURVATURE_EPS]
-    # One block for the work vectors and one for the integer state: an allocation
-    # costs about as much as a solver iteration's bookkeeping, and a warm-started
-    # stream frame takes only a few iterations.
-    ints = np.zeros(3, dtype=np.int64)
+    # One block for the work vectors and one for the integer state, from the caller:
+    # an allocation costs about as much as a solver iteration's bookkeeping, and the
+    # reference-count-free build (run_solver_leaf) cannot allocate at all.
+    ints[0] = 0
+    ints[1] = 0
     counters = ints[0:2]  # nfev, ngev
     rng_state = ints[2:3]
     rng_state[0] = iopt[C.I_SEED] % 2147483646 + 1
-    vectors = np.empty((10, n))
     x = vectors[0]
     g = vectors[1]
     x_new = vectors[2]
@@ -526,6 +560,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
     y = vectors[7]
     hy = vectors[8]
     work = vectors[9]
+    keep = vectors[10:12]
 
     _project(x0, lo, hi, x)
     f = _evaluate(fg, data, x, g, True, grad_mode, lo, hi, work, counters)
@@ -597,7 +632,7 @@ def run_solver(fg, goal_fn, data, x0, lo, hi, h, fopt, iopt, policy, log, trace,
                 for i in range(n):
                     d[i] *= scale
             status, f_trial, lam = _line_search(
-                fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters
+                fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters, keep
             )
             if status == 3:
                 code = C.MAX_FEV

@@ -79,3 +79,26 @@ def jit_inline(fn: F) -> F:
     """
     compiled: F = _compile(fn, inline="always")
     return compiled
+
+
+def jit_leaf(fn: F) -> F:
+    """``jit`` without numba's reference counting (``_nrt=False``), for the solve's hot
+    functions: the objective, the metric, forward kinematics and the core loop.
+
+    Why: numba counts references to every array a function receives or slices, with
+    an atomic increment and decrement per array per call. ``perf`` on a solve loop put
+    46% of the samples on those two instructions (NRT_incref / NRT_decref) after the
+    per-joint helpers had already been made scalar; with the hot path compiled this
+    way a 7-DOF iteration went from ~1.7 us to ~0.7 us, iterates unchanged
+    (bench/RESULTS.md).
+
+    The rules, which the type checker cannot see: such a function allocates nothing
+    (no ``np.empty``; numba refuses to compile it), returns no array, and every array
+    it touches is owned by its caller for the whole call (the caller holds the
+    references; views made inside live no longer than the call). numba compiles the
+    functions it calls with the same flag when it compiles them first from here, so
+    they must follow the rules too (work arrays come from the caller: ``run_solver``'s
+    ``work`` block, DD's rows).
+    """
+    compiled: F = _compile(fn, _nrt=False)
+    return compiled

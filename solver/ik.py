@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from . import _codes as C
-from ._core import run_solver
+from ._core import WORK_ROWS, run_solver_leaf
 from ._dispatch import register_objective
 from ._jit import jit
 from .analyzer import AnalyzerPolicy
@@ -32,7 +32,6 @@ from .kinematics import (
     DD_LO,
     DD_QREF,
     DD_REST,
-    DD_ROWS,
     DD_XLAST,
     ED_ERR_P,
     ED_ERR_R,
@@ -54,6 +53,7 @@ from .kinematics import (
     MODE_AIM,
     MODE_POSE,
     MODE_POSITION,
+    dd_rows,
     effector_errors,
     ik_goal,
     ik_metric,
@@ -148,10 +148,15 @@ def _solve_frame(data, x0, h0, fopt, iopt, policy, out_x, out, null_space_step_r
             h[i, j] = h0[i, j]
     trace = np.empty((0, 5))
     out_g = np.empty(n)
+    work = np.empty((WORK_ROWS, n))
+    ints = np.empty(3, dtype=np.int64)
     # fg=None: the core binds the objective registered for this data type (cacheable).
-    res = run_solver(
-        None, None, data, x0, dd[DD_LO], dd[DD_HI], h, fopt, iopt, policy, log, trace, out_x, out_g
-    )
+    # The build without reference counting: the IK objective and metric allocate
+    # nothing (their scratch is DD's rows), see _jit.jit_leaf.
+    res = run_solver_leaf(
+        None, None, data, x0, dd[DD_LO], dd[DD_HI], h, fopt, iopt, policy, log, trace, out_x, out_g,
+        work, ints,
+    )  # fmt: skip
     code = res[3]
     # The solve's answer is usually the point it evaluated last (ED holds its errors,
     # MISC its goal measure): reuse that instead of one more FK.
@@ -700,7 +705,7 @@ class IKSolver:
         self._n = n
         self._ei = cc.ei.copy()
         self._ed = cc.ed.copy()
-        self._dd = np.zeros((DD_ROWS, n))
+        self._dd = np.zeros((dd_rows(n), n))
         self._dd[DD_LO] = chain.lower
         self._dd[DD_HI] = chain.upper
         self._misc = np.zeros(MISC_SIZE)

@@ -43,7 +43,7 @@ import math
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_inline, jit_leaf
 
 # NI columns
 NI_PARENT = 0
@@ -81,6 +81,17 @@ DD_GSCRATCH = 4
 DD_J = 5  # rows 5..10: one effector's weighted Jacobian (metric)
 DD_REST = 11  # rest pose: where a stream's null-space step steers a redundant chain
 DD_ROWS = 12
+# Rows DD_STACK.. (n // 2 of them): several effectors' Jacobian rows stacked for the
+# low-rank metric, which is used only while the task has at most n / 2 rows. Kept in
+# DD because the metric is compiled without reference counting and cannot allocate.
+DD_STACK = DD_ROWS
+
+
+def dd_rows(n: int) -> int:
+    """Rows of a chain's DD block for n variables."""
+    return DD_ROWS + n // 2
+
+
 # Above this many variables the direct Gauss-Newton metric (O(n^3)) costs more than it
 # saves; the low-rank form (at most n / 2 task rows, O(n^2 rows)) is used at any size in
 # the solve (the null-space step keeps this limit).
@@ -103,7 +114,7 @@ MODE_POSE = 1
 MODE_AIM = 2
 
 
-@jit
+@jit_leaf
 def forward_kinematics(q, ni, nd):  # type: ignore[no-untyped-def]
     """World rotation and origin of every node for q, written into nd[:, 15:27]."""
     for k in range(ni.shape[0]):
@@ -400,7 +411,7 @@ def _goal_measure(ei, ed):  # type: ignore[no-untyped-def]
     return worst
 
 
-@jit
+@jit_leaf
 def ik_objective(q, g, need_grad, data):  # type: ignore[no-untyped-def]
     """f(q) = sum_e w_p |p_e - t_e|^2 + w_r |rot err_e|^2 + posture + limit margin."""
     ni, nd, ei, ed, dd, misc = data
@@ -452,7 +463,7 @@ def _held(qi, gi, lo_i, hi_i):  # type: ignore[no-untyped-def]
     return lo_i == hi_i or (qi <= lo_i and gi > 0.0) or (qi >= hi_i and gi < 0.0)
 
 
-@jit
+@jit_leaf
 def ik_metric(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
     """The registered metric (see ``_metric``), damped with mu = scale x f + 1e-9."""
     return _metric(q, g, lo, hi, data, h, -1.0)
@@ -496,7 +507,10 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     free = dd[DD_GSCRATCH]  # reused as a 0/1 mask of the free variables
     for i in range(n):
         free[i] = 0.0 if _held(q[i], g[i], lo[i], hi[i]) else 1.0
-    mu = max(misc[MISC_DAMPING_SCALE] * f + 1e-9, misc[MISC_DAMPING]) if mu_fixed < 0.0 else mu_fixed
+    if mu_fixed < 0.0:
+        mu = max(misc[MISC_DAMPING_SCALE] * f + 1e-9, misc[MISC_DAMPING])
+    else:
+        mu = mu_fixed
     c = mu + 2.0 * misc[MISC_POSTURE]
     if 2 * rows <= n:
         return _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h)
@@ -524,7 +538,7 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     return _invert_spd_in_place(h)
 
 
-@jit
+@jit_leaf
 def _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h):  # type: ignore[no-untyped-def]
     """h <- (c I + 2 J^T J)^-1 through the rows x rows matrix M = c I + 2 J J^T, for
     a task with at most half as many rows as variables (position-only arms, long
@@ -532,8 +546,8 @@ def _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h):  # type: ignore[no-u
 
     J holds sqrt(W)-weighted rows with the held variables' columns zeroed, so a held
     variable gets 1/c on the diagonal and no coupling, as in the direct path. With
-    one targeted effector (the usual case) J stays in DD's Jacobian rows, so an
-    iteration allocates nothing; several effectors stack their rows in a new array.
+    one targeted effector (the usual case) J stays in DD's Jacobian rows; several
+    effectors stack theirs in DD's rows from DD_STACK.
     """
     n = h.shape[0]
     only = -1
@@ -546,7 +560,7 @@ def _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h):  # type: ignore[no-u
             for i in range(n):
                 dd[DD_J + r, i] *= free[i]
         return _woodbury_inverse(dd[DD_J : DD_J + rows], c, h)
-    y = np.empty((rows, n))
+    y = dd[DD_STACK : DD_STACK + rows]
     r0 = 0
     for e in range(ei.shape[0]):
         if ei[e, EI_ACTIVE] == 0:
@@ -560,7 +574,7 @@ def _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h):  # type: ignore[no-u
     return _woodbury_inverse(y, c, h)
 
 
-@jit
+@jit_leaf
 def _woodbury_inverse(y, c, h):  # type: ignore[no-untyped-def]
     """h <- (c I + 2 Y^T Y)^-1 for Y (rows x n, rows <= n / 2); Y is overwritten.
 
