@@ -22,7 +22,7 @@ import numpy as np
 from . import _codes as C
 from ._core import WORK_ROWS, run_solver_leaf
 from ._dispatch import register_objective
-from ._jit import jit
+from ._jit import jit, jit_leaf
 from .analyzer import AnalyzerPolicy
 from .bfgs import pack_options, unpack_pass_log
 from .chain import Chain, EffectorMode
@@ -110,8 +110,15 @@ def _check_targets(data):  # type: ignore[no-untyped-def]
     return -1
 
 
-@jit
-def _solve_frame(data, x0, h0, fopt, iopt, policy, out_x, out, null_space_step_rad):  # type: ignore[no-untyped-def]
+def scratch_size(n: int, m: int) -> int:
+    """Length of ``_solve_frame``'s float scratch for n variables and m effectors."""
+    return WORK_ROWS * n + 3 * n + 3 * m + n * n
+
+
+@jit_leaf
+def _solve_frame(  # type: ignore[no-untyped-def]
+    data, x0, h0, fopt, iopt, policy, out_x, out, null_space_step_rad, scratch, ints
+):
     """One compiled call per frame: validate targets and seed, solve, report errors,
     and (``null_space_step_rad`` > 0, solved frames only) take the null-space step
     towards the rest pose (DD_REST).
@@ -124,6 +131,10 @@ def _solve_frame(data, x0, h0, fopt, iopt, policy, out_x, out, null_space_step_r
     position error, nan if not targeted; rotation error, nan if not constrained;
     1.0 if targeted), the final inverse Hessian (n x n), then the pass log.
     ``h0`` (the initial H) is read, never written.
+
+    ``scratch`` (float64[scratch_size(n, m)]) and ``ints`` (int64[3]) are work space,
+    the caller's: compiled without reference counting (``jit_leaf``), this function
+    and everything it calls allocate nothing.
 
     Returns (bad_target, status, termination code, iterations, evaluations,
     passes, restarts, solve seconds); status indexes ``STATUSES``.
@@ -146,10 +157,16 @@ def _solve_frame(data, x0, h0, fopt, iopt, policy, out_x, out, null_space_step_r
     for i in range(n):
         for j in range(n):
             h[i, j] = h0[i, j]
-    trace = np.empty((0, 5))
-    out_g = np.empty(n)
-    work = np.empty((WORK_ROWS, n))
-    ints = np.empty(3, dtype=np.int64)
+    # The scratch, cut into its parts (views: nothing is allocated).
+    work = scratch[: WORK_ROWS * n].reshape((WORK_ROWS, n))
+    k = WORK_ROWS * n
+    out_g = scratch[k : k + n]
+    moved = scratch[k + n : k + 2 * n]
+    ns_g = scratch[k + 2 * n : k + 3 * n]
+    k += 3 * n
+    moved_errors = scratch[k : k + 3 * m].reshape((m, 3))
+    ns_h = scratch[k + 3 * m : k + 3 * m + n * n].reshape((n, n))
+    trace = scratch[:0].reshape((0, 5))  # records nothing
     # fg=None: the core binds the objective registered for this data type (cacheable).
     # The build without reference counting: the IK objective and metric allocate
     # nothing (their scratch is DD's rows), see _jit.jit_leaf.
@@ -171,12 +188,15 @@ def _solve_frame(data, x0, h0, fopt, iopt, policy, out_x, out, null_space_step_r
     else:
         measure = _report(data, out_x, errors)
     if measure <= 1.0 and null_space_step_rad > 0.0:
-        moved = np.empty(n)
-        moved_errors = np.empty((m, 3))
-        if null_space_step(out_x, data, dd[DD_REST], null_space_step_rad, moved):
+        if null_space_step(out_x, data, dd[DD_REST], null_space_step_rad, moved, ns_h, ns_g):
             if _report(data, moved, moved_errors) <= 1.0:
-                out_x[:] = moved
-                errors[:, :] = moved_errors
+                # Loops, not slice assignment: that needs numba's runtime (a copy in case
+                # the two overlap), which this build does not have.
+                for i in range(n):
+                    out_x[i] = moved[i]
+                for e in range(m):
+                    for c in range(3):
+                        errors[e, c] = moved_errors[e, c]
     if measure <= 1.0:
         status = 0
     elif code == C.NONFINITE or not math.isfinite(measure):
@@ -737,6 +757,9 @@ class IKSolver:
         self._dd[DD_REST] = self._mid
         self._h: Matrix | None = None
         self._solve_call: Callable[..., tuple[Any, ...]] = _solve_frame
+        # _solve_frame's work space (it allocates nothing: see _jit.jit_leaf).
+        self._scratch = np.empty(scratch_size(n, self._ei.shape[0]))
+        self._ints = np.empty(3, dtype=np.int64)
 
     # -- public API ------------------------------------------------------------
     def solve(
@@ -992,6 +1015,8 @@ class IKSolver:
             out_x,
             out,
             null_space_step_rad,
+            self._scratch,
+            self._ints,
         )
         call = self._solve_call
         bad, status, code, nit, nfev, npass, nrest, elapsed = call(*args)

@@ -41,8 +41,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from ._jit import jit, jit_inline, jit_leaf
 
 # NI columns
@@ -729,7 +727,7 @@ def _invert_spd_in_place(m):  # type: ignore[no-untyped-def]
 
 
 @jit
-def null_space_step(q, data, rest, max_step, out):  # type: ignore[no-untyped-def]
+def null_space_step(q, data, rest, max_step, out, h, g):  # type: ignore[no-untyped-def]
     """A step towards ``rest`` that leaves the effectors where they are (to first order).
 
     With A = 2 J^T W J over the targeted effectors, mu (A + mu I)^-1 is the projector
@@ -739,6 +737,7 @@ def null_space_step(q, data, rest, max_step, out):  # type: ignore[no-untyped-de
     arm into its limits or a singularity over hundreds of frames (the classic
     pseudo-inverse drift). The step is scaled so that no variable moves more than
     max_step. Writes q + step (clipped to the limits) into out; False if impossible.
+    ``h`` (n x n) and ``g`` (n) are work space (the caller's: nothing is allocated).
     """
     ni, nd, ei, ed, dd, misc = data
     n = q.shape[0]
@@ -746,8 +745,8 @@ def null_space_step(q, data, rest, max_step, out):  # type: ignore[no-untyped-de
         return False
     lo = dd[DD_LO]
     hi = dd[DD_HI]
-    h = np.empty((n, n))
-    g = np.zeros(n)  # nothing is held by a gradient: only frozen variables stay out
+    for i in range(n):
+        g[i] = 0.0  # nothing is held by a gradient: only frozen variables stay out
     mu = 1e-6
     if not _metric(q, g, lo, hi, data, h, mu):
         return False
