@@ -221,6 +221,9 @@ def _line_search(  # type: ignore[no-untyped-def]
         lam = lam_t if lam_t > 0.1 * lam else 0.1 * lam
 
 
+# Not jit_leaf: it calls the objective, and minimize()'s objectives may allocate (a
+# leaf build would be inherited by them). It allocates nothing itself (its kept point
+# is the caller's), so the IK path's leaf core may call it either way.
 @jit
 def _curvature_phase(  # type: ignore[no-untyped-def]
     fg,
@@ -347,7 +350,7 @@ def _curvature_phase(  # type: ignore[no-untyped-def]
     return 0, f_keep, lam_keep
 
 
-@jit
+@jit_leaf
 def _uniform(state):  # type: ignore[no-untyped-def]
     """Park-Miller minimal standard generator (product < 2^47: no int64 overflow).
 
@@ -361,7 +364,7 @@ def _uniform(state):  # type: ignore[no-untyped-def]
     return (state[0] - 1) / 2147483646.0
 
 
-@jit
+@jit_leaf
 def _random_point(x_center, lo, hi, radius, rng_state, out):  # type: ignore[no-untyped-def]
     """Uniform in the box intersected with [center - radius, center + radius].
 

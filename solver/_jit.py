@@ -98,7 +98,12 @@ def jit_leaf(fn: F) -> F:
     references; views made inside live no longer than the call). numba compiles the
     functions it calls with the same flag when it compiles them first from here, so
     they must follow the rules too (work arrays come from the caller: ``run_solver``'s
-    ``work`` block, DD's rows).
+    ``work`` block, DD's rows). That inheritance depends on call order (whichever
+    caller compiles a helper first decides its build) and numba's on-disk cache key
+    does not record it, so an allocation added to a shared helper could compile with
+    a warm cache and fail in a fresh one: every helper the IK path reaches is
+    therefore marked ``jit_leaf`` itself (``_curvature_phase`` excepted: it calls
+    ``minimize()``'s objectives, which may allocate; it allocates nothing itself).
     """
     compiled: F = _compile(fn, _nrt=False)
     return compiled

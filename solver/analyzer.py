@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _codes as C
-from ._jit import jit
+from ._jit import jit_leaf
 from .termination import Action, GoalStatus, Termination
 
 PolicyTable = Mapping[tuple[Termination, GoalStatus], Action]
@@ -125,7 +125,7 @@ class AnalyzerPolicy:
         return out
 
 
-@jit
+@jit_leaf
 def decide(
     policy: npt.NDArray[np.int64],
     code: int,

@@ -67,7 +67,7 @@ TERMINATIONS = C.TERMINATIONS  # _solve_frame's termination codes, in order
 SEED_NOT_FINITE = -2  # _solve_frame's "bad" code for a seed with NaN or inf
 
 
-@jit
+@jit_leaf
 def _check_targets(data):  # type: ignore[no-untyped-def]
     """-1 if the loaded targets are valid, else 3 * effector + problem (0 non-finite,
     1 rotation not orthonormal with det +1, 2 zero direction); normalises directions.
@@ -208,7 +208,7 @@ def _solve_frame(  # type: ignore[no-untyped-def]
     return bad, status, code, res[4], res[5], res[7], res[8], res[10]
 
 
-@jit
+@jit_leaf
 def _report(data, q, errors):  # type: ignore[no-untyped-def]
     """Errors at q into ``errors`` (see ``_solve_frame``); returns the goal measure."""
     measure = effector_errors(q, data)
@@ -216,7 +216,7 @@ def _report(data, q, errors):  # type: ignore[no-untyped-def]
     return measure
 
 
-@jit
+@jit_leaf
 def _copy_errors(data, errors):  # type: ignore[no-untyped-def]
     """The errors in ED (those of the last q evaluated) into ``errors`` (m x 3)."""
     ei = data[2]

@@ -14,8 +14,9 @@ boundary costs reference counting, and numba's dispatcher type-checks each one.
                               weights w_p, w_r (15, 16), target position (17:20),
                               target rotation (20:29), target direction (29:32),
                               tolerances (32, 33), last errors [m], [rad] (34, 35)
-    DD  float64[12, n]        reference pose, lower, upper, last q evaluated,
-                              gradient scratch, 6 rows of Jacobian scratch, rest pose
+    DD  float64[12 + n // 2, n]  reference pose, lower, upper, last q evaluated,
+                              gradient scratch, 6 rows of Jacobian scratch, rest pose,
+                              then n // 2 rows for several effectors' stacked Jacobian
     MISC float64[7]           posture weight, limit weight, limit margin, goal
                               measure of the last q evaluated, damping floor,
                               f of the last q evaluated, damping scale
@@ -29,9 +30,9 @@ R = exp([phi]) and dR/dt = [w] R, dphi = J_l^-1(phi) w, and phi^T J_l^-1(phi) = 
 so d|phi|^2/dq = 2 phi^T J_w exactly (J_w the angular Jacobian): the same cheap
 form as for position, with no approximation of the log map's derivative.
 
-The objective and its gradient allocate nothing: they run thousands of times per second
-per session. Neither does the metric, except for the rows of several effectors stacked
-for the low-rank form.
+The objective, its gradient and the metric allocate nothing (they run thousands of
+times per second per session, and are compiled without reference counting,
+``_jit.jit_leaf``): their scratch is DD's rows.
 
 Helpers called once per joint take scalars, not arrays: numba reference-counts every
 array handed to a helper (two atomic operations), which was ~40% of a solve.
@@ -437,7 +438,7 @@ def ik_goal(f, q, data):  # type: ignore[no-untyped-def]
     return data[5][MISC_GOAL]
 
 
-@jit
+@jit_leaf
 def effector_errors(q, data):  # type: ignore[no-untyped-def]
     """Errors at q into ED[:, 34:36]; returns the goal measure."""
     ni, nd, ei, ed, dd, misc = data
@@ -558,6 +559,8 @@ def _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h):  # type: ignore[no-u
             for i in range(n):
                 dd[DD_J + r, i] *= free[i]
         return _woodbury_inverse(dd[DD_J : DD_J + rows], c, h)
+    if dd.shape[0] < DD_STACK + rows:  # a DD block not sized by dd_rows(n)
+        return False
     y = dd[DD_STACK : DD_STACK + rows]
     r0 = 0
     for e in range(ei.shape[0]):
@@ -726,7 +729,7 @@ def _invert_spd_in_place(m):  # type: ignore[no-untyped-def]
     return True
 
 
-@jit
+@jit_leaf
 def null_space_step(q, data, rest, max_step, out, h, g):  # type: ignore[no-untyped-def]
     """A step towards ``rest`` that leaves the effectors where they are (to first order).
 
