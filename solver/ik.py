@@ -32,7 +32,6 @@ from .kinematics import (
     DD_LO,
     DD_QREF,
     DD_REST,
-    DD_XLAST,
     ED_ERR_P,
     ED_ERR_R,
     ED_TDIR,
@@ -58,6 +57,7 @@ from .kinematics import (
     ik_goal,
     ik_metric,
     ik_objective,
+    is_last_point,
     null_space_step,
 )
 from .termination import Termination
@@ -177,12 +177,7 @@ def _solve_frame(  # type: ignore[no-untyped-def]
     code = res[3]
     # The solve's answer is usually the point it evaluated last (ED holds its errors,
     # MISC its goal measure): reuse that instead of one more FK.
-    last = True
-    for i in range(n):
-        if out_x[i] != dd[DD_XLAST, i]:
-            last = False
-            break
-    if last:
+    if is_last_point(out_x, dd):
         measure = data[5][MISC_GOAL]
         _copy_errors(data, errors)
     else:

@@ -34,8 +34,9 @@ The objective, its gradient and the metric allocate nothing (they run thousands 
 times per second per session, and are compiled without reference counting,
 ``_jit.jit_leaf``): their scratch is DD's rows.
 
-Helpers called once per joint take scalars, not arrays: numba reference-counts every
-array handed to a helper (two atomic operations), which was ~40% of a solve.
+Helpers called once per joint may take arrays only where every caller is compiled
+without reference counting (``jit_leaf``): elsewhere numba counts every array handed
+to a helper (two atomic operations), which was ~40% of a solve.
 """
 
 from __future__ import annotations
@@ -255,19 +256,44 @@ def rotation_log(r00, r01, r02, r10, r11, r12, r20, r21, r22):  # type: ignore[n
 
 @jit_inline
 def _rotate(r00, r01, r02, r10, r11, r12, r20, r21, r22, ux, uy, uz):  # type: ignore[no-untyped-def]
-    """R u for a row-major R.
-
-    The world axis of node k's motion is R_k a (a rotation leaves its own axis
-    fixed). Helpers called once per joint take scalars, never arrays: every array
-    handed to an inlined helper is reference-counted on the way in and out (two
-    atomic operations each), which measured at ~0.3 us of a ~0.8 us metric when
-    the per-joint helper took four arrays.
-    """
+    """R u for a row-major R: the world axis of node k's motion is R_k a (a rotation
+    leaves its own axis fixed)."""
     return (
         r00 * ux + r01 * uy + r02 * uz,
         r10 * ux + r11 * uy + r12 * uz,
         r20 * ux + r21 * uy + r22 * uz,
     )
+
+
+@jit_inline
+def _world_axis(nd, k):  # type: ignore[no-untyped-def]
+    """World axis R_k a of node k's motion, from the frames FK wrote into ND. Takes
+    the array: every caller is compiled without reference counting (jit_leaf), so
+    passing it costs nothing."""
+    return _rotate(
+        nd[k, ND_R],
+        nd[k, ND_R + 1],
+        nd[k, ND_R + 2],
+        nd[k, ND_R + 3],
+        nd[k, ND_R + 4],
+        nd[k, ND_R + 5],
+        nd[k, ND_R + 6],
+        nd[k, ND_R + 7],
+        nd[k, ND_R + 8],
+        nd[k, ND_AXIS],
+        nd[k, ND_AXIS + 1],
+        nd[k, ND_AXIS + 2],
+    )
+
+
+@jit_inline
+def is_last_point(x, dd):  # type: ignore[no-untyped-def]
+    """Whether x is the point evaluated last (DD_XLAST): then ND, ED's errors and
+    MISC's f and goal describe it, and need not be computed again."""
+    for i in range(x.shape[0]):
+        if x[i] != dd[DD_XLAST, i]:
+            return False
+    return True
 
 
 @jit_inline
@@ -330,20 +356,7 @@ def _effector_terms(q, g, need_grad, ni, nd, ei, ed):  # type: ignore[no-untyped
         while k >= 0:
             d = ni[k, NI_DOF]
             if d >= 0:
-                wx, wy, wz = _rotate(
-                    nd[k, ND_R],
-                    nd[k, ND_R + 1],
-                    nd[k, ND_R + 2],
-                    nd[k, ND_R + 3],
-                    nd[k, ND_R + 4],
-                    nd[k, ND_R + 5],
-                    nd[k, ND_R + 6],
-                    nd[k, ND_R + 7],
-                    nd[k, ND_R + 8],
-                    nd[k, ND_AXIS],
-                    nd[k, ND_AXIS + 1],
-                    nd[k, ND_AXIS + 2],
-                )
+                wx, wy, wz = _world_axis(nd, k)
                 if ni[k, NI_KIND] == NODE_ROTATION:
                     lx = px - nd[k, ND_T]
                     ly = py - nd[k, ND_T + 1]
@@ -492,12 +505,7 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     if n > METRIC_MAX_DOF and 2 * rows > n:
         return False
     # The line search has usually just evaluated q: its frames are still in nd.
-    fresh = True
-    for i in range(n):
-        if q[i] != dd[DD_XLAST, i]:
-            fresh = False
-            break
-    if fresh:
+    if is_last_point(q, dd):
         f = misc[MISC_LAST_F]
     else:
         f = _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
@@ -646,20 +654,7 @@ def _weighted_jacobian(e, ni, nd, ei, ed, dd):  # type: ignore[no-untyped-def]
     while k >= 0:
         d = ni[k, NI_DOF]
         if d >= 0:
-            wx, wy, wz = _rotate(
-                nd[k, ND_R],
-                nd[k, ND_R + 1],
-                nd[k, ND_R + 2],
-                nd[k, ND_R + 3],
-                nd[k, ND_R + 4],
-                nd[k, ND_R + 5],
-                nd[k, ND_R + 6],
-                nd[k, ND_R + 7],
-                nd[k, ND_R + 8],
-                nd[k, ND_AXIS],
-                nd[k, ND_AXIS + 1],
-                nd[k, ND_AXIS + 2],
-            )
+            wx, wy, wz = _world_axis(nd, k)
             if ni[k, NI_KIND] == NODE_ROTATION:
                 lx = px - nd[k, ND_T]
                 ly = py - nd[k, ND_T + 1]
