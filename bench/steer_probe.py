@@ -1,0 +1,311 @@
+"""Steering a 7-DOF arm's self-motion ahead of a singularity: what moves the iiwa step bar.
+
+Issue #3 (c) asks that the largest joint step of a tracked stream be at most twice the
+reference path's. One iiwa stream misses it (``bench/RESULTS.md``, "iiwa tracking"): the
+reference crosses the shoulder pole (joint 2 through 0) and later the wrist's (joint 6
+through 0), while our warm-started answer, on another point of the arm's one-dimensional
+self-motion, passes *near* the pole, where joints 1 and 3 (or 5 and 7) must turn by about
+pi in a few frames. This probe runs the benchmark's own streams (same generator, seed and
+options as ``bench/ik.py`` part (c)) with a steering strategy applied before each frame,
+and prints, per stream, the largest step over the reference's, the frames above 2x and the
+frames out of tolerance. It measures what each strategy can do, not what it costs: the
+strategies are Python with finite-difference Jacobians.
+
+Strategies (``--strategy``, several allowed):
+  none      STREAM_DEFAULTS as the benchmark runs them.
+  attract   when an alignment joint (``--align``, 0-based; default: the two joints whose
+            zero aligns the axes of their neighbours) is within ``--theta`` of 0, step
+            along the self-motion towards the point where that joint is smallest (Newton
+            on q_j^2), at most ``--cap`` rad per joint per frame: a stream that sits at
+            that point when the pole passes crosses it as the reference does.
+  velocity  step along the self-motion down the gradient of |J^+ xdot| (the joint speed
+            the coming frame's target motion needs).
+  oracle    every ``--every`` frames, run the plain local tracker over the next
+            ``--horizon`` frames of the TRUE future targets from the current pose and from
+            points +-D along the self-motion, score each by its steps above 0.02 rad, and
+            steer towards the best at ``--cap`` per frame. A tracker never has the future;
+            this bounds what look-ahead steering could buy.
+
+    OPENBLAS_NUM_THREADS=1 python -m bench.steer_probe --chain iiwa \
+        --strategy none,attract,velocity,oracle
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import math  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Callable, Sequence  # noqa: E402
+from dataclasses import dataclass, replace  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from solver.chain import Chain  # noqa: E402
+from solver.fk import effector_poses  # noqa: E402
+from solver.ik import IKOptions, IKSolver, Target  # noqa: E402
+
+from .ik import Config, _targets_for, chain_rng, fk_poses, make_stream, max_step, ours_options  # noqa: E402
+from .ik_chains import CHAINS, load  # noqa: E402
+
+STRATEGIES = ("none", "attract", "velocity", "oracle")
+# Joints (0-based) whose zero makes the axes of their two neighbours collinear.
+ALIGNMENT_JOINTS = {"iiwa": (1, 5), "panda": (1, 5)}
+EXCESS_RAD = 0.02  # oracle: steps above this count against a candidate
+
+
+@dataclass
+class Stream:
+    """One stream's state as a strategy sees it before frame k is solved."""
+
+    targets: list[list[Target]]
+    direction: np.ndarray | None = None  # the self-motion direction, oriented as last frame
+    steer: float = 0.0  # oracle: the side chosen at its last look-ahead (-1, 0, +1)
+
+
+Strategy = Callable[[IKSolver, int, Stream], None]
+
+
+def jacobian(chain: Chain, q: np.ndarray, h: float = 1e-7) -> np.ndarray:
+    """6 x n: the first effector's position and world rotation vector, by differences."""
+    p0 = effector_poses(chain, q)[0]
+    jac = np.empty((6, q.size))
+    for j in range(q.size):
+        dq = q.copy()
+        dq[j] += h
+        p = effector_poses(chain, dq)[0]
+        jac[:3, j] = (p[:3, 3] - p0[:3, 3]) / h
+        r = p0[:3, :3].T @ p[:3, :3]
+        w = 0.5 * np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+        jac[3:, j] = p0[:3, :3] @ w / h
+    return jac
+
+
+def self_motion(chain: Chain, q: np.ndarray, like: np.ndarray | None) -> np.ndarray:
+    """Unit direction of the self-motion at q (a 7-DOF arm's one null direction of its
+    6-D Jacobian), signed to agree with ``like`` (SVD picks the sign at random)."""
+    n: np.ndarray = np.linalg.svd(jacobian(chain, q))[2][-1]
+    return -n if like is not None and float(n @ like) < 0.0 else n
+
+
+def _move(solver: IKSolver, step: np.ndarray, cap: float) -> None:
+    """Move the stream's pose by ``step`` scaled to at most ``cap`` per joint; the
+    frame's solve then takes it back onto the target (second-order error only)."""
+    big = float(np.abs(step).max())
+    if big > cap:
+        step = step * (cap / big)
+    solver.q = np.clip(solver.q + step, solver.chain.lower, solver.chain.upper)
+
+
+def attract(joints: Sequence[int], theta: float, cap: float, eps: float = 1e-4) -> Strategy:
+    def before(solver: IKSolver, k: int, s: Stream) -> None:
+        q = solver.q
+        near = [j for j in joints if abs(q[j]) < theta]
+        if not near:
+            return
+        j = min(near, key=lambda i: abs(q[i]))
+        n = self_motion(solver.chain, q, s.direction)
+        s.direction = n
+        dn = (self_motion(solver.chain, q + eps * n, n)[j] - n[j]) / eps
+        slope = 2.0 * q[j] * n[j]  # d(q_j^2)/da along n
+        curvature = 2.0 * (n[j] ** 2 + q[j] * dn)
+        a = -slope / curvature if curvature > 0.0 else -math.copysign(1e9, slope)
+        _move(solver, a * n, cap)
+
+    return before
+
+
+def _rotation_vector(r: np.ndarray) -> np.ndarray:
+    angle = math.acos(max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0)))
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    return w * (0.5 if angle < 1e-8 else angle / (2.0 * math.sin(angle)))
+
+
+def velocity(cap: float, eps: float = 1e-3) -> Strategy:
+    def speed(chain: Chain, q: np.ndarray, xdot: np.ndarray) -> float:
+        return float(np.linalg.norm(np.linalg.lstsq(jacobian(chain, q), xdot, rcond=None)[0]))
+
+    def before(solver: IKSolver, k: int, s: Stream) -> None:
+        if k < 1:
+            return
+        a, b = s.targets[k - 1][0], s.targets[k][0]
+        assert a.position is not None and b.position is not None
+        assert a.rotation is not None and b.rotation is not None
+        xdot = np.concatenate(
+            [b.position - a.position, _rotation_vector(b.rotation @ a.rotation.T)]
+        )
+        q = solver.q
+        n = self_motion(solver.chain, q, s.direction)
+        s.direction = n
+        slope = (
+            speed(solver.chain, q + eps * n, xdot) - speed(solver.chain, q - eps * n, xdot)
+        ) / (2 * eps)
+        _move(solver, -slope * n, cap)
+
+    return before
+
+
+def oracle(
+    options: IKOptions, horizon: int, every: int, spans: Sequence[float], cap: float
+) -> Strategy:
+    local = replace(options, global_fallback=False, null_space_step_rad=0.0, max_restarts=3)
+    sims: dict[int, IKSolver] = {}
+
+    def simulate(sim: IKSolver, q0: np.ndarray, future: Sequence[list[Target]]) -> float:
+        sim.q = q0.copy()
+        prev, score = q0, 0.0
+        for t in future:
+            r = sim.track(t, options=local)
+            step = float(np.abs(r.q - prev).max())
+            prev = r.q.copy()
+            score += max(0.0, step - EXCESS_RAD) ** 2 + (0.0 if r.success else 0.01)
+        return score
+
+    def walk(
+        sim: IKSolver, q: np.ndarray, target: list[Target], span: float, n0: np.ndarray
+    ) -> np.ndarray | None:
+        """Follow the self-motion for ``span`` rad (largest joint), re-solving every 0.05."""
+        parts = max(1, int(abs(span) / 0.05))
+        n = n0
+        for _ in range(parts):
+            n = self_motion(sim.chain, q, n)
+            sim.q = np.clip(
+                q + (span / parts) * n / np.abs(n).max(), sim.chain.lower, sim.chain.upper
+            )
+            r = sim.track(target, options=local)
+            if not r.success:
+                return None
+            q = r.q.copy()
+        return q
+
+    def before(solver: IKSolver, k: int, s: Stream) -> None:
+        q = solver.q.copy()
+        n = self_motion(solver.chain, q, s.direction)
+        s.direction = n
+        if k >= 1 and k % every == 0:
+            sim = sims.setdefault(id(solver), IKSolver(solver.chain, options))
+            future = s.targets[k : k + horizon]
+            best, best_score = 0.0, simulate(sim, q, future)
+            for span in spans:
+                for side in (-1.0, 1.0):
+                    start = walk(sim, q, s.targets[k - 1], side * span, n)
+                    if start is not None and (score := simulate(sim, start, future)) < best_score:
+                        best, best_score = side, score
+            s.steer = best
+        if s.steer:
+            _move(solver, s.steer * n, cap)
+
+    return before
+
+
+@dataclass(frozen=True)
+class Outcome:
+    stream: int
+    ratio: float  # largest step / the reference's
+    worst_frame: int
+    above: int  # frames whose step exceeds twice the reference's
+    first_above: int  # the first of them (-1: none)
+    missed: int  # frames out of tolerance
+
+
+def run(
+    chain: str, strategy: Strategy | None, streams: int, frames: int, rest_pull: float
+) -> list[Outcome]:
+    """The benchmark's streams; with a strategy, the rest-pose pull is ``rest_pull``."""
+    bc = load(chain, peer_urdf=False)
+    cfg = Config(1, 0, 0, 0.005, frames, 60.0, streams, (), ())
+    rng = chain_rng(cfg, chain, "track")
+    options = ours_options(1, stream=True, budget_us=5000.0)
+    if strategy is not None:
+        options = replace(options, null_space_step_rad=rest_pull)
+    out = []
+    for index in range(streams):
+        path = make_stream(rng, bc, frames, 60.0)
+        stream = Stream(_targets_for(bc, fk_poses(bc, path), False))
+        solver = IKSolver(bc.pose, options)
+        solver.set_pose(path[0])
+        ours = np.empty_like(path)
+        missed = 0
+        for k in range(frames):
+            if strategy is not None:
+                strategy(solver, k, stream)
+            r = solver.track(stream.targets[k])
+            ours[k] = r.q
+            missed += not r.success
+        steps = np.abs(np.diff(ours, axis=0)).max(axis=1)
+        ref = max_step(path)
+        out.append(
+            Outcome(
+                index,
+                float(steps.max() / ref),
+                int(np.argmax(steps)) + 1,
+                int((steps > 2 * ref).sum()),
+                int(np.argmax(steps > 2 * ref)) + 1 if (steps > 2 * ref).any() else -1,
+                missed,
+            )
+        )
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--chain", default="iiwa", choices=CHAINS)
+    ap.add_argument("--strategy", default=",".join(STRATEGIES))
+    ap.add_argument("--streams", type=int, default=3)
+    ap.add_argument("--frames", type=int, default=600)
+    ap.add_argument("--align", default=None, help="alignment joints, 0-based (attract)")
+    ap.add_argument("--theta", type=float, default=0.3, help="attract when |q_j| < theta (rad)")
+    ap.add_argument("--cap", type=float, default=0.01, help="steering per frame, rad per joint")
+    ap.add_argument("--horizon", type=int, default=120, help="oracle: frames looked ahead")
+    ap.add_argument("--every", type=int, default=5, help="oracle: frames between look-aheads")
+    ap.add_argument("--spans", default="0.3,0.6", help="oracle: candidate distances (rad)")
+    ap.add_argument(
+        "--rest-pull",
+        type=float,
+        default=0.0,
+        help="null_space_step_rad while steering (STREAM_DEFAULTS: 0.005; 0: steering only)",
+    )
+    args = ap.parse_args(argv)
+
+    names = [s for s in args.strategy.split(",") if s]
+    unknown = set(names) - set(STRATEGIES)
+    if unknown:
+        ap.error(f"unknown strategy {sorted(unknown)}; choose from {STRATEGIES}")
+    align = (
+        tuple(int(x) for x in args.align.split(","))
+        if args.align
+        else ALIGNMENT_JOINTS.get(args.chain, ())
+    )
+    options = ours_options(1, stream=True, budget_us=5000.0)
+    spans = tuple(float(x) for x in args.spans.split(","))
+    build: dict[str, Callable[[], Strategy | None]] = {
+        "none": lambda: None,
+        "attract": lambda: attract(align, args.theta, args.cap),
+        "velocity": lambda: velocity(args.cap),
+        "oracle": lambda: oracle(options, args.horizon, args.every, spans, args.cap),
+    }
+    print(
+        f"{args.chain}: cap {args.cap} rad/frame, rest pull {args.rest_pull} while steering, "
+        f"{args.streams} x {args.frames} frames"
+    )
+    print(
+        "| strategy | stream | largest step / reference's | at frame | frames above 2x | first | missed | s |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    for name in names:
+        t = time.perf_counter()
+        outcomes = run(args.chain, build[name](), args.streams, args.frames, args.rest_pull)
+        took = time.perf_counter() - t
+        for o in outcomes:
+            print(
+                f"| {name} | {o.stream} | {o.ratio:.2f} | {o.worst_frame} | {o.above} "
+                f"| {o.first_above} | {o.missed} | {took:.0f} |"
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
