@@ -45,11 +45,11 @@ from dataclasses import dataclass, replace  # noqa: E402
 import numpy as np  # noqa: E402
 
 from solver.chain import Chain  # noqa: E402
-from solver.fk import effector_poses  # noqa: E402
 from solver.ik import IKOptions, IKSolver, Target  # noqa: E402
 
 from .ik import Config, _targets_for, chain_rng, fk_poses, make_stream, max_step, ours_options  # noqa: E402
 from .ik_chains import CHAINS, load  # noqa: E402
+from .stream_probe import jacobian  # noqa: E402
 
 STRATEGIES = ("none", "attract", "velocity", "oracle")
 # Joints (0-based) whose zero makes the axes of their two neighbours collinear.
@@ -67,21 +67,6 @@ class Stream:
 
 
 Strategy = Callable[[IKSolver, int, Stream], None]
-
-
-def jacobian(chain: Chain, q: np.ndarray, h: float = 1e-7) -> np.ndarray:
-    """6 x n: the first effector's position and world rotation vector, by differences."""
-    p0 = effector_poses(chain, q)[0]
-    jac = np.empty((6, q.size))
-    for j in range(q.size):
-        dq = q.copy()
-        dq[j] += h
-        p = effector_poses(chain, dq)[0]
-        jac[:3, j] = (p[:3, 3] - p0[:3, 3]) / h
-        r = p0[:3, :3].T @ p[:3, :3]
-        w = 0.5 * np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-        jac[3:, j] = p0[:3, :3] @ w / h
-    return jac
 
 
 def self_motion(chain: Chain, q: np.ndarray, like: np.ndarray | None) -> np.ndarray:

@@ -18,6 +18,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from solver.chain import Chain  # noqa: E402
 from solver.fk import effector_poses  # noqa: E402
 from solver.ik import IKSolver  # noqa: E402
 
@@ -33,19 +34,25 @@ from .ik import (  # noqa: E402
 from .ik_chains import CHAINS, load  # noqa: E402
 
 
-def smallest_singular_value(chain: object, q: np.ndarray, h: float = 1e-6) -> float:
-    """Of the first effector's 6-D Jacobian (position; rotation as a world rotation vector)."""
-    p0 = effector_poses(chain, q)[0]  # type: ignore[arg-type]
+def jacobian(chain: Chain, q: np.ndarray, h: float = 1e-7) -> np.ndarray:
+    """6 x n, by forward differences: the first effector's position and its rotation as
+    a world rotation vector."""
+    p0 = effector_poses(chain, q)[0]
     jac = np.empty((6, q.size))
     for j in range(q.size):
         dq = q.copy()
         dq[j] += h
-        p = effector_poses(chain, dq)[0]  # type: ignore[arg-type]
+        p = effector_poses(chain, dq)[0]
         jac[:3, j] = (p[:3, 3] - p0[:3, 3]) / h
         r = p0[:3, :3].T @ p[:3, :3]
         w = 0.5 * np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
         jac[3:, j] = p0[:3, :3] @ w / h
-    return float(np.linalg.svd(jac, compute_uv=False)[-1])
+    return jac
+
+
+def smallest_singular_value(chain: Chain, q: np.ndarray) -> float:
+    """Of the first effector's 6-D Jacobian."""
+    return float(np.linalg.svd(jacobian(chain, q, 1e-6), compute_uv=False)[-1])
 
 
 def main(argv: list[str] | None = None) -> int:
