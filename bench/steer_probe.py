@@ -6,13 +6,18 @@ reference crosses the shoulder pole (joint 2 through 0) and later the wrist's (j
 through 0), while our warm-started answer, on another point of the arm's one-dimensional
 self-motion, passes *near* the pole, where joints 1 and 3 (or 5 and 7) must turn by about
 pi in a few frames. This probe runs the benchmark's own streams (same generator, seed and
-options as ``bench/ik.py`` part (c)) with a steering strategy applied before each frame,
-and prints, per stream, the largest step over the reference's, the frames above 2x and the
-frames out of tolerance. It measures what each strategy can do, not what it costs: the
-strategies are Python with finite-difference Jacobians.
+options as ``bench/ik.py`` part (c); one solver per strategy, warmed and reused across the
+streams as the benchmark does, so ``none`` reproduces its figures) with a steering strategy
+applied before each frame, and prints, per stream, the largest step over the reference's,
+the frames above 2x, the first of them and the frames out of tolerance. It measures what
+each strategy can do, not what it costs: the strategies are Python with finite-difference
+Jacobians. The largest step of a failing stream is mostly where the global fallback's
+random restart lands; compare the frames above 2x and the first of them.
 
-Strategies (``--strategy``, several allowed):
+Strategies (``--strategy``, several allowed); all but ``none`` run with the rest-pose
+pull set to ``--rest-pull`` (default 0: the steering alone):
   none      STREAM_DEFAULTS as the benchmark runs them.
+  nopull    no steering (the baseline of the strategies below).
   attract   when an alignment joint (``--align``, 0-based; default: the two joints whose
             zero aligns the axes of their neighbours) is within ``--theta`` of 0, step
             along the self-motion towards the point where that joint is smallest (Newton
@@ -20,11 +25,13 @@ Strategies (``--strategy``, several allowed):
             that point when the pole passes crosses it as the reference does.
   velocity  step along the self-motion down the gradient of |J^+ xdot| (the joint speed
             the coming frame's target motion needs).
-  oracle    every ``--every`` frames, run the plain local tracker over the next
-            ``--horizon`` frames of the TRUE future targets from the current pose and from
-            points +-D along the self-motion, score each by its steps above 0.02 rad, and
-            steer towards the best at ``--cap`` per frame. A tracker never has the future;
-            this bounds what look-ahead steering could buy.
+  oracle    every ``--every`` frames, run a local tracker (3 restarts, no global fallback,
+            no rest pull) over the next ``--horizon`` frames of the TRUE future targets
+            from the current pose and from points +-D (``--spans``) along the
+            self-motion; score each by the sum of squared step excesses over 0.02 rad
+            plus 0.01 per frame out of tolerance, and steer towards the best at ``--cap``
+            per frame. A tracker never has the future; this asks what look-ahead
+            steering could buy.
 
     OPENBLAS_NUM_THREADS=1 python -m bench.steer_probe --chain iiwa \
         --strategy none,attract,velocity,oracle
@@ -47,11 +54,21 @@ import numpy as np  # noqa: E402
 from solver.chain import Chain  # noqa: E402
 from solver.ik import IKOptions, IKSolver, Target  # noqa: E402
 
-from .ik import Config, _targets_for, chain_rng, fk_poses, make_stream, max_step, ours_options  # noqa: E402
+from .ik import (  # noqa: E402
+    Config,
+    Ours,
+    _targets_for,
+    chain_rng,
+    fk_poses,
+    make_stream,
+    max_step,
+    ours_options,
+    warm,
+)
 from .ik_chains import CHAINS, load  # noqa: E402
 from .stream_probe import jacobian  # noqa: E402
 
-STRATEGIES = ("none", "attract", "velocity", "oracle")
+STRATEGIES = ("none", "nopull", "attract", "velocity", "oracle")
 # Joints (0-based) whose zero makes the axes of their two neighbours collinear.
 ALIGNMENT_JOINTS = {"iiwa": (1, 5), "panda": (1, 5)}
 EXCESS_RAD = 0.02  # oracle: steps above this count against a candidate
@@ -64,6 +81,7 @@ class Stream:
     targets: list[list[Target]]
     direction: np.ndarray | None = None  # the self-motion direction, oriented as last frame
     steer: float = 0.0  # oracle: the side chosen at its last look-ahead (-1, 0, +1)
+    sim: IKSolver | None = None  # oracle: this stream's look-ahead solver
 
 
 Strategy = Callable[[IKSolver, int, Stream], None]
@@ -137,7 +155,6 @@ def oracle(
     options: IKOptions, horizon: int, every: int, spans: Sequence[float], cap: float
 ) -> Strategy:
     local = replace(options, global_fallback=False, null_space_step_rad=0.0, max_restarts=3)
-    sims: dict[int, IKSolver] = {}
 
     def simulate(sim: IKSolver, q0: np.ndarray, future: Sequence[list[Target]]) -> float:
         sim.q = q0.copy()
@@ -171,7 +188,9 @@ def oracle(
         n = self_motion(solver.chain, q, s.direction)
         s.direction = n
         if k >= 1 and k % every == 0:
-            sim = sims.setdefault(id(solver), IKSolver(solver.chain, options))
+            if s.sim is None:
+                s.sim = IKSolver(solver.chain, options)
+            sim = s.sim
             future = s.targets[k : k + horizon]
             best, best_score = 0.0, simulate(sim, q, future)
             for span in spans:
@@ -197,20 +216,25 @@ class Outcome:
 
 
 def run(
-    chain: str, strategy: Strategy | None, streams: int, frames: int, rest_pull: float
+    chain: str, strategy: Strategy | None, streams: int, frames: int, rest_pull: float | None
 ) -> list[Outcome]:
-    """The benchmark's streams; with a strategy, the rest-pose pull is ``rest_pull``."""
+    """The benchmark's streams, tracked as ``bench.ik.run_tracking`` tracks them (one
+    solver, warmed by ``bench.ik.warm`` and reused across the streams: the global
+    fallback's restarts draw from its generator, so this is what makes ``none`` give
+    the benchmark's figures); ``rest_pull`` (not None) replaces STREAM_DEFAULTS'."""
     bc = load(chain, peer_urdf=False)
     cfg = Config(1, 0, 0, 0.005, frames, 60.0, streams, (), ())
     rng = chain_rng(cfg, chain, "track")
-    options = ours_options(1, stream=True, budget_us=5000.0)
-    if strategy is not None:
+    options = ours_options(1, stream=True, budget_us=cfg.timeout_s * 1e6)
+    if rest_pull is not None:
         options = replace(options, null_space_step_rad=rest_pull)
+    ours_adapter = Ours(bc, False, options, "steer_probe", track=True)
+    warm(cfg, bc, [("ours", ours_adapter, 0)], False)
+    solver = ours_adapter.solver
     out = []
     for index in range(streams):
         path = make_stream(rng, bc, frames, 60.0)
         stream = Stream(_targets_for(bc, fk_poses(bc, path), False))
-        solver = IKSolver(bc.pose, options)
         solver.set_pose(path[0])
         ours = np.empty_like(path)
         missed = 0
@@ -251,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
         "--rest-pull",
         type=float,
         default=0.0,
-        help="null_space_step_rad while steering (STREAM_DEFAULTS: 0.005; 0: steering only)",
+        help="null_space_step_rad of every strategy but none (STREAM_DEFAULTS: 0.005)",
     )
     args = ap.parse_args(argv)
 
@@ -264,16 +288,19 @@ def main(argv: list[str] | None = None) -> int:
         if args.align
         else ALIGNMENT_JOINTS.get(args.chain, ())
     )
+    if "attract" in names and not align:
+        ap.error(f"attract needs --align for {args.chain} (no default alignment joints)")
     options = ours_options(1, stream=True, budget_us=5000.0)
     spans = tuple(float(x) for x in args.spans.split(","))
     build: dict[str, Callable[[], Strategy | None]] = {
         "none": lambda: None,
+        "nopull": lambda: None,
         "attract": lambda: attract(align, args.theta, args.cap),
         "velocity": lambda: velocity(args.cap),
         "oracle": lambda: oracle(options, args.horizon, args.every, spans, args.cap),
     }
     print(
-        f"{args.chain}: cap {args.cap} rad/frame, rest pull {args.rest_pull} while steering, "
+        f"{args.chain}: cap {args.cap} rad/frame, rest pull {args.rest_pull} but in none, "
         f"{args.streams} x {args.frames} frames"
     )
     print(
@@ -282,7 +309,8 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---|---|---|---|---|---|")
     for name in names:
         t = time.perf_counter()
-        outcomes = run(args.chain, build[name](), args.streams, args.frames, args.rest_pull)
+        rest_pull = None if name == "none" else args.rest_pull
+        outcomes = run(args.chain, build[name](), args.streams, args.frames, rest_pull)
         took = time.perf_counter() - t
         for o in outcomes:
             print(
