@@ -292,11 +292,30 @@ async def session_ws(
         svc.metrics.error("too_many_websockets", "ws")
         await ws.close(code=status.WS_1013_TRY_AGAIN_LATER, reason="too_many_websockets")
         return
-    conn = _Connection(ws, svc, session, convert.result_builder(results))
-    limit = svc.settings.ws_max_message_bytes
+    # The frame loop runs in a task of its own. Awaited here, it would sit under the
+    # ~20 coroutine frames of uvicorn's and Starlette's ASGI stack, and every resume
+    # (each received frame, each send that waits) would pass down through all of them
+    # (measured: PyIter_Send / PyGen_am_send and their frames were ~10% of a loaded
+    # worker's CPU). Cancelling this handler cancels the task it awaits. The counts are
+    # kept here, with no await between the check above and the increment.
     svc.open_websockets += 1
     svc.metrics.websockets.inc()
     session.websockets += 1
+    try:
+        await asyncio.create_task(_serve(ws, svc, session, convert.result_builder(results)))
+    finally:
+        session.websockets -= 1
+        svc.open_websockets -= 1
+        svc.metrics.websockets.dec()
+        svc.store.touch(session)
+
+
+async def _serve(
+    ws: WebSocket, svc: Services, session: Session, build: convert.ResultBuilder
+) -> None:
+    """Read, solve and answer frames until the socket closes (its own task: see above)."""
+    conn = _Connection(ws, svc, session, build)
+    limit = svc.settings.ws_max_message_bytes
     conn.start_watch()
     try:
         while True:
@@ -347,7 +366,3 @@ async def session_ws(
             pass
     finally:
         conn.stop_watch()
-        session.websockets -= 1
-        svc.open_websockets -= 1
-        svc.metrics.websockets.dec()
-        svc.store.touch(session)
