@@ -29,7 +29,14 @@ from solver.chain import (
 )
 from solver.errors import IKError, InvalidModel
 from solver.examples import EXAMPLES
-from solver.ik import STREAM_DEFAULTS, IKOptions, IKResult
+from solver.ik import (
+    GIVEN_DIRECTION,
+    GIVEN_POSITION,
+    GIVEN_ROTATION,
+    STREAM_DEFAULTS,
+    IKOptions,
+    IKResult,
+)
 from solver.ik import Target as SolverTarget
 from solver.types import Vector
 from solver.urdf import chain_from_urdf
@@ -135,22 +142,23 @@ def _vec(v: S.Vec3) -> Vector:
 
 def _rotation(q: S.Quaternion) -> Vector:
     """Rotation matrix of the normalised quaternion."""
-    return np.array(_rotation_rows(q.w, q.x, q.y, q.z))
+    return np.array(_rotation_flat(q.w, q.x, q.y, q.z)).reshape(3, 3)
 
 
-Rows3 = tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]
+Flat9 = tuple[float, float, float, float, float, float, float, float, float]
 
 
-def _rotation_rows(qw: float, qx: float, qy: float, qz: float) -> Rows3:
-    """Rotation matrix of the normalised quaternion (w, x, y, z), as rows of plain
-    floats: this is per frame, and the fast path hands the rows to Target as they are."""
+def _rotation_flat(qw: float, qx: float, qy: float, qz: float) -> Flat9:
+    """Rotation matrix of the normalised quaternion (w, x, y, z), row after row as
+    plain floats: this is per frame, and the fast path packs them into the target's
+    row as they are."""
     n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     w, x, y, z = qw / n, qx / n, qy / n, qz / n
     return (
-        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
-        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
-        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
-    )
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    )  # fmt: skip
 
 
 def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
@@ -427,21 +435,42 @@ def _fast_frame(raw: object, modes: dict[str, EffectorMode]) -> FastFrame | None
                 return None
         elif direction is None or orientation is not None:
             return None
-        p = d = r = None
-        if position is not None and (p := _fast_vec3(position)) is None:
-            return None
-        if direction is not None:
+        # The target's packed row, built here in one list and one np.array call
+        # (Target.from_row): the dataclass constructor's checks and copies cost more
+        # than the rest of the fast path (measured). Placeholders as Target's own.
+        given = 0
+        if position is None:
+            values = [0.0, 0.0, 0.0]
+        else:
+            if (p := _fast_vec3(position)) is None:
+                return None
+            values = list(p)
+            given = GIVEN_POSITION
+        if orientation is None:
+            values += _NO_ROTATION
+        else:
+            if (r := _fast_rotation(orientation)) is None:
+                return None
+            values += r
+            given |= GIVEN_ROTATION
+        if direction is None:
+            values += _NO_DIRECTION
+        else:
             if (d := _fast_vec3(direction)) is None:
                 return None
             dx, dy, dz = d
             if not math.sqrt(dx * dx + dy * dy + dz * dz) > 1e-9:
                 return None
-        if orientation is not None and (r := _fast_rotation(orientation)) is None:
-            return None
-        # Tuples, not arrays: Target packs them with np.asarray, and building arrays
-        # here first only to have them copied costs more (measured).
-        out.append(SolverTarget(effector=name, position=p, rotation=r, direction=d))  # type: ignore[arg-type]
+            values += d
+            given |= GIVEN_DIRECTION
+        row = np.array(values, dtype=np.float64)
+        out.append(SolverTarget.from_row(name, row, given))
     return frame_id, out
+
+
+# Target's placeholders for a part not given (solver.ik._PLACEHOLDER_ROW).
+_NO_ROTATION = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+_NO_DIRECTION = (0.0, 0.0, 1.0)
 
 
 def _is_number(v: object) -> TypeGuard[float | int]:
@@ -467,9 +496,9 @@ def _fast_vec3(v: object) -> tuple[float, float, float] | None:
     return None
 
 
-def _fast_rotation(q: object) -> Rows3 | None:
+def _fast_rotation(q: object) -> Flat9 | None:
     """A ``Quaternion`` (exactly w, x, y, z, finite, unit norm within the tolerance) as
-    the rows ``targets`` would build."""
+    the matrix ``targets`` would build, row after row."""
     if type(q) is not dict or len(q) != 4:
         return None
     w = q.get("w")
@@ -488,7 +517,7 @@ def _fast_rotation(q: object) -> Rows3 | None:
     # The schema's test, computed the same way (hypot: no overflow).
     if abs(math.hypot(w, x, y, z) - 1.0) > QUATERNION_NORM_TOLERANCE:
         return None
-    return _rotation_rows(w, x, y, z)
+    return _rotation_flat(w, x, y, z)
 
 
 def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str) -> Vector:

@@ -417,6 +417,40 @@ def test_targets_from_sequences_and_from_arrays_pack_the_same_row() -> None:
         Target(effector="tool", position=(0.1, (0.2,), 0.3))
 
 
+def test_a_target_from_a_packed_row_is_the_one_its_parts_build() -> None:
+    """Target.from_row (the service's per-frame constructor) against __init__, for each
+    combination of given parts, down to the bits of the row and the views shown."""
+    from solver.ik import GIVEN_DIRECTION, GIVEN_POSITION, GIVEN_ROTATION
+
+    position = (0.1, -0.2, 0.3)
+    rotation = ((0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    direction = (0.0, 0.6, 0.8)
+    for bits in range(8):
+        parts = {
+            "position": position if bits & GIVEN_POSITION else None,
+            "rotation": rotation if bits & GIVEN_ROTATION else None,
+            "direction": direction if bits & GIVEN_DIRECTION else None,
+        }
+        built = Target(effector="tool", **parts)  # type: ignore[arg-type]
+        row = built.packed.copy()
+        fast = Target.from_row("tool", row, built.given)
+        assert fast.given == built.given == bits
+        assert fast.packed.tobytes() == built.packed.tobytes()
+        assert not row.flags.writeable  # kept, not copied, and frozen
+        for name in ("position", "rotation", "direction"):
+            a, b = getattr(fast, name), getattr(built, name)
+            assert (a is None) == (b is None) == (parts[name] is None)
+            if a is not None:
+                assert_allclose(a, b, rtol=0, atol=0)
+                assert np.shares_memory(a, fast.packed)
+    with pytest.raises(InvalidProblem, match="15 float64"):
+        Target.from_row("tool", np.zeros(14), GIVEN_POSITION)
+    with pytest.raises(InvalidProblem, match="15 float64"):
+        Target.from_row("tool", np.zeros(15, dtype=np.float32), GIVEN_POSITION)
+    with pytest.raises(InvalidProblem, match="15 float64"):
+        Target.from_row("tool", np.zeros(15), 8)
+
+
 def test_a_target_is_a_snapshot_of_its_numbers() -> None:
     position = np.array([0.3, 0.1, 0.5])
     t = Target(effector="tool", position=position)
