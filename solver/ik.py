@@ -333,25 +333,29 @@ class Target:
     def from_row(cls, effector: str, row: np.ndarray, given: int) -> Target:
         """A Target from a row its caller packed: TARGET_ROW float64 values (position,
         rotation, direction; ``_PLACEHOLDER_ROW``'s values where a part is not given)
-        and the GIVEN_* bits of the parts given. The row is kept, not copied, and made
-        read-only.
+        and the GIVEN_* bits of the parts given. The row must own its data (not a view
+        of another array, which could still change it); it is kept, not copied, and
+        made read-only.
 
         For a caller that builds a row per target per frame (the service's fast path):
         the dataclass ``__init__`` with its sequence checks costs about 2.8 us warm,
-        this about 1 us. The numbers are checked as in any solve (finiteness,
+        this about 1.5 us. The numbers are checked as in any solve (finiteness,
         orthonormality: in the compiled code).
 
         Raises:
-            InvalidProblem: a row of the wrong shape or dtype, or unknown bits.
+            InvalidProblem: a row of the wrong shape or dtype, a view, or unknown bits.
         """
         if (
             type(row) is not np.ndarray
             or row.shape != (TARGET_ROW,)
-            or row.dtype is not _FLOAT64  # builtin dtypes are singletons
+            or row.dtype != _FLOAT64  # also rejects a byte-swapped float64
+            or row.base is not None
+            or type(given) is not int
             or not 0 <= given <= GIVEN_POSITION | GIVEN_ROTATION | GIVEN_DIRECTION
         ):
             raise InvalidProblem(
-                f"target for {effector!r}: a packed row is {TARGET_ROW} float64 values"
+                f"target for {effector!r}: a packed row is {TARGET_ROW} float64 values "
+                "in an array of its own, with GIVEN_* bits"
             )
         target = object.__new__(cls)
         set_field = object.__setattr__

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
+import types
 from collections.abc import Callable
 from typing import Any
 
@@ -10,10 +12,11 @@ import msgpack
 import pytest
 from pydantic import TypeAdapter
 from starlette.testclient import TestClient
-from starlette.websockets import WebSocketDisconnect
+from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import schemas as S
 from service.config import Settings
+from service.routes import ws as ws_mod
 
 from .helpers import Created, create, hand_frame
 
@@ -250,3 +253,143 @@ def test_unexpected_error_sends_internal_error_then_closes_1011(
             ws.receive_json()
     assert info.value.code == 1011
     assert client.get(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 200
+
+
+# The frame loop runs in a task of its own (_serve), awaited by the endpoint: cancelling
+# the endpoint (server shutdown after the graceful timeout, the TestClient on exit) must
+# cancel the loop, and the counts kept by the endpoint must come back in every case.
+
+
+def _gauge(client: Any) -> float:
+    for line in client.get("/metrics").text.splitlines():
+        if line.startswith("ik_websockets "):
+            return float(line.split()[1])
+    raise AssertionError("no ik_websockets")
+
+
+def _track_inner(monkeypatch: pytest.MonkeyPatch) -> list[asyncio.Task[Any]]:
+    """Record the task each _Connection is created in (= the task running _serve)."""
+    seen: list[asyncio.Task[Any]] = []
+    real = ws_mod._Connection.__init__
+
+    def init(self: Any, *a: Any, **k: Any) -> None:
+        real(self, *a, **k)
+        # the watchdog must cancel the task running the frame loop, not the endpoint's
+        assert self._task.get_coro().cr_code.co_name == "_serve"
+        seen.append(self._task)
+
+    monkeypatch.setattr(ws_mod._Connection, "__init__", init)
+    return seen
+
+
+def test_endpoint_cancelled_during_a_send_cancels_the_loop_and_frees_the_counts(
+    make_client: Callable[..., TestClient], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The TestClient cancels the app on exit (as uvicorn does after the graceful
+    timeout): the inner task is cancelled too, no slow_reader, counts back to 0."""
+    client = make_client(Settings(ws_send_timeout_s=3600.0))
+    s = create(client)
+    svc = client.app.state.ik
+    inner = _track_inner(monkeypatch)
+
+    async def blocked(self: WebSocket, data: str) -> None:
+        await asyncio.sleep(3600)
+
+    monkeypatch.setattr(WebSocket, "send_text", blocked)
+    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        ws.send_json({"type": "ping", "id": 1})
+        client.get("/healthz")  # let the loop run the frame into the blocked send
+        assert svc.open_websockets == 1
+    assert len(inner) == 1 and inner[0].done() and inner[0].cancelled()
+    assert svc.open_websockets == 0 and svc.ws_in_flight == 0
+    assert client.get(f"/v1/sessions/{s.id}", headers=s.headers).json()["websockets"] == 0
+    assert _gauge(client) == 0.0
+    assert "slow_reader" not in client.get("/metrics").text
+
+
+def test_endpoint_cancelled_during_a_solve(
+    make_client: Callable[..., TestClient], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    client = make_client(Settings())
+    s = create(client)
+    svc = client.app.state.ik
+    inner = _track_inner(monkeypatch)
+
+    async def stuck(*a: Any, **k: Any) -> Any:
+        await asyncio.sleep(3600)
+
+    monkeypatch.setattr(svc.runner, "session_frames", stuck)
+    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        ws.send_json(frame_msg(1))
+        client.get("/healthz")
+    assert inner and inner[0].done()
+    assert svc.open_websockets == 0 and svc.ws_in_flight == 0 and _gauge(client) == 0.0
+
+
+def test_an_exception_escaping_the_loop_task_still_frees_the_counts(
+    make_client: Callable[..., TestClient], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    client = make_client(Settings())
+    s = create(client)
+    svc = client.app.state.ik
+
+    def boom(self: Any) -> None:
+        raise RuntimeError("bug before the loop's try")
+
+    monkeypatch.setattr(ws_mod._Connection, "start_watch", boom)
+    with pytest.raises(RuntimeError):
+        with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+            ws.send_json({"type": "ping", "id": 1})
+            ws.receive_json()
+    assert svc.open_websockets == 0 and _gauge(client) == 0.0
+    assert client.get(f"/v1/sessions/{s.id}", headers=s.headers).json()["websockets"] == 0
+
+
+def test_watchdog_and_endpoint_cancel_together_is_a_cancellation_not_a_slow_reader() -> None:
+    """Both cancels land before the inner task resumes: the inner must re-raise
+    CancelledError (uncancel() > 0), and the endpoint must see CancelledError."""
+
+    async def main() -> tuple[str, str]:
+        never = asyncio.Event()
+
+        class FakeWS:
+            async def send_text(self, data: str) -> None:
+                await never.wait()
+
+        svc = types.SimpleNamespace(settings=types.SimpleNamespace(ws_send_timeout_s=3600.0))
+        out: dict[str, str] = {}
+
+        async def serve() -> None:
+            conn = ws_mod._Connection(FakeWS(), svc, None)  # type: ignore[arg-type]
+            out["conn"] = "ok"
+            holder.append(conn)
+            try:
+                await conn.send({"x": 1}, False)
+            except ws_mod._SlowReader:
+                out["inner"] = "slow_reader"
+                return
+            except asyncio.CancelledError:
+                out["inner"] = "cancelled"
+                raise
+
+        holder: list[Any] = []
+
+        async def endpoint() -> None:
+            await asyncio.create_task(serve())
+
+        outer = asyncio.create_task(endpoint())
+        for _ in range(3):
+            await asyncio.sleep(0)
+        conn = holder[0]
+        assert conn._task is not outer  # the loop's own task
+        conn._timed_out = True
+        conn._task.cancel()  # the watchdog
+        outer.cancel()  # server shutdown
+        try:
+            await outer
+            out["outer"] = "returned"
+        except asyncio.CancelledError:
+            out["outer"] = "cancelled"
+        return out["inner"], out["outer"]
+
+    assert asyncio.run(main()) == ("cancelled", "cancelled")

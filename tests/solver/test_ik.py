@@ -449,6 +449,13 @@ def test_a_target_from_a_packed_row_is_the_one_its_parts_build() -> None:
         Target.from_row("tool", np.zeros(15, dtype=np.float32), GIVEN_POSITION)
     with pytest.raises(InvalidProblem, match="15 float64"):
         Target.from_row("tool", np.zeros(15), 8)
+    with pytest.raises(InvalidProblem, match="15 float64"):
+        Target.from_row("tool", np.zeros(15), 1.0)  # type: ignore[arg-type]
+    with pytest.raises(InvalidProblem, match="15 float64"):
+        Target.from_row("tool", np.zeros(15, dtype=">f8"), GIVEN_POSITION)
+    base = np.zeros((2, 15))
+    with pytest.raises(InvalidProblem, match="of its own"):
+        Target.from_row("tool", base[0], GIVEN_POSITION)  # a view: base could change it
 
 
 def test_a_target_is_a_snapshot_of_its_numbers() -> None:
