@@ -34,6 +34,7 @@ from solver.ik import (
     GIVEN_POSITION,
     GIVEN_ROTATION,
     STREAM_DEFAULTS,
+    TARGET_PLACEHOLDER_ROW,
     IKOptions,
     IKResult,
 )
@@ -440,7 +441,7 @@ def _fast_frame(raw: object, modes: dict[str, EffectorMode]) -> FastFrame | None
         # than the rest of the fast path (measured). Placeholders as Target's own.
         given = 0
         if position is None:
-            values = [0.0, 0.0, 0.0]
+            values = list(_NO_POSITION)
         else:
             if (p := _fast_vec3(position)) is None:
                 return None
@@ -468,9 +469,10 @@ def _fast_frame(raw: object, modes: dict[str, EffectorMode]) -> FastFrame | None
     return frame_id, out
 
 
-# Target's placeholders for a part not given (solver.ik._PLACEHOLDER_ROW).
-_NO_ROTATION = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
-_NO_DIRECTION = (0.0, 0.0, 1.0)
+# Target's placeholders for a part not given, as plain floats for the fast path.
+_NO_POSITION: tuple[float, ...] = tuple(TARGET_PLACEHOLDER_ROW[0:3].tolist())
+_NO_ROTATION: tuple[float, ...] = tuple(TARGET_PLACEHOLDER_ROW[3:12].tolist())
+_NO_DIRECTION: tuple[float, ...] = tuple(TARGET_PLACEHOLDER_ROW[12:15].tolist())
 
 
 def _is_number(v: object) -> TypeGuard[float | int]:

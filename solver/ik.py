@@ -270,7 +270,9 @@ _NEEDS = {
 # non-finite numbers anywhere in the row; a missing part's weight is zero).
 TARGET_ROW = 15
 _FLOAT64 = np.dtype(np.float64)
-_PLACEHOLDER_ROW = np.array([0.0, 0.0, 0.0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.0, 0.0, 1.0])
+# A target row's values where a part is not given (position, rotation, direction).
+TARGET_PLACEHOLDER_ROW = np.array([0.0, 0.0, 0.0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.0, 0.0, 1.0])
+TARGET_PLACEHOLDER_ROW.setflags(write=False)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -310,7 +312,7 @@ class Target:
         if fast is not None:
             self._freeze(*fast)
             return
-        row = _PLACEHOLDER_ROW.copy()
+        row = TARGET_PLACEHOLDER_ROW.copy()
         given = 0
         try:
             if self.position is not None:
@@ -332,7 +334,7 @@ class Target:
     @classmethod
     def from_row(cls, effector: str, row: np.ndarray, given: int) -> Target:
         """A Target from a row its caller packed: TARGET_ROW float64 values (position,
-        rotation, direction; ``_PLACEHOLDER_ROW``'s values where a part is not given)
+        rotation, direction; ``TARGET_PLACEHOLDER_ROW``'s values where a part is not given)
         and the GIVEN_* bits of the parts given. The row must own its data (not a view
         of another array, which could still change it); it is kept, not copied, and
         made read-only.
@@ -768,7 +770,7 @@ class IKSolver:
         # One row per effector: what a Target's ``packed`` row is copied into.
         self._target_rows = self._ed[:, ED_TPOS : ED_TDIR + 3]
         assert self._target_rows.shape[1] == TARGET_ROW
-        self._target_rows[:] = _PLACEHOLDER_ROW
+        self._target_rows[:] = TARGET_PLACEHOLDER_ROW
         assert np.shares_memory(self._target_rows, self._ed)
         self._effector_names = chain.effector_names
         self._effector_slot = {name: i for i, name in enumerate(self._effector_names)}
