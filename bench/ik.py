@@ -337,6 +337,8 @@ class Row:
     max_step: float = 0.0
     ref_step: float = 0.0
     step_ratio: float = 0.0  # worst over streams of max step / reference max step
+    streams: int = 0
+    streams_within_2x: int = 0  # streams whose max step is at most twice the reference's
 
     def __post_init__(self) -> None:
         self.count = 0
@@ -683,6 +685,8 @@ def run_tracking(
             row.max_step = max(row.max_step, st)
             row.ref_step = max(row.ref_step, ref)
             row.step_ratio = max(row.step_ratio, st / ref)
+            row.streams += 1
+            row.streams_within_2x += st <= 2.0 * ref
         progress(f"  (c) {bc.name}: stream {s + 1}/{cfg.streams}, reference max step {ref:.4f} rad")
     progress(f"  (c) {bc.name}: done in {time.perf_counter() - t_part:.1f} s")
     rows += skipped_rows(cfg, bc, peers, skipped)
@@ -723,7 +727,12 @@ def table(rows: list[Row], tracking: bool) -> list[str]:
         "fails late/none/limits/error",
     ]
     if tracking:
-        head += ["max err m / rad", "max joint step rad", "ref max step rad"]
+        head += [
+            "max err m / rad",
+            "max joint step rad",
+            "ref max step rad",
+            "streams with max step <= 2x ref's",
+        ]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         if r.skipped:
@@ -745,7 +754,12 @@ def table(rows: list[Row], tracking: bool) -> list[str]:
             ]
             if tracking:
                 dp, dr = r.max_errors()
-                cells += [f"{dp:.1e} / {dr:.1e}", f"{r.max_step:.4f}", f"{r.ref_step:.4f}"]
+                cells += [
+                    f"{dp:.1e} / {dr:.1e}",
+                    f"{r.max_step:.4f}",
+                    f"{r.ref_step:.4f}",
+                    f"{r.streams_within_2x}/{r.streams}",
+                ]
         out.append("| " + " | ".join(cells) + " |")
     return out
 
@@ -812,6 +826,17 @@ def verdicts(parts: dict[str, list[Row]], chains: tuple[str, ...]) -> list[str]:
             "<= 2.0",
             r.step_ratio <= 2.0,
         )
+        for row in (r, p):
+            if row:
+                add(
+                    "c",
+                    f"streams with max step <= 2x reference's, {row.name}",
+                    chain,
+                    100 * row.streams_within_2x / max(1, row.streams),
+                    "(info)",
+                    None,
+                    f"{{:.0f}}% ({row.streams_within_2x}/{row.streams})",
+                )
         h = find(c, chain, "ours+carryH")
         if h:
             add(
