@@ -265,6 +265,8 @@ _NEEDS = {
     EffectorMode.POSE: GIVEN_ROTATION,
     EffectorMode.AIM: GIVEN_DIRECTION,
 }
+# Task rows a mode adds to a targeted position's three (an aim fixes a direction: two).
+_MODE_ROWS = {EffectorMode.POSITION: 0, EffectorMode.POSE: 3, EffectorMode.AIM: 2}
 # A packed target row: position (3), rotation (9, row-major), direction (3). Parts a
 # target leaves out keep these finite placeholders (the compiled check rejects
 # non-finite numbers anywhere in the row; a missing part's weight is zero).
@@ -470,6 +472,12 @@ class IKOptions:
         damping: Floor of the Gauss-Newton damping mu (mu = damping_scale x f): damped least
             squares near singularities takes small joint steps where pure Gauss-Newton
             swings joints by radians for a millimetre (streams use 1e-3).
+        damping_redundant_only: Apply the ``damping`` floor only while the task is
+            redundant: more free joints than target rows (3 per position, 3 per
+            orientation, 2 per aim). Without a self-motion the floor has nothing to
+            steady, and near a singularity it only makes a tracked answer lag the
+            target and catch up later in one larger step (UR5 pose streams: 33 of 40
+            within twice the reference's largest step with the floor, 39 without).
         damping_scale: mu = damping_scale x f (Levenberg-Marquardt's damping relative
             to the current error, Sugihara 2011). 0.5 took 9-12 median iterations
             against 10-15 with 1.0 (Chan's choice, as in ``ik_LM``) on 10,000 random
@@ -508,6 +516,7 @@ class IKOptions:
     metric_until: int = 0
     null_space_step_rad: float = 0.0
     damping: float = 0.0
+    damping_redundant_only: bool = False
     damping_scale: float = 0.5
     global_fallback: bool = False
     policy: AnalyzerPolicy = field(default_factory=AnalyzerPolicy.default)
@@ -573,12 +582,17 @@ class IKOptions:
 # frames without it, 598/599 with it and one 4.3 rad jump). metric_until=8: near a
 # singularity the damped Gauss-Newton steps crawled (p99 154 iterations per frame on
 # the iiwa streams, 3-5 frames out of time); BFGS after 8 steps: p99 15, none missed.
+# The damping floor only for redundant tasks: a 6-DOF arm's pose stream has no
+# self-motion for it to steady, and with it the answer lagged behind the target at
+# singularities (UR5: 33 of 40 streams within twice the reference's largest step; 39
+# without; bench/ik.py --parts c --streams 40).
 STREAM_DEFAULTS = IKOptions(
     restart_radius_rad=0.3,
     limit_weight=1e-3,
     limit_margin=0.02,
     null_space_step_rad=0.005,
     damping=1e-3,
+    damping_redundant_only=True,
     global_fallback=True,
     metric_until=8,
     damping_scale=1.0,
@@ -775,6 +789,8 @@ class IKSolver:
         self._effector_names = chain.effector_names
         self._effector_slot = {name: i for i, name in enumerate(self._effector_names)}
         self._needs = tuple(_NEEDS[e.mode] for e in chain.effectors)
+        self._mode_rows = tuple(_MODE_ROWS[e.mode] for e in chain.effectors)
+        self._redundant = True  # more free joints than target rows (set per target set)
         self._static_weights = chain.compiled.ed[:, ED_WP].copy()
         self._active: list[int] = []
         self._zeroed: list[int] = []
@@ -944,6 +960,12 @@ class IKSolver:
             self._target_rows[i] = t.packed
             ei[i, EI_ACTIVE] = 1
             active.append(i)
+        rows = sum(self._mode_rows[i] + (0 if i in self._zeroed else 3) for i in active)
+        if self._every_effector_moves_all or not active:
+            free = self._n
+        else:
+            free = np.unique(np.concatenate([self._chain_dofs[i] for i in active])).size
+        self._redundant = free > rows
 
     def _set_free_bounds(self, q0: Vector) -> None:
         """Limits for this frame (DD rows): variables outside every targeted chain are
@@ -1005,9 +1027,13 @@ class IKSolver:
             self._misc[MISC_POSTURE] = opts.posture_weight
             self._misc[MISC_LIMIT] = opts.limit_weight
             self._misc[MISC_MARGIN] = opts.limit_margin
-            self._misc[MISC_DAMPING] = opts.damping
             self._misc[MISC_DAMPING_SCALE] = opts.damping_scale
             self._misc_for = opts
+        # Per frame: the target set (and with it the redundancy) can change under the
+        # same options.
+        self._misc[MISC_DAMPING] = (
+            opts.damping if self._redundant or not opts.damping_redundant_only else 0.0
+        )
         if not (self._bounds_are_limits and self._every_effector_moves_all and self._active):
             self._set_free_bounds(q0)
         packed = self._last_packed

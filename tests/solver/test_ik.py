@@ -536,3 +536,58 @@ def test_carried_h_is_the_metric_at_the_answer(carry: bool) -> None:
     assert ik_metric(result.q, g, data[4][DD_LO], data[4][DD_HI], data, h)
     same = np.allclose(result.inverse_hessian, h, rtol=1e-9, atol=1e-12)
     assert same is carry
+
+
+def _solve_with_floor(chain, targets, seed, **changes):  # type: ignore[no-untyped-def]
+    opts = with_options(TIGHT, **{"damping": 0.01, "damping_scale": 1.0, **changes})
+    return IKSolver(chain, seed=0).solve(targets, seed, options=opts)
+
+
+@pytest.mark.parametrize(
+    ("chain", "redundant"),
+    [
+        (tail(3, EffectorMode.POSE), False),  # 6 joints, 6 target rows
+        (tail(3, EffectorMode.POSITION), True),  # 6 joints, 3 rows
+        (two_arm_torso(), False),  # one hand: its arm's 3 joints (the shoulder terminates), 3 rows
+    ],
+    ids=["pose-6dof", "position-6dof", "one-hand-of-two"],
+)
+def test_damping_floor_follows_the_task_redundancy(chain, redundant) -> None:  # type: ignore[no-untyped-def]
+    """damping_redundant_only: a task with as many rows as free joints solves exactly
+    as with no floor, a redundant one exactly as with the floor."""
+    lo, hi = chain.lower, chain.upper
+    seed = lo + 0.45 * (hi - lo)
+    goal = lo + 0.7 * (hi - lo)
+    goal[0] = seed[0]  # the torso's spine does not move for one hand
+    targets = pose_targets(chain, goal)[:1]
+    on = _solve_with_floor(chain, targets, seed)
+    off = _solve_with_floor(chain, targets, seed, damping=0.0)
+    auto = _solve_with_floor(chain, targets, seed, damping_redundant_only=True)
+    assert on.success and off.success and auto.success
+    assert on.iterations != off.iterations  # the floor changes this solve's path
+    expected = on if redundant else off
+    np.testing.assert_array_equal(auto.q, expected.q)
+    assert auto.iterations == expected.iterations
+
+
+def test_damping_floor_follows_the_target_set_under_the_same_options() -> None:
+    """The redundancy is the frame's target set's: a 4-joint aim effector with its
+    position targeted has 5 rows (no floor), with the direction alone 2 (floor), and
+    one solver with one options object switches between them frame by frame."""
+    chain = tail(2, EffectorMode.AIM)
+    lo, hi = chain.lower, chain.upper
+    seed = lo + 0.45 * (hi - lo)
+    full = pose_targets(chain, lo + 0.7 * (hi - lo))[0]
+    aim_only = Target(effector=full.effector, direction=full.direction)
+    opts = with_options(TIGHT, damping=0.01, damping_scale=1.0, damping_redundant_only=True)
+    solver = IKSolver(chain, opts, seed=0)
+    for targets, floor in (([full], False), ([aim_only], True), ([full], False)):
+        got = solver.solve(targets, seed)
+        want = _solve_with_floor(chain, targets, seed, damping=0.01 if floor else 0.0)
+        assert got.success and want.success
+        np.testing.assert_array_equal(got.q, want.q)
+        assert got.iterations == want.iterations
+    assert (
+        _solve_with_floor(chain, [aim_only], seed).iterations
+        != _solve_with_floor(chain, [aim_only], seed, damping=0.0).iterations
+    )
