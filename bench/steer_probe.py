@@ -11,7 +11,9 @@ streams as the benchmark does, so ``none`` reproduces its figures) with a steeri
 applied before each frame, and prints, per stream, the largest step over the reference's,
 the frames above 2x, the first of them and the frames out of tolerance. It measures what
 each strategy can do, not what it costs: the strategies are Python with finite-difference
-Jacobians. The largest step of a failing stream is mostly where the global fallback's
+Jacobians. ``--streams 40`` looks beyond the benchmark's three streams (the same generator
+continues), and ``--tolerance-scale`` multiplies the tolerances of every strategy's
+solver (the success column then counts against the scaled tolerances). The largest step of a failing stream is mostly where the global fallback's
 random restart lands; compare the frames above 2x and the first of them.
 
 Strategies (``--strategy``, several allowed); all but ``none`` run with the rest-pose
@@ -25,6 +27,15 @@ pull set to ``--rest-pull`` (default 0: the steering alone):
             that point when the pole passes crosses it as the reference does.
   velocity  step along the self-motion down the gradient of |J^+ xdot| (the joint speed
             the coming frame's target motion needs).
+  repel     while an alignment joint is within ``--theta`` of 0, step along the
+            self-motion away from 0 (down the gradient of -log q_j^2) at ``--cap``.
+  hold      while an alignment joint j is within ``--theta`` of 0, solve the frame and
+            walk along the self-motion until joint j-1 is back where it was: a
+            straight line through the pole in the upper arm's direction.
+  flip      solve the frame; if a joint stepped more than 0.05 rad, also solve it from
+            the answer with each combination of the chain's flip groups applied (three
+            joints i, i+1, i+2 where turning i and i+2 by pi and negating i+1 keeps the
+            pose, found numerically) and keep the smallest step.
   oracle    every ``--every`` frames, run a local tracker (3 restarts, no global fallback,
             no rest pull) over the next ``--horizon`` frames of the TRUE future targets
             from the current pose and from points +-D (``--spans``) along the
@@ -52,6 +63,7 @@ from dataclasses import dataclass, replace  # noqa: E402
 import numpy as np  # noqa: E402
 
 from solver.chain import Chain  # noqa: E402
+from solver.fk import effector_poses  # noqa: E402
 from solver.ik import IKOptions, IKSolver, Target  # noqa: E402
 
 from .ik import (  # noqa: E402
@@ -68,7 +80,7 @@ from .ik import (  # noqa: E402
 from .ik_chains import CHAINS, load  # noqa: E402
 from .stream_probe import jacobian  # noqa: E402
 
-STRATEGIES = ("none", "nopull", "attract", "velocity", "oracle")
+STRATEGIES = ("none", "nopull", "flip", "attract", "repel", "hold", "velocity", "oracle")
 # Joints (0-based) whose zero makes the axes of their two neighbours collinear.
 ALIGNMENT_JOINTS = {"iiwa": (1, 5), "panda": (1, 5)}
 EXCESS_RAD = 0.02  # oracle: steps above this count against a candidate
@@ -117,6 +129,130 @@ def attract(joints: Sequence[int], theta: float, cap: float, eps: float = 1e-4) 
         curvature = 2.0 * (n[j] ** 2 + q[j] * dn)
         a = -slope / curvature if curvature > 0.0 else -math.copysign(1e9, slope)
         _move(solver, a * n, cap)
+
+    return before
+
+
+def flip_groups(chain: Chain, trials: int = 4, tol: float = 1e-2) -> list[tuple[int, int, int]]:
+    """Triples (i, i+1, i+2) of joints for which turning i and i+2 by pi and negating
+    i+1 leaves every effector's pose unchanged (a spherical group: shoulder or wrist),
+    found numerically on random joint vectors; ``tol`` (m, and rad of the rotation
+    matrix's entries) admits nearly spherical groups, whose flipped pose the frame's
+    solver then refines."""
+    rng = np.random.default_rng(0)
+    n = chain.n_dof
+    out = []
+    for i in range(n - 2):
+        ok = True
+        for _ in range(trials):
+            q = rng.uniform(-math.pi, math.pi, n)
+            f = q.copy()
+            f[i] += math.pi
+            f[i + 1] = -f[i + 1]
+            f[i + 2] += math.pi
+            a, b = effector_poses(chain, q), effector_poses(chain, f)
+            if any(float(np.abs(x - y).max()) > tol for x, y in zip(a, b, strict=True)):
+                ok = False
+                break
+        if ok:
+            out.append((i, i + 1, i + 2))
+    return out
+
+
+def _nearest_turn(value: float, prev: float, lo: float, hi: float) -> float | None:
+    """value + 2 pi m for the integer m that brings it nearest to prev within [lo, hi]."""
+    best = None
+    for m in (-2, -1, 0, 1, 2):
+        v = value + 2.0 * math.pi * m
+        if lo <= v <= hi and (best is None or abs(v - prev) < abs(best - prev)):
+            best = v
+    return best
+
+
+def flip(chain: Chain, trigger: float = 0.05) -> Strategy:
+    """Solve the frame; if a joint stepped more than ``trigger``, also solve it from
+    the answer turned by each combination of the chain's flip groups and take the
+    answer whose largest joint step from the last frame is smallest."""
+    groups = flip_groups(chain)
+    lo, hi = chain.lower, chain.upper
+
+    def before(solver: IKSolver, k: int, s: Stream) -> None:
+        if k < 1 or not groups:
+            return
+        prev = solver.q.copy()
+        q = solver.track(s.targets[k]).q.copy()
+        best, best_step = q, float(np.abs(q - prev).max())
+        if best_step <= trigger:
+            solver.q = q
+            return
+        for mask in range(1, 1 << len(groups)):
+            c = q.copy()
+            ok = True
+            for g, (i, j, m) in enumerate(groups):
+                if mask >> g & 1:
+                    c[j] = -c[j]
+                    for t in (i, m):
+                        v = _nearest_turn(c[t] + math.pi, prev[t], lo[t], hi[t])
+                        if v is None:
+                            ok = False
+                            break
+                        c[t] = v
+                if not ok or not lo[j] <= c[j] <= hi[j]:
+                    ok = False
+                    break
+            if not ok or float(np.abs(c - prev).max()) >= best_step:
+                continue
+            solver.q = c
+            r = solver.track(s.targets[k])
+            if r.success and (step := float(np.abs(r.q - prev).max())) < best_step:
+                best, best_step = r.q.copy(), step
+        solver.q = best
+
+    return before
+
+
+def repel(joints: Sequence[int], theta: float, cap: float) -> Strategy:
+    """While an alignment joint is within ``theta`` of 0, step along the self-motion in
+    the direction that moves it away from 0, at ``cap`` rad per frame."""
+
+    def before(solver: IKSolver, k: int, s: Stream) -> None:
+        q = solver.q
+        near = [j for j in joints if abs(q[j]) < theta]
+        if not near:
+            return
+        n = self_motion(solver.chain, q, s.direction)
+        s.direction = n
+        # the gradient of sum_j -log(q_j^2) along n, so the nearer pole dominates
+        slope = sum(-2.0 * n[j] / q[j] if q[j] != 0.0 else 0.0 for j in near)
+        _move(solver, -math.copysign(1.0, slope) * n * 1e3, cap)
+
+    return before
+
+
+def hold(joints: Sequence[int], theta: float, iterations: int = 8) -> Strategy:
+    """Near an alignment pole (|q_j| < theta), solve the frame, then walk along the
+    self-motion until joint j-1 is back where it was: the arm crosses the pole with that
+    joint still, as a 6-DOF arm would, instead of sweeping it round the pole."""
+
+    def before(solver: IKSolver, k: int, s: Stream) -> None:
+        if k < 1:
+            return
+        prev = solver.q.copy()
+        held = [j - 1 for j in joints if abs(prev[j]) < theta]
+        if not held:
+            return
+        q = solver.track(s.targets[k]).q.copy()
+        for _ in range(iterations):
+            err = q[held] - prev[held]
+            if float(np.abs(err).max()) < 1e-7:
+                break
+            n = self_motion(solver.chain, q, s.direction)
+            s.direction = n
+            a = -float(n[held] @ err) / max(float(n[held] @ n[held]), 1e-12)
+            a = max(-0.2, min(0.2, a))
+            solver.q = np.clip(q + a * n, solver.chain.lower, solver.chain.upper)
+            q = solver.track(s.targets[k]).q.copy()
+        solver.q = q
 
     return before
 
@@ -216,7 +352,12 @@ class Outcome:
 
 
 def run(
-    chain: str, strategy: Strategy | None, streams: int, frames: int, rest_pull: float | None
+    chain: str,
+    strategy: Strategy | None,
+    streams: int,
+    frames: int,
+    rest_pull: float | None,
+    tolerance_scale: float = 1.0,
 ) -> list[Outcome]:
     """The benchmark's streams, tracked as ``bench.ik.run_tracking`` tracks them (one
     solver, warmed by ``bench.ik.warm`` and reused across the streams: the global
@@ -228,6 +369,11 @@ def run(
     options = ours_options(1, stream=True, budget_us=cfg.timeout_s * 1e6)
     if rest_pull is not None:
         options = replace(options, null_space_step_rad=rest_pull)
+    options = replace(
+        options,
+        position_tolerance_m=options.position_tolerance_m * tolerance_scale,
+        rotation_tolerance_rad=options.rotation_tolerance_rad * tolerance_scale,
+    )
     ours_adapter = Ours(bc, False, options, "steer_probe", track=True)
     warm(cfg, bc, [("ours", ours_adapter, 0)], False)
     solver = ours_adapter.solver
@@ -268,6 +414,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--align", default=None, help="alignment joints, 0-based (attract)")
     ap.add_argument("--theta", type=float, default=0.3, help="attract when |q_j| < theta (rad)")
     ap.add_argument("--cap", type=float, default=0.01, help="steering per frame, rad per joint")
+    ap.add_argument("--tolerance-scale", type=float, default=1.0, help="multiplies the tolerances")
     ap.add_argument("--horizon", type=int, default=120, help="oracle: frames looked ahead")
     ap.add_argument("--every", type=int, default=5, help="oracle: frames between look-aheads")
     ap.add_argument("--spans", default="0.3,0.6", help="oracle: candidate distances (rad)")
@@ -288,35 +435,50 @@ def main(argv: list[str] | None = None) -> int:
         if args.align
         else ALIGNMENT_JOINTS.get(args.chain, ())
     )
-    if "attract" in names and not align:
-        ap.error(f"attract needs --align for {args.chain} (no default alignment joints)")
+    if {"attract", "repel", "hold"} & set(names) and not align:
+        ap.error(
+            f"attract, repel and hold need --align for {args.chain} (no default alignment joints)"
+        )
     options = ours_options(1, stream=True, budget_us=5000.0)
     spans = tuple(float(x) for x in args.spans.split(","))
     build: dict[str, Callable[[], Strategy | None]] = {
         "none": lambda: None,
         "nopull": lambda: None,
         "attract": lambda: attract(align, args.theta, args.cap),
+        "hold": lambda: hold(align, args.theta),
+        "flip": lambda: flip(load(args.chain, peer_urdf=False).pose),
+        "repel": lambda: repel(align, args.theta, args.cap),
         "velocity": lambda: velocity(args.cap),
         "oracle": lambda: oracle(options, args.horizon, args.every, spans, args.cap),
     }
     print(
         f"{args.chain}: cap {args.cap} rad/frame, rest pull {args.rest_pull} but in none, "
-        f"{args.streams} x {args.frames} frames"
+        f"tolerances x {args.tolerance_scale:g}, {args.streams} x {args.frames} frames"
     )
     print(
         "| strategy | stream | largest step / reference's | at frame | frames above 2x | first | missed | s |"
     )
     print("|---|---|---|---|---|---|---|---|")
+    summaries: list[str] = []
     for name in names:
         t = time.perf_counter()
         rest_pull = None if name == "none" else args.rest_pull
-        outcomes = run(args.chain, build[name](), args.streams, args.frames, rest_pull)
+        outcomes = run(
+            args.chain, build[name](), args.streams, args.frames, rest_pull, args.tolerance_scale
+        )
         took = time.perf_counter() - t
+        summaries.append(
+            f"{name}: {sum(o.ratio > 2.0 for o in outcomes)} of {len(outcomes)} streams above "
+            f"2x, worst {max(o.ratio for o in outcomes):.1f}x, "
+            f"{sum(o.missed for o in outcomes)} frames missed"
+        )
         for o in outcomes:
             print(
                 f"| {name} | {o.stream} | {o.ratio:.2f} | {o.worst_frame} | {o.above} "
                 f"| {o.first_above} | {o.missed} | {took:.0f} |"
             )
+    print()
+    print("\n".join(summaries))
     return 0
 
 
