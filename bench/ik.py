@@ -158,6 +158,15 @@ def ours_settings(o: IKOptions) -> str:
     )
     if o.limit_weight or o.posture_weight:
         s += f", limit_weight={o.limit_weight:g} (margin {o.limit_margin:g}), posture_weight={o.posture_weight:g}"
+    if o.damping:
+        only = " (redundant tasks only)" if o.damping_redundant_only else ""
+        s += f", damping floor {o.damping:g}{only}"
+    if o.metric_until:
+        s += f", metric_until={o.metric_until}"
+    if o.null_space_step_rad:
+        s += f", null_space_step_rad={o.null_space_step_rad:g}"
+    if o.global_fallback:
+        s += ", global_fallback=True"
     if o.carry_hessian:
         s += ", carry_hessian=True"
     return s
