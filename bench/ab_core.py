@@ -81,7 +81,9 @@ def main() -> None:
         w.stdin.close()
         w.wait()
     ratios = [b / a for a, b in zip(medians[0], medians[1], strict=True)]
-    print("| chain | part | A core median us | B core median us | B / A (median of paired batches) |")
+    print(
+        "| chain | part | A core median us | B core median us | B / A (median of paired batches) |"
+    )
     print("|---|---|---|---|---|")
     print(
         f"| {args.chain} | {args.part} | {statistics.median(medians[0]):.2f} | "

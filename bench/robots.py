@@ -25,15 +25,26 @@ ROBOTS: tuple[str, ...] = ("panda", "ur5", "iiwa")
 #  - tool0: REP-199 flange frame on UR5 and iiwa (0.126 m past joint a7 on the iiwa).
 _ERD = "cmeel.prefix/share/example-robot-data/robots"
 _SOURCES: dict[str, tuple[str, str, str, str]] = {
-    "panda": ("example-robot-data", f"{_ERD}/panda_description/urdf/panda.urdf",
-              "panda_link0", "panda_link8"),
+    "panda": (
+        "example-robot-data",
+        f"{_ERD}/panda_description/urdf/panda.urdf",
+        "panda_link0",
+        "panda_link8",
+    ),
     # ur5_robot.urdf has +-2pi limits (elbow +-pi); the *_joint_limited file has +-pi.
     # The unlimited one matches the stock UR5 and TRAC-IK's UR5 setup.
-    "ur5": ("example-robot-data", f"{_ERD}/ur_description/urdf/ur5_robot.urdf",
-            "base_link", "tool0"),
-    "iiwa": ("rtb-data",
-             "rtbdata/xacro/kuka_description/kuka_lbr_iiwa/urdf/lbr_iiwa_14_r820.urdf",
-             "base_link", "tool0"),
+    "ur5": (
+        "example-robot-data",
+        f"{_ERD}/ur_description/urdf/ur5_robot.urdf",
+        "base_link",
+        "tool0",
+    ),
+    "iiwa": (
+        "rtb-data",
+        "rtbdata/xacro/kuka_description/kuka_lbr_iiwa/urdf/lbr_iiwa_14_r820.urdf",
+        "base_link",
+        "tool0",
+    ),
 }
 
 
@@ -64,8 +75,9 @@ class RobotSpec:
 
     def chain(self) -> tuple[Joint, ...]:
         """Movable joints from base_link to tip_link, in chain order."""
-        return tuple(j for j in _path(self.urdf_path, self.base_link, self.tip_link)
-                     if j.type != "fixed")
+        return tuple(
+            j for j in _path(self.urdf_path, self.base_link, self.tip_link) if j.type != "fixed"
+        )
 
     def path_elements(self) -> tuple[str, ...]:
         """[base_link, joint, link, ..., tip_link], fixed joints included (ikpy's base_elements)."""

@@ -182,7 +182,9 @@ async def run(port: int, clients: int, frames: int, budget_us: float) -> dict[st
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--clients", type=int, default=4)
     ap.add_argument("--frames", type=int, default=2000, help="frames per stream client")
     ap.add_argument("--budget-us", type=float, default=5000.0, help="heavy client's time budget")
@@ -199,8 +201,10 @@ def main() -> None:
                 proc.terminate()
                 proc.wait(30)
     keys = list(rows["inline"][0])
-    print(f"clients={args.clients} frames/client={args.frames} heavy budget={args.budget_us:g} us "
-          f"repeats={args.repeats} (median over repeats)")
+    print(
+        f"clients={args.clients} frames/client={args.frames} heavy budget={args.budget_us:g} us "
+        f"repeats={args.repeats} (median over repeats)"
+    )
     print("| metric | inline | pool |")
     print("|---|---|---|")
     for k in keys:

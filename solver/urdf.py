@@ -238,7 +238,8 @@ def _joints_by_child(root: ET.Element, links: set[str]) -> dict[str, _RawJoint]:
         if child in by_child:
             raise InvalidModel(
                 f"link {child!r} already has parent joint {by_child[child].name!r}",
-                joint=name, field="child",
+                joint=name,
+                field="child",
             )
         by_child[child] = _RawJoint(name, kind, parent, child, element)
     return by_child
@@ -279,7 +280,8 @@ def _joint(raw: _RawJoint) -> Joint:
     if _child(e, "mimic") is not None:
         raise InvalidModel(
             "mimic joints are not supported (the follower would need its own coupling)",
-            joint=name, field="mimic",
+            joint=name,
+            field="mimic",
         )
     origin = _child(e, "origin")
     xyz = _vector(origin, "xyz", name, "origin.xyz", default=(0.0, 0.0, 0.0))
@@ -295,8 +297,14 @@ def _joint(raw: _RawJoint) -> Joint:
     if kind is not JointKind.CONTINUOUS:
         lower, upper = _limits(_child(e, "limit"), raw.type, name)
     return Joint(
-        name=name, parent=raw.parent, child=raw.child, kind=kind, origin=transform,
-        axis=axis / np.linalg.norm(axis), lower=lower, upper=upper,
+        name=name,
+        parent=raw.parent,
+        child=raw.child,
+        kind=kind,
+        origin=transform,
+        axis=axis / np.linalg.norm(axis),
+        lower=lower,
+        upper=upper,
     )
 
 
@@ -319,7 +327,11 @@ def _limits(limit: ET.Element | None, kind: str, joint: str) -> tuple[tuple[floa
 
 
 def _vector(
-    element: ET.Element | None, attr: str, joint: str, field: str, *,
+    element: ET.Element | None,
+    attr: str,
+    joint: str,
+    field: str,
+    *,
     default: tuple[float, float, float],
 ) -> tuple[float, float, float]:
     s = element.get(attr) if element is not None else None

@@ -29,8 +29,9 @@ class PeerSolver(Protocol):
         """4x4 pose of the tip in the base frame, by the peer's own FK."""
         ...
 
-    def solve(self, target: np.ndarray, seed: np.ndarray, *, position_only: bool,
-              timeout_s: float) -> np.ndarray | None:
+    def solve(
+        self, target: np.ndarray, seed: np.ndarray, *, position_only: bool, timeout_s: float
+    ) -> np.ndarray | None:
         """Joint vector in joint_names order, or None when the peer reports failure."""
         ...
 

@@ -37,7 +37,9 @@ class IkpyIK:
     def __init__(self, robot: RobotSpec) -> None:
         with warnings.catch_warnings():  # iiwa's fixed joint carries an axis; ikpy warns
             warnings.simplefilter("ignore")
-            full = Chain.from_urdf_file(str(robot.urdf_path), base_elements=list(robot.path_elements()))
+            full = Chain.from_urdf_file(
+                str(robot.urdf_path), base_elements=list(robot.path_elements())
+            )
             # ikpy keeps walking past the tip (first child of each link), so cut the chain at
             # the tip's joint: [origin link] + one ikpy link per URDF joint on the path
             n_path = (len(robot.path_elements()) - 1) // 2
@@ -52,9 +54,11 @@ class IkpyIK:
         self._mask = np.array(mask)
         # first call pays for lazily built sympy/numpy FK pieces; keep it out of the timings
         self.solve(self.fk(robot.mid()), robot.mid(), position_only=False, timeout_s=0.05)
-        self.settings = (f"least_squares trf, tol={TOL:g} (ftol=xtol), gtol={GTOL:g}, "
-                         f"optimizer_budget={BUDGET} evals, deadline via callback, "
-                         "orientation_mode='all' (R - R* residual, weight 1)")
+        self.settings = (
+            f"least_squares trf, tol={TOL:g} (ftol=xtol), gtol={GTOL:g}, "
+            f"optimizer_budget={BUDGET} evals, deadline via callback, "
+            "orientation_mode='all' (R - R* residual, weight 1)"
+        )
 
     def _full(self, q: np.ndarray) -> np.ndarray:
         full = np.zeros(len(self._mask))
@@ -64,8 +68,9 @@ class IkpyIK:
     def fk(self, q: np.ndarray) -> np.ndarray:
         return np.asarray(self._chain.forward_kinematics(self._full(np.asarray(q, dtype=float))))
 
-    def solve(self, target: np.ndarray, seed: np.ndarray, *, position_only: bool,
-              timeout_s: float) -> np.ndarray | None:
+    def solve(
+        self, target: np.ndarray, seed: np.ndarray, *, position_only: bool, timeout_s: float
+    ) -> np.ndarray | None:
         deadline = time.perf_counter() + timeout_s
 
         def stop_at_deadline(x: np.ndarray) -> None:
@@ -81,7 +86,9 @@ class IkpyIK:
                     target_orientation=None if position_only else target[:3, :3],
                     orientation_mode=None if position_only else "all",
                     initial_position=self._full(np.asarray(seed, dtype=float)),
-                    optimizer="least_squares", tol=TOL, optimizer_budget=BUDGET,
+                    optimizer="least_squares",
+                    tol=TOL,
+                    optimizer_budget=BUDGET,
                     optimizer_kwargs={"gtol": GTOL, "callback": stop_at_deadline},
                 )
         except Exception:  # noqa: BLE001 - a peer that raises has failed this target

@@ -40,17 +40,34 @@ def reduced_model(robot: RobotSpec) -> tuple[pin.Model, list[int]]:
 
 
 class PinClik:
-    def __init__(self, robot: RobotSpec, *, eps: float = EPS, dt: float = DT,
-                 damp: float = DAMP, it_max: int = IT_MAX) -> None:
+    def __init__(
+        self,
+        robot: RobotSpec,
+        *,
+        eps: float = EPS,
+        dt: float = DT,
+        damp: float = DAMP,
+        it_max: int = IT_MAX,
+    ) -> None:
         # knobs are exposed so a variant (e.g. dt=1, plain damped Gauss-Newton) can be
         # benchmarked too; the defaults are the docs' loop
         self._eps, self._dt, self._it_max = eps, dt, it_max
         self._damp6, self._damp3 = damp * np.eye(6), damp * np.eye(3)
-        changed = [f"{k}={v:g}" for k, v, d in (("eps", eps, EPS), ("dt", dt, DT), ("damp", damp, DAMP),
-                                                  ("it_max", it_max, IT_MAX)) if v != d]
+        changed = [
+            f"{k}={v:g}"
+            for k, v, d in (
+                ("eps", eps, EPS),
+                ("dt", dt, DT),
+                ("damp", damp, DAMP),
+                ("it_max", it_max, IT_MAX),
+            )
+            if v != d
+        ]
         self.name = "pinocchio CLIK (docs example" + "".join(", " + c for c in changed) + ")"
-        self.settings = (f"eps={eps:g} on |log6|, DT={dt:g}, damp={damp:g}, IT_MAX={it_max}, "
-                         "clip to limits each step, deadline checked each step")
+        self.settings = (
+            f"eps={eps:g} on |log6|, DT={dt:g}, damp={damp:g}, IT_MAX={it_max}, "
+            "clip to limits each step, deadline checked each step"
+        )
         self._model, self._idx = reduced_model(robot)
         self._data = self._model.createData()
         self._base = self._model.getFrameId(robot.base_link)
@@ -72,8 +89,9 @@ class PinClik:
         pin.framesForwardKinematics(self._model, self._data, self._to_pin(np.asarray(q, float)))
         return (self._oMbase.actInv(self._data.oMf[self._tip])).homogeneous
 
-    def solve(self, target: np.ndarray, seed: np.ndarray, *, position_only: bool,
-              timeout_s: float) -> np.ndarray | None:
+    def solve(
+        self, target: np.ndarray, seed: np.ndarray, *, position_only: bool, timeout_s: float
+    ) -> np.ndarray | None:
         deadline = time.perf_counter() + timeout_s
         m, d, tip = self._model, self._data, self._tip
         oMdes = self._oMbase * pin.SE3(np.asarray(target, dtype=float))

@@ -41,14 +41,17 @@ class RtbIK:
         # rtb numbers the joints along the ETS, which is the chain order; check it really
         # carries our limits in our order, since we pass vectors through unpermuted
         if self._ets.n != len(self.joint_names) or not np.allclose(
-                self._ets.qlim, np.vstack([self.lower, self.upper])):
+            self._ets.qlim, np.vstack([self.lower, self.upper])
+        ):
             raise ValueError(f"rtb chain for {robot.name} does not match the URDF chain")
         self._ik = {"LM": self._ets.ik_LM, "NR": self._ets.ik_NR, "GN": self._ets.ik_GN}[method]
         self.name = f"rtb ik_{method} (C++)"
         self._t_search = self._time_one_search(robot.mid())
-        self.settings = (f"tol={TOL:g} (on 0.5*|e|^2), ilimit={ILIMIT}, slimit<={SLIMIT} "
-                         f"cut to the time budget (~{self._t_search * 1e6:.0f} us/search), "
-                         f"joint_limits=True" + (", method=chan, k=1.0" if method == "LM" else ""))
+        self.settings = (
+            f"tol={TOL:g} (on 0.5*|e|^2), ilimit={ILIMIT}, slimit<={SLIMIT} "
+            f"cut to the time budget (~{self._t_search * 1e6:.0f} us/search), "
+            f"joint_limits=True" + (", method=chan, k=1.0" if method == "LM" else "")
+        )
 
     def _time_one_search(self, q0: np.ndarray) -> float:
         far = np.eye(4)
@@ -63,8 +66,9 @@ class RtbIK:
     def fk(self, q: np.ndarray) -> np.ndarray:
         return np.asarray(self._ets.eval(np.asarray(q, dtype=float)))
 
-    def solve(self, target: np.ndarray, seed: np.ndarray, *, position_only: bool,
-              timeout_s: float) -> np.ndarray | None:
+    def solve(
+        self, target: np.ndarray, seed: np.ndarray, *, position_only: bool, timeout_s: float
+    ) -> np.ndarray | None:
         deadline = time.perf_counter() + timeout_s
         mask = np.array([1, 1, 1, 0, 0, 0.0]) if position_only else np.ones(6)
         target = np.asarray(target, dtype=float)
@@ -73,8 +77,9 @@ class RtbIK:
         while left > 0:
             # always allow one search, so a tiny budget still tries the seed
             n = min(left, max(1, int(_SHARE * (deadline - time.perf_counter()) / self._t_search)))
-            sol = self._ik(target, q0=q0, ilimit=ILIMIT, slimit=n, tol=TOL, mask=mask,
-                           joint_limits=True)
+            sol = self._ik(
+                target, q0=q0, ilimit=ILIMIT, slimit=n, tol=TOL, mask=mask, joint_limits=True
+            )
             if sol.success:
                 return np.array(sol.q, dtype=float)
             left -= n

@@ -33,7 +33,9 @@ def reference_fk(spec: RobotSpec) -> Callable[[np.ndarray], np.ndarray]:
     base, tip = model.getFrameId(spec.base_link), model.getFrameId(spec.tip_link)
 
     def fk(q: np.ndarray) -> np.ndarray:
-        qf = pin.neutral(model)  # off-chain joints (Panda fingers) at neutral: they hang below the tip
+        qf = pin.neutral(
+            model
+        )  # off-chain joints (Panda fingers) at neutral: they hang below the tip
         qf[idx] = q
         pin.framesForwardKinematics(model, data, qf)
         return data.oMf[base].actInv(data.oMf[tip]).homogeneous
@@ -43,12 +45,20 @@ def reference_fk(spec: RobotSpec) -> Callable[[np.ndarray], np.ndarray]:
 
 def errors(T: np.ndarray, target: np.ndarray) -> tuple[float, float]:
     """(position error in m, rotation angle of R_target^T R in rad)."""
-    return (float(np.linalg.norm(T[:3, 3] - target[:3, 3])),
-            float(np.linalg.norm(pin.log3(target[:3, :3].T @ T[:3, :3]))))
+    return (
+        float(np.linalg.norm(T[:3, 3] - target[:3, 3])),
+        float(np.linalg.norm(pin.log3(target[:3, :3].T @ T[:3, :3]))),
+    )
 
 
-def check_peer(spec: RobotSpec, peer: PeerSolver, fk: Callable[[np.ndarray], np.ndarray],
-               qs_fk: np.ndarray, qs_ik: np.ndarray, timeout_s: float) -> dict[str, str]:
+def check_peer(
+    spec: RobotSpec,
+    peer: PeerSolver,
+    fk: Callable[[np.ndarray], np.ndarray],
+    qs_fk: np.ndarray,
+    qs_ik: np.ndarray,
+    timeout_s: float,
+) -> dict[str, str]:
     fk_err = max(float(np.abs(peer.fk(q) - fk(q)).max()) for q in qs_fk)
     row = {"robot": spec.name, "peer": peer.name, "fk max|dT|": f"{fk_err:.1e}"}
     for position_only in (False, True):
@@ -114,8 +124,10 @@ def main() -> None:
             rows.append(check_peer(spec, peer, fk, qs_fk, qs_ik, args.timeout))
 
     cols = list(rows[0]) if rows else []
-    print(f"timeout {1e3 * args.timeout:g} ms, {args.n} targets, seed = mid-limits, "
-          f"success: |dp| <= {POS_TOL:g} m, angle <= {ROT_TOL:g} rad, within limits\n")
+    print(
+        f"timeout {1e3 * args.timeout:g} ms, {args.n} targets, seed = mid-limits, "
+        f"success: |dp| <= {POS_TOL:g} m, angle <= {ROT_TOL:g} rad, within limits\n"
+    )
     print("| " + " | ".join(cols) + " |")
     print("|" + "---|" * len(cols))
     for r in rows:

@@ -73,12 +73,32 @@ def sample(chain: Chain, rng: np.random.Generator) -> np.ndarray:
 
 def _planar(l1: float = 0.5, l2: float = 0.3) -> Chain:
     joints = [
-        Joint(name="q1", parent="base", child="upper", kind=JointKind.REVOLUTE, axis=Z,
-              lower=(-3.0,), upper=(3.0,)),
-        Joint(name="q2", parent="upper", child="fore", kind=JointKind.REVOLUTE, axis=Z,
-              origin=Transform(np.array([l1, 0.0, 0.0])), lower=(-3.0,), upper=(3.0,)),
-        Joint(name="wrist", parent="fore", child="hand", kind=JointKind.FIXED,
-              origin=Transform(np.array([l2, 0.0, 0.0]))),
+        Joint(
+            name="q1",
+            parent="base",
+            child="upper",
+            kind=JointKind.REVOLUTE,
+            axis=Z,
+            lower=(-3.0,),
+            upper=(3.0,),
+        ),
+        Joint(
+            name="q2",
+            parent="upper",
+            child="fore",
+            kind=JointKind.REVOLUTE,
+            axis=Z,
+            origin=Transform(np.array([l1, 0.0, 0.0])),
+            lower=(-3.0,),
+            upper=(3.0,),
+        ),
+        Joint(
+            name="wrist",
+            parent="fore",
+            child="hand",
+            kind=JointKind.FIXED,
+            origin=Transform(np.array([l2, 0.0, 0.0])),
+        ),
     ]
     return build_chain(joints, [Effector(name="hand", link="hand")])
 
@@ -96,39 +116,70 @@ def test_planar_two_link_by_hand(rng: np.random.Generator) -> None:
         assert_allclose(effector_poses(chain, np.array(q))[0], expected, rtol=0.0, atol=1e-15)
     for _ in range(20):
         q1, q2 = rng.uniform(-3.0, 3.0, size=2)
-        tip = [0.5 * math.cos(q1) + 0.3 * math.cos(q1 + q2),
-               0.5 * math.sin(q1) + 0.3 * math.sin(q1 + q2), 0.0]
+        tip = [
+            0.5 * math.cos(q1) + 0.3 * math.cos(q1 + q2),
+            0.5 * math.sin(q1) + 0.3 * math.sin(q1 + q2),
+            0.0,
+        ]
         poses = link_poses(chain, np.array([q1, q2]))
         assert_allclose(poses["hand"], pose(rot_z(q1 + q2), tip), rtol=0.0, atol=ATOL)
         assert_allclose(
-            poses["fore"], pose(rot_z(q1 + q2), [0.5 * math.cos(q1), 0.5 * math.sin(q1), 0.0]),
-            rtol=0.0, atol=ATOL,
+            poses["fore"],
+            pose(rot_z(q1 + q2), [0.5 * math.cos(q1), 0.5 * math.sin(q1), 0.0]),
+            rtol=0.0,
+            atol=ATOL,
         )
 
 
 def test_prismatic_slides_along_its_axis_in_the_joint_frame() -> None:
     # origin rotates the joint frame by Rx(90 deg): the joint's +z is the parent's -y.
     joints = [
-        Joint(name="slide", parent="base", child="carriage", kind=JointKind.PRISMATIC,
-              origin=Transform(np.array([0.1, 0.2, 0.0]), rot_x(math.pi / 2)),
-              axis=np.array([0.0, 0.0, 2.0]), lower=(-0.5,), upper=(0.5,)),
-        Joint(name="tool", parent="carriage", child="tip", kind=JointKind.FIXED,
-              origin=Transform(np.array([0.0, 0.0, 0.05]))),
+        Joint(
+            name="slide",
+            parent="base",
+            child="carriage",
+            kind=JointKind.PRISMATIC,
+            origin=Transform(np.array([0.1, 0.2, 0.0]), rot_x(math.pi / 2)),
+            axis=np.array([0.0, 0.0, 2.0]),
+            lower=(-0.5,),
+            upper=(0.5,),
+        ),
+        Joint(
+            name="tool",
+            parent="carriage",
+            child="tip",
+            kind=JointKind.FIXED,
+            origin=Transform(np.array([0.0, 0.0, 0.05])),
+        ),
     ]
     chain = build_chain(joints, [Effector(name="tip", link="tip")])
     poses = link_poses(chain, np.array([0.25]))
-    assert_allclose(poses["carriage"], pose(rot_x(math.pi / 2), [0.1, -0.05, 0.0]),
-                    rtol=0.0, atol=1e-15)
+    assert_allclose(
+        poses["carriage"], pose(rot_x(math.pi / 2), [0.1, -0.05, 0.0]), rtol=0.0, atol=1e-15
+    )
     assert_allclose(poses["tip"], pose(rot_x(math.pi / 2), [0.1, -0.1, 0.0]), rtol=0.0, atol=1e-15)
 
 
 def _shoulder_zx() -> Chain:
     joints = [
-        Joint(name="shoulder", parent="torso", child="upper", kind=JointKind.ROTATIONAL,
-              axes="zx", origin=Transform(np.array([0.0, 0.0, 1.0])),
-              pivot=np.array([0.0, 0.1, 0.0]), lower=(-3.0, -3.0), upper=(3.0, 3.0)),
-        Joint(name="elbow_mount", parent="upper", child="elbow", kind=JointKind.FIXED,
-              origin=Transform(np.array([0.0, 0.3, 0.0]))),
+        Joint(
+            name="shoulder",
+            parent="torso",
+            child="upper",
+            kind=JointKind.ROTATIONAL,
+            axes="zx",
+            origin=Transform(np.array([0.0, 0.0, 1.0])),
+            pivot=np.array([0.0, 0.1, 0.0]),
+            lower=(-3.0, -3.0),
+            upper=(3.0, 3.0),
+        ),
+        Joint(
+            name="elbow_mount",
+            parent="upper",
+            child="elbow",
+            kind=JointKind.FIXED,
+            origin=Transform(np.array([0.0, 0.3, 0.0])),
+        ),
     ]
     return build_chain(joints, [Effector(name="elbow", link="elbow")])
 
@@ -140,8 +191,12 @@ def _shoulder_zx() -> Chain:
         ((math.pi / 2, 0.0), [[0, -1, 0], [1, 0, 0], [0, 0, 1]], [0.1, 0.1, 1.0], [-0.2, 0.1, 1.0]),
         ((0.0, math.pi / 2), [[1, 0, 0], [0, 0, -1], [0, 1, 0]], [0.0, 0.1, 0.9], [0.0, 0.1, 1.2]),
         # intrinsic order "zx": Rz(90) Rx(90), not Rx(90) Rz(90) = [[0,-1,0],[0,0,-1],[1,0,0]]
-        ((math.pi / 2, math.pi / 2), [[0, 0, 1], [1, 0, 0], [0, 1, 0]], [0.0, 0.1, 0.9],
-         [0.0, 0.1, 1.2]),
+        (
+            (math.pi / 2, math.pi / 2),
+            [[0, 0, 1], [1, 0, 0], [0, 1, 0]],
+            [0.0, 0.1, 0.9],
+            [0.0, 0.1, 1.2],
+        ),
     ],
 )
 def test_rotational_zx_with_pivot_by_hand(
@@ -174,8 +229,9 @@ def test_terminator_does_not_change_fk(rng: np.random.Generator) -> None:
         a, b = link_poses(with_terminators, q), link_poses(without, q)
         for link in a:
             assert_allclose(a[link], b[link], rtol=0.0, atol=0.0)
-        for ea, eb in zip(effector_poses(with_terminators, q), effector_poses(without, q),
-                          strict=True):
+        for ea, eb in zip(
+            effector_poses(with_terminators, q), effector_poses(without, q), strict=True
+        ):
             assert_allclose(ea, eb, rtol=0.0, atol=0.0)
 
 
@@ -245,6 +301,7 @@ def test_panda_urdf_against_pytransform3d(rng: np.random.Generator) -> None:
 
 def _random_urdf(rng: np.random.Generator, n_joints: int) -> tuple[str, list[str]]:
     """A random tree: general rpy and non-unit axes, all four joint types; returns tips."""
+
     def num(v: float) -> str:
         return repr(float(v))
 
@@ -260,8 +317,10 @@ def _random_urdf(rng: np.random.Generator, n_joints: int) -> tuple[str, list[str
         children[parent] = children.get(parent, 0) + 1
         children.setdefault(child, 0)
         kind = str(rng.choice(["revolute", "continuous", "prismatic", "fixed"]))
-        inner = (f'<origin xyz="{vec(rng.uniform(-0.5, 0.5, 3))}" '
-                 f'rpy="{vec(rng.uniform(-math.pi, math.pi, 3))}"/>')
+        inner = (
+            f'<origin xyz="{vec(rng.uniform(-0.5, 0.5, 3))}" '
+            f'rpy="{vec(rng.uniform(-math.pi, math.pi, 3))}"/>'
+        )
         if kind != "fixed":
             inner += f'<axis xyz="{vec(rng.normal(size=3))}"/>'
         if kind in ("revolute", "prismatic"):
@@ -283,8 +342,12 @@ def test_random_urdfs_against_pytransform3d(rng: np.random.Generator) -> None:
         chain = chain_from_urdf(text, base_link="base", tip_links=tips)
         kinds_seen.update(j.kind for j in chain.joints)
         assert_matches_pytransform3d(text, chain, rng, n_samples=5)
-    assert kinds_seen == {JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.PRISMATIC,
-                          JointKind.FIXED}
+    assert kinds_seen == {
+        JointKind.REVOLUTE,
+        JointKind.CONTINUOUS,
+        JointKind.PRISMATIC,
+        JointKind.FIXED,
+    }
 
 
 def installed_robot(name: str) -> Any:

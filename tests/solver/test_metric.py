@@ -62,7 +62,9 @@ def _tail_with_two_points() -> Chain:
 )
 @pytest.mark.parametrize("damping", [0.0, 1e-3])
 @pytest.mark.parametrize("damping_scale", [IKOptions().damping_scale, 1.0])
-def test_metric_is_the_damped_gauss_newton_inverse(factory, low_rank: bool, damping: float, damping_scale: float) -> None:  # type: ignore[no-untyped-def]
+def test_metric_is_the_damped_gauss_newton_inverse(
+    factory, low_rank: bool, damping: float, damping_scale: float
+) -> None:  # type: ignore[no-untyped-def]
     chain = factory()
     rows = sum(3 if e.mode is EffectorMode.POSITION else 6 for e in chain.effectors)
     assert (2 * rows <= chain.n_dof) is low_rank

@@ -35,6 +35,7 @@ PANDA_ARM = tuple(f"panda_joint{i}" for i in range(1, 8))
 def rng() -> np.random.Generator:
     return np.random.default_rng(20240611)
 
+
 # --- small inline URDFs for the error table -------------------------------------------
 
 _LINKS = '<link name="base"/><link name="l1"/><link name="l2"/><link name="other"/>'
@@ -47,8 +48,12 @@ _AXIS_LIMIT = '<axis xyz="0 0 1"/>' + _LIMIT
 
 
 def _j2(
-    inner: str = _AXIS_LIMIT, *, type_: str | None = "revolute", name: str = "j2",
-    parent: str = "l1", child: str = "l2",
+    inner: str = _AXIS_LIMIT,
+    *,
+    type_: str | None = "revolute",
+    name: str = "j2",
+    parent: str = "l1",
+    child: str = "l2",
 ) -> str:
     type_attr = f' type="{type_}"' if type_ is not None else ""
     return (
@@ -81,7 +86,7 @@ _EXTERNAL_ENTITY = """<?xml version="1.0"?>
 <robot name="t"><link name="&x;"/></robot>
 """
 _EXTERNAL_DTD = '<!DOCTYPE robot SYSTEM "http://example.invalid/urdf.dtd"><robot name="t"/>'
-_PLAIN_DTD = "<!DOCTYPE robot><robot name=\"t\"/>"
+_PLAIN_DTD = '<!DOCTYPE robot><robot name="t"/>'
 _CYCLE = (  # l1 and l2 each have one parent joint, but they are each other's parents
     '<robot name="t"><link name="base"/><link name="l1"/><link name="l2"/>'
     '<joint name="a" type="fixed"><parent link="l1"/><child link="l2"/></joint>'
@@ -108,8 +113,13 @@ ERROR_CASES: list[tuple[str, str, dict[str, object], str, str | None]] = [
     ("missing_type", _robot(_j2(type_=None)), {}, "type", "j2"),
     # limits
     ("revolute_no_limit", _robot(_j2('<axis xyz="0 0 1"/>')), {}, "limit", "j2"),
-    ("prismatic_no_limit", _robot(_j2('<axis xyz="0 0 1"/>', type_="prismatic")), {}, "limit",
-     "j2"),
+    (
+        "prismatic_no_limit",
+        _robot(_j2('<axis xyz="0 0 1"/>', type_="prismatic")),
+        {},
+        "limit",
+        "j2",
+    ),
     ("no_lower", _robot(_j2('<limit upper="1"/>')), {}, "limit.lower", "j2"),
     ("no_upper", _robot(_j2('<limit lower="-1"/>')), {}, "limit.upper", "j2"),
     ("lower_gt_upper", _robot(_j2('<limit lower="1" upper="-1"/>')), {}, "limit.lower", "j2"),
@@ -124,26 +134,46 @@ ERROR_CASES: list[tuple[str, str, dict[str, object], str, str | None]] = [
     ("nan_axis", _robot(_j2('<axis xyz="0 nan 1"/>' + _LIMIT)), {}, "axis", "j2"),
     # origin
     ("nan_xyz", _robot(_j2(_AXIS_LIMIT + '<origin xyz="0 NaN 0"/>')), {}, "origin.xyz", "j2"),
-    ("overflow_xyz", _robot(_j2(_AXIS_LIMIT + '<origin xyz="1e999 0 0"/>')), {}, "origin.xyz",
-     "j2"),
+    (
+        "overflow_xyz",
+        _robot(_j2(_AXIS_LIMIT + '<origin xyz="1e999 0 0"/>')),
+        {},
+        "origin.xyz",
+        "j2",
+    ),
     ("comma_xyz", _robot(_j2(_AXIS_LIMIT + '<origin xyz="0,0,0"/>')), {}, "origin.xyz", "j2"),
     ("inf_rpy", _robot(_j2(_AXIS_LIMIT + '<origin rpy="0 -inf 0"/>')), {}, "origin.rpy", "j2"),
     ("text_rpy", _robot(_j2(_AXIS_LIMIT + '<origin rpy="0 0 pi"/>')), {}, "origin.rpy", "j2"),
     # structure
     ("unknown_parent_link", _robot(_j2(parent="nowhere")), {}, "parent", "j2"),
     ("unknown_child_link", _robot(_j2(child="nowhere")), {}, "child", "j2"),
-    ("missing_parent", _robot('<joint name="j2" type="fixed"><child link="l2"/></joint>'), {},
-     "parent", "j2"),
+    (
+        "missing_parent",
+        _robot('<joint name="j2" type="fixed"><child link="l2"/></joint>'),
+        {},
+        "parent",
+        "j2",
+    ),
     ("duplicate_joint", _robot(_j2(name="j1")), {}, "name", "j1"),
     ("duplicate_link", _robot(_j2(), links=_LINKS + '<link name="l1"/>'), {}, "name", "l1"),
-    ("nameless_joint", _robot('<joint type="fixed"><parent link="l1"/><child link="l2"/></joint>'),
-     {}, "name", None),
+    (
+        "nameless_joint",
+        _robot('<joint type="fixed"><parent link="l1"/><child link="l2"/></joint>'),
+        {},
+        "name",
+        None,
+    ),
     ("two_parents", _robot(_j2(child="l1")), {}, "child", "j2"),
     ("cycle", _CYCLE, {}, "parent", "b"),  # walking up from l2: a, then b closes the loop
     # base and tips
     ("unknown_tip", _robot(_j2()), {"tip_links": "l9"}, "tip_links", "l9"),
-    ("tip_not_below_base", _robot(_j2(), _j2(name="j3", parent="base", child="other")),
-     {"base_link": "l1", "tip_links": "other"}, "tip_links", "other"),
+    (
+        "tip_not_below_base",
+        _robot(_j2(), _j2(name="j3", parent="base", child="other")),
+        {"base_link": "l1", "tip_links": "other"},
+        "tip_links",
+        "other",
+    ),
     ("tip_is_base", _robot(_j2()), {"tip_links": "base"}, "tip_links", "base"),
     ("no_tips", _robot(_j2()), {"tip_links": []}, "tip_links", None),
     ("duplicate_tips", _robot(_j2()), {"tip_links": ["l2", "l2"]}, "tip_links", "l2"),
@@ -276,7 +306,10 @@ def test_urdf_defaults_and_joint_kinds() -> None:
     chain = chain_from_urdf(text, base_link="base", tip_links="d")
     by_name = {j.name: j for j in chain.joints}
     assert [by_name[n].kind for n in ("rev", "cont", "slide", "tool")] == [
-        JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.PRISMATIC, JointKind.FIXED,
+        JointKind.REVOLUTE,
+        JointKind.CONTINUOUS,
+        JointKind.PRISMATIC,
+        JointKind.FIXED,
     ]
     assert_allclose(by_name["rev"].axis, [1.0, 0.0, 0.0], rtol=0.0, atol=0.0)
     assert_allclose(by_name["rev"].origin.translation, [0.0, 0.0, 0.0], rtol=0.0, atol=0.0)
@@ -305,8 +338,10 @@ def test_panda_arm_ignores_the_mimic_finger_off_the_path() -> None:
     chain = chain_from_urdf(PANDA, base_link="panda_link0", tip_links="panda_link8")
     assert chain.dof_names == PANDA_ARM
     assert_allclose(
-        chain.lower, [-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973],
-        rtol=0.0, atol=0.0,
+        chain.lower,
+        [-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973],
+        rtol=0.0,
+        atol=0.0,
     )
     assert_allclose(
         chain.upper, [2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973], rtol=0.0, atol=0.0
@@ -319,7 +354,9 @@ def test_panda_arm_ignores_the_mimic_finger_off_the_path() -> None:
 
 def test_panda_tree_with_two_tips() -> None:
     chain = chain_from_urdf(
-        PANDA, base_link="panda_link0", tip_links=["panda_hand_tcp", "panda_leftfinger"],
+        PANDA,
+        base_link="panda_link0",
+        tip_links=["panda_hand_tcp", "panda_leftfinger"],
         mode=EffectorMode.POSITION,
     )
     assert chain.dof_names == (*PANDA_ARM, "panda_finger_joint1")
@@ -366,9 +403,7 @@ def installed_robot(name: str) -> Any:
 @pytest.mark.parametrize("name", ["panda", "ur5", "iiwa"])
 def test_installed_robot(name: str, rng: np.random.Generator) -> None:
     spec = installed_robot(name)
-    full = chain_from_urdf(
-        spec.urdf_text(), base_link=spec.base_link, tip_links=spec.tip_link
-    )
+    full = chain_from_urdf(spec.urdf_text(), base_link=spec.base_link, tip_links=spec.tip_link)
     assert full.dof_names == spec.joint_names
     assert_allclose(full.lower, spec.lower, rtol=0.0, atol=0.0)
     assert_allclose(full.upper, spec.upper, rtol=0.0, atol=0.0)
@@ -376,7 +411,8 @@ def test_installed_robot(name: str, rng: np.random.Generator) -> None:
     # Without meshes, the same kinematics.
     stripped = chain_from_urdf(
         spec.kinematic_urdf_text(),
-        base_link=spec.base_link, tip_links=spec.tip_link,
+        base_link=spec.base_link,
+        tip_links=spec.tip_link,
     )
     for _ in range(10):
         q = rng.uniform(full.lower, full.upper)
