@@ -40,6 +40,7 @@ from .kinematics import (
     ED_TPOS,
     ED_TROT,
     ED_WP,
+    ED_WR,
     EI_ACTIVE,
     EI_MODE,
     MISC_DAMPING,
@@ -473,11 +474,13 @@ class IKOptions:
             squares near singularities takes small joint steps where pure Gauss-Newton
             swings joints by radians for a millimetre (streams use 1e-3).
         damping_redundant_only: Apply the ``damping`` floor only while the task is
-            redundant: more free joints than target rows (3 per position, 3 per
-            orientation, 2 per aim). Without a self-motion the floor has nothing to
-            steady, and near a singularity it only makes a tracked answer lag the
-            target and catch up later in one larger step (UR5 pose streams: 33 of 40
-            within twice the reference's largest step with the floor, 39 without).
+            redundant: more free joints (unlocked, lower < upper) than target rows (3
+            per position, 3 per orientation, 2 per aim direction; a part whose weight
+            is 0 adds none). Without a self-motion the floor has nothing to steady,
+            and near a singularity it only makes a tracked answer lag the target and
+            catch up later in one larger step (UR5 pose streams at 1e-5 m / 1e-4 rad:
+            33 of 40 within twice the reference's largest step with the floor, 39
+            without; at 1e-4 m / 1e-3 rad: 22 and 23).
         damping_scale: mu = damping_scale x f (Levenberg-Marquardt's damping relative
             to the current error, Sugihara 2011). 0.5 took 9-12 median iterations
             against 10-15 with 1.0 (Chan's choice, as in ``ik_LM``) on 10,000 random
@@ -584,8 +587,8 @@ class IKOptions:
 # the iiwa streams, 3-5 frames out of time); BFGS after 8 steps: p99 15, none missed.
 # The damping floor only for redundant tasks: a 6-DOF arm's pose stream has no
 # self-motion for it to steady, and with it the answer lagged behind the target at
-# singularities (UR5: 33 of 40 streams within twice the reference's largest step; 39
-# without; bench/ik.py --parts c --streams 40).
+# singularities (UR5 at 1e-5 m / 1e-4 rad: 33 of 40 streams within twice the
+# reference's largest step; 39 without; bench/ik.py --parts c --streams 40).
 STREAM_DEFAULTS = IKOptions(
     restart_radius_rad=0.3,
     limit_weight=1e-3,
@@ -789,7 +792,17 @@ class IKSolver:
         self._effector_names = chain.effector_names
         self._effector_slot = {name: i for i, name in enumerate(self._effector_names)}
         self._needs = tuple(_NEEDS[e.mode] for e in chain.effectors)
-        self._mode_rows = tuple(_MODE_ROWS[e.mode] for e in chain.effectors)
+        # Target rows each effector adds, for the redundancy test: a part whose weight is
+        # zero in the model constrains nothing.
+        static = chain.compiled.ed
+        self._position_rows = tuple(
+            3 if static[i, ED_WP] > 0.0 else 0 for i in range(len(self._needs))
+        )
+        self._mode_rows = tuple(
+            _MODE_ROWS[e.mode] if static[i, ED_WR] > 0.0 else 0
+            for i, e in enumerate(chain.effectors)
+        )
+        self._movable = chain.lower < chain.upper  # a joint with lower == upper is locked
         self._redundant = True  # more free joints than target rows (set per target set)
         self._static_weights = chain.compiled.ed[:, ED_WP].copy()
         self._active: list[int] = []
@@ -941,31 +954,44 @@ class IKSolver:
             ed[i, ED_WP] = self._static_weights[i]
         self._active = active = []
         self._zeroed = []
-        for t in targets:
-            i = self._effector_slot.get(t.effector, -1)
-            if i < 0:
-                self.chain.effector_index(t.effector)  # raises with the list of names
-            if ei[i, EI_ACTIVE]:
-                raise InvalidProblem(f"two targets for effector {t.effector!r}")
-            need = self._needs[i]
-            if t.given & need != need:
-                part = {GIVEN_POSITION: "a position", GIVEN_ROTATION: "a rotation"}.get(
-                    need, "a direction"
-                )
-                mode = self.chain.effectors[i].mode.value
-                raise InvalidProblem(f"target for {t.effector!r} ({mode}) needs {part}")
-            if not t.given & GIVEN_POSITION:
-                ed[i, ED_WP] = 0.0
-                self._zeroed.append(i)
-            self._target_rows[i] = t.packed
-            ei[i, EI_ACTIVE] = 1
-            active.append(i)
-        rows = sum(self._mode_rows[i] + (0 if i in self._zeroed else 3) for i in active)
+        try:
+            for t in targets:
+                i = self._effector_slot.get(t.effector, -1)
+                if i < 0:
+                    self.chain.effector_index(t.effector)  # raises with the list of names
+                if ei[i, EI_ACTIVE]:
+                    raise InvalidProblem(f"two targets for effector {t.effector!r}")
+                need = self._needs[i]
+                if t.given & need != need:
+                    part = {GIVEN_POSITION: "a position", GIVEN_ROTATION: "a rotation"}.get(
+                        need, "a direction"
+                    )
+                    mode = self.chain.effectors[i].mode.value
+                    raise InvalidProblem(f"target for {t.effector!r} ({mode}) needs {part}")
+                if not t.given & GIVEN_POSITION:
+                    ed[i, ED_WP] = 0.0
+                    self._zeroed.append(i)
+                self._target_rows[i] = t.packed
+                ei[i, EI_ACTIVE] = 1
+                active.append(i)
+        finally:
+            # Also when a target is rejected: the effectors loaded before it stay active,
+            # and the next frame's fast path keeps this answer.
+            self._redundant = self._task_is_redundant()
+
+    def _task_is_redundant(self) -> bool:
+        """More free (unlocked) joints than target rows among the active effectors."""
+        active = self._active
+        rows = sum(
+            self._mode_rows[i] + (0 if i in self._zeroed else self._position_rows[i])
+            for i in active
+        )
         if self._every_effector_moves_all or not active:
-            free = self._n
+            free = int(self._movable.sum())
         else:
-            free = np.unique(np.concatenate([self._chain_dofs[i] for i in active])).size
-        self._redundant = free > rows
+            dofs = np.unique(np.concatenate([self._chain_dofs[i] for i in active]))
+            free = int(self._movable[dofs].sum())
+        return free > rows
 
     def _set_free_bounds(self, q0: Vector) -> None:
         """Limits for this frame (DD rows): variables outside every targeted chain are

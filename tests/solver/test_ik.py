@@ -591,3 +591,100 @@ def test_damping_floor_follows_the_target_set_under_the_same_options() -> None:
         _solve_with_floor(chain, [aim_only], seed).iterations
         != _solve_with_floor(chain, [aim_only], seed, damping=0.0).iterations
     )
+
+
+def _tail_with(*effectors: Effector, locked: tuple[str, ...] = ()):  # type: ignore[no-untyped-def]
+    """tail(3)'s six joints (j1..j3, axes x and z, +-40 deg) with other effectors;
+    ``locked`` pins joints ("j1": both axes) or single axes ("j2.x") at 0.1 rad
+    (lower == upper)."""
+    joints = []
+    for j in tail(3).joints:
+        pins = [f"{j.name}.{a}" in locked or j.name in locked for a in j.axes]
+        if any(pins):
+            j = Joint(
+                name=j.name,
+                parent=j.parent,
+                child=j.child,
+                kind=j.kind,
+                axes=j.axes,
+                origin=j.origin,
+                lower=tuple(0.1 if p else lo for p, lo in zip(pins, j.lower, strict=True)),
+                upper=tuple(0.1 if p else hi for p, hi in zip(pins, j.upper, strict=True)),
+            )
+        joints.append(j)
+    return build_chain(joints, list(effectors))
+
+
+@pytest.mark.parametrize(
+    ("chain", "targets", "redundant"),
+    [
+        # A pose without a weighted position: 3 rows on 6 joints.
+        (
+            _tail_with(
+                Effector(name="tip", link="tip", mode=EffectorMode.POSE, position_weight=0.0)
+            ),
+            None,
+            True,
+        ),
+        # A pose without a weighted rotation: 3 rows on 6 joints.
+        (
+            _tail_with(
+                Effector(name="tip", link="tip", mode=EffectorMode.POSE, rotation_weight=0.0)
+            ),
+            None,
+            True,
+        ),
+        # A position on 6 joints of which 4 are locked: 3 rows on 2 joints.
+        (_tail_with(Effector(name="tip", link="tip"), locked=("j1", "j2")), None, False),
+        # An aim alone (2 rows) on seg2's 4 joints with j1 locked: 2 free joints.
+        (
+            _tail_with(Effector(name="tip", link="seg2", mode=EffectorMode.AIM), locked=("j1",)),
+            "aim only",
+            False,
+        ),
+        # The same aim on all 6 joints but j1 and j2.x: 3 free joints, 2 rows.
+        (
+            _tail_with(
+                Effector(name="tip", link="tip", mode=EffectorMode.AIM), locked=("j1", "j2.x")
+            ),
+            "aim only",
+            True,
+        ),
+    ],
+    ids=["pose-no-position", "pose-no-rotation", "locked-joints", "aim-2-of-2", "aim-2-of-3"],
+)
+def test_redundancy_counts_weighted_rows_and_unlocked_joints(chain, targets, redundant) -> None:  # type: ignore[no-untyped-def]
+    lo, hi = chain.lower, chain.upper
+    seed = lo + 0.45 * (hi - lo)
+    full = pose_targets(chain, lo + 0.7 * (hi - lo))
+    if targets == "aim only":
+        full = [Target(effector=full[0].effector, direction=full[0].direction)]
+    auto = _solve_with_floor(chain, full, seed, damping_redundant_only=True)
+    want = _solve_with_floor(chain, full, seed, **({} if redundant else {"damping": 0.0}))
+    other = _solve_with_floor(chain, full, seed, **({"damping": 0.0} if redundant else {}))
+    assert auto.success and want.success
+    assert other.iterations != want.iterations or not np.array_equal(other.q, want.q)
+    np.testing.assert_array_equal(auto.q, want.q)
+    assert auto.iterations == want.iterations
+
+
+def test_redundancy_is_recounted_when_a_target_set_is_rejected() -> None:
+    """A frame whose second target is rejected leaves its first loaded; the next frame
+    (the fast path) must see that effector's redundancy, not the frame before's."""
+    chain = _tail_with(
+        Effector(name="tip", link="tip", mode=EffectorMode.POSE),  # 6 rows on 6 joints
+        Effector(name="mid", link="seg2"),  # 3 rows on 4 joints: redundant
+    )
+    lo, hi = chain.lower, chain.upper
+    seed = lo + 0.45 * (hi - lo)
+    tip, mid = pose_targets(chain, lo + 0.7 * (hi - lo))
+    opts = with_options(TIGHT, damping=0.01, damping_scale=1.0, damping_redundant_only=True)
+    solver = IKSolver(chain, opts, seed=0)
+    assert solver.solve([tip], seed).success
+    with pytest.raises(InvalidProblem, match="unknown effector"):
+        solver.solve([mid, Target(effector="nose", position=np.zeros(3))], seed)
+    got = solver.solve([mid], seed)
+    want = _solve_with_floor(chain, [mid], seed)
+    assert got.success and want.success
+    np.testing.assert_array_equal(got.q, want.q)
+    assert got.iterations == want.iterations
