@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -601,13 +602,8 @@ def _tail_with(*effectors: Effector, locked: tuple[str, ...] = ()):  # type: ign
     for j in tail(3).joints:
         pins = [f"{j.name}.{a}" in locked or j.name in locked for a in j.axes]
         if any(pins):
-            j = Joint(
-                name=j.name,
-                parent=j.parent,
-                child=j.child,
-                kind=j.kind,
-                axes=j.axes,
-                origin=j.origin,
+            j = dataclasses.replace(
+                j,
                 lower=tuple(0.1 if p else lo for p, lo in zip(pins, j.lower, strict=True)),
                 upper=tuple(0.1 if p else hi for p, hi in zip(pins, j.upper, strict=True)),
             )
