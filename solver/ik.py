@@ -14,7 +14,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, NamedTuple, cast
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numba
 import numpy as np
@@ -63,6 +63,9 @@ from .kinematics import (
 )
 from .termination import Termination
 from .types import Matrix, MinimizeOptions, PassRecord, Vector
+
+if TYPE_CHECKING:
+    from .path import PathOptions, PlannedPath
 
 TERMINATIONS = C.TERMINATIONS  # _solve_frame's termination codes, in order
 SEED_NOT_FINITE = -2  # _solve_frame's "bad" code for a seed with NaN or inf
@@ -898,16 +901,49 @@ class IKSolver:
 
     def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:
         """Pose errors of q against targets with the solver's tolerances (no solving)."""
-        self._load_targets(targets, self.options)
-        packed = self._packed_options(self.options)
+        return self._judge(q, targets, self.options, 0.0).effectors
+
+    def plan(
+        self,
+        frames: Sequence[Sequence[Target]],
+        *,
+        options: IKOptions | None = None,
+        path_options: PathOptions | None = None,
+    ) -> PlannedPath:
+        """Solve a whole clip of frames at once, from the current pose: the path whose
+        largest joint step between consecutive frames is smallest (``solver.path``).
+
+        Where ``track`` answers each frame knowing only the past, this knows the whole
+        clip. The current pose becomes the last frame's answer, as after tracking.
+        """
+        from .path import plan_path  # path.py builds on this module
+
+        return plan_path(self, frames, options=options, path_options=path_options)
+
+    def _judge(
+        self, q: Vector, targets: Sequence[Target], opts: IKOptions, solve_us: float
+    ) -> IKResult:
+        """A result for q as it is (no solving): errors against the targets, SOLVED
+        (goal_reached) within the tolerances of ``opts``, else NOT_REACHED (gtol)."""
+        self._load_targets(targets, opts)
+        packed = self._packed_options(opts)
         raw = np.full(packed.out_size, math.nan)
         q = self._check_seed(q)
-        bad, _ = _report_only(self._data, q, raw)
+        bad, measure = _report_only(self._data, q, raw)
         self._raise_bad_target(bad)
-        result = IKResult(
-            q, IKStatus.SOLVED, Termination.GOAL_REACHED, 0, 0, 0, 0, 0.0, raw, packed.layout
+        ok = measure <= 1.0
+        return IKResult(
+            q,
+            IKStatus.SOLVED if ok else IKStatus.NOT_REACHED,
+            Termination.GOAL_REACHED if ok else Termination.GTOL,
+            0,
+            0,
+            0,
+            0,
+            solve_us,
+            raw,
+            packed.layout,
         )
-        return result.effectors
 
     # -- internals -------------------------------------------------------------
     def _check_seed(self, seed: Vector) -> Vector:
@@ -981,6 +1017,12 @@ class IKSolver:
 
     def _task_is_redundant(self) -> bool:
         """More free (unlocked) joints than target rows among the active effectors."""
+        return self._free_directions() > 0
+
+    def _free_directions(self) -> int:
+        """Free (unlocked) joints of the targeted effectors minus their target rows: the
+        dimension of the self-motion where the Jacobian has full rank (a 7-DOF arm
+        under a 6-D pose: 1; <= 0: no self-motion)."""
         active = self._active
         rows = sum(
             self._mode_rows[i] + (0 if i in self._zeroed else self._position_rows[i])
@@ -991,7 +1033,7 @@ class IKSolver:
         else:
             dofs = np.unique(np.concatenate([self._chain_dofs[i] for i in active]))
             free = int(self._movable[dofs].sum())
-        return free > rows
+        return free - rows
 
     def _set_free_bounds(self, q0: Vector) -> None:
         """Limits for this frame (DD rows): variables outside every targeted chain are
@@ -1038,6 +1080,13 @@ class IKSolver:
             self._packed[id(opts)] = hit
         self._last_packed = hit
         return hit
+
+    def _prepare(self, targets: Sequence[Target], opts: IKOptions, q0: Vector) -> None:
+        """Load a frame's targets and its bounds (variables outside every targeted
+        chain frozen at q0), as a solve from q0 does."""
+        self._load_targets(targets, opts)
+        if not (self._bounds_are_limits and self._every_effector_moves_all and self._active):
+            self._set_free_bounds(q0)
 
     def _frame(
         self,

@@ -17,7 +17,8 @@ from .ik import IKOptions, IKSolver, Target, pose_targets
 
 
 def warmup() -> float:
-    """Run one small solve of every compiled path; returns the seconds it took."""
+    """Run one small solve of every compiled path (and a small plan); returns the seconds
+    it took."""
     start = time.perf_counter()
     for mode in (EffectorMode.POSE, EffectorMode.POSITION, EffectorMode.AIM):
         chain = panda_arm(mode)
@@ -25,6 +26,12 @@ def warmup() -> float:
         q = chain.mid_limits() + 0.1
         solver.solve(pose_targets(chain, q))
         solver.track(pose_targets(chain, q + 0.01))
+    # The planner's kernels (solver/path.py): a two-frame clip of a 7-DOF pose task.
+    chain = panda_arm()
+    q = chain.mid_limits() + 0.1
+    planner = IKSolver(chain, IKOptions(time_budget_us=None, max_iter=50))
+    planner.set_pose(q)
+    planner.plan([pose_targets(chain, q), pose_targets(chain, q + 0.01)])
     # A chain with no variables takes its own compiled path (errors only).
     bolt = Joint(
         name="bolt",

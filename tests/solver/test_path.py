@@ -1,0 +1,281 @@
+"""Planning a clip as a whole (solver/path.py): smooth where tracking pops, never worse."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from solver import EffectorMode, IKSolver, InvalidProblem, Target, build_chain
+from solver._path_kernels import dp_step, frame_nodes
+from solver.examples import humanoid_arm, panda_arm, two_arm_torso
+from solver.fk import effector_poses
+from solver.ik import STREAM_DEFAULTS, pose_targets, with_options
+from solver.path import PathOptions, PlannedPath
+
+# The benchmark's tracking settings, without a time budget: a loaded CI machine must
+# not change which answers a test sees.
+STREAM = with_options(
+    STREAM_DEFAULTS,
+    position_tolerance_m=1e-5,
+    rotation_tolerance_rad=1e-4,
+    time_budget_us=None,
+)
+
+
+def joint_stream(chain, seed: int, frames: int) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """bench/ik.py's reference paths: q(t) = c + A sin(2 pi f t + phi) at 60 Hz."""
+    rng = np.random.default_rng(seed)
+    lo, hi = chain.lower, chain.upper
+    n = chain.n_dof
+    c = lo + (hi - lo) * rng.uniform(0.25, 0.75, n)
+    amp = np.minimum(0.6, 0.8 * np.minimum(c - lo, hi - c))
+    f = rng.uniform(0.05, 0.3, n)
+    phi = rng.uniform(0.0, 2 * math.pi, n)
+    t = np.arange(frames)[:, None] / 60.0
+    q: np.ndarray = c + amp * np.sin(2 * math.pi * f * t + phi)
+    return q
+
+
+def largest_step(start: np.ndarray, qs: np.ndarray) -> float:
+    return float(np.abs(np.diff(np.vstack([start, qs]), axis=0)).max())
+
+
+def track_all(solver: IKSolver, frames: list[list[Target]]) -> list:  # type: ignore[type-arg]
+    return [solver.track(t, options=STREAM) for t in frames]
+
+
+def rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
+    c = (np.trace(a @ b.T) - 1.0) / 2.0
+    return math.acos(min(1.0, max(-1.0, c)))
+
+
+def assert_reaches(chain, q: np.ndarray, targets: list[Target]) -> None:  # type: ignore[no-untyped-def]
+    """Independently of the solver's report: FK of q against the targets, and limits."""
+    assert np.all(q >= chain.lower - 1e-12) and np.all(q <= chain.upper + 1e-12)
+    poses = effector_poses(chain, q)
+    for t in targets:
+        pose = poses[chain.effector_names.index(t.effector)]
+        if t.position is not None:
+            assert np.linalg.norm(pose[:3, 3] - t.position) <= 1e-5 * (1 + 1e-9)
+        if t.rotation is not None:
+            assert rotation_angle(pose[:3, :3], t.rotation) <= 1e-4 * (1 + 1e-6)
+
+
+def test_plan_crosses_smoothly_where_tracking_pops() -> None:
+    # A Panda stream whose reference crosses the shoulder pole (joint 2 through 0):
+    # the tracker, on another point of the self-motion, jumps by radians at frame 78.
+    chain = panda_arm()
+    path = joint_stream(chain, 4, 90)
+    ref = float(np.abs(np.diff(path, axis=0)).max())
+    frames = [pose_targets(chain, q) for q in path]
+    tracker = IKSolver(chain, STREAM)
+    tracker.set_pose(path[0])
+    tracked = np.array([r.q for r in track_all(tracker, frames)])
+    assert largest_step(path[0], tracked) > 10 * ref
+
+    planner = IKSolver(chain, STREAM)
+    planner.set_pose(path[0])
+    plan = planner.plan(frames)
+    assert plan.success
+    assert plan.largest_step <= 2 * ref
+    assert plan.largest_step == pytest.approx(largest_step(path[0], plan.q), abs=0.0)
+    assert plan.tracked_largest_step == pytest.approx(largest_step(path[0], tracked), rel=1e-12)
+    for q, targets in zip(plan.q, frames, strict=True):
+        assert_reaches(chain, q, targets)
+
+
+def _locked_panda():  # type: ignore[no-untyped-def]
+    """The Panda with its last joint locked: 6 free joints under a 6-D pose (no
+    self-motion: the plan chooses between separate answers)."""
+    chain = panda_arm()
+    joints = list(chain.joints)
+    last = max(i for i, j in enumerate(joints) if j.lower)
+    joints[last] = dataclasses.replace(joints[last], lower=(0.3,), upper=(0.3,))
+    return build_chain(joints, list(chain.effectors))
+
+
+@pytest.mark.parametrize(
+    "make, seeds",
+    [
+        (lambda: panda_arm(), (0, 1, 2)),
+        (_locked_panda, (0, 1)),
+        (lambda: panda_arm(EffectorMode.POSITION), (0, 1)),
+        (lambda: humanoid_arm(), (0, 1)),
+    ],
+    ids=["panda-pose", "panda-locked-joint", "panda-position", "humanoid"],
+)
+def test_plan_is_never_worse_than_tracking(make, seeds) -> None:  # type: ignore[no-untyped-def]
+    chain = make()
+    for seed in seeds:
+        path = joint_stream(chain, seed, 60)
+        frames = [pose_targets(chain, q) for q in path]
+        tracker = IKSolver(chain, STREAM)
+        tracker.set_pose(path[0])
+        tracked = track_all(tracker, frames)
+        planner = IKSolver(chain, STREAM)
+        planner.set_pose(path[0])
+        plan = planner.plan(frames)
+        for r, t, targets in zip(plan.results, tracked, frames, strict=True):
+            assert r.success or not t.success
+            if r.success:
+                assert_reaches(chain, r.q, targets)
+        if all(t.success for t in tracked):
+            assert plan.largest_step <= largest_step(path[0], np.array([t.q for t in tracked]))
+
+
+def test_plan_results_are_judged_as_solve_judges_them() -> None:
+    chain = panda_arm()
+    path = joint_stream(chain, 4, 90)
+    frames = [pose_targets(chain, q) for q in path]
+    solver = IKSolver(chain, STREAM)
+    solver.set_pose(path[0])
+    plan = solver.plan(frames)
+    checker = IKSolver(chain, STREAM)
+    for r, targets in zip(plan.results, frames, strict=True):
+        assert r.effectors == checker.errors_at(r.q, targets)
+        assert r.success == all(e.within_tolerance for e in r.effectors)
+
+
+def test_a_frame_nothing_reaches_keeps_the_closest_pose() -> None:
+    chain = panda_arm()
+    path = joint_stream(chain, 1, 30)
+    frames = [pose_targets(chain, q) for q in path]
+    near = frames[10][0]
+    far = Target(effector=near.effector, position=np.array([3.0, 0.0, 0.5]), rotation=near.rotation)
+    frames[10] = [far]
+    solver = IKSolver(chain, STREAM)
+    solver.set_pose(path[0])
+    plan = solver.plan(frames)
+    assert not plan.results[10].success
+    assert not plan.success
+    assert all(r.success for i, r in enumerate(plan.results) if i != 10)
+    # The closest pose: the arm reaches towards the target (about 0.9 m from the base).
+    tip = effector_poses(chain, plan.results[10].q)[0][:3, 3]
+    assert np.linalg.norm(tip - far.position) < np.linalg.norm(far.position) - 0.5
+
+
+def test_plan_starts_from_the_current_pose_and_ends_at_the_last_answer() -> None:
+    chain = panda_arm()
+    path = joint_stream(chain, 2, 20)
+    frames = [pose_targets(chain, q) for q in path]
+    solver = IKSolver(chain, STREAM)
+    start = path[0] + 0.2  # off the first target: the first step is measured from here
+    solver.set_pose(start)
+    plan = solver.plan(frames)
+    first = float(np.abs(plan.results[0].q - start).max())
+    assert first >= 0.05
+    assert plan.largest_step >= first
+    assert np.array_equal(solver.q, plan.results[-1].q)
+    after = solver.track(frames[-1], options=STREAM)
+    assert after.success
+    # Warm-started from the plan's last answer: only the rest pull moves it.
+    assert np.abs(after.q - plan.results[-1].q).max() <= STREAM.null_space_step_rad + 1e-6
+
+
+def test_plan_is_reproducible() -> None:
+    chain = panda_arm()
+    path = joint_stream(chain, 0, 40)
+    frames = [pose_targets(chain, q) for q in path]
+    plans = []
+    for _ in range(2):
+        solver = IKSolver(chain, STREAM)
+        solver.set_pose(path[0])
+        plans.append(solver.plan(frames).q)
+    assert np.array_equal(plans[0], plans[1])
+
+
+def test_plan_of_no_frames_changes_nothing() -> None:
+    chain = panda_arm()
+    solver = IKSolver(chain, STREAM)
+    before = solver.q.copy()
+    plan = solver.plan([])
+    assert isinstance(plan, PlannedPath)
+    assert plan.results == () and plan.largest_step == 0.0 and plan.success
+    assert np.array_equal(solver.q, before)
+
+
+def test_plan_rejects_bad_targets_as_solve_does_and_stays_usable() -> None:
+    chain = panda_arm()
+    path = joint_stream(chain, 0, 10)
+    frames = [pose_targets(chain, q) for q in path]
+    good = frames[5][0]
+    broken = Target(
+        effector=good.effector, position=np.array([np.nan, 0.0, 0.5]), rotation=good.rotation
+    )
+    solver = IKSolver(chain, STREAM)
+    solver.set_pose(path[0])
+    with pytest.raises(InvalidProblem, match="finite"):
+        solver.plan(frames[:5] + [[broken]] + frames[6:])
+    assert np.array_equal(solver.q, path[0])  # a rejected clip changes nothing
+    assert solver.plan(frames).success
+
+
+def test_plan_with_two_effectors() -> None:
+    chain = two_arm_torso()
+    path = joint_stream(chain, 3, 40)
+    frames = [pose_targets(chain, q) for q in path]
+    tracker = IKSolver(chain, STREAM)
+    tracker.set_pose(path[0])
+    tracked = track_all(tracker, frames)
+    solver = IKSolver(chain, STREAM)
+    solver.set_pose(path[0])
+    plan = solver.plan(frames)
+    assert plan.success
+    for r, targets in zip(plan.results, frames, strict=True):
+        assert_reaches(chain, r.q, targets)
+    if all(t.success for t in tracked):
+        assert plan.largest_step <= plan.tracked_largest_step
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("spacing_rad", 0.0),
+        ("spacing_rad", math.nan),
+        ("window_rad", 0.0),
+        ("max_nodes_per_frame", 0),
+        ("carried", 0),
+        ("perturbed", -1),
+        ("perturbation_rad", -0.1),
+        ("smoothing_sweeps", -1),
+    ],
+)
+def test_path_options_are_validated(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=field):
+        PathOptions(**{field: value})
+
+
+def test_walk_samples_the_self_motion_on_the_target() -> None:
+    # A 7-DOF arm under a 6-D pose: the nodes walked from one answer lie on the target,
+    # inside the limits, each within a few spacings of the next, and they span more
+    # than a radian of the joint that moves most.
+    chain = panda_arm()
+    q0 = chain.mid_limits() + 0.1
+    targets = pose_targets(chain, q0)
+    solver = IKSolver(chain, STREAM)
+    solver._prepare(targets, STREAM, q0)
+    nodes = frame_nodes(q0[None, :].copy(), solver._data, True, 0.01, 4096)
+    assert len(nodes) > 100
+    steps = np.abs(np.diff(nodes, axis=0)).max(axis=1)
+    assert steps.max() <= 3 * 0.01
+    assert (nodes.max(axis=0) - nodes.min(axis=0)).max() > 1.0
+    for q in nodes[:: max(1, len(nodes) // 25)]:
+        assert_reaches(chain, q, targets)
+
+
+def test_dp_step_picks_the_smallest_largest_step_then_the_smoothest() -> None:
+    prev = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.3]])
+    prev_worst = np.array([0.0, 0.0, 0.5])
+    prev_sum = np.array([0.0, 0.0, 0.0])
+    nodes = np.array([[0.1, 0.0], [0.95, 0.05], [0.0, 0.25], [5.0, 0.5]])
+    worst, total, back = dp_step(prev, prev_worst, prev_sum, nodes, 0.25)
+    # node 0 from prev 0 (step 0.1); node 1 from prev 1 (0.05); node 2: from prev 0 the
+    # step is 0.25, from prev 2 it is 0.05 but that path already stepped 0.5.
+    assert back.tolist()[:3] == [0, 1, 0]
+    assert worst[:3] == pytest.approx([0.1, 0.05, 0.25])
+    assert total[:3] == pytest.approx([0.01, 0.0025, 0.0625])
+    # node 3 is beyond the window from everything: still reached, by the shortest jump.
+    assert back[3] == 1 and worst[3] == pytest.approx(4.0)
