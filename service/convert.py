@@ -39,6 +39,7 @@ from solver.ik import (
     IKResult,
 )
 from solver.ik import Target as SolverTarget
+from solver.path import PlannedPath
 from solver.types import Vector
 from solver.urdf import chain_from_urdf
 
@@ -597,6 +598,16 @@ def result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str
         "restarts": r.restarts,
         "solve_us": r.solve_us,
         "server_us": server_us,
+    }
+
+
+def plan_summary(plan: PlannedPath) -> dict[str, Any]:
+    """A PlanSummary's fields."""
+    return {
+        "largest_step_rad": plan.largest_step,
+        "tracked_largest_step_rad": plan.tracked_largest_step,
+        "candidates": plan.nodes,
+        "plan_us": plan.plan_us,
     }
 
 

@@ -25,6 +25,7 @@ from starlette import status
 
 from solver.ik import IKOptions, IKResult, IKSolver
 from solver.ik import Target as SolverTarget
+from solver.path import PlannedPath
 
 from . import convert
 from .errors import ServiceError, not_found, not_ready
@@ -152,6 +153,35 @@ class Runner:
         Frames of one session never overlap: the session's lock is held until the last
         frame is done, also when the caller goes away while a pooled solve runs.
         """
+        out, _ = await self._under_lock(session, store, jobs, t0, transport, build, plan=False)
+        return out
+
+    async def session_plan(
+        self,
+        session: Session,
+        store: SessionStore,
+        jobs: Sequence[FrameJob],
+        t0: float,
+        transport: str,
+        build: convert.ResultBuilder = convert.result_dict,
+    ) -> tuple[list[dict[str, Any]], PlannedPath]:
+        """Solve a session's clip as a whole (``IKSolver.plan``): the answers and the
+        plan. Always in the pool: a plan takes milliseconds per frame."""
+        out, plan = await self._under_lock(session, store, jobs, t0, transport, build, plan=True)
+        assert plan is not None
+        return out, plan
+
+    async def _under_lock(
+        self,
+        session: Session,
+        store: SessionStore,
+        jobs: Sequence[FrameJob],
+        t0: float,
+        transport: str,
+        build: convert.ResultBuilder,
+        *,
+        plan: bool,
+    ) -> tuple[list[dict[str, Any]], PlannedPath | None]:
         self.check_ready()
         wait_s = session.take_frames(
             len(jobs), now=store.clock(), rate_per_s=self.max_frames_per_s, burst=self.burst
@@ -165,8 +195,11 @@ class Runner:
                 raise not_found()
             options = session.options
             metrics = self.metrics
-            if self.inline(len(jobs), options):
-                out = _track_all(session, jobs, options, t0, metrics.frames, transport, build)
+            work: Callable[..., tuple[list[dict[str, Any]], PlannedPath | None]] = (
+                _plan_all if plan else _track_all
+            )
+            if not plan and self.inline(len(jobs), options):
+                out = work(session, jobs, options, t0, metrics.frames, transport, build)
             else:
                 loop = asyncio.get_running_loop()
 
@@ -176,7 +209,7 @@ class Runner:
                         loop.call_soon_threadsafe(metrics.frames, batch, transport)
 
                 args = (session, jobs, options, t0, record, transport, build)
-                fut = loop.run_in_executor(self.pool, _track_all, *args)
+                fut = loop.run_in_executor(self.pool, work, *args)
                 # The lock is released when the thread is done, never earlier.
                 fut.add_done_callback(lambda _: session.lock.release())
                 released = True
@@ -205,7 +238,7 @@ def _track_all(
     record: Callable[[list[tuple[IKResult, float]], str], None],
     transport: str,
     build: convert.ResultBuilder,
-) -> list[dict[str, Any]]:
+) -> tuple[list[dict[str, Any]], None]:
     """Runs under the session's lock (inline or in the pool); counts as it goes and
     hands the frames solved to ``record`` (metrics), also when a later frame fails."""
     out = []
@@ -221,7 +254,29 @@ def _track_all(
             session.solved += int(r.success)
     finally:
         record(done, transport)
-    return out
+    return out, None
+
+
+def _plan_all(
+    session: Session,
+    jobs: Sequence[FrameJob],
+    options: IKOptions,
+    t0: float,
+    record: Callable[[list[tuple[IKResult, float]], str], None],
+    transport: str,
+    build: convert.ResultBuilder,
+) -> tuple[list[dict[str, Any]], PlannedPath]:
+    """``_track_all`` for a planned clip: all frames or none (a rejected target fails
+    the request and leaves the session's pose as it was)."""
+    plan = session.solver.plan([targets for _, targets in jobs], options=options)
+    server_us = (time.perf_counter() - t0) * 1e6
+    out = [
+        build(r, frame_id, server_us) for (frame_id, _), r in zip(jobs, plan.results, strict=True)
+    ]
+    session.frames += len(plan.results)
+    session.solved += sum(r.success for r in plan.results)
+    record([(r, server_us * 1e-6) for r in plan.results], transport)
+    return out, plan
 
 
 def make_solver(view: convert.ChainView, options: IKOptions) -> IKSolver:

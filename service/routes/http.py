@@ -106,6 +106,22 @@ _FRAMES_EXAMPLES = {
             ]
         },
     },
+    "planned clip": {
+        "summary": "A clip solved as a whole: the smoothest joint path through all frames",
+        "value": {
+            "plan": True,
+            "frames": [
+                {
+                    "id": 1,
+                    "targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}}],
+                },
+                {
+                    "id": 2,
+                    "targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.12, "z": 0.59}}],
+                },
+            ],
+        },
+    },
     "panda": {
         "summary": "One pose frame for the panda_arm example (effector 'tool')",
         "value": {
@@ -268,8 +284,10 @@ async def post_frames(
     svc: ServicesDep,
     query: Annotated[S.FramesQuery, Query()],
 ) -> Response:
-    """Solve one frame, or a clip of frames in order; one result per frame."""
+    """Solve one frame, or a clip of frames in order (with `"plan": true`, as a whole);
+    one result per frame."""
     t0 = received_at(request)
+    plan = isinstance(body, S.ClipRequest) and body.plan
     if isinstance(body, S.ClipRequest):
         limit = svc.settings.max_frames_per_request
         if len(body.frames) > limit:
@@ -282,9 +300,11 @@ async def post_frames(
         ]
     else:
         jobs = [(body.id, convert.targets(body.targets, session.view, "targets"))]
-    out = await svc.runner.session_frames(
-        session, svc.store, jobs, t0, "http", convert.result_builder(query.results)
-    )
+    build = convert.result_builder(query.results)
+    if plan:
+        out, planned = await svc.runner.session_plan(session, svc.store, jobs, t0, "http", build)
+        return ORJSONResponse({"results": out, "plan": convert.plan_summary(planned)})
+    out = await svc.runner.session_frames(session, svc.store, jobs, t0, "http", build)
     return ORJSONResponse({"results": out})
 
 

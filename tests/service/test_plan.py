@@ -1,0 +1,128 @@
+"""Planned clips over HTTP: ``{"frames": [...], "plan": true}``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from starlette.testclient import TestClient
+
+import schemas as S
+from service.config import Settings
+from solver.examples import panda_arm
+from tests.solver.test_path import joint_stream
+
+from .helpers import Created, create, hand_frame
+from .test_http import _panda_target
+
+# Tolerances of the benchmark; a budget no loaded CI machine runs out of.
+TIGHT = {"position_tolerance_m": 1e-5, "rotation_tolerance_rad": 1e-4, "time_budget_us": 50_000}
+
+
+def _panda_session(client: TestClient, q0: np.ndarray) -> Created:
+    return create(
+        client,
+        {"format": "example", "name": "panda_arm"},
+        options=TIGHT,
+        initial_pose={"q": q0.tolist()},
+    )
+
+
+def _clip(path: np.ndarray, plan: bool) -> dict[str, Any]:
+    frames = [{"id": i, "targets": [_panda_target(q)]} for i, q in enumerate(path)]
+    return {"frames": frames, "plan": plan}
+
+
+def _steps(start: list[float], results: list[dict[str, Any]]) -> float:
+    qs = np.array([start] + [r["q"] for r in results])
+    return float(np.abs(np.diff(qs, axis=0)).max())
+
+
+def test_a_planned_clip_crosses_smoothly_where_the_tracked_clip_jumps(
+    make_client: Callable[..., TestClient],
+) -> None:
+    # The Panda stream of tests/solver/test_path.py whose tracker jumps at frame 78.
+    client = make_client(Settings(max_frames_per_request=600))
+    path = joint_stream(panda_arm(), 4, 90)
+    ref = float(np.abs(np.diff(path, axis=0)).max())
+    planned = _panda_session(client, path[0])
+    r = client.post(
+        f"/v1/sessions/{planned.id}/frames", json=_clip(path, True), headers=planned.headers
+    )
+    assert r.status_code == 200, r.text
+    body = S.FrameResults.model_validate(r.json())
+    assert body.plan is not None
+    assert [x.id for x in body.results] == list(range(90))
+    assert all(x.success and x.status == "solved" for x in body.results)
+    results = r.json()["results"]
+    assert _steps(path[0].tolist(), results) <= 2 * ref
+    assert body.plan.largest_step_rad == _steps(path[0].tolist(), results)
+    assert body.plan.tracked_largest_step_rad > 10 * ref
+    assert body.plan.candidates > 90 and body.plan.plan_us > 0
+
+    tracked = _panda_session(client, path[0])
+    r = client.post(
+        f"/v1/sessions/{tracked.id}/frames", json=_clip(path, False), headers=tracked.headers
+    )
+    assert r.status_code == 200 and "plan" not in r.json()
+    assert _steps(path[0].tolist(), r.json()["results"]) > 10 * ref
+
+
+def test_a_planned_clip_counts_its_frames_and_moves_the_session(
+    client: TestClient, session: Created
+) -> None:
+    frames = [hand_frame(i, y=0.1 + 0.01 * i) for i in range(5)]
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames?results=compact",
+        json={"frames": frames, "plan": True},
+        headers=session.headers,
+    )
+    assert r.status_code == 200, r.text
+    body = S.CompactFrameResults.model_validate(r.json())
+    assert body.plan is not None and all(x.success for x in body.results)
+    info = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()
+    assert info["counters"] == {"frames": 5, "solved": 5, "not_solved": 0}
+    assert info["pose"]["q"] == body.results[-1].q
+    metrics = client.get("/metrics").text
+    assert 'ik_frames_total{success="true",termination="goal_reached"}' in metrics
+
+
+def test_a_planned_clip_with_a_bad_frame_changes_nothing(
+    client: TestClient, session: Created
+) -> None:
+    before = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()
+    frames = [
+        hand_frame(1),
+        {"targets": [{"effector": "nope", "position": {"x": 0, "y": 0, "z": 0}}]},
+    ]
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames",
+        json={"frames": frames, "plan": True},
+        headers=session.headers,
+    )
+    assert r.status_code == 422 and r.json()["field"] == "frames[1].targets[0].effector"
+    after = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()
+    assert after["pose"] == before["pose"]
+    assert after["counters"]["frames"] == 0
+
+
+def test_plan_must_be_a_boolean(client: TestClient, session: Created) -> None:
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames",
+        json={"frames": [hand_frame(1)], "plan": "yes please"},
+        headers=session.headers,
+    )
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format"
+    assert [e["loc"] for e in r.json()["detail"]] == [["body", "clip", "plan"]]
+
+
+def test_a_planned_clip_keeps_the_frame_limit(make_client: Callable[..., TestClient]) -> None:
+    client = make_client(Settings(max_frames_per_request=3))
+    s = create(client)
+    r = client.post(
+        f"/v1/sessions/{s.id}/frames",
+        json={"frames": [hand_frame(i) for i in range(4)], "plan": True},
+        headers=s.headers,
+    )
+    assert r.status_code == 422 and r.json()["field"] == "frames"
