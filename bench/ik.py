@@ -65,11 +65,12 @@ from bench.peers import SKIPPED, PeerSolver, available_peers
 from solver.fk import effector_poses
 from solver.ik import STREAM_DEFAULTS, IKOptions, IKSolver, Target, with_options
 from solver.kinematics import effector_errors, ik_objective
+from solver.path import PlannedPath
 
 POS_TOL = 1e-5  # m
 ROT_TOL = 1e-4  # rad
 ARMS = ("panda", "ur5", "iiwa")
-SOLVER_KEYS = ("ours", "ours-bfgs", "scipy", "rtb", "ikpy", "clik")
+SOLVER_KEYS = ("ours", "ours-plan", "ours-bfgs", "scipy", "rtb", "ikpy", "clik")
 RTB = "rtb"
 T0 = time.perf_counter()
 
@@ -207,6 +208,36 @@ class Ours:
         else:
             r = self.solver.solve(self.targets[k], seed)
         return r.q, r.solve_us, r.success
+
+
+class OursPlanned:
+    """``IKSolver.plan`` over a whole stream (part (c) only): the stream is planned at
+    once, after the frame-by-frame solvers have run it; each frame is charged the
+    plan's time divided by the frames."""
+
+    def __init__(self, bc: BenchChain, opts: IKOptions, label: str) -> None:
+        self.solver = IKSolver(bc.pose, opts)
+        self.opts = opts
+        self.name, self.settings = label, ours_settings(opts)
+        self.targets: list[list[Target]] = []
+        self._planned: PlannedPath | None = None
+
+    def load(self, targets: list[list[Target]]) -> None:
+        self.targets = targets
+        self._planned = None
+
+    def reset(self, q0: np.ndarray) -> None:
+        self.solver.set_pose(q0)
+        self._planned = None
+
+    def plan(self) -> PlannedPath:
+        self._planned = self.solver.plan(self.targets)
+        return self._planned
+
+    def solve(self, k: int, seed: np.ndarray) -> tuple[np.ndarray | None, float, bool | None]:
+        planned = self._planned or self.plan()
+        r = planned.results[k]
+        return r.q, planned.plan_us / len(planned.results), r.success
 
 
 class _Deadline(Exception):
@@ -476,6 +507,19 @@ def make_solvers(
                 n_all,
             )
         )
+    if "ours-plan" in cfg.solvers and tracking and not position_only:
+        out.append(
+            (
+                "ours-plan",
+                OursPlanned(
+                    bc,
+                    ours_options(1, stream=True, budget_us=budget_us),
+                    "ours, planned (IKSolver.plan: the whole stream known)",
+                ),
+                n_all,
+            )
+        )
+    if "ours" in cfg.solvers:
         if tracking:
             out.append(
                 (
@@ -675,6 +719,8 @@ def run_tracking(
         for k in range(cfg.frames):
             for idx in order_rng.permutation(m):
                 key, a, _ = solvers[idx]
+                if isinstance(a, OursPlanned):
+                    continue  # planned below, the whole stream at once
                 t = time.perf_counter()
                 q, core, flag = a.solve(k, held[idx])
                 wall = time.perf_counter() - t
@@ -692,6 +738,16 @@ def run_tracking(
                 else:
                     answered_all[idx] = False
                 outs[idx][k] = held[idx]
+        for idx, (_, a, _) in enumerate(solvers):
+            if not isinstance(a, OursPlanned):
+                continue
+            t = time.perf_counter()
+            planned = a.plan()
+            per_frame = (time.perf_counter() - t) / cfg.frames
+            for k, r in enumerate(planned.results):
+                v = judge(bc, r.q, poses[k], False, per_frame, cfg.timeout_s)
+                rows[idx].record(per_frame, planned.plan_us / cfg.frames, v, k)
+                outs[idx][k] = r.q
         for idx, row in enumerate(rows):
             row.n += cfg.frames
             st = max_step(outs[idx])
@@ -719,6 +775,7 @@ SHORT = {
     "ours": "defaults (metric_every=1)",
     "ours-bfgs": "metric_every=0",
     "ours+carryH": "carry_hessian=True",
+    "ours-plan": "PathOptions defaults; per frame = plan time / frames",
     "ours-bfgs+carryH": "metric_every=0, carry_hessian=True",
     "scipy": "ftol 1e-16, gtol 1e-12, maxiter 1000, goal stop",
     "rtb": "tol 1e-12, ilimit 30, random restarts to 5 ms",
@@ -839,7 +896,26 @@ def verdicts(parts: dict[str, list[Row]], chains: tuple[str, ...]) -> list[str]:
             "<= 2.0",
             r.step_ratio <= 2.0,
         )
-        for row in (r, p):
+        planned = find(c, chain, "ours-plan")
+        if planned:
+            add(
+                "c",
+                f"max joint step / reference's (worst stream), {planned.name}",
+                chain,
+                planned.step_ratio,
+                "(info)",
+                None,
+            )
+            if p:
+                add(
+                    "c",
+                    "plan time per frame / rtb ik_LM's median per frame",
+                    chain,
+                    planned.median_us() / p.median_us(),
+                    "(info)",
+                    None,
+                )
+        for row in (r, planned, p):
             if row:
                 add(
                     "c",

@@ -44,6 +44,7 @@ def test_curl_walkthrough(server: Server, tmp_path: Path) -> None:
     assert '"status":"ready"' in text
     assert '"success": true' in text  # the single frame (jq pretty-prints it)
     assert '{"id":2,"success":true' in text and '{"id":3,"success":true' in text
+    assert '"ids":[4,5],"solved":[true,true]}' in text and '"largest_step_rad":' in text
     assert '"code":"unauthorized"} HTTP 401' in text
     assert '"field":"targets[0].effector"} HTTP 422' in text
     assert '"time_budget_us":500' in text
