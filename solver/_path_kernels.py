@@ -317,22 +317,18 @@ def _walk(q0, data, ws, spacing, limit, nodes, count):  # type: ignore[no-untype
     sides = np.empty((2, room, n))
     counts = np.zeros(2, dtype=np.int64)
     at = np.empty((2, n))  # each side's last node
-    prev = np.empty((2, n))  # and its direction
+    tangent = np.empty((2, n))  # and the self-motion's direction there
     active = np.ones(2, dtype=np.bool_)
     for side in range(2):
         at[side] = q0
-        prev[side] = first if side == 0 else -first
-    v = np.empty(n)
+        tangent[side] = first if side == 0 else -first
     qt = np.empty(n)
     while (active[0] or active[1]) and counts[0] + counts[1] < room:
         for side in range(2):
             if not active[side] or counts[0] + counts[1] >= room:
                 continue
             q = at[side]
-            rows = _task_system(q, data, r, jac)
-            if not _null_direction(ws, rows, prev[side], lo, hi, v) > 1e-9:
-                active[side] = False
-                continue
+            v = tangent[side]
             inside = True
             for i in range(n):
                 qt[i] = q[i] + spacing * v[i]
@@ -351,10 +347,13 @@ def _walk(q0, data, ws, spacing, limit, nodes, count):  # type: ignore[no-untype
                 continue
             sides[side, counts[side]] = qt
             counts[side] += 1
-            prev[side] = v
             at[side] = qt
             if counts[side] > 8 and home < 0.75 * spacing:
                 active[:] = False  # went round the loop
+                continue
+            # _project's last evaluation was at qt: its Jacobian gives the next tangent.
+            if not _null_direction(ws, rows, v, lo, hi, tangent[side]) > 1e-9:
+                active[side] = False
     for k in range(counts[1] - 1, -1, -1):
         nodes[count] = sides[1, k]
         count += 1

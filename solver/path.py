@@ -56,6 +56,7 @@ class PathOptions:
 
     spacing_rad: float = 0.01  # between walked self-motion nodes (largest joint)
     window_rad: float = 0.25  # longer steps are ranked only where nothing shorter reaches
+    # (nor longer than 3x the best path's largest step so far, at least 4 spacings)
     max_nodes_per_frame: int = 8192
     carried: int = 16  # previous frame's nodes carried onto the next targets
     perturbed: int = 8  # random neighbours of carried nodes, per frame
@@ -123,7 +124,11 @@ def _anchors(
     order = np.lexsort((total, worst))
     half = max(1, popts.carried // 2)
     best = [nodes[i] for i in order[:half]]
-    spread = [nodes[i] for i in np.linspace(0, len(nodes) - 1, half).astype(int)]
+    # The spread covers the nodes a good path may still use: those reached with steps
+    # not far above the best's (a self-motion reached only by a jump is dropped,
+    # unless the tracker is on it).
+    cheap = np.flatnonzero(worst <= max(3.0 * worst.min(), worst.min() + 4.0 * popts.spacing_rad))
+    spread = [nodes[i] for i in cheap[np.linspace(0, len(cheap) - 1, half).astype(int)]]
     chosen = best[:1] + [tracked] + best[1:] + spread
     if popts.perturbed:
         around = rng.choice(len(chosen), size=popts.perturbed)
@@ -173,7 +178,10 @@ def plan_path(
             elif len(nodes) == 0:  # nothing reaches this frame: keep the closest pose
                 nodes = q_track[None, :]
             considered += len(nodes)
-            worst, total, back = dp_step(prev_nodes, worst, total, nodes, popts.window_rad)
+            # Steps much longer than the best path's so far are only ranked where
+            # nothing shorter reaches (dp_step's window): the bulk of the DP's time.
+            reach = min(popts.window_rad, max(3.0 * worst.min(), 4.0 * popts.spacing_rad))
+            worst, total, back = dp_step(prev_nodes, worst, total, nodes, reach)
             node_sets.append(nodes)
             backs.append(back)
             prev_nodes = nodes
