@@ -747,6 +747,8 @@ def run_tracking(
             for k, r in enumerate(planned.results):
                 v = judge(bc, r.q, poses[k], False, per_frame, cfg.timeout_s)
                 rows[idx].record(per_frame, planned.plan_us / cfg.frames, v, k)
+                if r.success != (v.ok or v.reason == "late"):
+                    rows[idx].flag_mismatch.append(s * cfg.frames + k)
                 outs[idx][k] = r.q
         for idx, row in enumerate(rows):
             row.n += cfg.frames

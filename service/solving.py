@@ -121,9 +121,13 @@ class Runner:
         self.metrics = metrics
         self.warmup = warmup
         self.pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="ik-solve")
+        # Planned clips take a second or more each: they queue on a thread of their own
+        # so that they never hold up the pool's frames, one-shot solves and chain builds.
+        self.plan_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ik-plan")
 
     def shutdown(self) -> None:
         self.pool.shutdown(wait=False, cancel_futures=True)
+        self.plan_pool.shutdown(wait=False, cancel_futures=True)
 
     def check_ready(self) -> None:
         if not self.warmup.ready.is_set():
@@ -166,7 +170,8 @@ class Runner:
         build: convert.ResultBuilder = convert.result_dict,
     ) -> tuple[list[dict[str, Any]], PlannedPath]:
         """Solve a session's clip as a whole (``IKSolver.plan``): the answers and the
-        plan. Always in the pool: a plan takes milliseconds per frame."""
+        plan. Always off the loop, on the planning thread: a plan takes milliseconds
+        per frame."""
         out, plan = await self._under_lock(session, store, jobs, t0, transport, build, plan=True)
         assert plan is not None
         return out, plan
@@ -209,7 +214,8 @@ class Runner:
                         loop.call_soon_threadsafe(metrics.frames, batch, transport)
 
                 args = (session, jobs, options, t0, record, transport, build)
-                fut = loop.run_in_executor(self.pool, work, *args)
+                pool = self.plan_pool if plan else self.pool
+                fut = loop.run_in_executor(pool, work, *args)
                 # The lock is released when the thread is done, never earlier.
                 fut.add_done_callback(lambda _: session.lock.release())
                 released = True

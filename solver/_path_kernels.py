@@ -24,8 +24,7 @@ import numpy as np
 from ._jit import jit, jit_inline
 from .kinematics import (
     DD_GSCRATCH,
-    DD_HI,
-    DD_LO,
+    DD_XLAST,
     ED_AIM,
     ED_TDIR,
     ED_TPOS,
@@ -62,13 +61,18 @@ TIGHT = 0.05
 
 
 @jit_inline
-def _task_system(q, data, r, jac):  # type: ignore[no-untyped-def]
+def _task_system(q, data, free, r, jac):  # type: ignore[no-untyped-def]
     """Errors at q into ED (the solver's own measure) and the targeted rows' weighted
     residual r and Jacobian jac; returns the number of rows. A position row counts
     when its weight is positive, an orientation (pose) or aim row when the rotation
-    weight is; locked variables (lower == upper) get zero columns."""
+    weight is; variables that are not free (``free[i] == 0``: locked, or outside every
+    targeted chain) get zero columns."""
     ni, nd, ei, ed, dd, misc = data
     _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
+    if q.shape[0] > 0:
+        # ND and ED now describe q, not the solver's last point: mark it stale, as
+        # effector_errors does.
+        dd[DD_XLAST, 0] = math.nan
     n = q.shape[0]
     rows = 0
     for e in range(ei.shape[0]):
@@ -142,7 +146,7 @@ def _task_system(q, data, r, jac):  # type: ignore[no-untyped-def]
                     jac[p0 + 2, d] += sp * wz
             k = ni[k, NI_PARENT]
     for i in range(n):
-        if dd[DD_LO, i] == dd[DD_HI, i]:
+        if free[i] == 0.0:
             for row in range(rows):
                 jac[row, i] = 0.0
     return rows
@@ -209,18 +213,19 @@ _workspace = jit(workspace)
 
 
 @jit_inline
-def _project(q, data, ws, max_iter):  # type: ignore[no-untyped-def]
+def _project(q, data, ws, box, max_iter):  # type: ignore[no-untyped-def]
     """Damped Gauss-Newton from q (changed in place) onto the loaded targets: each step
-    is the minimum-norm one, so q moves to the nearest answer. Returns the goal
-    measure at the final q (max error / tolerance; <= 1: within tolerance); errors
-    stay in ED."""
+    is the minimum-norm one over the free variables, so q moves to the nearest answer,
+    inside the limits (``box``: lower, upper, free). Returns the goal measure at the
+    final q (max error / tolerance; <= 1: within tolerance); errors stay in ED, and
+    ``ws`` holds the residual and Jacobian at the final q."""
     r, jac, gram, y, dq, _ = ws
-    dd = data[4]
+    lower, upper, free = box
     n = q.shape[0]
     prev = math.inf
     goal = math.inf
     for it in range(max_iter + 1):
-        rows = _task_system(q, data, r, jac)
+        rows = _task_system(q, data, free, r, jac)
         goal = _goal_measure(data[2], data[3])
         if not math.isfinite(goal):
             return math.inf
@@ -239,21 +244,23 @@ def _project(q, data, ws, max_iter):  # type: ignore[no-untyped-def]
             big = max(big, abs(acc))
         s = 1.0 if big <= MAX_STEP else MAX_STEP / big
         for i in range(n):
-            q[i] = min(dd[DD_HI, i], max(dd[DD_LO, i], q[i] - s * dq[i]))
+            if free[i] != 0.0:
+                q[i] = min(upper[i], max(lower[i], q[i] - s * dq[i]))
     return goal
 
 
 @jit_inline
-def _null_direction(ws, rows, prev, lo, hi, out):  # type: ignore[no-untyped-def]
+def _null_direction(ws, rows, prev, free, out):  # type: ignore[no-untyped-def]
     """The component of ``prev`` in J's null space (J as ``_task_system`` left it in
     ``ws``), scaled to largest entry 1, into ``out``; returns its largest entry before
     scaling (0: none). For a task with one free direction this is the self-motion's
-    tangent, oriented as ``prev``."""
+    tangent, oriented as ``prev``. ``out`` may be ``prev`` itself: each entry of prev
+    is read before the same entry of out is written, and never after."""
     _, jac, gram, y, _, _ = ws
     jv = ws[0]  # the residual's slot is free here: the caller has used it
     n = prev.shape[0]
     for i in range(n):
-        out[i] = prev[i] if lo[i] != hi[i] else 0.0
+        out[i] = prev[i] if free[i] != 0.0 else 0.0
     if rows > 0:
         for a in range(rows):
             acc = 0.0
@@ -277,7 +284,7 @@ def _null_direction(ws, rows, prev, lo, hi, out):  # type: ignore[no-untyped-def
 
 
 @jit_inline
-def _seed_direction(ws, rows, lo, hi, out):  # type: ignore[no-untyped-def]
+def _seed_direction(ws, rows, free, out):  # type: ignore[no-untyped-def]
     """A null direction with no previous one to follow: that of the unit vector with
     the largest null component. False if J has no null space."""
     n = out.shape[0]
@@ -287,7 +294,7 @@ def _seed_direction(ws, rows, lo, hi, out):  # type: ignore[no-untyped-def]
     for i in range(n):
         e[:] = 0.0
         e[i] = 1.0
-        size = _null_direction(ws, rows, e, lo, hi, pick)
+        size = _null_direction(ws, rows, e, free, pick)
         if size > best:
             best = size
             out[:] = pick
@@ -295,20 +302,18 @@ def _seed_direction(ws, rows, lo, hi, out):  # type: ignore[no-untyped-def]
 
 
 @jit_inline
-def _walk(q0, data, ws, spacing, limit, nodes, count):  # type: ignore[no-untyped-def]
+def _walk(q0, data, ws, box, spacing, limit, nodes, count):  # type: ignore[no-untyped-def]
     """Append the self-motion through q0 (an answer) to ``nodes`` from ``count``,
     walked ``spacing`` apart (largest variable) on both sides of q0 in turn, each side
     until a limit, a branch point or the loop's closure, and both within ``limit``
     nodes in all: a walk cut short keeps the stretch around q0. Returns the new count.
     """
     r, jac = ws[0], ws[1]
-    dd = data[4]
-    lo = dd[DD_LO]
-    hi = dd[DD_HI]
+    lo, hi, free = box
     n = q0.shape[0]
-    rows = _task_system(q0.copy(), data, r, jac)
+    rows = _task_system(q0.copy(), data, free, r, jac)
     first = np.zeros(n)
-    if not _seed_direction(ws, rows, lo, hi, first):
+    if not _seed_direction(ws, rows, free, first):
         nodes[count] = q0
         return count + 1
     room = limit - count - 1
@@ -334,7 +339,7 @@ def _walk(q0, data, ws, spacing, limit, nodes, count):  # type: ignore[no-untype
                 qt[i] = q[i] + spacing * v[i]
                 if qt[i] < lo[i] or qt[i] > hi[i]:
                     inside = False
-            if not inside or _project(qt, data, ws, 12) > 1.0:
+            if not inside or _project(qt, data, ws, box, 12) > 1.0:
                 active[side] = False
                 continue
             moved = 0.0
@@ -351,8 +356,15 @@ def _walk(q0, data, ws, spacing, limit, nodes, count):  # type: ignore[no-untype
             if counts[side] > 8 and home < 0.75 * spacing:
                 active[:] = False  # went round the loop
                 continue
+            if counts[0] > 4 and counts[1] > 4:
+                meet = 0.0
+                for i in range(n):
+                    meet = max(meet, abs(at[0, i] - at[1, i]))
+                if meet < 1.5 * spacing:
+                    active[:] = False  # the two sides met: the loop is closed
+                    continue
             # _project's last evaluation was at qt: its Jacobian gives the next tangent.
-            if not _null_direction(ws, rows, v, lo, hi, tangent[side]) > 1e-9:
+            if not _null_direction(ws, rows, v, free, tangent[side]) > 1e-9:
                 active[side] = False
     for k in range(counts[1] - 1, -1, -1):
         nodes[count] = sides[1, k]
@@ -366,11 +378,12 @@ def _walk(q0, data, ws, spacing, limit, nodes, count):  # type: ignore[no-untype
 
 
 @jit
-def frame_nodes(anchors, data, walk, spacing, limit):  # type: ignore[no-untyped-def]
+def frame_nodes(anchors, data, box, walk, spacing, limit):  # type: ignore[no-untyped-def]
     """The answers of the loaded targets the planner chooses from: each anchor carried
     onto the targets (Gauss-Newton, minimum-norm) and kept if within tolerance, and
     with ``walk`` (one free direction) the self-motion through it, unless an earlier
-    walk already passed within two spacings of it. At most ``limit`` nodes."""
+    walk already passed within two spacings of it. At most ``limit`` nodes. ``box``:
+    (lower, upper, free) — limits, and 1.0 for each variable the targets may move."""
     n = anchors.shape[1]
     nodes = np.empty((limit, n))
     ws = _workspace(6 * data[2].shape[0], n)
@@ -380,7 +393,7 @@ def frame_nodes(anchors, data, walk, spacing, limit):  # type: ignore[no-untyped
         if count >= limit:
             break
         q = anchors[a].copy()
-        if _project(q, data, ws, 30) > 1.0:
+        if _project(q, data, ws, box, 30) > 1.0:
             continue
         seen = False
         for k in range(count):
@@ -393,7 +406,7 @@ def frame_nodes(anchors, data, walk, spacing, limit):  # type: ignore[no-untyped
         if seen:
             continue
         if walk:
-            count = _walk(q, data, ws, spacing, limit, nodes, count)
+            count = _walk(q, data, ws, box, spacing, limit, nodes, count)
         else:
             nodes[count] = q
             count += 1
@@ -401,10 +414,10 @@ def frame_nodes(anchors, data, walk, spacing, limit):  # type: ignore[no-untyped
 
 
 @jit
-def project_onto(q, data, max_iter):  # type: ignore[no-untyped-def]
+def project_onto(q, data, box, max_iter):  # type: ignore[no-untyped-def]
     """``_project`` from Python: q changed in place; returns the goal measure."""
     ws = _workspace(6 * data[2].shape[0], q.shape[0])
-    return _project(q, data, ws, max_iter)
+    return _project(q, data, ws, box, max_iter)
 
 
 @jit_inline
@@ -457,9 +470,12 @@ def dp_step(prev_nodes, prev_worst, prev_sum, nodes, window):  # type: ignore[no
     The previous nodes are visited in order of their distance along one variable (the
     one that spreads most), nearest first: once that distance alone exceeds the best
     largest step found, no later node can do better, so each node looks at a narrow
-    window instead of every previous node. ``window`` narrows it further: steps longer
-    than that are only considered for a node that no previous node reaches within it
-    (a jump is a jump: which one matters less than the time spent ranking them).
+    window instead of every previous node. ``window`` narrows it further: a first scan
+    stops at that distance, and only a node whose best so far is longer than
+    ``window`` is scanned again without it (any better step is longer than
+    ``window``, and the scan stops at the best). The largest steps are exact; the
+    sum of squares only breaks ties between paths of equal largest step, per node
+    (a heuristic: a prefix with a larger largest step but a smaller sum is dropped).
     """
     a = prev_nodes.shape[0]
     b = nodes.shape[0]
@@ -481,7 +497,7 @@ def dp_step(prev_nodes, prev_worst, prev_sum, nodes, window):  # type: ignore[no
     for j in range(b):
         x = nodes[j, axis]
         for reach in (window, np.inf):
-            if back[j] >= 0:
+            if reach > window and not worst[j] > window:
                 break
             _dp_scan(
                 j,

@@ -1019,6 +1019,18 @@ class IKSolver:
         """More free (unlocked) joints than target rows among the active effectors."""
         return self._free_directions() > 0
 
+    def _free_mask(self) -> np.ndarray:
+        """1.0 for each variable the loaded targets may move: unlocked, and in the
+        chain of a targeted effector; else 0.0."""
+        if self._every_effector_moves_all or not self._active:
+            reach = self._movable
+        else:
+            reach = np.zeros(self._n, dtype=bool)
+            for i in self._active:
+                reach[self._chain_dofs[i]] = True
+            reach &= self._movable
+        return reach.astype(np.float64)
+
     def _free_directions(self) -> int:
         """Free (unlocked) joints of the targeted effectors minus their target rows: the
         dimension of the self-motion where the Jacobian has full rank (a 7-DOF arm

@@ -25,7 +25,7 @@ def test_create_session_examples(client: TestClient) -> None:
         assert r.status_code == 201, (name, r.text)
 
 
-@pytest.mark.parametrize("name", ["frame", "clip", "panda"])
+@pytest.mark.parametrize("name", ["frame", "clip", "planned clip", "panda"])
 def test_frames_examples(client: TestClient, name: str) -> None:
     body = _examples(client, "/v1/sessions/{session_id}/frames", "post")[name]
     chain = {"format": "example", "name": "panda_arm"} if name == "panda" else None

@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+import pytest
 from starlette.testclient import TestClient
 
 import schemas as S
 from service.config import Settings
 from solver.examples import panda_arm
+from solver.ik import IKSolver
 from tests.solver.test_path import joint_stream
 
 from .helpers import Created, create, hand_frame
@@ -85,10 +88,10 @@ def test_a_planned_clip_counts_its_frames_and_moves_the_session(
     assert info["counters"] == {"frames": 5, "solved": 5, "not_solved": 0}
     assert info["pose"]["q"] == body.results[-1].q
     metrics = client.get("/metrics").text
-    assert 'ik_frames_total{success="true",termination="goal_reached"}' in metrics
+    assert 'ik_frames_total{success="true",termination="goal_reached"} 5.0' in metrics
 
 
-def test_a_planned_clip_with_a_bad_frame_changes_nothing(
+def test_a_planned_clip_is_checked_whole_before_it_is_planned(
     client: TestClient, session: Created
 ) -> None:
     before = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()
@@ -126,3 +129,24 @@ def test_a_planned_clip_keeps_the_frame_limit(make_client: Callable[..., TestCli
         headers=s.headers,
     )
     assert r.status_code == 422 and r.json()["field"] == "frames"
+
+
+def test_a_planned_clip_runs_on_the_planning_thread(
+    client: TestClient, session: Created, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Plans take seconds: they must not occupy the pool that serves frames and solves.
+    threads: list[str] = []
+    real = IKSolver.plan
+
+    def spy(self: IKSolver, *args: Any, **kwargs: Any) -> Any:
+        threads.append(threading.current_thread().name)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(IKSolver, "plan", spy)
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames",
+        json={"frames": [hand_frame(1), hand_frame(2, y=0.11)], "plan": True},
+        headers=session.headers,
+    )
+    assert r.status_code == 200, r.text
+    assert len(threads) == 1 and threads[0].startswith("ik-plan")

@@ -8,7 +8,17 @@ import math
 import numpy as np
 import pytest
 
-from solver import EffectorMode, IKSolver, InvalidProblem, Target, build_chain
+from solver import (
+    Effector,
+    EffectorMode,
+    IKSolver,
+    InvalidProblem,
+    Joint,
+    JointKind,
+    Target,
+    Transform,
+    build_chain,
+)
 from solver._path_kernels import dp_step, frame_nodes
 from solver.examples import humanoid_arm, panda_arm, two_arm_torso
 from solver.fk import effector_poses
@@ -167,7 +177,7 @@ def test_plan_starts_from_the_current_pose_and_ends_at_the_last_answer() -> None
     plan = solver.plan(frames)
     first = float(np.abs(plan.results[0].q - start).max())
     assert first >= 0.05
-    assert plan.largest_step >= first
+    assert plan.largest_step == largest_step(start, plan.q)
     assert np.array_equal(solver.q, plan.results[-1].q)
     after = solver.track(frames[-1], options=STREAM)
     assert after.success
@@ -185,6 +195,78 @@ def test_plan_is_reproducible() -> None:
         solver.set_pose(path[0])
         plans.append(solver.plan(frames).q)
     assert np.array_equal(plans[0], plans[1])
+
+
+def test_plan_of_a_single_frame_is_the_nearest_answer() -> None:
+    chain = panda_arm()
+    q0 = chain.mid_limits() + 0.1
+    solver = IKSolver(chain, STREAM)
+    solver.set_pose(q0)
+    target = pose_targets(chain, q0 + 0.05)
+    plan = solver.plan([target])
+    assert plan.success and len(plan.results) == 1
+    assert_reaches(chain, plan.q[0], target)
+    # No answer is nearer than the tracker's by more than a walk's spacing.
+    assert plan.largest_step <= plan.tracked_largest_step
+
+
+def test_plan_of_a_chain_without_variables() -> None:
+    bolt = Joint(
+        name="bolt",
+        parent="base",
+        child="tip",
+        kind=JointKind.FIXED,
+        origin=Transform(np.array([0.0, 0.0, 1.0])),
+    )
+    chain = build_chain([bolt], [Effector(name="tip", link="tip")])
+    solver = IKSolver(chain, STREAM)
+    frames = [
+        [Target(effector="tip", position=np.array([0.0, 0.0, 1.0]))],
+        [Target(effector="tip", position=np.array([0.0, 0.5, 1.0]))],
+    ]
+    plan = solver.plan(frames)
+    assert [r.success for r in plan.results] == [True, False]
+    assert plan.largest_step == 0.0 and plan.q.shape == (2, 0)
+
+
+def test_plan_reaches_frames_the_tracker_misses() -> None:
+    # A tracker allowed one iteration per frame and no restarts misses frames of a
+    # fast clip; the planner's own projections reach them.
+    chain = panda_arm()
+    path = joint_stream(chain, 1, 300)[::10]
+    frames = [pose_targets(chain, q) for q in path]
+    weak = with_options(STREAM, max_iter=1, max_restarts=0, global_fallback=False)
+    solver = IKSolver(chain, weak)
+    solver.set_pose(path[0])
+    plan = solver.plan(frames)
+    tracker = IKSolver(chain, weak)
+    tracker.set_pose(path[0])
+    missed = sum(not r.success for r in track_all_with(tracker, frames, weak))
+    assert missed >= 5
+    assert plan.success
+    for q, targets in zip(plan.q, frames, strict=True):
+        assert_reaches(chain, q, targets)
+
+
+def track_all_with(solver: IKSolver, frames: list[list[Target]], options) -> list:  # type: ignore[no-untyped-def, type-arg]
+    return [solver.track(t, options=options) for t in frames]
+
+
+def test_a_rejected_plan_keeps_the_carried_state() -> None:
+    chain = panda_arm()
+    path = joint_stream(chain, 0, 10)
+    frames = [pose_targets(chain, q) for q in path]
+    carry = with_options(STREAM, carry_hessian=True)
+    solver = IKSolver(chain, carry)
+    solver.set_pose(path[0])
+    solver.track(frames[0])
+    h, q = solver._h, solver.q.copy()
+    assert h is not None
+    good = frames[5][0]
+    bad = Target(effector=good.effector, position=good.position, rotation=2.0 * good.rotation)
+    with pytest.raises(InvalidProblem, match="orthonormal"):
+        solver.plan(frames[:5] + [[bad]] + frames[6:])
+    assert solver._h is h and np.array_equal(solver.q, q)
 
 
 def test_plan_of_no_frames_changes_nothing() -> None:
@@ -230,6 +312,30 @@ def test_plan_with_two_effectors() -> None:
         assert plan.largest_step <= plan.tracked_largest_step
 
 
+def test_the_work_budget_bounds_a_plan_and_keeps_its_guarantees() -> None:
+    chain = panda_arm()
+    path = joint_stream(chain, 4, 90)
+    frames = [pose_targets(chain, q) for q in path]
+    answers = 2000
+    solver = IKSolver(chain, STREAM)
+    solver.set_pose(path[0])
+    small = solver.plan(frames, path_options=PathOptions(max_work=answers * 7**3))
+    solver.set_pose(path[0])
+    full = solver.plan(frames)
+    # Each frame may still keep its anchors (25) and the tracker's answer.
+    assert small.nodes <= answers + 90 * 26 < full.nodes
+    assert small.success
+    tracked = solver_track_largest_step(chain, path, frames)
+    assert small.tracked_largest_step == pytest.approx(tracked, rel=1e-12)
+    assert small.largest_step <= tracked
+
+
+def solver_track_largest_step(chain, path, frames) -> float:  # type: ignore[no-untyped-def]
+    tracker = IKSolver(chain, STREAM)
+    tracker.set_pose(path[0])
+    return largest_step(path[0], np.array([r.q for r in track_all(tracker, frames)]))
+
+
 @pytest.mark.parametrize(
     "field, value",
     [
@@ -241,6 +347,8 @@ def test_plan_with_two_effectors() -> None:
         ("perturbed", -1),
         ("perturbation_rad", -0.1),
         ("smoothing_sweeps", -1),
+        ("max_work", 0.0),
+        ("carried", 1.5),
     ],
 )
 def test_path_options_are_validated(field: str, value: float) -> None:
@@ -257,7 +365,8 @@ def test_walk_samples_the_self_motion_on_the_target() -> None:
     targets = pose_targets(chain, q0)
     solver = IKSolver(chain, STREAM)
     solver._prepare(targets, STREAM, q0)
-    nodes = frame_nodes(q0[None, :].copy(), solver._data, True, 0.01, 4096)
+    box = (chain.lower, chain.upper, solver._free_mask())
+    nodes = frame_nodes(q0[None, :].copy(), solver._data, box, True, 0.01, 4096)
     assert len(nodes) > 100
     steps = np.abs(np.diff(nodes, axis=0)).max(axis=1)
     assert steps.max() <= 3 * 0.01
@@ -279,3 +388,12 @@ def test_dp_step_picks_the_smallest_largest_step_then_the_smoothest() -> None:
     assert total[:3] == pytest.approx([0.01, 0.0025, 0.0625])
     # node 3 is beyond the window from everything: still reached, by the shortest jump.
     assert back[3] == 1 and worst[3] == pytest.approx(4.0)
+
+
+def test_dp_step_looks_past_the_window_when_the_best_it_found_is_longer() -> None:
+    # prev 0 is within the window along the ordering variable (axis 0 spreads most)
+    # but 2.0 away in full; prev 1 is 0.3 away: the step to take.
+    prev = np.array([[2.0, 0.0], [0.0, 0.3], [0.0, 5.0]])
+    zeros = np.zeros(3)
+    worst, _, back = dp_step(prev, zeros, zeros, np.array([[0.0, 0.0]]), 0.25)
+    assert back[0] == 1 and worst[0] == pytest.approx(0.3)
