@@ -25,6 +25,8 @@ from solver.fk import effector_poses
 from solver.ik import STREAM_DEFAULTS, pose_targets, with_options
 from solver.path import PathOptions, PlannedPath
 
+from .test_ik import CHAINS
+
 # The benchmark's tracking settings, without a time budget: a loaded CI machine must
 # not change which answers a test sees.
 STREAM = with_options(
@@ -397,3 +399,30 @@ def test_dp_step_looks_past_the_window_when_the_best_it_found_is_longer() -> Non
     zeros = np.zeros(3)
     worst, _, back = dp_step(prev, zeros, zeros, np.array([[0.0, 0.0]]), 0.25)
     assert back[0] == 1 and worst[0] == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize("name", sorted(CHAINS))
+def test_plans_on_every_test_chain_keep_the_guarantees(name: str) -> None:
+    # Every kind of joint and effector mode (prismatic, multi-axis, aim, two arms on
+    # one torso with one hand's target dropped in some frames, a 40-DOF tail), a slow
+    # and a fast clip, and a frame out of reach.
+    chain = CHAINS[name]()
+    for seed, speed in ((0, 1.0), (1, 4.0)):
+        path = joint_stream(chain, seed, 80)[:: int(speed)][:30]
+        frames = [pose_targets(chain, q) for q in path]
+        if name == "two-arms":
+            frames = [f[:1] if k % 7 < 3 else f for k, f in enumerate(frames)]
+        first = frames[15][0]
+        frames[15] = [dataclasses.replace(first, position=first.position + 5.0)] + frames[15][1:]
+        tracker = IKSolver(chain, STREAM)
+        tracker.set_pose(path[0])
+        tracked = track_all(tracker, frames)
+        planner = IKSolver(chain, STREAM)
+        planner.set_pose(path[0])
+        plan = planner.plan(frames)
+        assert not plan.results[15].success
+        for r, t, targets in zip(plan.results, tracked, frames, strict=True):
+            assert r.success or not t.success
+            if r.success:
+                assert_reaches(chain, r.q, targets)
+        assert plan.largest_step == largest_step(path[0], plan.q)
