@@ -45,6 +45,7 @@ from .kinematics import (
     _effector_terms,
     _goal_measure,
     _world_axis,
+    cholesky_in_place,
     effector_frame,
     rotation_log,
 )
@@ -170,19 +171,8 @@ def _gram_solve(jac, rows, v, gram, y):  # type: ignore[no-untyped-def]
     lam = 1e-10 * scale + 1e-14
     for a in range(rows):
         gram[a, a] += lam
-    for a in range(rows):
-        s = gram[a, a]
-        for k in range(a):
-            s -= gram[a, k] * gram[a, k]
-        if not s > 0.0:
-            return False
-        d = math.sqrt(s)
-        gram[a, a] = d
-        for b in range(a + 1, rows):
-            s = gram[b, a]
-            for k in range(a):
-                s -= gram[b, k] * gram[a, k]
-            gram[b, a] = s / d
+    if not cholesky_in_place(gram, rows):
+        return False
     for a in range(rows):  # L z = v
         s = v[a]
         for k in range(a):

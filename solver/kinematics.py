@@ -583,6 +583,26 @@ def _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h):  # type: ignore[no-u
     return _woodbury_inverse(y, c, h)
 
 
+@jit_inline
+def cholesky_in_place(m, rows):  # type: ignore[no-untyped-def]
+    """m's leading rows x rows block (symmetric; its lower triangle is read) <- its
+    lower Cholesky factor L, in the lower triangle; False if not positive definite."""
+    for j in range(rows):
+        s = m[j, j]
+        for k in range(j):
+            s -= m[j, k] * m[j, k]
+        if not s > 0.0:
+            return False
+        d = math.sqrt(s)
+        m[j, j] = d
+        for i in range(j + 1, rows):
+            s = m[i, j]
+            for k in range(j):
+                s -= m[i, k] * m[j, k]
+            m[i, j] = s / d
+    return True
+
+
 @jit_leaf
 def _woodbury_inverse(y, c, h):  # type: ignore[no-untyped-def]
     """h <- (c I + 2 Y^T Y)^-1 for Y (rows x n, rows <= n / 2); Y is overwritten.
@@ -601,19 +621,8 @@ def _woodbury_inverse(y, c, h):  # type: ignore[no-untyped-def]
             for i in range(n):
                 acc += y[a, i] * y[b, i]
             low[a, b] = 2.0 * acc + (c if a == b else 0.0)
-    for j in range(rows):
-        s = low[j, j]
-        for k in range(j):
-            s -= low[j, k] * low[j, k]
-        if not s > 0.0:
-            return False
-        d = math.sqrt(s)
-        low[j, j] = d
-        for i in range(j + 1, rows):
-            s = low[i, j]
-            for k in range(j):
-                s -= low[i, k] * low[j, k]
-            low[i, j] = s / d
+    if not cholesky_in_place(low, rows):
+        return False
     # Y <- L^-1 J, column by column (forward substitution in place).
     for i in range(n):
         for a in range(rows):

@@ -22,7 +22,7 @@ from solver import (
 from solver._path_kernels import dp_step, frame_nodes
 from solver.examples import humanoid_arm, panda_arm, two_arm_torso
 from solver.fk import effector_poses
-from solver.ik import STREAM_DEFAULTS, pose_targets, with_options
+from solver.ik import STREAM_DEFAULTS, IKOptions, IKResult, pose_targets, with_options
 from solver.path import PathOptions, PlannedPath
 
 from .test_ik import CHAINS
@@ -55,8 +55,21 @@ def largest_step(start: np.ndarray, qs: np.ndarray) -> float:
     return float(np.abs(np.diff(np.vstack([start, qs]), axis=0)).max())
 
 
-def track_all(solver: IKSolver, frames: list[list[Target]]) -> list:  # type: ignore[type-arg]
-    return [solver.track(t, options=STREAM) for t in frames]
+def tracked_from(  # type: ignore[no-untyped-def]
+    chain, start: np.ndarray, frames: list[list[Target]], options: IKOptions = STREAM
+) -> list[IKResult]:
+    """Frame by frame from ``start``, as a session streams them."""
+    tracker = IKSolver(chain, options)
+    tracker.set_pose(start)
+    return [tracker.track(t, options=options) for t in frames]
+
+
+def planned_from(  # type: ignore[no-untyped-def]
+    chain, start: np.ndarray, frames: list[list[Target]], options: IKOptions = STREAM
+) -> PlannedPath:
+    planner = IKSolver(chain, options)
+    planner.set_pose(start)
+    return planner.plan(frames)
 
 
 def rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -83,14 +96,10 @@ def test_plan_crosses_smoothly_where_tracking_pops() -> None:
     path = joint_stream(chain, 4, 90)
     ref = float(np.abs(np.diff(path, axis=0)).max())
     frames = [pose_targets(chain, q) for q in path]
-    tracker = IKSolver(chain, STREAM)
-    tracker.set_pose(path[0])
-    tracked = np.array([r.q for r in track_all(tracker, frames)])
+    tracked = np.array([r.q for r in tracked_from(chain, path[0], frames)])
     assert largest_step(path[0], tracked) > 10 * ref
 
-    planner = IKSolver(chain, STREAM)
-    planner.set_pose(path[0])
-    plan = planner.plan(frames)
+    plan = planned_from(chain, path[0], frames)
     assert plan.success
     assert plan.largest_step <= 2 * ref
     assert plan.largest_step == pytest.approx(largest_step(path[0], plan.q), abs=0.0)
@@ -124,12 +133,8 @@ def test_plan_is_never_worse_than_tracking(make, seeds) -> None:  # type: ignore
     for seed in seeds:
         path = joint_stream(chain, seed, 60)
         frames = [pose_targets(chain, q) for q in path]
-        tracker = IKSolver(chain, STREAM)
-        tracker.set_pose(path[0])
-        tracked = track_all(tracker, frames)
-        planner = IKSolver(chain, STREAM)
-        planner.set_pose(path[0])
-        plan = planner.plan(frames)
+        tracked = tracked_from(chain, path[0], frames)
+        plan = planned_from(chain, path[0], frames)
         for r, t, targets in zip(plan.results, tracked, frames, strict=True):
             assert r.success or not t.success
             if r.success:
@@ -142,9 +147,7 @@ def test_plan_results_are_judged_as_solve_judges_them() -> None:
     chain = panda_arm()
     path = joint_stream(chain, 4, 90)
     frames = [pose_targets(chain, q) for q in path]
-    solver = IKSolver(chain, STREAM)
-    solver.set_pose(path[0])
-    plan = solver.plan(frames)
+    plan = planned_from(chain, path[0], frames)
     checker = IKSolver(chain, STREAM)
     for r, targets in zip(plan.results, frames, strict=True):
         assert r.effectors == checker.errors_at(r.q, targets)
@@ -158,9 +161,7 @@ def test_a_frame_nothing_reaches_keeps_the_closest_pose() -> None:
     near = frames[10][0]
     far = Target(effector=near.effector, position=np.array([3.0, 0.0, 0.5]), rotation=near.rotation)
     frames[10] = [far]
-    solver = IKSolver(chain, STREAM)
-    solver.set_pose(path[0])
-    plan = solver.plan(frames)
+    plan = planned_from(chain, path[0], frames)
     assert not plan.results[10].success
     assert not plan.success
     assert all(r.success for i, r in enumerate(plan.results) if i != 10)
@@ -241,17 +242,11 @@ def test_plan_reaches_frames_the_tracker_misses() -> None:
     solver = IKSolver(chain, weak)
     solver.set_pose(path[0])
     plan = solver.plan(frames)
-    tracker = IKSolver(chain, weak)
-    tracker.set_pose(path[0])
-    missed = sum(not r.success for r in track_all_with(tracker, frames, weak))
+    missed = sum(not r.success for r in tracked_from(chain, path[0], frames, weak))
     assert missed >= 5
     assert plan.success
     for q, targets in zip(plan.q, frames, strict=True):
         assert_reaches(chain, q, targets)
-
-
-def track_all_with(solver: IKSolver, frames: list[list[Target]], options) -> list:  # type: ignore[no-untyped-def, type-arg]
-    return [solver.track(t, options=options) for t in frames]
 
 
 def test_a_rejected_plan_keeps_the_carried_state() -> None:
@@ -301,12 +296,8 @@ def test_plan_with_two_effectors() -> None:
     chain = two_arm_torso()
     path = joint_stream(chain, 3, 40)
     frames = [pose_targets(chain, q) for q in path]
-    tracker = IKSolver(chain, STREAM)
-    tracker.set_pose(path[0])
-    tracked = track_all(tracker, frames)
-    solver = IKSolver(chain, STREAM)
-    solver.set_pose(path[0])
-    plan = solver.plan(frames)
+    tracked = tracked_from(chain, path[0], frames)
+    plan = planned_from(chain, path[0], frames)
     assert plan.success
     for r, targets in zip(plan.results, frames, strict=True):
         assert_reaches(chain, r.q, targets)
@@ -327,15 +318,9 @@ def test_the_work_budget_bounds_a_plan_and_keeps_its_guarantees() -> None:
     # Each frame may still keep its anchors (25) and the tracker's answer.
     assert small.nodes <= answers + 90 * 26 < full.nodes
     assert small.success
-    tracked = solver_track_largest_step(chain, path, frames)
+    tracked = largest_step(path[0], np.array([r.q for r in tracked_from(chain, path[0], frames)]))
     assert small.tracked_largest_step == pytest.approx(tracked, rel=1e-12)
     assert small.largest_step <= tracked
-
-
-def solver_track_largest_step(chain, path, frames) -> float:  # type: ignore[no-untyped-def]
-    tracker = IKSolver(chain, STREAM)
-    tracker.set_pose(path[0])
-    return largest_step(path[0], np.array([r.q for r in track_all(tracker, frames)]))
 
 
 @pytest.mark.parametrize(
@@ -414,12 +399,8 @@ def test_plans_on_every_test_chain_keep_the_guarantees(name: str) -> None:
             frames = [f[:1] if k % 7 < 3 else f for k, f in enumerate(frames)]
         first = frames[15][0]
         frames[15] = [dataclasses.replace(first, position=first.position + 5.0)] + frames[15][1:]
-        tracker = IKSolver(chain, STREAM)
-        tracker.set_pose(path[0])
-        tracked = track_all(tracker, frames)
-        planner = IKSolver(chain, STREAM)
-        planner.set_pose(path[0])
-        plan = planner.plan(frames)
+        tracked = tracked_from(chain, path[0], frames)
+        plan = planned_from(chain, path[0], frames)
         assert not plan.results[15].success
         for r, t, targets in zip(plan.results, tracked, frames, strict=True):
             assert r.success or not t.success
