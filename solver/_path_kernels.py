@@ -24,6 +24,7 @@ import numpy as np
 from ._jit import jit, jit_inline
 from .kinematics import (
     DD_GSCRATCH,
+    DD_J,
     DD_XLAST,
     ED_AIM,
     ED_TDIR,
@@ -33,18 +34,12 @@ from .kinematics import (
     ED_WR,
     EI_ACTIVE,
     EI_MODE,
-    EI_NODE,
     MODE_AIM,
     MODE_POSE,
     MODE_POSITION,
-    ND_T,
-    NI_DOF,
-    NI_KIND,
-    NI_PARENT,
-    NODE_ROTATION,
     _effector_terms,
     _goal_measure,
-    _world_axis,
+    _weighted_jacobian,
     cholesky_in_place,
     effector_frame,
     rotation_log,
@@ -90,7 +85,6 @@ def _task_system(q, data, free, r, jac):  # type: ignore[no-untyped-def]
             r[rows + 2] = sp * (pz - ed[e, ED_TPOS + 2])
             rows += 3
         o0 = rows
-        ax = ay = az = 0.0
         if sr > 0.0 and mode == MODE_POSE:
             t = ED_TROT
             # phi = log(R_e R_t^T), world frame: as _effector_terms measures it.
@@ -117,35 +111,15 @@ def _task_system(q, data, free, r, jac):  # type: ignore[no-untyped-def]
             r[rows + 1] = sr * (ay - ed[e, ED_TDIR + 1])
             r[rows + 2] = sr * (az - ed[e, ED_TDIR + 2])
             rows += 3
-        for row in range(p0, rows):
-            for i in range(n):
-                jac[row, i] = 0.0
-        k = ei[e, EI_NODE]
-        while k >= 0:
-            d = ni[k, NI_DOF]
-            if d >= 0:
-                wx, wy, wz = _world_axis(nd, k)
-                if ni[k, NI_KIND] == NODE_ROTATION:
-                    if o0 > p0:
-                        lx = px - nd[k, ND_T]
-                        ly = py - nd[k, ND_T + 1]
-                        lz = pz - nd[k, ND_T + 2]
-                        jac[p0, d] += sp * (wy * lz - wz * ly)
-                        jac[p0 + 1, d] += sp * (wz * lx - wx * lz)
-                        jac[p0 + 2, d] += sp * (wx * ly - wy * lx)
-                    if rows > o0 and mode == MODE_POSE:
-                        jac[o0, d] += sr * wx
-                        jac[o0 + 1, d] += sr * wy
-                        jac[o0 + 2, d] += sr * wz
-                    elif rows > o0:  # aim: d a / dt = w x a
-                        jac[o0, d] += sr * (wy * az - wz * ay)
-                        jac[o0 + 1, d] += sr * (wz * ax - wx * az)
-                        jac[o0 + 2, d] += sr * (wx * ay - wy * ax)
-                elif o0 > p0:
-                    jac[p0, d] += sp * wx
-                    jac[p0 + 1, d] += sp * wy
-                    jac[p0 + 2, d] += sp * wz
-            k = ni[k, NI_PARENT]
+        # The Jacobian as the solver's metric weighs it (DD's Jacobian rows are scratch).
+        _weighted_jacobian(e, ni, nd, ei, ed, dd)
+        for i in range(n):
+            if o0 > p0:
+                for row in range(3):
+                    jac[p0 + row, i] = dd[DD_J + row, i]
+            if rows > o0:
+                for row in range(3):
+                    jac[o0 + row, i] = dd[DD_J + 3 + row, i]
     for i in range(n):
         if free[i] == 0.0:
             for row in range(rows):
