@@ -29,7 +29,6 @@ from .kinematics import (
     ED_AIM,
     ED_TDIR,
     ED_TPOS,
-    ED_TROT,
     ED_WP,
     ED_WR,
     EI_ACTIVE,
@@ -42,7 +41,7 @@ from .kinematics import (
     _weighted_jacobian,
     cholesky_in_place,
     effector_frame,
-    rotation_log,
+    pose_rotation_error,
 )
 
 # A node closer than this to a node already found is the same answer (projections of
@@ -86,18 +85,7 @@ def _task_system(q, data, free, r, jac):  # type: ignore[no-untyped-def]
             rows += 3
         o0 = rows
         if sr > 0.0 and mode == MODE_POSE:
-            t = ED_TROT
-            # phi = log(R_e R_t^T), world frame: as _effector_terms measures it.
-            e00 = r00 * ed[e, t] + r01 * ed[e, t + 1] + r02 * ed[e, t + 2]
-            e01 = r00 * ed[e, t + 3] + r01 * ed[e, t + 4] + r02 * ed[e, t + 5]
-            e02 = r00 * ed[e, t + 6] + r01 * ed[e, t + 7] + r02 * ed[e, t + 8]
-            e10 = r10 * ed[e, t] + r11 * ed[e, t + 1] + r12 * ed[e, t + 2]
-            e11 = r10 * ed[e, t + 3] + r11 * ed[e, t + 4] + r12 * ed[e, t + 5]
-            e12 = r10 * ed[e, t + 6] + r11 * ed[e, t + 7] + r12 * ed[e, t + 8]
-            e20 = r20 * ed[e, t] + r21 * ed[e, t + 1] + r22 * ed[e, t + 2]
-            e21 = r20 * ed[e, t + 3] + r21 * ed[e, t + 4] + r22 * ed[e, t + 5]
-            e22 = r20 * ed[e, t + 6] + r21 * ed[e, t + 7] + r22 * ed[e, t + 8]
-            ox, oy, oz, _ = rotation_log(e00, e01, e02, e10, e11, e12, e20, e21, e22)
+            ox, oy, oz, _ = pose_rotation_error(ed, e, r00, r01, r02, r10, r11, r12, r20, r21, r22)
             r[rows] = sr * ox
             r[rows + 1] = sr * oy
             r[rows + 2] = sr * oz

@@ -297,6 +297,23 @@ def is_last_point(x, dd):  # type: ignore[no-untyped-def]
 
 
 @jit_inline
+def pose_rotation_error(ed, e, r00, r01, r02, r10, r11, r12, r20, r21, r22):  # type: ignore[no-untyped-def]
+    """Effector e's orientation error for its frame R: phi = log(R R_t^T) (world
+    frame), as (phi_x, phi_y, phi_z, |phi|)."""
+    t = ED_TROT
+    e00 = r00 * ed[e, t] + r01 * ed[e, t + 1] + r02 * ed[e, t + 2]
+    e01 = r00 * ed[e, t + 3] + r01 * ed[e, t + 4] + r02 * ed[e, t + 5]
+    e02 = r00 * ed[e, t + 6] + r01 * ed[e, t + 7] + r02 * ed[e, t + 8]
+    e10 = r10 * ed[e, t] + r11 * ed[e, t + 1] + r12 * ed[e, t + 2]
+    e11 = r10 * ed[e, t + 3] + r11 * ed[e, t + 4] + r12 * ed[e, t + 5]
+    e12 = r10 * ed[e, t + 6] + r11 * ed[e, t + 7] + r12 * ed[e, t + 8]
+    e20 = r20 * ed[e, t] + r21 * ed[e, t + 1] + r22 * ed[e, t + 2]
+    e21 = r20 * ed[e, t + 3] + r21 * ed[e, t + 4] + r22 * ed[e, t + 5]
+    e22 = r20 * ed[e, t + 6] + r21 * ed[e, t + 7] + r22 * ed[e, t + 8]
+    return rotation_log(e00, e01, e02, e10, e11, e12, e20, e21, e22)
+
+
+@jit_inline
 def _effector_terms(q, g, need_grad, ni, nd, ei, ed):  # type: ignore[no-untyped-def]
     """Pose part of f (and of g); stores each effector's errors in ed[:, 34:36]."""
     forward_kinematics(q, ni, nd)
@@ -321,18 +338,9 @@ def _effector_terms(q, g, need_grad, ni, nd, ei, ed):  # type: ignore[no-untyped
         oy = 0.0
         oz = 0.0
         if mode == MODE_POSE:
-            t = ED_TROT
-            # R_err = R_e R_t^T
-            e00 = r00 * ed[e, t] + r01 * ed[e, t + 1] + r02 * ed[e, t + 2]
-            e01 = r00 * ed[e, t + 3] + r01 * ed[e, t + 4] + r02 * ed[e, t + 5]
-            e02 = r00 * ed[e, t + 6] + r01 * ed[e, t + 7] + r02 * ed[e, t + 8]
-            e10 = r10 * ed[e, t] + r11 * ed[e, t + 1] + r12 * ed[e, t + 2]
-            e11 = r10 * ed[e, t + 3] + r11 * ed[e, t + 4] + r12 * ed[e, t + 5]
-            e12 = r10 * ed[e, t + 6] + r11 * ed[e, t + 7] + r12 * ed[e, t + 8]
-            e20 = r20 * ed[e, t] + r21 * ed[e, t + 1] + r22 * ed[e, t + 2]
-            e21 = r20 * ed[e, t + 3] + r21 * ed[e, t + 4] + r22 * ed[e, t + 5]
-            e22 = r20 * ed[e, t + 6] + r21 * ed[e, t + 7] + r22 * ed[e, t + 8]
-            ox, oy, oz, theta = rotation_log(e00, e01, e02, e10, e11, e12, e20, e21, e22)
+            ox, oy, oz, theta = pose_rotation_error(
+                ed, e, r00, r01, r02, r10, r11, r12, r20, r21, r22
+            )
             ed[e, ED_ERR_R] = theta
             f += wr * theta * theta
         elif mode == MODE_AIM:
