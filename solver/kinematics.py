@@ -706,18 +706,8 @@ def _invert_spd_in_place(m):  # type: ignore[no-untyped-def]
     scratch allocation per call cost more than the arithmetic at 6-7 joints.
     """
     n = m.shape[0]
-    for j in range(n):
-        s = m[j, j]
-        for k in range(j):
-            s -= m[j, k] * m[j, k]
-        if not s > 0.0:
-            return False
-        m[j, j] = math.sqrt(s)
-        for i in range(j + 1, n):
-            s = m[i, j]
-            for k in range(j):
-                s -= m[i, k] * m[j, k]
-            m[i, j] = s / m[j, j]
+    if not cholesky_in_place(m, n):
+        return False
     # inv(L) in place (lower triangle).
     for j in range(n):
         m[j, j] = 1.0 / m[j, j]
