@@ -79,6 +79,12 @@ class Settings(BaseSettings):
         "otherwise in the solver thread pool",
     )
     solver_threads: int = Field(default=2, ge=1, description="Solver thread-pool size")
+    max_queued_plans: int = Field(
+        default=4,
+        ge=1,
+        description="Planned clips queued or running at once (one plans at a time); "
+        "more get 503 plans_busy",
+    )
 
     # Default solver options (a session or request may override each).
     default_time_budget_us: float = Field(default=1_000.0, gt=0, description="[us] per frame")

@@ -15,6 +15,7 @@ method_not_allowed   405    --
 payload_too_large    413    close 1009 (message larger than IK_WS_MAX_MESSAGE_BYTES)
 too_many_sessions    503    -- (+ Retry-After)
 not_ready            503    error message (solver still warming up) (+ Retry-After)
+plans_busy           503    -- (IK_MAX_QUEUED_PLANS planned clips already queued; + Retry-After)
 too_many_websockets  --     close 1013 (try again later)
 internal_error       500    error message, then close 1011
 ==================== ====== =====================================================
@@ -116,6 +117,15 @@ def not_ready() -> ServiceError:
     return ServiceError(
         "not_ready",
         "the solver is still warming up (see /readyz)",
+        status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
+        retry_after_s=1.0,
+    )
+
+
+def plans_busy(limit: int) -> ServiceError:
+    return ServiceError(
+        "plans_busy",
+        f"{limit} planned clips are already queued or running (IK_MAX_QUEUED_PLANS)",
         status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
         retry_after_s=1.0,
     )

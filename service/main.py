@@ -147,6 +147,7 @@ def create_app(
             warmup=warm,
             max_frames_per_s=settings.max_frames_per_s,
             max_frames_per_request=settings.max_frames_per_request,
+            max_queued_plans=settings.max_queued_plans,
         )
         app.state.ik = Services(
             settings=settings,

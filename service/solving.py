@@ -28,7 +28,7 @@ from solver.ik import Target as SolverTarget
 from solver.path import PlannedPath
 
 from . import convert
-from .errors import ServiceError, not_found, not_ready
+from .errors import ServiceError, not_found, not_ready, plans_busy
 from .metrics import Metrics
 from .sessions import Session, SessionStore
 
@@ -113,6 +113,7 @@ class Runner:
         warmup: Warmup,
         max_frames_per_s: float = 0.0,
         max_frames_per_request: int = 1,
+        max_queued_plans: int = 4,
     ) -> None:
         self.inline_budget_us = inline_budget_us
         self.max_frames_per_s = max_frames_per_s
@@ -124,6 +125,10 @@ class Runner:
         # Planned clips take a second or more each: they queue on a thread of their own
         # so that they never hold up the pool's frames, one-shot solves and chain builds.
         self.plan_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ik-plan")
+        # A queue of plans is a queue of seconds: beyond this many, say so at once
+        # (503) rather than let clients time out waiting.
+        self.max_queued_plans = max_queued_plans
+        self.plans_in_flight = 0  # queued or running; changed on the loop only
 
     def shutdown(self) -> None:
         self.pool.shutdown(wait=False, cancel_futures=True)
@@ -171,10 +176,30 @@ class Runner:
     ) -> tuple[list[dict[str, Any]], PlannedPath]:
         """Solve a session's clip as a whole (``IKSolver.plan``): the answers and the
         plan. Always off the loop, on the planning thread: a plan takes milliseconds
-        per frame."""
-        out, plan = await self._under_lock(session, store, jobs, t0, transport, build, plan=True)
+        per frame. At most ``max_queued_plans`` at once (503 ``plans_busy``): a plan
+        counts from here until its thread is done, also if its caller went away."""
+        if self.plans_in_flight >= self.max_queued_plans:
+            raise plans_busy(self.max_queued_plans)
+        self.plans_in_flight += 1
+        handed_over = False
+
+        def on_submit(fut: asyncio.Future[Any]) -> None:
+            nonlocal handed_over
+            handed_over = True
+            fut.add_done_callback(lambda _: self._plan_done())
+
+        try:
+            out, plan = await self._under_lock(
+                session, store, jobs, t0, transport, build, plan=True, on_submit=on_submit
+            )
+        finally:
+            if not handed_over:  # refused or failed before it reached the thread
+                self._plan_done()
         assert plan is not None
         return out, plan
+
+    def _plan_done(self) -> None:
+        self.plans_in_flight -= 1
 
     async def _under_lock(
         self,
@@ -186,6 +211,7 @@ class Runner:
         build: convert.ResultBuilder,
         *,
         plan: bool,
+        on_submit: Callable[[asyncio.Future[Any]], None] | None = None,
     ) -> tuple[list[dict[str, Any]], PlannedPath | None]:
         self.check_ready()
         wait_s = session.take_frames(
@@ -216,6 +242,8 @@ class Runner:
                 args = (session, jobs, options, t0, record, transport, build)
                 pool = self.plan_pool if plan else self.pool
                 fut = loop.run_in_executor(pool, work, *args)
+                if on_submit is not None:
+                    on_submit(fut)
                 # The lock is released when the thread is done, never earlier.
                 fut.add_done_callback(lambda _: session.lock.release())
                 released = True

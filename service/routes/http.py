@@ -2,7 +2,7 @@
 
 Codes: 201/200/204 on success; 401 unauthorized, 403 forbidden, 404 not_found,
 413 payload_too_large, 422 invalid_format / invalid_problem, 503 too_many_sessions /
-not_ready (+ Retry-After).
+plans_busy / not_ready (+ Retry-After).
 """
 
 from __future__ import annotations
@@ -34,7 +34,11 @@ _422: dict[int | str, dict[str, Any]] = {
     422: {**_E, "description": "`invalid_format` (schema) or `invalid_problem` (field named)"}
 }
 _503: dict[int | str, dict[str, Any]] = {
-    503: {**_E, "description": "`not_ready` (warming up) or `too_many_sessions`; see Retry-After"}
+    503: {
+        **_E,
+        "description": "`not_ready` (warming up), `too_many_sessions` or, for a planned "
+        "clip, `plans_busy`; see Retry-After",
+    }
 }
 _KEY_ERRORS: dict[int | str, dict[str, Any]] = {
     401: {**_E, "description": "No API key while the server requires one (`unauthorized`)"},

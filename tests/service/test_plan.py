@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -11,12 +12,16 @@ import pytest
 from starlette.testclient import TestClient
 
 import schemas as S
+from service import convert, solving
 from service.config import Settings
+from service.errors import ServiceError
+from service.metrics import Metrics
+from service.sessions import InMemorySessionStore, new_session
 from solver.examples import panda_arm
 from solver.ik import IKSolver
 from tests.solver.test_path import joint_stream
 
-from .helpers import Created, create, hand_frame
+from .helpers import ARM, Created, create, hand_frame
 from .test_http import _panda_target
 
 # Tolerances of the benchmark; a budget no loaded CI machine runs out of.
@@ -150,3 +155,65 @@ def test_a_planned_clip_runs_on_the_planning_thread(
     )
     assert r.status_code == 200, r.text
     assert len(threads) == 1 and threads[0].startswith("ik-plan")
+
+
+def test_plans_beyond_the_queue_limit_are_refused_at_once(warm_solver: float) -> None:
+    # Two plans in flight (one running, blocked here; one queued behind it) fill a
+    # queue of two: a third is refused with 503 plans_busy at once, and once both are
+    # done the count is back to 0, also for the one whose caller went away.
+    settings = Settings()
+    view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
+    options = convert.session_defaults(settings)
+    release = threading.Event()
+
+    async def scenario() -> None:
+        warm = solving.Warmup(lambda: 0.0)
+        warm._run()
+        runner = solving.Runner(
+            inline_budget_us=0.0,
+            threads=1,
+            metrics=Metrics(lambda: 1),
+            warmup=warm,
+            max_frames_per_request=10,
+            max_queued_plans=2,
+        )
+        store = InMemorySessionStore(max_sessions=3, ttl_s=60.0)
+        sessions = []
+        for _ in range(3):
+            session, _ = new_session(
+                view, IKSolver(view.chain, options), options, now=store.clock()
+            )
+            await store.add(session)
+            real = session.solver.plan
+
+            def blocked(*args: Any, real: Any = real, **kwargs: Any) -> Any:
+                release.wait(timeout=30)
+                return real(*args, **kwargs)
+
+            session.solver.plan = blocked  # type: ignore[method-assign]
+            sessions.append(session)
+        target = convert.targets(S.Frame.model_validate(hand_frame(1)).targets, view, "t")
+        jobs = [(1, target)]
+        try:
+            first = asyncio.create_task(runner.session_plan(sessions[0], store, jobs, 0.0, "http"))
+            second = asyncio.create_task(runner.session_plan(sessions[1], store, jobs, 0.0, "http"))
+            await asyncio.sleep(0.2)
+            assert runner.plans_in_flight == 2
+            with pytest.raises(ServiceError) as refused:
+                await runner.session_plan(sessions[2], store, jobs, 0.0, "http")
+            assert refused.value.code == "plans_busy" and refused.value.status_code == 503
+            second.cancel()  # its caller goes away: the plan still runs to its end
+            release.set()
+            out, plan = await first
+            assert out[0]["success"] and plan.success
+            for _ in range(100):
+                if runner.plans_in_flight == 0:
+                    break
+                await asyncio.sleep(0.05)
+            assert runner.plans_in_flight == 0
+            assert sessions[1].frames == 1  # the cancelled request's plan did run
+        finally:
+            release.set()
+            runner.shutdown()
+
+    asyncio.run(scenario())
