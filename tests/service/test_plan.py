@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -199,10 +200,21 @@ def test_plans_beyond_the_queue_limit_are_refused_at_once(warm_solver: float) ->
             second = asyncio.create_task(runner.session_plan(sessions[1], store, jobs, 0.0, "http"))
             await asyncio.sleep(0.2)
             assert runner.plans_in_flight == 2
-            with pytest.raises(ServiceError) as refused:
-                await runner.session_plan(sessions[2], store, jobs, 0.0, "http")
-            assert refused.value.code == "plans_busy" and refused.value.status_code == 503
-            second.cancel()  # its caller goes away: the plan still runs to its end
+
+            async def third() -> None:
+                # At once: a wait here would be a queue, which is what the limit prevents.
+                with pytest.raises(ServiceError) as refused:
+                    await asyncio.wait_for(
+                        runner.session_plan(sessions[2], store, jobs, 0.0, "http"), timeout=2.0
+                    )
+                assert refused.value.code == "plans_busy" and refused.value.status_code == 503
+
+            await third()
+            second.cancel()  # its caller goes away: the plan still counts until it is done
+            with contextlib.suppress(asyncio.CancelledError):
+                await second
+            assert runner.plans_in_flight == 2
+            await third()
             release.set()
             out, plan = await first
             assert out[0]["success"] and plan.success
@@ -212,6 +224,11 @@ def test_plans_beyond_the_queue_limit_are_refused_at_once(warm_solver: float) ->
                 await asyncio.sleep(0.05)
             assert runner.plans_in_flight == 0
             assert sessions[1].frames == 1  # the cancelled request's plan did run
+            # A plan refused before it reaches the thread gives its place back.
+            sessions[2].closed = True
+            with pytest.raises(ServiceError, match="no such session"):
+                await runner.session_plan(sessions[2], store, jobs, 0.0, "http")
+            assert runner.plans_in_flight == 0
         finally:
             release.set()
             runner.shutdown()
