@@ -27,14 +27,29 @@ the larger of its two steps does not grow) take out the sampling's jitter. Every
 is judged by the solver's own error measure: a frame counts as solved exactly when
 ``solve`` would say so.
 
+Keyframes. Walking the whole self-motion of every frame is what costs (hundreds of
+nodes per frame). For a clip whose every frame has one free direction, the programme
+first runs over keyframes only (every ``key_every``-th frame, the self-motion walked
+``key_spacing_rad`` apart), and the frames between are filled in: the straight line
+between the two keyframes' poses, projected onto each frame's targets. Where the line
+cuts a corner of the self-motion (near a singularity, where joints turn fast), the
+filled frames step well above the keyframes' pace (``repair_ratio`` x the keyframe
+path's largest step per frame); those stretches, widened by one keyframe on each side,
+are planned again frame by frame as above, from the path's pose before them onto its
+pose after them, and kept where their largest step gets smaller; what is still above
+the pace is tried again over 3, then 9 keyframes on each side. On the benchmark's
+streams this is about 10x cheaper than planning every frame densely, and holds the
+same streams within 2x of the reference's step (``bench/RESULTS.md``, "Planned
+clips").
+
 Guarantees, by construction: every frame the tracker solves is solved by the plan, and
 when the tracker solves every frame the plan's largest step is at most the tracker's.
 Frames that no node reaches keep the tracker's answer (its closest pose).
 
 Cost: about frames x nodes x a few Gauss-Newton steps; nodes grow with the
-self-motion's length over ``spacing_rad`` (a 7-DOF arm: hundreds to a few thousand per
-frame), and memory with frames x nodes x joints; ``PathOptions.max_work`` bounds both.
-``bench/ik.py`` part (c) measures it.
+self-motion's length over the spacing (a 7-DOF arm: hundreds to a few thousand per
+walked frame), and memory with frames x nodes x joints; ``PathOptions.max_work`` bounds
+both. ``bench/ik.py`` part (c) measures it.
 """
 
 from __future__ import annotations
@@ -67,15 +82,37 @@ class PathOptions:
     carried: int = 16  # previous frame's nodes carried onto the next targets
     perturbed: int = 8  # random neighbours of carried nodes, per frame
     perturbation_rad: float = 0.08  # their spread (standard deviation per joint)
-    smoothing_sweeps: int = 20
+    smoothing_sweeps: int = 3
+    # Keyframes: for a clip whose every frame has one free direction (a 7-DOF arm
+    # under a 6-D pose), the programme first runs over every key_every-th frame with
+    # the self-motion walked key_spacing_rad apart; the frames between are filled in,
+    # and a stretch stepping more than repair_ratio x the keyframes' pace is planned
+    # again densely. 1: every frame densely.
+    key_every: int = 5
+    key_spacing_rad: float = 0.05
+    repair_ratio: float = 1.5
     seed: int = 0  # of the neighbours' generator: a plan is reproducible
 
     def __post_init__(self) -> None:
         # The compiled kernels get exactly one type per field (an int where a float is
         # expected would fail to compile mid-plan).
-        for name in ("spacing_rad", "window_rad", "perturbation_rad", "max_work"):
+        for name in (
+            "spacing_rad",
+            "window_rad",
+            "perturbation_rad",
+            "max_work",
+            "key_spacing_rad",
+            "repair_ratio",
+        ):
             object.__setattr__(self, name, float(getattr(self, name)))
-        for name in ("max_nodes_per_frame", "carried", "perturbed", "smoothing_sweeps", "seed"):
+        for name in (
+            "max_nodes_per_frame",
+            "carried",
+            "perturbed",
+            "smoothing_sweeps",
+            "seed",
+            "key_every",
+        ):
             value = getattr(self, name)
             if isinstance(value, float) and not value.is_integer():
                 raise ValueError(f"{name} must be an integer")
@@ -88,6 +125,12 @@ class PathOptions:
             raise ValueError("max_nodes_per_frame and carried must be at least 1")
         if not self.max_work > 0.0:
             raise ValueError("max_work must be positive")
+        if not (math.isfinite(self.key_spacing_rad) and self.key_spacing_rad > 0.0):
+            raise ValueError("key_spacing_rad must be a positive number")
+        if self.key_every < 1:
+            raise ValueError("key_every must be at least 1")
+        if not self.repair_ratio >= 1.0:
+            raise ValueError("repair_ratio must be at least 1")
         if self.perturbed < 0 or self.smoothing_sweeps < 0:
             raise ValueError("perturbed and smoothing_sweeps must be >= 0")
         if not (math.isfinite(self.perturbation_rad) and self.perturbation_rad >= 0.0):
@@ -124,19 +167,26 @@ def _largest_step(start: Vector, path: np.ndarray) -> float:
     return float(np.abs(np.diff(np.vstack([start, path]), axis=0)).max()) if len(path) else 0.0
 
 
+def _steps(start: Vector, path: np.ndarray) -> np.ndarray:
+    """Each frame's step: the largest change of any variable from the frame before."""
+    steps: np.ndarray = np.abs(np.diff(np.vstack([start, path]), axis=0)).max(axis=1)
+    return steps
+
+
 def _anchors(
     nodes: np.ndarray,
     worst: np.ndarray,
     total: np.ndarray,
-    tracked: np.ndarray,
+    must: np.ndarray,
     lower: np.ndarray,
     upper: np.ndarray,
     rng: np.random.Generator,
     popts: PathOptions,
 ) -> np.ndarray:
-    """Where this frame's nodes start from: the previous frame's cheapest nodes, the
-    tracker's answer, a spread of the previous nodes, then random neighbours of some
-    of these. Order matters: a node walked first claims its self-motion, and when the
+    """Where a frame's nodes start from: the previous frame's cheapest node, ``must``
+    (rows: the tracker's answer, and in a repair the path being repaired), the other
+    cheapest nodes, a spread of the previous nodes, then random neighbours of some of
+    these. Order matters: a node walked first claims its self-motion, and when the
     node budget runs out, what comes last is cut: the cheapest paths go first."""
     order = np.lexsort((total, worst))
     half = max(1, popts.carried // 2)
@@ -146,7 +196,7 @@ def _anchors(
     # unless the tracker is on it).
     cheap = np.flatnonzero(worst <= max(3.0 * worst.min(), worst.min() + 4.0 * popts.spacing_rad))
     spread = [nodes[i] for i in cheap[np.linspace(0, len(cheap) - 1, half).astype(int)]]
-    chosen = best[:1] + [tracked] + best[1:] + spread
+    chosen = best[:1] + list(must) + best[1:] + spread
     if popts.perturbed:
         around = rng.choice(len(chosen), size=popts.perturbed)
         noise = rng.normal(0.0, popts.perturbation_rad, (popts.perturbed, nodes.shape[1]))
@@ -183,6 +233,205 @@ def plan_path(
         raise
 
 
+Box = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+class _Planner:
+    """The state one plan shares between its passes: the frames, the tracker's
+    answers, each frame's box, and the work spent against ``PathOptions.max_work``."""
+
+    def __init__(
+        self,
+        solver: IKSolver,
+        frames: Sequence[Sequence[Target]],
+        opts: IKOptions,
+        popts: PathOptions,
+        tracked: list[IKResult],
+        boxes: list[Box],
+    ) -> None:
+        self.solver = solver
+        self.frames = frames
+        self.opts = opts
+        self.popts = popts
+        self.tracked = tracked
+        self.boxes = boxes
+        self.rng = np.random.default_rng(popts.seed)
+        self.considered = 0
+        self.budget = popts.max_work / max(1, solver.chain.n_dof) ** 3  # answers, all frames
+
+    def load(self, k: int, q0: np.ndarray) -> Box:
+        """Load frame k's targets into the solver's data (for the kernels)."""
+        self.solver._prepare(self.frames[k], self.opts, q0)
+        return self.boxes[k]
+
+    def nodes_at(
+        self, k: int, anchors: np.ndarray, walk: bool, spacing: float, cap: int, frames_left: int
+    ) -> np.ndarray:
+        """Frame k's nodes from ``anchors`` (``frame_nodes``), the tracker's answer
+        first when it is within tolerance; never empty (nothing reaches the frame:
+        the tracker's closest pose). Each call may use up to 4x its even share of the
+        work left."""
+        tracked = self.tracked[k]
+        box = self.load(k, tracked.q)
+        fair = 4.0 * (self.budget - self.considered) / max(1, frames_left)
+        limit = int(min(cap, max(len(anchors), fair)))
+        nodes: np.ndarray = frame_nodes(anchors, self.solver._data, box, walk, spacing, limit)
+        if tracked.success:  # the tracker's exact answer: the plan can always follow it
+            nodes = np.vstack([tracked.q[None, :], nodes])
+        elif len(nodes) == 0:
+            nodes = tracked.q[None, :]
+        self.considered += len(nodes)
+        return nodes
+
+    def dense(
+        self,
+        before: np.ndarray,
+        ks: Sequence[int],
+        *,
+        spacing: float,
+        cap: int,
+        walk: Sequence[bool],
+        along: np.ndarray | None = None,
+        end: np.ndarray | None = None,
+        span: int = 1,
+    ) -> tuple[np.ndarray, float]:
+        """The dynamic programme over frames ``ks`` from the single pose ``before``:
+        the path (one row per frame) with the smallest largest step, and that step.
+        ``along`` (rows per frame) joins each frame's anchors (a path being repaired);
+        ``end`` fixes the last frame's pose (a repair joins the path there); ``walk``
+        says, per frame, whether to walk the self-motion (one free direction). ``span``:
+        frames between consecutive ks (keyframes), which scales the window."""
+        popts = self.popts
+        lower, upper = self.solver.chain.lower, self.solver.chain.upper
+        prev = before[None, :]
+        worst = np.zeros(1)
+        total = np.zeros(1)
+        sets: list[np.ndarray] = []
+        backs: list[np.ndarray] = []
+        for i, k in enumerate(ks):
+            if end is not None and i == len(ks) - 1:
+                nodes = end[None, :]
+            else:
+                must = [self.tracked[k].q] if along is None else [along[i], self.tracked[k].q]
+                anchors = _anchors(
+                    prev, worst, total, np.array(must), lower, upper, self.rng, popts
+                )
+                nodes = self.nodes_at(k, anchors, walk[i], spacing, cap, len(ks) - i)
+            # dp_step ranks steps longer than this only for nodes nothing shorter
+            # reaches: 3x the best path's largest step so far (at least 4 spacings).
+            window = popts.window_rad * span
+            reach = min(window, max(3.0 * float(worst.min()), 4.0 * spacing))
+            worst, total, back = dp_step(prev, worst, total, nodes, float(reach))
+            assert back.min() >= 0  # every node has a predecessor: there is at least one
+            sets.append(nodes)
+            backs.append(back)
+            prev = nodes
+        path = np.empty((len(ks), before.shape[0]))
+        j = int(np.lexsort((total, worst))[0]) if len(ks) else 0
+        best = float(worst[j]) if len(ks) else 0.0
+        for i in range(len(ks) - 1, -1, -1):
+            path[i] = sets[i][j]
+            j = int(backs[i][j])
+        return path, best
+
+    def keyed(self, start: np.ndarray) -> np.ndarray:
+        """The keyframe plan (``PathOptions.key_every``): a coarse dynamic programme
+        over keyframes, the frames between filled in, and the stretches that step
+        much more than the keyframes' pace re-planned densely."""
+        popts = self.popts
+        n = len(self.frames)
+        count = max(2, n // popts.key_every)
+        keys = [((i + 1) * n) // count - 1 for i in range(count)]  # intervals of n/count
+        span = n / count
+        key_path, key_worst = self.dense(
+            start,
+            keys,
+            spacing=popts.key_spacing_rad,
+            cap=popts.max_nodes_per_frame,
+            walk=[True] * len(keys),
+            span=round(span),
+        )
+        path = np.empty((n, start.shape[0]))
+        failed = self._fill(start, keys, key_path, path)
+        # The keyframes' pace: a path through them moving evenly steps about this much
+        # per frame. A stretch stepping well above it passed a keyframe badly
+        # (interpolation cut a corner of the self-motion, e.g. near a singularity).
+        pace = max(popts.repair_ratio * key_worst / span, popts.spacing_rad)
+        bounds = [-1, *keys]
+        for widen in (1, 3, 9):
+            steps = _steps(start, path)
+            bad = [
+                i
+                for i in range(count)
+                if failed[i] or steps[bounds[i] + 1 : bounds[i + 1] + 1].max() > pace
+            ]
+            if not bad:
+                break
+            for lo, hi in _windows(bad, widen, count):
+                self._repair(start, path, bounds[lo], bounds[hi + 1])
+                failed[lo : hi + 1] = False
+        return path
+
+    def _fill(
+        self, start: np.ndarray, keys: list[int], key_path: np.ndarray, path: np.ndarray
+    ) -> np.ndarray:
+        """Frames between keyframes: the straight line between the two keyframes'
+        poses, projected onto each frame's targets; where that fails, the tracker's
+        answer. Returns, per interval, whether any of its frames failed."""
+        failed = np.zeros(len(keys), dtype=bool)
+        before, q_before = -1, start
+        lower, upper = self.solver.chain.lower, self.solver.chain.upper
+        for i, k in enumerate(keys):
+            path[k] = key_path[i]
+            for f in range(before + 1, k):
+                a = (f - before) / (k - before)
+                q = np.clip((1.0 - a) * q_before + a * key_path[i], lower, upper)
+                box = self.load(f, q)
+                if project_onto(q, self.solver._data, box, 30) > 1.0:
+                    failed[i] = True
+                    q = self.tracked[f].q.copy()
+                path[f] = q
+            self.considered += k - before
+            before, q_before = k, key_path[i]
+        return failed
+
+    def _repair(self, start: np.ndarray, path: np.ndarray, first: int, last: int) -> None:
+        """Re-plan frames first+1..last densely, from path[first] (the start pose when
+        first is -1), ending on path[last] unless last is the clip's last frame; kept
+        only where the stretch's largest step (its joins included) gets smaller."""
+        n = len(self.frames)
+        ks = list(range(first + 1, last + 1))
+        before = start if first < 0 else path[first]
+        end = None if last == n - 1 else path[last]
+        popts = self.popts
+        new, _ = self.dense(
+            before,
+            ks,
+            spacing=popts.spacing_rad,
+            cap=popts.max_nodes_per_frame,
+            walk=[True] * len(ks),
+            along=path[first + 1 : last + 1],
+            end=end,
+        )
+        after = path[last + 1 : last + 2]  # the join after the stretch (none at the end)
+        old = _largest_step(before, np.vstack([path[first + 1 : last + 1], after]))
+        if _largest_step(before, np.vstack([new, after])) < old:
+            path[first + 1 : last + 1] = new
+
+
+def _windows(bad: list[int], widen: int, count: int) -> list[tuple[int, int]]:
+    """Intervals ``bad`` widened by ``widen`` on each side, overlapping ones merged:
+    (first, last) interval indices."""
+    out: list[tuple[int, int]] = []
+    for i in bad:
+        lo, hi = max(0, i - widen), min(count - 1, i + widen)
+        if out and lo <= out[-1][1] + 1:
+            out[-1] = (out[-1][0], max(out[-1][1], hi))
+        else:
+            out.append((lo, hi))
+    return out
+
+
 def _plan(
     solver: IKSolver,
     frames: Sequence[Sequence[Target]],
@@ -191,73 +440,53 @@ def _plan(
     start: np.ndarray,
 ) -> PlannedPath:
     started = time.perf_counter()
-    lower = solver.chain.lower
-    upper = solver.chain.upper
-    rng = np.random.default_rng(popts.seed)
-    data = solver._data
+    n = len(frames)
     tracked: list[IKResult] = []
-    node_sets: list[np.ndarray] = []
-    backs: list[np.ndarray] = []
-    boxes: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    prev_nodes = start[None, :]
-    worst = np.zeros(1)
-    total = np.zeros(1)
+    boxes: list[Box] = []
+    walks: list[bool] = []
     q_track = start
-    considered = 0
-    budget = popts.max_work / max(1, solver.chain.n_dof) ** 3  # answers, all frames
-    for k, targets in enumerate(frames):
+    lower, upper = solver.chain.lower, solver.chain.upper
+    for targets in frames:
         solver.q = q_track
         r = solver.track(targets, options=opts)  # also loads the targets
         q_track = r.q.copy()
         tracked.append(r)
         # Variables outside every targeted chain keep each node's own value (the
         # tracker freezes them at its previous answer; a node carries its own).
-        box = (lower, upper, solver._free_mask())
-        boxes.append(box)
-        anchors = _anchors(prev_nodes, worst, total, q_track, lower, upper, rng, popts)
-        walk = solver._free_directions() == 1
-        fair = 4.0 * (budget - considered) / (len(frames) - k)
-        limit = int(min(popts.max_nodes_per_frame, max(len(anchors), fair)))
-        nodes = frame_nodes(anchors, data, box, walk, popts.spacing_rad, limit)
-        if r.success:  # the tracker's exact answer: the plan can always follow it
-            nodes = np.vstack([q_track[None, :], nodes])
-        elif len(nodes) == 0:  # nothing reaches this frame: keep the closest pose
-            nodes = q_track[None, :]
-        considered += len(nodes)
-        # dp_step ranks steps longer than this only for nodes nothing shorter reaches:
-        # 3x the best path's largest step so far (at least 4 spacings).
-        reach = min(popts.window_rad, max(3.0 * float(worst.min()), 4.0 * popts.spacing_rad))
-        worst, total, back = dp_step(prev_nodes, worst, total, nodes, float(reach))
-        assert back.min() >= 0  # every node has a predecessor: there is at least one
-        node_sets.append(nodes)
-        backs.append(back)
-        prev_nodes = nodes
-    path = np.empty((len(frames), solver.chain.n_dof))
-    j = int(np.lexsort((total, worst))[0]) if len(frames) else 0
-    for k in range(len(frames) - 1, -1, -1):
-        path[k] = node_sets[k][j]
-        j = int(backs[k][j])
+        boxes.append((lower, upper, solver._free_mask()))
+        walks.append(solver._free_directions() == 1)
+    planner = _Planner(solver, frames, opts, popts, tracked, boxes)
+    if popts.key_every > 1 and n >= 2 * popts.key_every and all(walks):
+        path = planner.keyed(start)
+    else:
+        path, _ = planner.dense(
+            start,
+            range(n),
+            spacing=popts.spacing_rad,
+            cap=popts.max_nodes_per_frame,
+            walk=walks,
+        )
+        path = path.reshape(n, solver.chain.n_dof)
     # A node is within tolerance unless it is the tracker's answer kept for a frame
     # nothing reaches.
-    solved = [
-        tracked[k].success or not np.array_equal(path[k], tracked[k].q) for k in range(len(frames))
-    ]
+    solved = [tracked[k].success or not np.array_equal(path[k], tracked[k].q) for k in range(n)]
     _smooth(solver, frames, opts, start, path, solved, boxes, popts.smoothing_sweeps)
     tracked_path = np.array([r.q for r in tracked]).reshape(path.shape)
     tracked_step = _largest_step(start, tracked_path)
     if all(r.success for r in tracked) and tracked_step <= _largest_step(start, path):
         path = tracked_path  # a safety net: never do worse than tracking
     plan_us = (time.perf_counter() - started) * 1e6
-    share = plan_us / max(1, len(frames))
+    share = plan_us / max(1, n)
     results = tuple(
         tracked[k]
         if np.array_equal(path[k], tracked[k].q)
         else solver._judge(path[k].copy(), frames[k], opts, share)
-        for k in range(len(frames))
+        for k in range(n)
     )
     solver._h = None  # the tracker's carried BFGS matrix is not the plan's
     solver.q = results[-1].q.copy() if results else start
-    return PlannedPath(results, _largest_step(start, path), tracked_step, considered, plan_us)
+    largest = _largest_step(start, path)
+    return PlannedPath(results, largest, tracked_step, planner.considered, plan_us)
 
 
 def _smooth(

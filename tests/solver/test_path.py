@@ -23,7 +23,7 @@ from solver._path_kernels import dp_step, frame_nodes
 from solver.examples import humanoid_arm, panda_arm, two_arm_torso
 from solver.fk import effector_poses
 from solver.ik import STREAM_DEFAULTS, IKOptions, IKResult, pose_targets, with_options
-from solver.path import PathOptions, PlannedPath
+from solver.path import PathOptions, PlannedPath, _windows
 
 from .test_ik import CHAINS
 
@@ -65,11 +65,15 @@ def tracked_from(  # type: ignore[no-untyped-def]
 
 
 def planned_from(  # type: ignore[no-untyped-def]
-    chain, start: np.ndarray, frames: list[list[Target]], options: IKOptions = STREAM
+    chain,
+    start: np.ndarray,
+    frames: list[list[Target]],
+    options: IKOptions = STREAM,
+    path_options: PathOptions | None = None,
 ) -> PlannedPath:
     planner = IKSolver(chain, options)
     planner.set_pose(start)
-    return planner.plan(frames)
+    return planner.plan(frames, path_options=path_options)
 
 
 def rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -89,7 +93,8 @@ def assert_reaches(chain, q: np.ndarray, targets: list[Target]) -> None:  # type
             assert rotation_angle(pose[:3, :3], t.rotation) <= 1e-4 * (1 + 1e-6)
 
 
-def test_plan_crosses_smoothly_where_tracking_pops() -> None:
+@pytest.mark.parametrize("key_every", [1, 5], ids=["every-frame", "keyframes"])
+def test_plan_crosses_smoothly_where_tracking_pops(key_every: int) -> None:
     # A Panda stream whose reference crosses the shoulder pole (joint 2 through 0):
     # the tracker, on another point of the self-motion, jumps by radians at frame 78.
     chain = panda_arm()
@@ -99,7 +104,7 @@ def test_plan_crosses_smoothly_where_tracking_pops() -> None:
     tracked = np.array([r.q for r in tracked_from(chain, path[0], frames)])
     assert largest_step(path[0], tracked) > 10 * ref
 
-    plan = planned_from(chain, path[0], frames)
+    plan = planned_from(chain, path[0], frames, path_options=PathOptions(key_every=key_every))
     assert plan.success
     assert plan.largest_step <= 2 * ref
     assert plan.largest_step == pytest.approx(largest_step(path[0], plan.q), abs=0.0)
@@ -305,22 +310,68 @@ def test_plan_with_two_effectors() -> None:
         assert plan.largest_step <= plan.tracked_largest_step
 
 
+def test_a_stretch_the_keyframes_pass_badly_is_planned_again() -> None:
+    # Keyframes 15 frames apart on the pole-crossing stream: the straight lines between
+    # them cut across the self-motion near the pole, and the frames filled in step
+    # several times the reference's; the repair plans those stretches frame by frame.
+    chain = panda_arm()
+    path = joint_stream(chain, 4, 90)
+    ref = float(np.abs(np.diff(path, axis=0)).max())
+    frames = [pose_targets(chain, q) for q in path]
+    coarse = PathOptions(key_every=15, smoothing_sweeps=0)
+    unrepaired = planned_from(
+        chain, path[0], frames, path_options=dataclasses.replace(coarse, repair_ratio=1e9)
+    )
+    repaired = planned_from(chain, path[0], frames, path_options=coarse)
+    assert unrepaired.success and repaired.success
+    assert unrepaired.largest_step > 2.5 * ref
+    assert repaired.largest_step <= 1.5 * ref
+    assert repaired.nodes > 10 * unrepaired.nodes  # the dense stretches' answers
+    for q, targets in zip(repaired.q, frames, strict=True):
+        assert_reaches(chain, q, targets)
+
+
+def test_repair_windows_widen_and_merge() -> None:
+    assert _windows([3], 1, 10) == [(2, 4)]
+    assert _windows([0, 9], 1, 10) == [(0, 1), (8, 9)]  # clipped to the clip
+    assert _windows([2, 4], 1, 10) == [(1, 5)]  # overlapping
+    assert _windows([2, 5], 1, 10) == [(1, 6)]  # touching: one window
+    assert _windows([2, 6], 1, 10) == [(1, 3), (5, 7)]
+    assert _windows([4], 3, 6) == [(1, 5)]
+
+
 def test_the_work_budget_bounds_a_plan_and_keeps_its_guarantees() -> None:
+    # Every frame planned densely: the budget's bound is simple to state.
     chain = panda_arm()
     path = joint_stream(chain, 4, 90)
     frames = [pose_targets(chain, q) for q in path]
     answers = 2000
     solver = IKSolver(chain, STREAM)
     solver.set_pose(path[0])
-    small = solver.plan(frames, path_options=PathOptions(max_work=answers * 7**3))
+    dense = PathOptions(key_every=1)
+    small = solver.plan(frames, path_options=dataclasses.replace(dense, max_work=answers * 7**3))
     solver.set_pose(path[0])
-    full = solver.plan(frames)
+    full = solver.plan(frames, path_options=dense)
     # Each frame may still keep its anchors (25) and the tracker's answer.
     assert small.nodes <= answers + 90 * 26 < full.nodes
     assert small.success
     tracked = largest_step(path[0], np.array([r.q for r in tracked_from(chain, path[0], frames)]))
     assert small.tracked_largest_step == pytest.approx(tracked, rel=1e-12)
     assert small.largest_step <= tracked
+
+
+def test_the_work_budget_bounds_a_keyframe_plan_and_keeps_its_guarantees() -> None:
+    chain = panda_arm()
+    path = joint_stream(chain, 4, 90)
+    frames = [pose_targets(chain, q) for q in path]
+    coarse = PathOptions(key_every=15)  # with repairs, as above
+    full = planned_from(chain, path[0], frames, path_options=coarse)
+    small = planned_from(
+        chain, path[0], frames, path_options=dataclasses.replace(coarse, max_work=500 * 7**3)
+    )
+    assert small.nodes < full.nodes / 4
+    assert small.success
+    assert small.largest_step <= small.tracked_largest_step
 
 
 @pytest.mark.parametrize(
@@ -336,6 +387,11 @@ def test_the_work_budget_bounds_a_plan_and_keeps_its_guarantees() -> None:
         ("smoothing_sweeps", -1),
         ("max_work", 0.0),
         ("carried", 1.5),
+        ("key_every", 0),
+        ("key_spacing_rad", 0.0),
+        ("key_spacing_rad", math.inf),
+        ("repair_ratio", 0.5),
+        ("repair_ratio", math.nan),
     ],
 )
 def test_path_options_are_validated(field: str, value: float) -> None:
