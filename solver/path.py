@@ -27,10 +27,11 @@ the larger of its two steps does not grow) take out the sampling's jitter. Every
 is judged by the solver's own error measure: a frame counts as solved exactly when
 ``solve`` would say so.
 
-Keyframes. Walking the whole self-motion of every frame is what costs (hundreds of
-nodes per frame). For a clip whose every frame has one free direction, the programme
-first runs over keyframes only (every ``key_every``-th frame, the self-motion walked
-``key_spacing_rad`` apart), and the frames between are filled in: the straight line
+Keyframes. Gathering nodes for every frame is what costs (a walked self-motion is
+hundreds per frame). For a clip of at least two keyframes whose frames all walk, or
+all do not (the same kind of task throughout), the programme first runs over keyframes
+only (every ``key_every``-th frame, a self-motion walked ``key_spacing_rad`` apart),
+and the frames between are filled in: the straight line
 between the two keyframes' poses, projected onto each frame's targets. Where the line
 cuts a corner of the self-motion (near a singularity, where joints turn fast), the
 filled frames step well above the keyframes' pace (``repair_ratio`` x the keyframe
@@ -39,8 +40,8 @@ are planned again frame by frame as above, from the path's pose before them onto
 pose after them, and kept where their largest step gets smaller; what is still above
 the pace is tried again over 3, then 9 keyframes on each side. On the benchmark's
 streams this is about 10x cheaper than planning every frame densely, and holds the
-same streams within 2x of the reference's step (``bench/RESULTS.md``, "Planned
-clips").
+same streams within 2x of the reference's step; a 6-DOF arm's (no walk), about 2x
+(``bench/RESULTS.md``, "Planned clips").
 
 Guarantees, by construction: every frame the tracker solves is solved by the plan, and
 when the tracker solves every frame the plan's largest step is at most the tracker's.
@@ -83,9 +84,9 @@ class PathOptions:
     perturbed: int = 8  # random neighbours of carried nodes, per frame
     perturbation_rad: float = 0.08  # their spread (standard deviation per joint)
     smoothing_sweeps: int = 3
-    # Keyframes: for a clip whose every frame has one free direction (a 7-DOF arm
-    # under a 6-D pose), the programme first runs over every key_every-th frame with
-    # the self-motion walked key_spacing_rad apart; the frames between are filled in,
+    # Keyframes (a clip of one kind of task throughout, at least 2 x key_every
+    # frames): the programme first runs over every key_every-th frame, a self-motion
+    # walked key_spacing_rad apart; the frames between are filled in,
     # and a stretch stepping more than repair_ratio x the keyframes' pace is planned
     # again densely. 1: every frame densely.
     key_every: int = 5
@@ -334,10 +335,11 @@ class _Planner:
             j = int(backs[i][j])
         return path, best
 
-    def keyed(self, start: np.ndarray) -> np.ndarray:
+    def keyed(self, start: np.ndarray, walk: bool) -> np.ndarray:
         """The keyframe plan (``PathOptions.key_every``): a coarse dynamic programme
         over keyframes, the frames between filled in, and the stretches that step
-        much more than the keyframes' pace re-planned densely."""
+        much more than the keyframes' pace re-planned densely. ``walk``: every
+        frame's task has one free direction (else none has)."""
         popts = self.popts
         n = len(self.frames)
         count = max(2, n // popts.key_every)
@@ -348,7 +350,7 @@ class _Planner:
             keys,
             spacing=popts.key_spacing_rad,
             cap=popts.max_nodes_per_frame,
-            walk=[True] * len(keys),
+            walk=[walk] * len(keys),
             span=round(span),
         )
         path = np.empty((n, start.shape[0]))
@@ -368,7 +370,7 @@ class _Planner:
             if not bad:
                 break
             for lo, hi in _windows(bad, widen, count):
-                self._repair(start, path, bounds[lo], bounds[hi + 1])
+                self._repair(start, path, bounds[lo], bounds[hi + 1], walk)
                 failed[lo : hi + 1] = False
         return path
 
@@ -395,7 +397,9 @@ class _Planner:
             before, q_before = k, key_path[i]
         return failed
 
-    def _repair(self, start: np.ndarray, path: np.ndarray, first: int, last: int) -> None:
+    def _repair(
+        self, start: np.ndarray, path: np.ndarray, first: int, last: int, walk: bool
+    ) -> None:
         """Re-plan frames first+1..last densely, from path[first] (the start pose when
         first is -1), ending on path[last] unless last is the clip's last frame; kept
         only where the stretch's largest step (its joins included) gets smaller."""
@@ -409,7 +413,7 @@ class _Planner:
             ks,
             spacing=popts.spacing_rad,
             cap=popts.max_nodes_per_frame,
-            walk=[True] * len(ks),
+            walk=[walk] * len(ks),
             along=path[first + 1 : last + 1],
             end=end,
         )
@@ -456,8 +460,8 @@ def _plan(
         boxes.append((lower, upper, solver._free_mask()))
         walks.append(solver._free_directions() == 1)
     planner = _Planner(solver, frames, opts, popts, tracked, boxes)
-    if popts.key_every > 1 and n >= 2 * popts.key_every and all(walks):
-        path = planner.keyed(start)
+    if popts.key_every > 1 and n >= 2 * popts.key_every and len(set(walks)) == 1:
+        path = planner.keyed(start, walks[0])
     else:
         path, _ = planner.dense(
             start,

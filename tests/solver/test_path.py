@@ -331,6 +331,23 @@ def test_a_stretch_the_keyframes_pass_badly_is_planned_again() -> None:
         assert_reaches(chain, q, targets)
 
 
+@pytest.mark.parametrize(
+    "make", [panda_arm, _locked_panda], ids=["self-motion-walked", "no-self-motion"]
+)
+def test_keyframes_cut_the_work_and_keep_the_guarantees(make) -> None:  # type: ignore[no-untyped-def]
+    chain = make()
+    path = joint_stream(chain, 0, 120)
+    ref = float(np.abs(np.diff(path, axis=0)).max())
+    frames = [pose_targets(chain, q) for q in path]
+    dense = planned_from(chain, path[0], frames, path_options=PathOptions(key_every=1))
+    keyed = planned_from(chain, path[0], frames)
+    assert keyed.success and dense.success
+    assert keyed.nodes < dense.nodes / 2
+    assert keyed.largest_step <= min(1.5 * ref, keyed.tracked_largest_step)
+    for q, targets in zip(keyed.q, frames, strict=True):
+        assert_reaches(chain, q, targets)
+
+
 def test_repair_windows_widen_and_merge() -> None:
     assert _windows([3], 1, 10) == [(2, 4)]
     assert _windows([0, 9], 1, 10) == [(0, 1), (8, 9)]  # clipped to the clip
