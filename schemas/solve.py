@@ -197,8 +197,9 @@ class ClipRequest(StrictModel):
         "counted from the current pose), instead of each frame from the previous answer. "
         "Every frame that frame-by-frame solving would reach is reached, and where that "
         "reaches every frame the largest step is never larger; a redundant arm no longer "
-        "jumps where its self-motion meets a singularity. Costs milliseconds per frame "
-        "(a 7-DOF arm under 6-D poses: about 2 ms), so it suits clips known ahead "
+        "jumps where its self-motion meets a singularity. Costs about 0.1-0.2 ms per frame "
+        "(a 7-DOF arm under 6-D poses; frame by frame: under 0.01 ms) and answers only once "
+        "the whole clip is planned, so it suits clips known ahead "
         "(trajectories, animations), not live streams. The response adds a `plan` summary.",
     )
 

@@ -122,7 +122,7 @@ class Runner:
         self.metrics = metrics
         self.warmup = warmup
         self.pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="ik-solve")
-        # Planned clips take a second or more each: they queue on a thread of their own
+        # A planned clip takes 0.05-1 s (600 frames): they queue on a thread of their own
         # so that they never hold up the pool's frames, one-shot solves and chain builds.
         self.plan_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ik-plan")
         # A queue of plans is a queue of seconds: beyond this many, say so at once
