@@ -1095,8 +1095,10 @@ class IKSolver:
 
     def _prepare(self, targets: Sequence[Target], opts: IKOptions, q0: Vector) -> None:
         """Load a frame's targets and its bounds (variables outside every targeted
-        chain frozen at q0), as a solve from q0 does."""
+        chain frozen at q0), as a solve from q0 does; aim directions normalised as a
+        solve normalises them (the caller has checked the targets)."""
         self._load_targets(targets, opts)
+        _check_targets(self._data)
         if not (self._bounds_are_limits and self._every_effector_moves_all and self._active):
             self._set_free_bounds(q0)
 

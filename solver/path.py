@@ -35,22 +35,30 @@ and the frames between are filled in: the straight line
 between the two keyframes' poses, projected onto each frame's targets. Where the line
 cuts a corner of the self-motion (near a singularity, where joints turn fast), the
 filled frames step well above the keyframes' pace (``repair_ratio`` x the keyframe
-path's largest step per frame); those stretches, widened by one keyframe on each side,
-are planned again frame by frame as above, from the path's pose before them onto its
-pose after them, and kept where their largest step gets smaller; what is still above
-the pace is tried again over 3, then 9 keyframes on each side. On the benchmark's
+path's largest step per frame between keyframes that are reached, at least
+``spacing_rad``), or hold a frame left unreached; those stretches, widened by one
+keyframe on each side, are planned again frame by frame as above, from the path's pose
+before them onto its pose after them (left free at the clip's end), and kept where they
+reach more frames, or as many with a smaller largest step (steps into and out of an
+unreached frame apart, then all); what is still bad is tried again over 3, then 9
+keyframes on each side, and once the stretches would cover more than half the clip,
+the whole clip is planned densely instead. On the benchmark's
 streams this is about 10x cheaper than planning every frame densely, and holds the
 same streams within 2x of the reference's step; a 6-DOF arm's (no walk), about 2x
 (``bench/RESULTS.md``, "Planned clips").
 
 Guarantees, by construction: every frame the tracker solves is solved by the plan, and
 when the tracker solves every frame the plan's largest step is at most the tracker's.
-Frames that no node reaches keep the tracker's answer (its closest pose).
+Frames where no answer is found keep the tracker's answer (its closest pose).
 
 Cost: about frames x nodes x a few Gauss-Newton steps; nodes grow with the
 self-motion's length over the spacing (a 7-DOF arm: hundreds to a few thousand per
-walked frame), and memory with frames x nodes x joints; ``PathOptions.max_work`` bounds
-both. ``bench/ik.py`` part (c) measures it.
+walked frame), and memory with frames x nodes x joints. ``PathOptions.max_work`` bounds
+the answers gathered beyond each frame's anchors (which every frame planned keeps:
+about carried + perturbed + 2); with keyframes, the frames planned are the keyframes,
+the filled-in frames and the repaired stretches (the latter at most about twice the
+clip: past half the clip, one dense plan of the whole clip replaces the stretches).
+``bench/ik.py`` part (c) measures it.
 """
 
 from __future__ import annotations
@@ -66,6 +74,23 @@ from ._path_kernels import dp_step, frame_nodes, project_onto
 from .ik import IKOptions, IKResult, IKSolver, Target
 from .types import Vector
 
+_FLOAT_FIELDS = (
+    "spacing_rad",
+    "window_rad",
+    "perturbation_rad",
+    "max_work",
+    "key_spacing_rad",
+    "repair_ratio",
+)
+_INT_FIELDS = (
+    "max_nodes_per_frame",
+    "carried",
+    "perturbed",
+    "smoothing_sweeps",
+    "seed",
+    "key_every",
+)
+
 
 @dataclass(frozen=True)
 class PathOptions:
@@ -77,8 +102,10 @@ class PathOptions:
     # (nor longer than 3x the best path's largest step so far, at least 4 spacings)
     max_nodes_per_frame: int = 8192
     # Bounds a whole plan's time and memory: answers x DOF^3 (a 7-DOF answer costs
-    # 343, so ~2.9 million of them; a 600-frame iiwa clip uses about 1 million). Each
-    # frame may use up to 4x its even share of what is left.
+    # 343, so ~2.9 million of them; a 600-frame iiwa clip planned densely uses about
+    # 1 million, with keyframes about 100,000). Each frame planned may use up to 4x its
+    # even share of what is left (the keyframes' pass leaves a clip's worth of shares
+    # for the repairs).
     max_work: float = 1e9
     carried: int = 16  # previous frame's nodes carried onto the next targets
     perturbed: int = 8  # random neighbours of carried nodes, per frame
@@ -96,24 +123,14 @@ class PathOptions:
 
     def __post_init__(self) -> None:
         # The compiled kernels get exactly one type per field (an int where a float is
-        # expected would fail to compile mid-plan).
-        for name in (
-            "spacing_rad",
-            "window_rad",
-            "perturbation_rad",
-            "max_work",
-            "key_spacing_rad",
-            "repair_ratio",
-        ):
+        # expected would fail to compile mid-plan). A bool is a number to Python, but
+        # never what a caller meant here.
+        for name in _FLOAT_FIELDS + _INT_FIELDS:
+            if isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be a number, not a bool")
+        for name in _FLOAT_FIELDS:
             object.__setattr__(self, name, float(getattr(self, name)))
-        for name in (
-            "max_nodes_per_frame",
-            "carried",
-            "perturbed",
-            "smoothing_sweeps",
-            "seed",
-            "key_every",
-        ):
+        for name in _INT_FIELDS:
             value = getattr(self, name)
             if isinstance(value, float) and not value.is_integer():
                 raise ValueError(f"{name} must be an integer")
@@ -130,8 +147,8 @@ class PathOptions:
             raise ValueError("key_spacing_rad must be a positive number")
         if self.key_every < 1:
             raise ValueError("key_every must be at least 1")
-        if not self.repair_ratio >= 1.0:
-            raise ValueError("repair_ratio must be at least 1")
+        if not (math.isfinite(self.repair_ratio) and self.repair_ratio >= 1.0):
+            raise ValueError("repair_ratio must be a finite number, at least 1")
         if self.perturbed < 0 or self.smoothing_sweeps < 0:
             raise ValueError("perturbed and smoothing_sweeps must be >= 0")
         if not (math.isfinite(self.perturbation_rad) and self.perturbation_rad >= 0.0):
@@ -269,9 +286,9 @@ class _Planner:
         self, k: int, anchors: np.ndarray, walk: bool, spacing: float, cap: int, frames_left: int
     ) -> np.ndarray:
         """Frame k's nodes from ``anchors`` (``frame_nodes``), the tracker's answer
-        first when it is within tolerance; never empty (nothing reaches the frame:
-        the tracker's closest pose). Each call may use up to 4x its even share of the
-        work left."""
+        first when it is within tolerance; never empty (no answer found: the
+        tracker's closest pose). Each call may use up to 4x its even share of the work
+        left, shared over ``frames_left`` (the frames still to plan that count on it)."""
         tracked = self.tracked[k]
         box = self.load(k, tracked.q)
         fair = 4.0 * (self.budget - self.considered) / max(1, frames_left)
@@ -295,13 +312,15 @@ class _Planner:
         along: np.ndarray | None = None,
         end: np.ndarray | None = None,
         span: int = 1,
+        reserve: int = 0,
     ) -> tuple[np.ndarray, float]:
         """The dynamic programme over frames ``ks`` from the single pose ``before``:
         the path (one row per frame) with the smallest largest step, and that step.
         ``along`` (rows per frame) joins each frame's anchors (a path being repaired);
         ``end`` fixes the last frame's pose (a repair joins the path there); ``walk``
         says, per frame, whether to walk the self-motion (one free direction). ``span``:
-        frames between consecutive ks (keyframes), which scales the window."""
+        frames between consecutive ks (keyframes), which scales the window;
+        ``reserve``: frames planned later that the work budget keeps shares for."""
         popts = self.popts
         lower, upper = self.solver.chain.lower, self.solver.chain.upper
         prev = before[None, :]
@@ -317,7 +336,8 @@ class _Planner:
                 anchors = _anchors(
                     prev, worst, total, np.array(must), lower, upper, self.rng, popts
                 )
-                nodes = self.nodes_at(k, anchors, walk[i], spacing, cap, len(ks) - i)
+                left = len(ks) - i + reserve
+                nodes = self.nodes_at(k, anchors, walk[i], spacing, cap, left)
             # dp_step ranks steps longer than this only for nodes nothing shorter
             # reaches: 3x the best path's largest step so far (at least 4 spacings).
             window = popts.window_rad * span
@@ -352,35 +372,61 @@ class _Planner:
             cap=popts.max_nodes_per_frame,
             walk=[walk] * len(keys),
             span=round(span),
+            reserve=n,  # the repairs' share
         )
         path = np.empty((n, start.shape[0]))
-        failed = self._fill(start, keys, key_path, path)
+        self._fill(start, keys, key_path, path)
         # The keyframes' pace: a path through them moving evenly steps about this much
         # per frame. A stretch stepping well above it passed a keyframe badly
         # (interpolation cut a corner of the self-motion, e.g. near a singularity).
-        pace = max(popts.repair_ratio * key_worst / span, popts.spacing_rad)
+        # Measured between keyframes that are reached: a jump to a frame nothing
+        # reaches says nothing of the pace elsewhere.
         bounds = [-1, *keys]
+        reached = [self._solved_at(k, q) for k, q in zip(keys, key_path, strict=True)]
+        gaps = _steps(start, key_path)
+        paced = [gaps[i] for i in range(count) if reached[i] and (i == 0 or reached[i - 1])]
+        pace = max(popts.repair_ratio * max(paced, default=key_worst) / span, popts.spacing_rad)
         for widen in (1, 3, 9):
-            steps = _steps(start, path)
-            bad = [
-                i
-                for i in range(count)
-                if failed[i] or steps[bounds[i] + 1 : bounds[i + 1] + 1].max() > pace
-            ]
+            bad = self._bad_intervals(start, path, bounds, pace)
             if not bad:
                 break
-            for lo, hi in _windows(bad, widen, count):
+            windows = _windows(bad, widen, count)
+            if 2 * sum(hi - lo + 1 for lo, hi in windows) > count:
+                # Past half the clip, one dense plan of it all costs less than the
+                # stretches, and sees everything they would.
+                self._repair(start, path, -1, n - 1, walk)
+                break
+            for lo, hi in windows:
                 self._repair(start, path, bounds[lo], bounds[hi + 1], walk)
-                failed[lo : hi + 1] = False
         return path
+
+    def _solved_at(self, k: int, q: np.ndarray) -> bool:
+        """Whether pose q of frame k is within tolerance: every node is, but the
+        tracker's answer kept where no answer was found."""
+        return self.tracked[k].success or not np.array_equal(q, self.tracked[k].q)
+
+    def _bad_intervals(
+        self, start: np.ndarray, path: np.ndarray, bounds: list[int], pace: float
+    ) -> list[int]:
+        """Keyframe intervals holding a frame left unreached, or a step above
+        ``pace`` between two reached frames."""
+        steps = _steps(start, path)
+        solved = [self._solved_at(k, path[k]) for k in range(len(path))]
+        bad = []
+        for i in range(len(bounds) - 1):
+            frames = range(bounds[i] + 1, bounds[i + 1] + 1)
+            if not all(solved[k] for k in frames) or any(
+                steps[k] > pace for k in frames if solved[k] and (k == 0 or solved[k - 1])
+            ):
+                bad.append(i)
+        return bad
 
     def _fill(
         self, start: np.ndarray, keys: list[int], key_path: np.ndarray, path: np.ndarray
-    ) -> np.ndarray:
+    ) -> None:
         """Frames between keyframes: the straight line between the two keyframes'
         poses, projected onto each frame's targets; where that fails, the tracker's
-        answer. Returns, per interval, whether any of its frames failed."""
-        failed = np.zeros(len(keys), dtype=bool)
+        answer."""
         before, q_before = -1, start
         lower, upper = self.solver.chain.lower, self.solver.chain.upper
         for i, k in enumerate(keys):
@@ -390,19 +436,18 @@ class _Planner:
                 q = np.clip((1.0 - a) * q_before + a * key_path[i], lower, upper)
                 box = self.load(f, q)
                 if project_onto(q, self.solver._data, box, 30) > 1.0:
-                    failed[i] = True
                     q = self.tracked[f].q.copy()
                 path[f] = q
-            self.considered += k - before
+            self.considered += k - before - 1
             before, q_before = k, key_path[i]
-        return failed
 
     def _repair(
         self, start: np.ndarray, path: np.ndarray, first: int, last: int, walk: bool
     ) -> None:
         """Re-plan frames first+1..last densely, from path[first] (the start pose when
         first is -1), ending on path[last] unless last is the clip's last frame; kept
-        only where the stretch's largest step (its joins included) gets smaller."""
+        where it reaches more frames, or as many with a smaller largest step (see
+        ``_stretch_score``)."""
         n = len(self.frames)
         ks = list(range(first + 1, last + 1))
         before = start if first < 0 else path[first]
@@ -417,10 +462,30 @@ class _Planner:
             along=path[first + 1 : last + 1],
             end=end,
         )
-        after = path[last + 1 : last + 2]  # the join after the stretch (none at the end)
-        old = _largest_step(before, np.vstack([path[first + 1 : last + 1], after]))
-        if _largest_step(before, np.vstack([new, after])) < old:
+        old = path[first + 1 : last + 1]
+        if self._stretch_score(before, first, new, path) < self._stretch_score(
+            before, first, old, path
+        ):
             path[first + 1 : last + 1] = new
+
+    def _stretch_score(
+        self, before: np.ndarray, first: int, rows: np.ndarray, path: np.ndarray
+    ) -> tuple[int, float, float]:
+        """How good ``rows`` are as frames first+1.. of ``path`` (smaller is better):
+        the frames they leave unreached; the largest step between two reached frames
+        (the stretch's joins included: a jump into or out of an unreached frame is
+        there whichever way the stretch goes); then the largest step of all."""
+        last = first + len(rows)
+        seq = [before, *rows]
+        ok = [first < 0 or self._solved_at(first, before)]
+        ok += [self._solved_at(first + 1 + i, q) for i, q in enumerate(rows)]
+        if last + 1 < len(path):  # the join after the stretch
+            seq.append(path[last + 1])
+            ok.append(self._solved_at(last + 1, path[last + 1]))
+        steps = np.abs(np.diff(np.array(seq), axis=0)).max(axis=1)
+        between = [steps[i] for i in range(len(steps)) if ok[i] and ok[i + 1]]
+        unreached = sum(not x for x in ok[1 : 1 + len(rows)])
+        return unreached, max(between, default=0.0), float(steps.max(initial=0.0))
 
 
 def _windows(bad: list[int], widen: int, count: int) -> list[tuple[int, int]]:
@@ -472,8 +537,8 @@ def _plan(
         )
         path = path.reshape(n, solver.chain.n_dof)
     # A node is within tolerance unless it is the tracker's answer kept for a frame
-    # nothing reaches.
-    solved = [tracked[k].success or not np.array_equal(path[k], tracked[k].q) for k in range(n)]
+    # where no answer was found.
+    solved = [planner._solved_at(k, path[k]) for k in range(n)]
     _smooth(solver, frames, opts, start, path, solved, boxes, popts.smoothing_sweeps)
     tracked_path = np.array([r.q for r in tracked]).reshape(path.shape)
     tracked_step = _largest_step(start, tracked_path)

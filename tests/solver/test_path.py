@@ -314,8 +314,9 @@ def test_a_stretch_the_keyframes_pass_badly_is_planned_again() -> None:
     # Keyframes 15 frames apart on the pole-crossing stream: the straight lines between
     # them cut across the self-motion near the pole, and the frames filled in step
     # several times the reference's; the repair plans those stretches frame by frame.
+    # 93 frames: six keyframe intervals of 15 or 16 frames.
     chain = panda_arm()
-    path = joint_stream(chain, 4, 90)
+    path = joint_stream(chain, 4, 93)
     ref = float(np.abs(np.diff(path, axis=0)).max())
     frames = [pose_targets(chain, q) for q in path]
     coarse = PathOptions(key_every=15, smoothing_sweeps=0)
@@ -386,9 +387,57 @@ def test_the_work_budget_bounds_a_keyframe_plan_and_keeps_its_guarantees() -> No
     small = planned_from(
         chain, path[0], frames, path_options=dataclasses.replace(coarse, max_work=500 * 7**3)
     )
-    assert small.nodes < full.nodes / 4
+    # Beyond the budget, each frame planned keeps its anchors (26): the keyframes
+    # (6), the repaired stretches (at most twice the clip) and one answer per frame
+    # filled in.
+    assert small.nodes <= 500 + 26 * (6 + 2 * 90) + 90 < full.nodes
     assert small.success
     assert small.largest_step <= small.tracked_largest_step
+
+
+@pytest.mark.parametrize(
+    "key_every", [1, 5, 15], ids=["every-frame", "keyframes", "keyframes-repaired"]
+)
+def test_a_frame_out_of_reach_does_not_spoil_the_rest_of_the_plan(key_every: int) -> None:
+    # The pole-crossing stream with frame 29 out of reach: that frame keeps the
+    # tracker's closest pose, and away from it the plan still crosses the pole (frame
+    # ~78) smoothly, also with keyframes 15 apart, whose straight lines cut corners
+    # there (the whole clip is planned again).
+    chain = panda_arm()
+    path = joint_stream(chain, 4, 90)
+    ref = float(np.abs(np.diff(path, axis=0)).max())
+    frames = [pose_targets(chain, q) for q in path]
+    first = frames[29][0]
+    frames[29] = [dataclasses.replace(first, position=first.position + 5.0)]
+    plan = planned_from(chain, path[0], frames, path_options=PathOptions(key_every=key_every))
+    assert [k for k, r in enumerate(plan.results) if not r.success] == [29]
+    steps = np.abs(np.diff(np.vstack([path[0], plan.q]), axis=0)).max(axis=1)
+    assert max(steps[k] for k in range(90) if not 27 <= k <= 32) <= 2.5 * ref
+    for k, (q, targets) in enumerate(zip(plan.q, frames, strict=True)):
+        if k != 29:
+            assert_reaches(chain, q, targets)
+
+
+@pytest.mark.parametrize("frames_in_clip", [9, 60], ids=["shorter-than-two-keyframes", "mixed"])
+def test_clips_keyframes_cannot_serve_are_planned_densely(frames_in_clip: int) -> None:
+    # Keyframes need at least 2 x key_every frames of one kind of task: a 9-frame
+    # clip, or one whose first half targets the tool's pose only (one free direction:
+    # walked) and second half the elbow's position as well (none: not walked), is
+    # planned exactly as key_every=1 plans it.
+    panda = panda_arm()
+    elbow = Effector(name="elbow", link="link4", mode=EffectorMode.POSITION)
+    chain = build_chain(list(panda.joints), [*panda.effectors, elbow])
+    path = joint_stream(chain, 0, frames_in_clip)
+    frames = [pose_targets(chain, q) for q in path]
+    if frames_in_clip == 60:
+        frames = [f[:1] for f in frames[:30]] + frames[30:]
+    else:
+        frames = [f[:1] for f in frames]
+    plan = planned_from(chain, path[0], frames)
+    dense = planned_from(chain, path[0], frames, path_options=PathOptions(key_every=1))
+    assert plan.nodes == dense.nodes
+    np.testing.assert_array_equal(plan.q, dense.q)
+    assert plan.success
 
 
 @pytest.mark.parametrize(
