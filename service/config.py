@@ -83,7 +83,8 @@ class Settings(BaseSettings):
         default=4,
         ge=1,
         description="Planned clips queued or running at once (one plans at a time); "
-        "more get 503 plans_busy",
+        "more get 503 plans_busy; one API key (a session when keys are off) holds at most "
+        "half of them, at least 1 (429 too_many_plans)",
     )
 
     # Default solver options (a session or request may override each).

@@ -16,6 +16,7 @@ payload_too_large    413    close 1009 (message larger than IK_WS_MAX_MESSAGE_BY
 too_many_sessions    503    -- (+ Retry-After)
 not_ready            503    error message (solver still warming up) (+ Retry-After)
 plans_busy           503    -- (IK_MAX_QUEUED_PLANS planned clips already queued; + Retry-After)
+too_many_plans       429    -- (this client holds half of IK_MAX_QUEUED_PLANS; + Retry-After)
 too_many_websockets  --     close 1013 (try again later)
 internal_error       500    error message, then close 1011
 ==================== ====== =====================================================
@@ -118,6 +119,16 @@ def not_ready() -> ServiceError:
         "not_ready",
         "the solver is still warming up (see /readyz)",
         status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
+        retry_after_s=1.0,
+    )
+
+
+def too_many_plans(limit: int) -> ServiceError:
+    return ServiceError(
+        "too_many_plans",
+        f"this client already has {limit} planned clip(s) queued or running (half of "
+        "IK_MAX_QUEUED_PLANS, per API key, or per session when the server has no keys)",
+        status_code=status.HTTP_429_TOO_MANY_REQUESTS,
         retry_after_s=1.0,
     )
 

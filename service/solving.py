@@ -28,7 +28,7 @@ from solver.ik import Target as SolverTarget
 from solver.path import PlannedPath
 
 from . import convert
-from .errors import ServiceError, not_found, not_ready, plans_busy
+from .errors import ServiceError, not_found, not_ready, plans_busy, too_many_plans
 from .metrics import Metrics
 from .sessions import Session, SessionStore
 
@@ -128,7 +128,11 @@ class Runner:
         # A queue of plans is a queue of seconds: beyond this many, say so at once
         # (503) rather than let clients time out waiting.
         self.max_queued_plans = max_queued_plans
+        # One client (an API key; a session when the server has no keys) holds at most
+        # half the places, so that it cannot keep everyone else's plans out.
+        self.max_plans_per_client = max(1, max_queued_plans // 2)
         self.plans_in_flight = 0  # queued or running; changed on the loop only
+        self.plans_by_client: dict[str, int] = {}  # the same, per client
 
     def shutdown(self) -> None:
         self.pool.shutdown(wait=False, cancel_futures=True)
@@ -176,17 +180,23 @@ class Runner:
     ) -> tuple[list[dict[str, Any]], PlannedPath]:
         """Solve a session's clip as a whole (``IKSolver.plan``): the answers and the
         plan. Always off the loop, on the planning thread: a plan takes milliseconds
-        per frame. At most ``max_queued_plans`` at once (503 ``plans_busy``): a plan
-        counts from here until its thread is done, also if its caller went away."""
+        per frame. At most ``max_queued_plans`` at once (503 ``plans_busy``), and at
+        most half of them (at least one) for one client (429 ``too_many_plans``): a
+        plan counts from here until its thread is done, also if its caller went away."""
+        client = session.owner if session.owner is not None else f"session:{session.id}"
+        held = self.plans_by_client.get(client, 0)
+        if held >= self.max_plans_per_client:
+            raise too_many_plans(self.max_plans_per_client)
         if self.plans_in_flight >= self.max_queued_plans:
             raise plans_busy(self.max_queued_plans)
         self.plans_in_flight += 1
+        self.plans_by_client[client] = held + 1
         handed_over = False
 
         def on_submit(fut: asyncio.Future[Any]) -> None:
             nonlocal handed_over
             handed_over = True
-            fut.add_done_callback(lambda _: self._plan_done())
+            fut.add_done_callback(lambda _: self._plan_done(client))
 
         try:
             out, plan = await self._under_lock(
@@ -194,12 +204,17 @@ class Runner:
             )
         finally:
             if not handed_over:  # refused or failed before it reached the thread
-                self._plan_done()
+                self._plan_done(client)
         assert plan is not None
         return out, plan
 
-    def _plan_done(self) -> None:
+    def _plan_done(self, client: str) -> None:
         self.plans_in_flight -= 1
+        held = self.plans_by_client[client] - 1
+        if held:
+            self.plans_by_client[client] = held
+        else:
+            del self.plans_by_client[client]
 
     async def _under_lock(
         self,

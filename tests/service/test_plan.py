@@ -234,3 +234,82 @@ def test_plans_beyond_the_queue_limit_are_refused_at_once(warm_solver: float) ->
             runner.shutdown()
 
     asyncio.run(scenario())
+
+
+def test_one_client_holds_at_most_half_the_plan_places(warm_solver: float) -> None:
+    # A queue of four: one API key (two of its sessions) holds two places, and its
+    # third plan is refused with 429 too_many_plans while places are free; another
+    # key, and a session created without keys (its own client), still get theirs;
+    # past four, 503 plans_busy. When all are done nothing is left counted.
+    settings = Settings()
+    view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
+    options = convert.session_defaults(settings)
+    release = threading.Event()
+
+    async def scenario() -> None:
+        warm = solving.Warmup(lambda: 0.0)
+        warm._run()
+        runner = solving.Runner(
+            inline_budget_us=0.0,
+            threads=1,
+            metrics=Metrics(lambda: 1),
+            warmup=warm,
+            max_frames_per_request=10,
+            max_queued_plans=4,
+        )
+        store = InMemorySessionStore(max_sessions=10, ttl_s=60.0)
+
+        async def session_of(owner: str | None) -> Any:
+            session, _ = new_session(
+                view, IKSolver(view.chain, options), options, now=store.clock(), owner=owner
+            )
+            await store.add(session)
+            real = session.solver.plan
+
+            def blocked(*args: Any, real: Any = real, **kwargs: Any) -> Any:
+                release.wait(timeout=30)
+                return real(*args, **kwargs)
+
+            session.solver.plan = blocked  # type: ignore[method-assign]
+            return session
+
+        a1, a2, b, c, d = [await session_of(o) for o in ("key-a", "key-a", "key-b", None, None)]
+        target = convert.targets(S.Frame.model_validate(hand_frame(1)).targets, view, "t")
+        jobs = [(1, target)]
+
+        def plan(session: Any) -> asyncio.Task[Any]:
+            return asyncio.create_task(runner.session_plan(session, store, jobs, 0.0, "http"))
+
+        async def refused(session: Any) -> ServiceError:
+            with pytest.raises(ServiceError) as e:
+                await asyncio.wait_for(
+                    runner.session_plan(session, store, jobs, 0.0, "http"), timeout=2.0
+                )
+            return e.value
+
+        try:
+            running = [plan(a1), plan(a2)]
+            await asyncio.sleep(0.1)
+            error = await refused(a1)
+            assert (error.code, error.status_code) == ("too_many_plans", 429)
+            assert error.retry_after_s is not None
+            assert runner.plans_in_flight == 2
+            running += [plan(b), plan(c)]
+            await asyncio.sleep(0.1)
+            assert runner.plans_in_flight == 4
+            error = await refused(d)
+            assert (error.code, error.status_code) == ("plans_busy", 503)
+            release.set()
+            for task in running:
+                out, _ = await task
+                assert out[0]["success"]
+            for _ in range(100):
+                if runner.plans_in_flight == 0:
+                    break
+                await asyncio.sleep(0.05)
+            assert runner.plans_in_flight == 0 and runner.plans_by_client == {}
+        finally:
+            release.set()
+            runner.shutdown()
+
+    asyncio.run(scenario())
