@@ -53,6 +53,8 @@ from .solve import (
 )
 from .ws import (
     ClientMessage,
+    ClipMessage,
+    ClipResultMessage,
     ErrorMessage,
     ErrorPayload,
     FrameMessage,
@@ -65,7 +67,9 @@ from .ws import (
 __all__ = [
     "ChainSpec",
     "ClientMessage",
+    "ClipMessage",
     "ClipRequest",
+    "ClipResultMessage",
     "CompactFrameResult",
     "CompactFrameResults",
     "DofInfo",

@@ -12,7 +12,17 @@ from typing import Annotated, Literal
 from pydantic import Field
 
 from .common import StrictModel
-from .solve import HARD_MAX_TARGETS, CompactFrameResult, FrameId, FrameResult, Target
+from .solve import (
+    HARD_MAX_FRAMES,
+    HARD_MAX_TARGETS,
+    ClipRequest,
+    CompactFrameResult,
+    Frame,
+    FrameId,
+    FrameResult,
+    PlanSummary,
+    Target,
+)
 
 
 class FrameMessage(StrictModel):
@@ -23,6 +33,18 @@ class FrameMessage(StrictModel):
     targets: list[Target] = Field(min_length=1, max_length=HARD_MAX_TARGETS)
 
 
+class ClipMessage(StrictModel):
+    """Client -> server: a clip of frames, solved in order, each warm-started from the
+    previous answer, or with ``plan`` as a whole (as ``POST .../frames`` with
+    ``{"frames": [...]}``); answered by one ``clip_result``. The server caps its length
+    (IK_MAX_FRAMES_PER_REQUEST) and the message's size (IK_WS_MAX_MESSAGE_BYTES)."""
+
+    type: Literal["clip"]
+    id: FrameId = Field(description="Message id; must be greater than the previous message's id")
+    frames: list[Frame] = Field(min_length=1, max_length=HARD_MAX_FRAMES)
+    plan: bool = Field(default=False, description=ClipRequest.model_fields["plan"].description)
+
+
 class PingMessage(StrictModel):
     """Client -> server: ask for a ``pong`` (keep-alive, round-trip time)."""
 
@@ -30,7 +52,7 @@ class PingMessage(StrictModel):
     id: FrameId
 
 
-ClientMessage = Annotated[FrameMessage | PingMessage, Field(discriminator="type")]
+ClientMessage = Annotated[FrameMessage | ClipMessage | PingMessage, Field(discriminator="type")]
 
 
 class ResultMessage(StrictModel):
@@ -41,6 +63,21 @@ class ResultMessage(StrictModel):
     success: bool
     result: FrameResult | CompactFrameResult = Field(
         description="A CompactFrameResult on a socket opened with ?results=compact"
+    )
+
+
+class ClipResultMessage(StrictModel):
+    """Server -> client: the results of clip ``id``, one per frame in order (each
+    echoing its frame's ``id``); ``success``: every frame's success."""
+
+    id: int
+    type: Literal["clip_result"]
+    success: bool
+    results: list[FrameResult] | list[CompactFrameResult] = Field(
+        description="CompactFrameResults on a socket opened with ?results=compact"
+    )
+    plan: PlanSummary | None = Field(
+        default=None, description="Present when the clip was planned (`plan: true`)"
     )
 
 
@@ -68,4 +105,4 @@ class PongMessage(StrictModel):
     type: Literal["pong"]
 
 
-ServerMessage = ResultMessage | ErrorMessage | PongMessage
+ServerMessage = ResultMessage | ClipResultMessage | ErrorMessage | PongMessage

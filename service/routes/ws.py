@@ -1,11 +1,13 @@
 """WebSocket ``/v1/sessions/{session_id}/ws``: the game-client path.
 
-The client sends ``frame`` (and ``ping``) messages, each with an increasing ``id``; the
-server answers each one, in order, before reading the next. JSON text messages get JSON
+The client sends ``frame`` messages (and ``clip``: several frames in one message,
+solved in order or planned as a whole, and ``ping``), each with an increasing ``id``;
+the server answers each one, in order, before reading the next. JSON text messages get JSON
 text answers, MessagePack binary messages get MessagePack answers.
 
 Recoverable errors (an error ``result`` message; the socket stays open): invalid_format,
-invalid_problem, id_reuse, not_ready, rate_limited. Closes: 4401 unauthorized, 4403
+invalid_problem, id_reuse, not_ready, rate_limited, and for a planned clip plans_busy
+and too_many_plans. Closes: 4401 unauthorized, 4403
 forbidden (wrong token, or an Origin not in IK_CORS_ORIGINS),
 4404 not_found (at connect, or when the session was deleted / expired), 1009 message
 too big, 1013 too many WebSockets, 1011 unexpected error (after an internal_error
@@ -36,6 +38,7 @@ from ..errors import (
     WS_NOT_FOUND,
     WS_UNAUTHORIZED,
     ServiceError,
+    invalid_problem,
     validation_errors,
 )
 from ..sessions import Session
@@ -43,7 +46,9 @@ from ..sessions import Session
 log = logging.getLogger("service")
 router = APIRouter(prefix="/v1")
 
-_CLIENT_MESSAGE: TypeAdapter[S.FrameMessage | S.PingMessage] = TypeAdapter(S.ClientMessage)
+_CLIENT_MESSAGE: TypeAdapter[S.FrameMessage | S.ClipMessage | S.PingMessage] = TypeAdapter(
+    S.ClientMessage
+)
 _AUTH_CLOSE = {
     "unauthorized": WS_UNAUTHORIZED,
     "forbidden": WS_FORBIDDEN,
@@ -187,7 +192,7 @@ class _Connection:
         binary = isinstance(data, bytes)
         view = self.session.view
         raw: Any = None
-        msg: S.FrameMessage | S.PingMessage | None = None
+        msg: S.FrameMessage | S.ClipMessage | S.PingMessage | None = None
         # A well-formed frame takes the fast path (convert.fast_frame); anything else is
         # validated by pydantic, which gives the documented error.
         try:
@@ -229,6 +234,9 @@ class _Connection:
         if isinstance(msg, S.PingMessage):
             await self.send({"id": msg.id, "type": "pong"}, binary)
             return
+        if isinstance(msg, S.ClipMessage):
+            await self.clip(binary, msg, t0)
+            return
         try:
             targets = convert.targets(msg.targets, view, "targets")
         except ServiceError as e:
@@ -266,6 +274,40 @@ class _Connection:
         await self.send(
             {"id": msg_id, "type": "result", "success": result["success"], "result": result}, binary
         )
+
+    async def clip(self, binary: bool, msg: S.ClipMessage, t0: float) -> None:
+        """Solve a clip (in order, or planned as a whole) and answer it in one
+        ``clip_result``; as ``POST .../frames`` with ``{"frames": [...]}``."""
+        view = self.session.view
+        runner = self.svc.runner
+        limit = self.svc.settings.max_frames_per_request
+        try:
+            if len(msg.frames) > limit:
+                raise invalid_problem(
+                    f"at most {limit} frames per message (IK_MAX_FRAMES_PER_REQUEST)", "frames"
+                )
+            jobs = [
+                (f.id, convert.targets(f.targets, view, f"frames[{i}].targets"))
+                for i, f in enumerate(msg.frames)
+            ]
+            plan = None
+            if msg.plan:
+                out, planned = await runner.session_plan(
+                    self.session, self.svc.store, jobs, t0, "ws", self.build
+                )
+                plan = convert.plan_summary(planned)
+            else:
+                out = await runner.session_frames(
+                    self.session, self.svc.store, jobs, t0, "ws", self.build
+                )
+        except ServiceError as e:
+            if e.code == "not_found":
+                raise
+            await self.reply_error(binary, msg.id, e.code, e.detail, e.field)
+            return
+        success = all(r["success"] for r in out)
+        reply = {"id": msg.id, "type": "clip_result", "success": success, "results": out}
+        await self.send({**reply, "plan": plan}, binary)
 
 
 @router.websocket("/sessions/{session_id}/ws")

@@ -393,3 +393,73 @@ def test_watchdog_and_endpoint_cancel_together_is_a_cancellation_not_a_slow_read
         return out["inner"], out["outer"]
 
     assert asyncio.run(main()) == ("cancelled", "cancelled")
+
+
+def _clip(msg_id: int, n: int, plan: bool) -> dict[str, Any]:
+    frames = [hand_frame(10 + i, y=0.1 + 0.01 * i) for i in range(n)]
+    return {"type": "clip", "id": msg_id, "frames": frames, "plan": plan}
+
+
+def _pose(client: TestClient, s: Created) -> list[float]:
+    r = client.get(f"/v1/sessions/{s.id}", headers=s.headers)
+    q: list[float] = r.json()["pose"]["q"]
+    return q
+
+
+@pytest.mark.parametrize("plan", [True, False], ids=["planned", "in-order"])
+def test_a_clip_message_is_answered_by_one_clip_result(
+    client: TestClient, session: Created, plan: bool
+) -> None:
+    # As POST .../frames with {"frames": [...]}: one result per frame, in order, each
+    # with its frame's id; the session's pose is the last frame's answer, and the next
+    # frame message starts from it.
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json(_clip(4, 5, plan))
+        reply = SERVER_MESSAGE.validate_python(ws.receive_json())
+        assert isinstance(reply, S.ClipResultMessage)
+        assert reply.id == 4 and reply.success
+        assert [r.id for r in reply.results] == [10, 11, 12, 13, 14]
+        assert all(r.success for r in reply.results)
+        assert (reply.plan is not None) == plan
+        if reply.plan is not None:
+            assert reply.plan.candidates >= 5 and reply.plan.plan_us > 0
+        assert _pose(client, session) == pytest.approx(reply.results[-1].q, abs=0.0)
+        ws.send_json(frame_msg(5, y=0.15))
+        assert ws.receive_json()["success"] is True
+    counters = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()
+    assert counters["counters"]["frames"] == 6
+
+
+def test_a_clip_in_msgpack_with_compact_results(client: TestClient, session: Created) -> None:
+    with client.websocket_connect(f"{url(session)}?results=compact", headers=session.headers) as ws:
+        ws.send_bytes(msgpack.packb(_clip(1, 3, True)))
+        raw = msgpack.unpackb(ws.receive_bytes())
+    reply = S.ClipResultMessage.model_validate(raw)
+    assert all(isinstance(r, S.CompactFrameResult) for r in reply.results)
+    assert [r.id for r in reply.results] == [10, 11, 12] and reply.plan is not None
+
+
+def test_a_clip_with_a_bad_frame_is_refused_whole(
+    make_client: Callable[..., TestClient],
+) -> None:
+    client = make_client(Settings(max_frames_per_request=4))
+    session = create(client)
+    before = _pose(client, session)
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        bad = _clip(1, 3, True)
+        bad["frames"][2]["targets"][0]["effector"] = "claw"
+        ws.send_json(bad)
+        err = S.ErrorMessage.model_validate(ws.receive_json())
+        assert (err.id, err.error.code) == (1, "invalid_problem")
+        assert err.error.field == "frames[2].targets[0].effector"
+        ws.send_json(_clip(2, 5, False))  # over IK_MAX_FRAMES_PER_REQUEST
+        err = S.ErrorMessage.model_validate(ws.receive_json())
+        assert (err.id, err.error.code, err.error.field) == (2, "invalid_problem", "frames")
+        ws.send_json(_clip(2, 2, True))
+        assert ws.receive_json()["error"]["code"] == "id_reuse"
+        ws.send_json({"type": "clip", "id": 3, "frames": []})
+        err = S.ErrorMessage.model_validate(ws.receive_json())
+        assert (err.error.code, err.error.field) == ("invalid_format", "clip.frames")
+        assert _pose(client, session) == before
+        ws.send_json(_clip(4, 2, True))  # the socket and the session are fine
+        assert ws.receive_json()["success"] is True
