@@ -87,6 +87,11 @@ class ErrorPayload(StrictModel):
     code: str = Field(description="invalid_format | invalid_problem | id_reuse | not_ready | ...")
     message: str
     field: str | None = None
+    retry_after_s: float | None = Field(
+        default=None,
+        description="For not_ready, rate_limited, plans_busy, too_many_plans: when to try "
+        "again [s] (HTTP's Retry-After)",
+    )
 
 
 class ErrorMessage(StrictModel):

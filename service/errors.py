@@ -15,8 +15,8 @@ method_not_allowed   405    --
 payload_too_large    413    close 1009 (message larger than IK_WS_MAX_MESSAGE_BYTES)
 too_many_sessions    503    -- (+ Retry-After)
 not_ready            503    error message (solver still warming up) (+ Retry-After)
-plans_busy           503    -- (IK_MAX_QUEUED_PLANS planned clips already queued; + Retry-After)
-too_many_plans       429    -- (this client holds half of IK_MAX_QUEUED_PLANS; + Retry-After)
+plans_busy           503    error message (IK_MAX_QUEUED_PLANS planned clips already queued)
+too_many_plans       429    error message (this client holds half of IK_MAX_QUEUED_PLANS)
 too_many_websockets  --     close 1013 (try again later)
 internal_error       500    error message, then close 1011
 ==================== ====== =====================================================

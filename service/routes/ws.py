@@ -29,6 +29,7 @@ from pydantic import TypeAdapter, ValidationError
 from starlette import status
 
 import schemas as S
+from solver.errors import IKError
 from solver.ik import Target as SolverTarget
 
 from .. import convert
@@ -82,10 +83,18 @@ def _subprotocol(ws: WebSocket) -> str | None:
     return SUBPROTOCOL if SUBPROTOCOL in ws.scope.get("subprotocols", ()) else None
 
 
-def _error(msg_id: int | None, code: str, message: str, field: str | None = None) -> dict[str, Any]:
+def _error(
+    msg_id: int | None,
+    code: str,
+    message: str,
+    field: str | None = None,
+    retry_after_s: float | None = None,
+) -> dict[str, Any]:
     err: dict[str, Any] = {"code": code, "message": message}
     if field is not None:
         err["field"] = field
+    if retry_after_s is not None:
+        err["retry_after_s"] = retry_after_s
     return {"id": msg_id, "type": "result", "success": False, "error": err}
 
 
@@ -96,6 +105,10 @@ def _raw_id(raw: Any) -> int | None:
         if isinstance(v, int) and not isinstance(v, bool):
             return v
     return None
+
+
+def _solver_error(e: IKError) -> ServiceError:
+    return invalid_problem(str(e), getattr(e, "field", None))
 
 
 class _SlowReader(Exception):
@@ -183,10 +196,19 @@ class _Connection:
             self._sending_since = None
 
     async def reply_error(
-        self, binary: bool, msg_id: int | None, code: str, message: str, field: str | None = None
+        self,
+        binary: bool,
+        msg_id: int | None,
+        code: str,
+        message: str,
+        field: str | None = None,
+        retry_after_s: float | None = None,
     ) -> None:
         self.svc.metrics.error(code, "ws")
-        await self.send(_error(msg_id, code, message, field), binary)
+        await self.send(_error(msg_id, code, message, field, retry_after_s), binary)
+
+    async def reply_service_error(self, binary: bool, msg_id: int, e: ServiceError) -> None:
+        await self.reply_error(binary, msg_id, e.code, e.detail, e.field, e.retry_after_s)
 
     async def handle(self, data: str | bytes, t0: float) -> None:
         binary = isinstance(data, bytes)
@@ -269,7 +291,10 @@ class _Connection:
         except ServiceError as e:
             if e.code == "not_found":
                 raise
-            await self.reply_error(binary, msg_id, e.code, e.detail, e.field)
+            await self.reply_service_error(binary, msg_id, e)
+            return
+        except IKError as e:  # convert.py names the field first; this is the safety net
+            await self.reply_service_error(binary, msg_id, _solver_error(e))
             return
         await self.send(
             {"id": msg_id, "type": "result", "success": result["success"], "result": result}, binary
@@ -303,7 +328,10 @@ class _Connection:
         except ServiceError as e:
             if e.code == "not_found":
                 raise
-            await self.reply_error(binary, msg.id, e.code, e.detail, e.field)
+            await self.reply_service_error(binary, msg.id, e)
+            return
+        except IKError as e:  # convert.py names the field first; this is the safety net
+            await self.reply_service_error(binary, msg.id, _solver_error(e))
             return
         success = all(r["success"] for r in out)
         reply = {"id": msg.id, "type": "clip_result", "success": success, "results": out}

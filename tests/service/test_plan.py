@@ -228,7 +228,7 @@ def test_plans_beyond_the_queue_limit_are_refused_at_once(warm_solver: float) ->
             sessions[2].closed = True
             with pytest.raises(ServiceError, match="no such session"):
                 await runner.session_plan(sessions[2], store, jobs, 0.0, "http")
-            assert runner.plans_in_flight == 0
+            assert runner.plans_in_flight == 0 and runner.plans_by_client == {}
         finally:
             release.set()
             runner.shutdown()

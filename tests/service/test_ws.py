@@ -463,3 +463,45 @@ def test_a_clip_with_a_bad_frame_is_refused_whole(
         assert _pose(client, session) == before
         ws.send_json(_clip(4, 2, True))  # the socket and the session are fine
         assert ws.receive_json()["success"] is True
+
+
+def test_a_rate_limited_clip_is_refused_with_a_retry_hint(
+    make_client: Callable[..., TestClient],
+) -> None:
+    # Each frame of a clip counts: at 3 frames per second (burst: one full clip of 5),
+    # a second 5-frame clip right after the first is refused whole, with
+    # retry_after_s, and none of its frames is solved.
+    client = make_client(Settings(max_frames_per_s=3.0, max_frames_per_request=5))
+    session = create(client)
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json(_clip(1, 5, True))
+        assert ws.receive_json()["success"] is True
+        ws.send_json(_clip(2, 5, True))
+        err = S.ErrorMessage.model_validate(ws.receive_json())
+        assert (err.id, err.error.code) == (2, "rate_limited")
+        assert err.error.retry_after_s is not None and err.error.retry_after_s > 0
+        ws.send_json({"type": "ping", "id": 3})
+        assert ws.receive_json() == {"id": 3, "type": "pong"}
+    body = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()
+    assert body["counters"]["frames"] == 5
+
+
+def test_a_solver_error_in_a_clip_is_an_error_message_not_a_close(
+    client: TestClient, session: Created, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # convert.py rejects bad targets first, naming the field; a solver error that got
+    # past it is still a recoverable invalid_problem, as over HTTP.
+    from solver.errors import InvalidProblem
+    from solver.ik import IKSolver
+
+    def refuse(*args: Any, **kwargs: Any) -> Any:
+        raise InvalidProblem("refused for the test")
+
+    monkeypatch.setattr(IKSolver, "plan", refuse)
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json(_clip(1, 2, True))
+        err = S.ErrorMessage.model_validate(ws.receive_json())
+        assert (err.id, err.error.code) == (1, "invalid_problem")
+        assert "refused for the test" in err.error.message
+        ws.send_json(_clip(2, 2, False))
+        assert ws.receive_json()["success"] is True
