@@ -317,6 +317,8 @@ def _plan_all(
 ) -> tuple[list[dict[str, Any]], PlannedPath]:
     """``_track_all`` for a planned clip: all frames or none (a rejected target fails
     the request and leaves the session's pose as it was)."""
+    if session.closed:  # deleted while the plan waited for the planning thread
+        raise not_found()
     plan = session.solver.plan([targets for _, targets in jobs], options=options)
     server_us = (time.perf_counter() - t0) * 1e6
     out = [

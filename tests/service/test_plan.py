@@ -313,3 +313,66 @@ def test_one_client_holds_at_most_half_the_plan_places(warm_solver: float) -> No
             runner.shutdown()
 
     asyncio.run(scenario())
+
+
+def test_a_plan_whose_session_is_deleted_while_queued_does_not_run(warm_solver: float) -> None:
+    settings = Settings()
+    view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
+    options = convert.session_defaults(settings)
+    release = threading.Event()
+    ran: list[str] = []
+
+    async def scenario() -> None:
+        warm = solving.Warmup(lambda: 0.0)
+        warm._run()
+        runner = solving.Runner(
+            inline_budget_us=0.0,
+            threads=1,
+            metrics=Metrics(lambda: 1),
+            warmup=warm,
+            max_frames_per_request=10,
+            max_queued_plans=4,
+        )
+        store = InMemorySessionStore(max_sessions=10, ttl_s=60.0)
+        sessions = []
+        for name in ("running", "queued"):
+            session, _ = new_session(
+                view, IKSolver(view.chain, options), options, now=store.clock()
+            )
+            await store.add(session)
+            real = session.solver.plan
+
+            def recorded(*args: Any, real: Any = real, name: str = name, **kwargs: Any) -> Any:
+                ran.append(name)
+                release.wait(timeout=30)
+                return real(*args, **kwargs)
+
+            session.solver.plan = recorded  # type: ignore[method-assign]
+            sessions.append(session)
+        target = convert.targets(S.Frame.model_validate(hand_frame(1)).targets, view, "t")
+        jobs = [(1, target)]
+        try:
+            tasks = [
+                asyncio.create_task(runner.session_plan(s, store, jobs, 0.0, "http"))
+                for s in sessions
+            ]
+            await asyncio.sleep(0.2)
+            assert ran == ["running"] and runner.plans_in_flight == 2
+            await store.remove(sessions[1].id)  # deleted while its plan waits
+            release.set()
+            out, _ = await tasks[0]
+            assert out[0]["success"]
+            with pytest.raises(ServiceError) as refused:
+                await tasks[1]
+            assert refused.value.code == "not_found"
+            assert ran == ["running"] and sessions[1].frames == 0
+            for _ in range(100):
+                if runner.plans_in_flight == 0:
+                    break
+                await asyncio.sleep(0.05)
+            assert runner.plans_in_flight == 0 and runner.plans_by_client == {}
+        finally:
+            release.set()
+            runner.shutdown()
+
+    asyncio.run(scenario())
