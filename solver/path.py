@@ -49,7 +49,9 @@ same streams within 2x of the reference's step; a 6-DOF arm's (no walk), about 2
 
 Guarantees, by construction: every frame the tracker solves is solved by the plan, and
 when the tracker solves every frame the plan's largest step is at most the tracker's.
-Frames where no answer is found keep the tracker's answer (its closest pose).
+Frames where no answer is found keep the tracker's answer (its closest pose); the jumps
+into and out of them are not ranked (they would be the largest steps whatever the rest
+of the path did), so the path between such frames is planned as a clip of its own.
 
 Cost: about frames x nodes x a few Gauss-Newton steps; nodes grow with the
 self-motion's length over the spacing (a 7-DOF arm: hundreds to a few thousand per
@@ -328,6 +330,7 @@ class _Planner:
         total = np.zeros(1)
         sets: list[np.ndarray] = []
         backs: list[np.ndarray] = []
+        after_gap = False  # the previous frame was one nothing reaches
         for i, k in enumerate(ks):
             if end is not None and i == len(ks) - 1:
                 nodes = end[None, :]
@@ -338,11 +341,24 @@ class _Planner:
                 )
                 left = len(ks) - i + reserve
                 nodes = self.nodes_at(k, anchors, walk[i], spacing, cap, left)
-            # dp_step ranks steps longer than this only for nodes nothing shorter
-            # reaches: 3x the best path's largest step so far (at least 4 spacings).
-            window = popts.window_rad * span
-            reach = min(window, max(3.0 * float(worst.min()), 4.0 * spacing))
-            worst, total, back = dp_step(prev, worst, total, nodes, float(reach))
+            unreached = self._unreached(k, nodes)
+            if unreached or after_gap:
+                # A frame nothing reaches keeps the tracker's closest pose, and the
+                # jumps into and out of it are the largest steps whatever else the
+                # path does: counted, they would leave the rest of the path ranked
+                # by its sum of squares alone. So the path is planned in segments
+                # between such frames: the frame before one keeps the best path to
+                # it, and the frames on either side start afresh.
+                back = np.full(len(nodes), int(np.lexsort((total, worst))[0]))
+                worst = np.zeros(len(nodes))
+                total = np.zeros(len(nodes))
+            else:
+                # dp_step ranks steps longer than this only for nodes nothing shorter
+                # reaches: 3x the best path's largest step so far (at least 4 spacings).
+                window = popts.window_rad * span
+                reach = min(window, max(3.0 * float(worst.min()), 4.0 * spacing))
+                worst, total, back = dp_step(prev, worst, total, nodes, float(reach))
+            after_gap = unreached
             assert back.min() >= 0  # every node has a predecessor: there is at least one
             sets.append(nodes)
             backs.append(back)
@@ -399,6 +415,12 @@ class _Planner:
             for lo, hi in windows:
                 self._repair(start, path, bounds[lo], bounds[hi + 1], walk)
         return path
+
+    def _unreached(self, k: int, nodes: np.ndarray) -> bool:
+        """Whether ``nodes`` of frame k are only the tracker's closest pose (no
+        answer found)."""
+        tracked = self.tracked[k]
+        return len(nodes) == 1 and not tracked.success and np.array_equal(nodes[0], tracked.q)
 
     def _solved_at(self, k: int, q: np.ndarray) -> bool:
         """Whether pose q of frame k is within tolerance: every node is, but the
@@ -568,15 +590,18 @@ def _smooth(
     boxes: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
     sweeps: int,
 ) -> None:
-    """Gauss-Seidel sweeps over the path (in place): each solved frame but the last
-    moves towards the middle of its neighbours and back onto its targets; kept only
+    """Gauss-Seidel sweeps over the path (in place): each solved frame but the last,
+    between two solved ones, moves towards the middle of its neighbours and back onto
+    its targets; kept only
     if it stays within tolerance and the larger of its two steps does not grow (so
     the path's largest step never grows; one of the two may)."""
     last = len(frames) - 1
     for _ in range(sweeps):
         moved = 0.0
         for k in range(last):
-            if not solved[k]:
+            # Next to a frame nothing reaches, the midpoint would pull the frame
+            # towards that frame's closest pose, off its own segment.
+            if not (solved[k] and solved[k + 1] and (k == 0 or solved[k - 1])):
                 continue
             before = start if k == 0 else path[k - 1]
             after = path[k + 1]
