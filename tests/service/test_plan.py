@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable, Coroutine
 from typing import Any
 
 import numpy as np
@@ -17,7 +17,7 @@ from service import convert, solving
 from service.config import Settings
 from service.errors import ServiceError
 from service.metrics import Metrics
-from service.sessions import InMemorySessionStore, new_session
+from service.sessions import InMemorySessionStore, Session, new_session
 from solver.examples import panda_arm
 from solver.ik import IKSolver
 from tests.solver.test_path import joint_stream
@@ -158,82 +158,114 @@ def test_a_planned_clip_runs_on_the_planning_thread(
     assert len(threads) == 1 and threads[0].startswith("ik-plan")
 
 
-def test_plans_beyond_the_queue_limit_are_refused_at_once(warm_solver: float) -> None:
-    # Two plans in flight (one running, blocked here; one queued behind it) fill a
-    # queue of two: a third is refused with 503 plans_busy at once, and once both are
-    # done the count is back to 0, also for the one whose caller went away.
-    settings = Settings()
-    view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
-    options = convert.session_defaults(settings)
-    release = threading.Event()
+class _HeldPlans:
+    """A Runner on the example arm whose sessions' plans wait for ``release``: what
+    the plan-queue tests drive. ``ran`` names the sessions whose plan started."""
 
-    async def scenario() -> None:
+    def __init__(self, max_queued_plans: int) -> None:
+        settings = Settings()
+        self.view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
+        self.options = convert.session_defaults(settings)
+        self.release = threading.Event()
+        self.ran: list[str] = []
         warm = solving.Warmup(lambda: 0.0)
         warm._run()
-        runner = solving.Runner(
+        self.runner = solving.Runner(
             inline_budget_us=0.0,
             threads=1,
             metrics=Metrics(lambda: 1),
             warmup=warm,
             max_frames_per_request=10,
-            max_queued_plans=2,
+            max_queued_plans=max_queued_plans,
         )
-        store = InMemorySessionStore(max_sessions=3, ttl_s=60.0)
-        sessions = []
-        for _ in range(3):
-            session, _ = new_session(
-                view, IKSolver(view.chain, options), options, now=store.clock()
-            )
-            await store.add(session)
-            real = session.solver.plan
+        self.store = InMemorySessionStore(max_sessions=10, ttl_s=60.0)
+        frame = S.Frame.model_validate(hand_frame(1))
+        self.jobs = [(1, convert.targets(frame.targets, self.view, "t"))]
 
-            def blocked(*args: Any, real: Any = real, **kwargs: Any) -> Any:
-                release.wait(timeout=30)
-                return real(*args, **kwargs)
+    async def session(self, name: str, owner: str | None = None) -> Session:
+        session, _ = new_session(
+            self.view,
+            IKSolver(self.view.chain, self.options),
+            self.options,
+            now=self.store.clock(),
+            owner=owner,
+        )
+        await self.store.add(session)
+        real = session.solver.plan
 
-            session.solver.plan = blocked  # type: ignore[method-assign]
-            sessions.append(session)
-        target = convert.targets(S.Frame.model_validate(hand_frame(1)).targets, view, "t")
-        jobs = [(1, target)]
+        def held(*args: Any, **kwargs: Any) -> Any:
+            self.ran.append(name)
+            self.release.wait(timeout=30)
+            return real(*args, **kwargs)
+
+        session.solver.plan = held  # type: ignore[method-assign]
+        return session
+
+    def plan(self, session: Session) -> Coroutine[Any, Any, Any]:
+        return self.runner.session_plan(session, self.store, self.jobs, 0.0, "http")
+
+    def start(self, session: Session) -> asyncio.Task[Any]:
+        return asyncio.create_task(self.plan(session))
+
+    async def refused(self, session: Session) -> ServiceError:
+        """The error ``session``'s plan gets, at once (a wait would be a queue, which
+        is what the limits prevent)."""
+        with pytest.raises(ServiceError) as e:
+            await asyncio.wait_for(self.plan(session), timeout=2.0)
+        return e.value
+
+    async def settled(self) -> None:
+        """Every place given back once the plans are done."""
+        for _ in range(100):
+            if self.runner.plans_in_flight == 0:
+                break
+            await asyncio.sleep(0.05)
+        assert self.runner.plans_in_flight == 0 and self.runner.plans_by_client == {}
+
+    def close(self) -> None:
+        self.release.set()
+        self.runner.shutdown()
+
+
+def _with_held_plans(max_queued_plans: int, body: Callable[[_HeldPlans], Awaitable[None]]) -> None:
+    async def scenario() -> None:
+        held = _HeldPlans(max_queued_plans)
         try:
-            first = asyncio.create_task(runner.session_plan(sessions[0], store, jobs, 0.0, "http"))
-            second = asyncio.create_task(runner.session_plan(sessions[1], store, jobs, 0.0, "http"))
-            await asyncio.sleep(0.2)
-            assert runner.plans_in_flight == 2
-
-            async def third() -> None:
-                # At once: a wait here would be a queue, which is what the limit prevents.
-                with pytest.raises(ServiceError) as refused:
-                    await asyncio.wait_for(
-                        runner.session_plan(sessions[2], store, jobs, 0.0, "http"), timeout=2.0
-                    )
-                assert refused.value.code == "plans_busy" and refused.value.status_code == 503
-
-            await third()
-            second.cancel()  # its caller goes away: the plan still counts until it is done
-            with contextlib.suppress(asyncio.CancelledError):
-                await second
-            assert runner.plans_in_flight == 2
-            await third()
-            release.set()
-            out, plan = await first
-            assert out[0]["success"] and plan.success
-            for _ in range(100):
-                if runner.plans_in_flight == 0:
-                    break
-                await asyncio.sleep(0.05)
-            assert runner.plans_in_flight == 0
-            assert sessions[1].frames == 1  # the cancelled request's plan did run
-            # A plan refused before it reaches the thread gives its place back.
-            sessions[2].closed = True
-            with pytest.raises(ServiceError, match="no such session"):
-                await runner.session_plan(sessions[2], store, jobs, 0.0, "http")
-            assert runner.plans_in_flight == 0 and runner.plans_by_client == {}
+            await body(held)
         finally:
-            release.set()
-            runner.shutdown()
+            held.close()
 
     asyncio.run(scenario())
+
+
+def test_plans_beyond_the_queue_limit_are_refused_at_once(warm_solver: float) -> None:
+    # Two plans in flight (one running, blocked here; one queued behind it) fill a
+    # queue of two: a third is refused with 503 plans_busy at once, and once both are
+    # done the count is back to 0, also for the one whose caller went away.
+    async def body(h: _HeldPlans) -> None:
+        sessions = [await h.session(name) for name in ("first", "second", "third")]
+        first, second = h.start(sessions[0]), h.start(sessions[1])
+        await asyncio.sleep(0.2)
+        assert h.runner.plans_in_flight == 2
+        error = await h.refused(sessions[2])
+        assert (error.code, error.status_code) == ("plans_busy", 503)
+        second.cancel()  # its caller goes away: the plan still counts until it is done
+        with contextlib.suppress(asyncio.CancelledError):
+            await second
+        assert h.runner.plans_in_flight == 2
+        assert (await h.refused(sessions[2])).code == "plans_busy"
+        h.release.set()
+        out, plan = await first
+        assert out[0]["success"] and plan.success
+        await h.settled()
+        assert sessions[1].frames == 1  # the cancelled request's plan did run
+        # A plan refused before it reaches the thread gives its place back.
+        sessions[2].closed = True
+        with pytest.raises(ServiceError, match="no such session"):
+            await h.plan(sessions[2])
+        await h.settled()
+
+    _with_held_plans(2, body)
 
 
 def test_one_client_holds_at_most_half_the_plan_places(warm_solver: float) -> None:
@@ -241,138 +273,43 @@ def test_one_client_holds_at_most_half_the_plan_places(warm_solver: float) -> No
     # third plan is refused with 429 too_many_plans while places are free; another
     # key, and a session created without keys (its own client), still get theirs;
     # past four, 503 plans_busy. When all are done nothing is left counted.
-    settings = Settings()
-    view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
-    options = convert.session_defaults(settings)
-    release = threading.Event()
+    async def body(h: _HeldPlans) -> None:
+        owners = {"a1": "key-a", "a2": "key-a", "b": "key-b", "c": None, "d": None}
+        s = {name: await h.session(name, owner) for name, owner in owners.items()}
+        running = [h.start(s["a1"]), h.start(s["a2"])]
+        await asyncio.sleep(0.1)
+        error = await h.refused(s["a1"])
+        assert (error.code, error.status_code) == ("too_many_plans", 429)
+        assert error.retry_after_s is not None
+        assert h.runner.plans_in_flight == 2
+        running += [h.start(s["b"]), h.start(s["c"])]
+        await asyncio.sleep(0.1)
+        assert h.runner.plans_in_flight == 4
+        error = await h.refused(s["d"])
+        assert (error.code, error.status_code) == ("plans_busy", 503)
+        h.release.set()
+        for task in running:
+            out, _ = await task
+            assert out[0]["success"]
+        await h.settled()
 
-    async def scenario() -> None:
-        warm = solving.Warmup(lambda: 0.0)
-        warm._run()
-        runner = solving.Runner(
-            inline_budget_us=0.0,
-            threads=1,
-            metrics=Metrics(lambda: 1),
-            warmup=warm,
-            max_frames_per_request=10,
-            max_queued_plans=4,
-        )
-        store = InMemorySessionStore(max_sessions=10, ttl_s=60.0)
-
-        async def session_of(owner: str | None) -> Any:
-            session, _ = new_session(
-                view, IKSolver(view.chain, options), options, now=store.clock(), owner=owner
-            )
-            await store.add(session)
-            real = session.solver.plan
-
-            def blocked(*args: Any, real: Any = real, **kwargs: Any) -> Any:
-                release.wait(timeout=30)
-                return real(*args, **kwargs)
-
-            session.solver.plan = blocked  # type: ignore[method-assign]
-            return session
-
-        a1, a2, b, c, d = [await session_of(o) for o in ("key-a", "key-a", "key-b", None, None)]
-        target = convert.targets(S.Frame.model_validate(hand_frame(1)).targets, view, "t")
-        jobs = [(1, target)]
-
-        def plan(session: Any) -> asyncio.Task[Any]:
-            return asyncio.create_task(runner.session_plan(session, store, jobs, 0.0, "http"))
-
-        async def refused(session: Any) -> ServiceError:
-            with pytest.raises(ServiceError) as e:
-                await asyncio.wait_for(
-                    runner.session_plan(session, store, jobs, 0.0, "http"), timeout=2.0
-                )
-            return e.value
-
-        try:
-            running = [plan(a1), plan(a2)]
-            await asyncio.sleep(0.1)
-            error = await refused(a1)
-            assert (error.code, error.status_code) == ("too_many_plans", 429)
-            assert error.retry_after_s is not None
-            assert runner.plans_in_flight == 2
-            running += [plan(b), plan(c)]
-            await asyncio.sleep(0.1)
-            assert runner.plans_in_flight == 4
-            error = await refused(d)
-            assert (error.code, error.status_code) == ("plans_busy", 503)
-            release.set()
-            for task in running:
-                out, _ = await task
-                assert out[0]["success"]
-            for _ in range(100):
-                if runner.plans_in_flight == 0:
-                    break
-                await asyncio.sleep(0.05)
-            assert runner.plans_in_flight == 0 and runner.plans_by_client == {}
-        finally:
-            release.set()
-            runner.shutdown()
-
-    asyncio.run(scenario())
+    _with_held_plans(4, body)
 
 
 def test_a_plan_whose_session_is_deleted_while_queued_does_not_run(warm_solver: float) -> None:
-    settings = Settings()
-    view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
-    options = convert.session_defaults(settings)
-    release = threading.Event()
-    ran: list[str] = []
+    async def body(h: _HeldPlans) -> None:
+        running, queued = await h.session("running"), await h.session("queued")
+        tasks = [h.start(running), h.start(queued)]
+        await asyncio.sleep(0.2)
+        assert h.ran == ["running"] and h.runner.plans_in_flight == 2
+        await h.store.remove(queued.id)  # deleted while its plan waits
+        h.release.set()
+        out, _ = await tasks[0]
+        assert out[0]["success"]
+        with pytest.raises(ServiceError) as refused:
+            await tasks[1]
+        assert refused.value.code == "not_found"
+        assert h.ran == ["running"] and queued.frames == 0
+        await h.settled()
 
-    async def scenario() -> None:
-        warm = solving.Warmup(lambda: 0.0)
-        warm._run()
-        runner = solving.Runner(
-            inline_budget_us=0.0,
-            threads=1,
-            metrics=Metrics(lambda: 1),
-            warmup=warm,
-            max_frames_per_request=10,
-            max_queued_plans=4,
-        )
-        store = InMemorySessionStore(max_sessions=10, ttl_s=60.0)
-        sessions = []
-        for name in ("running", "queued"):
-            session, _ = new_session(
-                view, IKSolver(view.chain, options), options, now=store.clock()
-            )
-            await store.add(session)
-            real = session.solver.plan
-
-            def recorded(*args: Any, real: Any = real, name: str = name, **kwargs: Any) -> Any:
-                ran.append(name)
-                release.wait(timeout=30)
-                return real(*args, **kwargs)
-
-            session.solver.plan = recorded  # type: ignore[method-assign]
-            sessions.append(session)
-        target = convert.targets(S.Frame.model_validate(hand_frame(1)).targets, view, "t")
-        jobs = [(1, target)]
-        try:
-            tasks = [
-                asyncio.create_task(runner.session_plan(s, store, jobs, 0.0, "http"))
-                for s in sessions
-            ]
-            await asyncio.sleep(0.2)
-            assert ran == ["running"] and runner.plans_in_flight == 2
-            await store.remove(sessions[1].id)  # deleted while its plan waits
-            release.set()
-            out, _ = await tasks[0]
-            assert out[0]["success"]
-            with pytest.raises(ServiceError) as refused:
-                await tasks[1]
-            assert refused.value.code == "not_found"
-            assert ran == ["running"] and sessions[1].frames == 0
-            for _ in range(100):
-                if runner.plans_in_flight == 0:
-                    break
-                await asyncio.sleep(0.05)
-            assert runner.plans_in_flight == 0 and runner.plans_by_client == {}
-        finally:
-            release.set()
-            runner.shutdown()
-
-    asyncio.run(scenario())
+    _with_held_plans(4, body)
