@@ -296,6 +296,22 @@ def options_dict(o: IKOptions) -> dict[str, Any]:
 
 
 # --- targets and poses -----------------------------------------------------------------
+def clip_jobs(
+    frames: Sequence[S.Frame], view: ChainView, limit: int
+) -> list[tuple[int | None, list[SolverTarget]]]:
+    """(frame id, solver targets) per frame of a clip, at most ``limit`` frames
+    (IK_MAX_FRAMES_PER_REQUEST); the same over HTTP and WebSocket.
+
+    Raises:
+        ServiceError: too many frames (``frames``), or a frame's targets (``targets``).
+    """
+    if len(frames) > limit:
+        raise invalid_problem(
+            f"at most {limit} frames per request (IK_MAX_FRAMES_PER_REQUEST)", "frames"
+        )
+    return [(f.id, targets(f.targets, view, f"frames[{i}].targets")) for i, f in enumerate(frames)]
+
+
 def targets(ts: Sequence[S.Target], view: ChainView, field: str) -> list[SolverTarget]:
     """Solver targets for one frame, checked against the chain's effectors.
 

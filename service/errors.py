@@ -172,10 +172,15 @@ async def _validation_error(request: Request, exc: Exception) -> Response:
     )
 
 
+def solver_error(exc: IKError) -> ServiceError:
+    """A solver error that got past convert.py (which names the field first), as the
+    ``invalid_problem`` it is: the safety net of HTTP and WebSocket alike."""
+    return invalid_problem(str(exc), getattr(exc, "field", None))
+
+
 async def _solver_error(request: Request, exc: Exception) -> Response:
-    # convert.py maps solver errors with the field named; this is the safety net.
     assert isinstance(exc, IKError)
-    err = invalid_problem(str(exc), getattr(exc, "field", None))
+    err = solver_error(exc)
     return ORJSONResponse(err.body(), status_code=err.status_code)
 
 

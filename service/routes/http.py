@@ -17,7 +17,7 @@ from schemas.chain import EXAMPLE_ARM
 
 from .. import convert
 from ..deps import OwnerDep, ServicesDep, SessionDep, received_at
-from ..errors import ServiceError, invalid_problem, not_found
+from ..errors import ServiceError, not_found
 from ..responses import ORJSONResponse
 from ..sessions import OwnerFull, Session, SessionStore, StoreFull, new_session
 from ..solving import make_solver, solve_once
@@ -293,15 +293,7 @@ async def post_frames(
     t0 = received_at(request)
     plan = isinstance(body, S.ClipRequest) and body.plan
     if isinstance(body, S.ClipRequest):
-        limit = svc.settings.max_frames_per_request
-        if len(body.frames) > limit:
-            raise invalid_problem(
-                f"at most {limit} frames per request (IK_MAX_FRAMES_PER_REQUEST)", "frames"
-            )
-        jobs = [
-            (f.id, convert.targets(f.targets, session.view, f"frames[{i}].targets"))
-            for i, f in enumerate(body.frames)
-        ]
+        jobs = convert.clip_jobs(body.frames, session.view, svc.settings.max_frames_per_request)
     else:
         jobs = [(body.id, convert.targets(body.targets, session.view, "targets"))]
     build = convert.result_builder(query.results)

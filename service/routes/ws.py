@@ -39,7 +39,7 @@ from ..errors import (
     WS_NOT_FOUND,
     WS_UNAUTHORIZED,
     ServiceError,
-    invalid_problem,
+    solver_error,
     validation_errors,
 )
 from ..sessions import Session
@@ -105,10 +105,6 @@ def _raw_id(raw: Any) -> int | None:
         if isinstance(v, int) and not isinstance(v, bool):
             return v
     return None
-
-
-def _solver_error(e: IKError) -> ServiceError:
-    return invalid_problem(str(e), getattr(e, "field", None))
 
 
 class _SlowReader(Exception):
@@ -294,7 +290,7 @@ class _Connection:
             await self.reply_service_error(binary, msg_id, e)
             return
         except IKError as e:  # convert.py names the field first; this is the safety net
-            await self.reply_service_error(binary, msg_id, _solver_error(e))
+            await self.reply_service_error(binary, msg_id, solver_error(e))
             return
         await self.send(
             {"id": msg_id, "type": "result", "success": result["success"], "result": result}, binary
@@ -303,18 +299,10 @@ class _Connection:
     async def clip(self, binary: bool, msg: S.ClipMessage, t0: float) -> None:
         """Solve a clip (in order, or planned as a whole) and answer it in one
         ``clip_result``; as ``POST .../frames`` with ``{"frames": [...]}``."""
-        view = self.session.view
         runner = self.svc.runner
-        limit = self.svc.settings.max_frames_per_request
         try:
-            if len(msg.frames) > limit:
-                raise invalid_problem(
-                    f"at most {limit} frames per message (IK_MAX_FRAMES_PER_REQUEST)", "frames"
-                )
-            jobs = [
-                (f.id, convert.targets(f.targets, view, f"frames[{i}].targets"))
-                for i, f in enumerate(msg.frames)
-            ]
+            limit = self.svc.settings.max_frames_per_request
+            jobs = convert.clip_jobs(msg.frames, self.session.view, limit)
             plan = None
             if msg.plan:
                 out, planned = await runner.session_plan(
@@ -331,7 +319,7 @@ class _Connection:
             await self.reply_service_error(binary, msg.id, e)
             return
         except IKError as e:  # convert.py names the field first; this is the safety net
-            await self.reply_service_error(binary, msg.id, _solver_error(e))
+            await self.reply_service_error(binary, msg.id, solver_error(e))
             return
         success = all(r["success"] for r in out)
         reply = {"id": msg.id, "type": "clip_result", "success": success, "results": out}
