@@ -41,8 +41,9 @@ keyframe on each side, are planned again frame by frame as above, from the path'
 before them onto its pose after them (left free at the clip's end), and kept where they
 reach more frames, or as many with a smaller largest step (steps into and out of an
 unreached frame apart, then all); what is still bad is tried again over 3, then 9
-keyframes on each side, and once the stretches would cover more than half the clip,
-the whole clip is planned densely instead. On the benchmark's
+keyframes on each side (but a frame a dense plan left unreached: nothing reaches it),
+and once the stretches would cover more than half the clip, the whole clip is planned
+densely instead. On the benchmark's
 streams this is about 10x cheaper than planning every frame densely, and holds the
 same streams within 2x of the reference's step; a 6-DOF arm's (no walk), about 2x
 (``bench/RESULTS.md``, "Planned clips").
@@ -402,8 +403,13 @@ class _Planner:
         gaps = _steps(start, key_path)
         paced = [gaps[i] for i in range(count) if reached[i] and (i == 0 or reached[i - 1])]
         pace = max(popts.repair_ratio * max(paced, default=key_worst) / span, popts.spacing_rad)
+        # Frames a dense plan has left unreached: nothing reaches them (the tracker's
+        # restarts failed there too), so they no longer make a stretch bad. Retrying
+        # them would widen every such clip's repairs to a dense plan of the whole clip
+        # (measured: 2-4x the time of the clip without that frame).
+        given_up: set[int] = set()
         for widen in (1, 3, 9):
-            bad = self._bad_intervals(start, path, bounds, pace)
+            bad = self._bad_intervals(start, path, bounds, pace, given_up)
             if not bad:
                 break
             windows = _windows(bad, widen, count)
@@ -414,6 +420,11 @@ class _Planner:
                 break
             for lo, hi in windows:
                 self._repair(start, path, bounds[lo], bounds[hi + 1], walk)
+                given_up.update(
+                    k
+                    for k in range(bounds[lo] + 1, bounds[hi + 1] + 1)
+                    if not self._solved_at(k, path[k])
+                )
         return path
 
     def _unreached(self, k: int, nodes: np.ndarray) -> bool:
@@ -428,16 +439,21 @@ class _Planner:
         return self.tracked[k].success or not np.array_equal(q, self.tracked[k].q)
 
     def _bad_intervals(
-        self, start: np.ndarray, path: np.ndarray, bounds: list[int], pace: float
+        self,
+        start: np.ndarray,
+        path: np.ndarray,
+        bounds: list[int],
+        pace: float,
+        given_up: set[int],
     ) -> list[int]:
-        """Keyframe intervals holding a frame left unreached, or a step above
-        ``pace`` between two reached frames."""
+        """Keyframe intervals holding a frame left unreached (but those in
+        ``given_up``), or a step above ``pace`` between two reached frames."""
         steps = _steps(start, path)
         solved = [self._solved_at(k, path[k]) for k in range(len(path))]
         bad = []
         for i in range(len(bounds) - 1):
             frames = range(bounds[i] + 1, bounds[i + 1] + 1)
-            if not all(solved[k] for k in frames) or any(
+            if not all(solved[k] or k in given_up for k in frames) or any(
                 steps[k] > pace for k in frames if solved[k] and (k == 0 or solved[k - 1])
             ):
                 bad.append(i)
