@@ -1,0 +1,168 @@
+"""How far ahead a stream must be known to hold the step bar: receding-horizon planning.
+
+Issue #3 (c) asks that a tracked stream's largest joint step be at most twice the
+reference path's; tracked frame by frame, 30 of 40 iiwa streams miss it, and planned as
+a whole clip none does (``bench/RESULTS.md``, "iiwa tracking" and "Planned clips"). This
+probe asks what lies between: a client that can wait W frames before it needs an
+answer. From the pose committed so far, ``IKSolver.plan`` plans the next ``window``
+frames, the first ``commit`` of them are kept, and the plan goes on from the last kept
+pose. A frame is then answered once the frame ``window - 1`` after the start of its
+chunk has arrived: a latency of ``window - commit`` to ``window - 1`` frames.
+
+The streams are ``bench/ik.py`` part (c)'s (same generator and seed, so the first three
+are the benchmark's), with its tracking options and 5 ms budget; the row ``track`` is
+frame-by-frame tracking (``IKSolver.track``) of the same streams. Prints one row per
+setting: streams within 2x of the reference's largest step, the worst stream, frames out
+of tolerance, and the median over streams of planning time per frame.
+
+    OPENBLAS_NUM_THREADS=1 python -m bench.horizon_probe --chain iiwa --streams 40 \\
+        --settings 60:15,120:30,240:60
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from solver.ik import IKSolver, Target  # noqa: E402
+
+from .ik import (  # noqa: E402
+    Config,
+    _targets_for,
+    chain_rng,
+    fk_poses,
+    make_stream,
+    max_step,
+    ours_options,
+)
+from .ik_chains import CHAINS, load  # noqa: E402
+
+FPS = 60.0
+
+
+@dataclass(frozen=True)
+class Setting:
+    """Plan ``window`` frames ahead, keep the first ``commit``; window 0: track."""
+
+    window: int
+    commit: int
+
+    @property
+    def label(self) -> str:
+        return "track" if self.window == 0 else f"{self.window}:{self.commit}"
+
+    @property
+    def latency_s(self) -> tuple[float, float]:
+        if self.window == 0:
+            return 0.0, 0.0
+        return (self.window - self.commit) / FPS, (self.window - 1) / FPS
+
+
+@dataclass(frozen=True)
+class Row:
+    setting: Setting
+    ratios: np.ndarray  # per stream: largest step / reference's
+    missed: int  # frames out of tolerance, all streams
+    us_per_frame: float  # median over streams
+
+
+def parse_settings(text: str) -> list[Setting]:
+    out = []
+    for item in text.split(","):
+        window, _, commit = item.partition(":")
+        s = Setting(int(window), int(commit or window))
+        if not 1 <= s.commit <= s.window:
+            raise ValueError(f"setting {item!r}: need 1 <= commit <= window")
+        out.append(s)
+    return out
+
+
+def answer_stream(
+    solver: IKSolver, targets: Sequence[Sequence[Target]], setting: Setting
+) -> tuple[np.ndarray, int]:
+    """The stream's answers under ``setting`` from ``solver.q``, and the frames missed."""
+    n = len(targets)
+    out = np.empty((n, solver.chain.n_dof))
+    missed = 0
+    if setting.window == 0:
+        for k in range(n):
+            r = solver.track(targets[k])
+            out[k] = r.q
+            missed += not r.success
+        return out, missed
+    k = 0
+    while k < n:
+        plan = solver.plan(targets[k : k + setting.window])
+        kept = plan.results[: setting.commit]
+        for i, r in enumerate(kept):
+            out[k + i] = r.q
+            missed += not r.success
+        k += len(kept)
+        solver.q = out[k - 1].copy()  # go on from the last kept pose, not the plan's end
+    return out, missed
+
+
+def run(chain: str, settings: list[Setting], streams: int, frames: int) -> list[Row]:
+    bc = load(chain, peer_urdf=False)
+    cfg = Config(1, 0, 0, 0.005, frames, FPS, streams, (), ())
+    options = ours_options(1, stream=True, budget_us=cfg.timeout_s * 1e6)
+    rng = chain_rng(cfg, chain, "track")
+    paths = [make_stream(rng, bc, frames, FPS) for _ in range(streams)]
+    clips = [_targets_for(bc, fk_poses(bc, p), False) for p in paths]
+    rows = []
+    for setting in settings:
+        solver = IKSolver(bc.pose, options)
+        ratios, missed, per_frame = [], 0, []
+        for path, targets in zip(paths, clips, strict=True):
+            solver.set_pose(path[0])
+            t = time.perf_counter()
+            out, m = answer_stream(solver, targets, setting)
+            per_frame.append((time.perf_counter() - t) / frames * 1e6)
+            ratios.append(max_step(np.vstack([path[0], out])) / max_step(path))
+            missed += m
+        rows.append(Row(setting, np.array(ratios), missed, float(np.median(per_frame))))
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--chain", default="iiwa", choices=CHAINS)
+    ap.add_argument("--streams", type=int, default=40)
+    ap.add_argument("--frames", type=int, default=600)
+    ap.add_argument(
+        "--settings",
+        default="60:15,120:30,240:60",
+        help="window:commit pairs, comma-separated; 'track' and the whole clip are added",
+    )
+    args = ap.parse_args(argv)
+    try:
+        settings = parse_settings(args.settings)
+    except ValueError as e:
+        ap.error(str(e))
+    settings = [Setting(0, 0), *settings, Setting(args.frames, args.frames)]
+    t = time.perf_counter()
+    rows = run(args.chain, settings, args.streams, args.frames)
+    print(f"{args.chain}: {args.streams} streams x {args.frames} frames at {FPS:g} Hz")
+    print("| window:commit | latency (s) | within 2x | worst | frames missed | us per frame |")
+    print("|---|---|---|---|---|---|")
+    for row in rows:
+        lo, hi = row.setting.latency_s
+        print(
+            f"| {row.setting.label} | {lo:.2f}-{hi:.2f} | {int((row.ratios <= 2.0).sum())} / "
+            f"{len(row.ratios)} | {row.ratios.max():.2f}x | {row.missed} | "
+            f"{row.us_per_frame:.0f} |"
+        )
+    print(f"\n{time.perf_counter() - t:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
