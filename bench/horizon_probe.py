@@ -1,4 +1,4 @@
-"""How far ahead a stream must be known to hold the step bar: receding-horizon planning.
+"""What a client can trade for the step bar: latency (receding-horizon planning) or accuracy.
 
 Issue #3 (c) asks that a tracked stream's largest joint step be at most twice the
 reference path's; tracked frame by frame, 30 of 40 iiwa streams miss it, and planned as
@@ -15,8 +15,15 @@ frame-by-frame tracking (``IKSolver.track``) of the same streams. Prints one row
 setting: streams within 2x of the reference's largest step, the worst stream, frames out
 of tolerance, and the median over streams of planning time per frame.
 
+``--caps`` adds the other trade: tracking with no frame's joints moving more than C rad
+from the previous answer. A frame whose answer would step further is solved again,
+locally (no global fallback), inside the box of the previous pose +- C; where that box
+holds no answer, the frame is answered with its closest pose and counts as missed. The
+extra columns give the longest run of consecutive missed frames and the largest
+position error.
+
     OPENBLAS_NUM_THREADS=1 python -m bench.horizon_probe --chain iiwa --streams 40 \\
-        --settings 60:15,120:30,240:60
+        --settings 60:15,120:30,240:60 --caps 0.037,0.1
 """
 
 from __future__ import annotations
@@ -26,13 +33,15 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import math  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
-from dataclasses import dataclass  # noqa: E402
+from dataclasses import dataclass, replace  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from solver.ik import IKSolver, Target  # noqa: E402
+from solver.ik import IKOptions, IKResult, IKSolver, Target  # noqa: E402
+from solver.kinematics import DD_HI, DD_LO  # noqa: E402
 
 from .ik import (  # noqa: E402
     Config,
@@ -50,14 +59,18 @@ FPS = 60.0
 
 @dataclass(frozen=True)
 class Setting:
-    """Plan ``window`` frames ahead, keep the first ``commit``; window 0: track."""
+    """Plan ``window`` frames ahead and keep the first ``commit``; window 0: track,
+    each frame's joints moving at most ``cap`` rad (inf: no cap)."""
 
     window: int
     commit: int
+    cap: float = math.inf
 
     @property
     def label(self) -> str:
-        return "track" if self.window == 0 else f"{self.window}:{self.commit}"
+        if self.window:
+            return f"{self.window}:{self.commit}"
+        return "track" if math.isinf(self.cap) else f"track, cap {self.cap:g} rad"
 
     @property
     def latency_s(self) -> tuple[float, float]:
@@ -71,12 +84,14 @@ class Row:
     setting: Setting
     ratios: np.ndarray  # per stream: largest step / reference's
     missed: int  # frames out of tolerance, all streams
+    longest_miss: int  # consecutive frames out of tolerance, longest run
+    worst_error_m: float  # largest position error of any frame
     us_per_frame: float  # median over streams
 
 
 def parse_settings(text: str) -> list[Setting]:
     out = []
-    for item in text.split(","):
+    for item in filter(None, text.split(",")):
         window, _, commit = item.partition(":")
         s = Setting(int(window), int(commit or window))
         if not 1 <= s.commit <= s.window:
@@ -85,29 +100,61 @@ def parse_settings(text: str) -> list[Setting]:
     return out
 
 
+def track_capped(
+    solver: IKSolver, targets: Sequence[Target], cap: float, local: IKOptions
+) -> IKResult:
+    """``solver.track``, then, if any joint stepped more than ``cap``, the frame again
+    from the previous pose inside the box of that pose +- cap. The box is the
+    bound-constrained core's own bounds (the solver has no public per-frame box, so
+    this reaches into its data; it holds for chains whose every effector moves every
+    joint, where a frame keeps the bounds it finds)."""
+    prev = solver.q.copy()
+    r = solver.track(targets)
+    if np.abs(r.q - prev).max() <= cap:
+        return r
+    lower, upper = solver.chain.lower, solver.chain.upper
+    solver.q = prev
+    solver._dd[DD_LO] = np.maximum(lower, prev - cap)
+    solver._dd[DD_HI] = np.minimum(upper, prev + cap)
+    try:
+        return solver.track(targets, options=local)
+    finally:
+        solver._dd[DD_LO] = lower
+        solver._dd[DD_HI] = upper
+
+
 def answer_stream(
     solver: IKSolver, targets: Sequence[Sequence[Target]], setting: Setting
-) -> tuple[np.ndarray, int]:
-    """The stream's answers under ``setting`` from ``solver.q``, and the frames missed."""
+) -> tuple[np.ndarray, list[IKResult]]:
+    """The stream's answers under ``setting`` from ``solver.q``, and their results."""
     n = len(targets)
     out = np.empty((n, solver.chain.n_dof))
-    missed = 0
+    results: list[IKResult] = []
     if setting.window == 0:
+        local = replace(solver.options, global_fallback=False)
         for k in range(n):
-            r = solver.track(targets[k])
+            r = track_capped(solver, targets[k], setting.cap, local)
             out[k] = r.q
-            missed += not r.success
-        return out, missed
+            results.append(r)
+        return out, results
     k = 0
     while k < n:
         plan = solver.plan(targets[k : k + setting.window])
         kept = plan.results[: setting.commit]
         for i, r in enumerate(kept):
             out[k + i] = r.q
-            missed += not r.success
+        results += kept
         k += len(kept)
         solver.q = out[k - 1].copy()  # go on from the last kept pose, not the plan's end
-    return out, missed
+    return out, results
+
+
+def longest_run(flags: Sequence[bool]) -> int:
+    best = run = 0
+    for f in flags:
+        run = run + 1 if f else 0
+        best = max(best, run)
+    return best
 
 
 def run(chain: str, settings: list[Setting], streams: int, frames: int) -> list[Row]:
@@ -120,15 +167,24 @@ def run(chain: str, settings: list[Setting], streams: int, frames: int) -> list[
     rows = []
     for setting in settings:
         solver = IKSolver(bc.pose, options)
-        ratios, missed, per_frame = [], 0, []
+        if not solver._every_effector_moves_all:
+            raise SystemExit(f"{chain}: the cap's box needs every effector to move every joint")
+        ratios, per_frame = [], []
+        missed = longest = 0
+        worst = 0.0
         for path, targets in zip(paths, clips, strict=True):
             solver.set_pose(path[0])
             t = time.perf_counter()
-            out, m = answer_stream(solver, targets, setting)
+            out, results = answer_stream(solver, targets, setting)
             per_frame.append((time.perf_counter() - t) / frames * 1e6)
             ratios.append(max_step(np.vstack([path[0], out])) / max_step(path))
-            missed += m
-        rows.append(Row(setting, np.array(ratios), missed, float(np.median(per_frame))))
+            misses = [not r.success for r in results]
+            missed += sum(misses)
+            longest = max(longest, longest_run(misses))
+            worst = max(worst, max(r.max_position_error_m for r in results))
+        rows.append(
+            Row(setting, np.array(ratios), missed, longest, worst, float(np.median(per_frame)))
+        )
     return rows
 
 
@@ -142,23 +198,28 @@ def main(argv: list[str] | None = None) -> int:
         default="60:15,120:30,240:60",
         help="window:commit pairs, comma-separated; 'track' and the whole clip are added",
     )
+    ap.add_argument("--caps", default="", help="per-frame joint step caps (rad), comma-separated")
     args = ap.parse_args(argv)
     try:
         settings = parse_settings(args.settings)
+        caps = [Setting(0, 0, float(c)) for c in filter(None, args.caps.split(","))]
     except ValueError as e:
         ap.error(str(e))
-    settings = [Setting(0, 0), *settings, Setting(args.frames, args.frames)]
+    settings = [Setting(0, 0), *caps, *settings, Setting(args.frames, args.frames)]
     t = time.perf_counter()
     rows = run(args.chain, settings, args.streams, args.frames)
     print(f"{args.chain}: {args.streams} streams x {args.frames} frames at {FPS:g} Hz")
-    print("| window:commit | latency (s) | within 2x | worst | frames missed | us per frame |")
-    print("|---|---|---|---|---|---|")
+    print(
+        "| setting | latency (s) | within 2x | worst | frames missed | longest miss "
+        "| largest error (mm) | us per frame |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
     for row in rows:
         lo, hi = row.setting.latency_s
         print(
             f"| {row.setting.label} | {lo:.2f}-{hi:.2f} | {int((row.ratios <= 2.0).sum())} / "
             f"{len(row.ratios)} | {row.ratios.max():.2f}x | {row.missed} | "
-            f"{row.us_per_frame:.0f} |"
+            f"{row.longest_miss} | {row.worst_error_m * 1e3:.2f} | {row.us_per_frame:.0f} |"
         )
     print(f"\n{time.perf_counter() - t:.0f} s")
     return 0
