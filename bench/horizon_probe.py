@@ -43,15 +43,7 @@ import numpy as np  # noqa: E402
 from solver.ik import IKOptions, IKResult, IKSolver, Target  # noqa: E402
 from solver.kinematics import DD_HI, DD_LO  # noqa: E402
 
-from .ik import (  # noqa: E402
-    Config,
-    _targets_for,
-    chain_rng,
-    fk_poses,
-    make_stream,
-    max_step,
-    ours_options,
-)
+from .ik import Config, max_step, ours_options, reference_streams  # noqa: E402
 from .ik_chains import CHAINS, load  # noqa: E402
 
 FPS = 60.0
@@ -161,9 +153,7 @@ def run(chain: str, settings: list[Setting], streams: int, frames: int) -> list[
     bc = load(chain, peer_urdf=False)
     cfg = Config(1, 0, 0, 0.005, frames, FPS, streams, (), ())
     options = ours_options(1, stream=True, budget_us=cfg.timeout_s * 1e6)
-    rng = chain_rng(cfg, chain, "track")
-    paths = [make_stream(rng, bc, frames, FPS) for _ in range(streams)]
-    clips = [_targets_for(bc, fk_poses(bc, p), False) for p in paths]
+    references = list(reference_streams(cfg, bc))
     rows = []
     for setting in settings:
         solver = IKSolver(bc.pose, options)
@@ -172,7 +162,8 @@ def run(chain: str, settings: list[Setting], streams: int, frames: int) -> list[
         ratios, per_frame = [], []
         missed = longest = 0
         worst = 0.0
-        for path, targets in zip(paths, clips, strict=True):
+        for stream in references:
+            path, targets = stream.path, stream.targets
             solver.set_pose(path[0])
             t = time.perf_counter()
             out, results = answer_stream(solver, targets, setting)

@@ -50,6 +50,7 @@ import platform
 import shlex
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -686,6 +687,25 @@ def make_stream(rng: np.random.Generator, bc: BenchChain, frames: int, fps: floa
     return q
 
 
+@dataclass(frozen=True)
+class ReferenceStream:
+    """One stream of part (c): the reference joint path, its FK poses and targets."""
+
+    path: np.ndarray
+    poses: np.ndarray
+    targets: list[list[Target]]
+
+
+def reference_streams(cfg: Config, bc: BenchChain) -> Iterator[ReferenceStream]:
+    """Part (c)'s ``cfg.streams`` streams for ``bc``, in the benchmark's order (the
+    probes in bench/ use it to reproduce the benchmark's streams)."""
+    rng = chain_rng(cfg, bc.name, "track")
+    for _ in range(cfg.streams):
+        path = make_stream(rng, bc, cfg.frames, cfg.fps)
+        poses = fk_poses(bc, path)
+        yield ReferenceStream(path, poses, _targets_for(bc, poses, False))
+
+
 def max_step(qs: np.ndarray) -> float:
     return float(np.abs(np.diff(qs, axis=0)).max()) if len(qs) > 1 else 0.0
 
@@ -693,7 +713,6 @@ def max_step(qs: np.ndarray) -> float:
 def run_tracking(
     cfg: Config, bc: BenchChain, peers: list[PeerSolver], skipped: dict[str, str]
 ) -> list[Row]:
-    rng = chain_rng(cfg, bc.name, "track")
     order_rng = chain_rng(cfg, bc.name, "order")
     solvers = make_solvers(cfg, bc, peers, False, tracking=True)
     warm(cfg, bc, solvers, False)
@@ -705,11 +724,9 @@ def run_tracking(
     gc.collect()
     gc.freeze()
     t_part = time.perf_counter()
-    for s in range(cfg.streams):
-        path = make_stream(rng, bc, cfg.frames, cfg.fps)
+    for s, stream in enumerate(reference_streams(cfg, bc)):
+        path, poses, targets = stream.path, stream.poses, stream.targets
         ref = max_step(path)
-        poses = fk_poses(bc, path)
-        targets = _targets_for(bc, poses, False)
         held = [path[0].copy() for _ in solvers]  # each solver's output pose stream
         outs = [np.empty_like(path) for _ in solvers]
         answered_all = [True] * m  # a held pose does not move: no step to judge

@@ -70,12 +70,9 @@ from solver.ik import IKOptions, IKSolver, Target  # noqa: E402
 from .ik import (  # noqa: E402
     Config,
     Ours,
-    _targets_for,
-    chain_rng,
-    fk_poses,
-    make_stream,
     max_step,
     ours_options,
+    reference_streams,
     warm,
 )
 from .ik_chains import CHAINS, load  # noqa: E402
@@ -374,7 +371,6 @@ def run(
     the benchmark's figures); ``rest_pull`` (not None) replaces STREAM_DEFAULTS'."""
     bc = load(chain, peer_urdf=False)
     cfg = Config(1, 0, 0, 0.005, frames, 60.0, streams, (), ())
-    rng = chain_rng(cfg, chain, "track")
     options = ours_options(1, stream=True, budget_us=cfg.timeout_s * 1e6)
     if rest_pull is not None:
         options = replace(options, null_space_step_rad=rest_pull)
@@ -387,9 +383,9 @@ def run(
     warm(cfg, bc, [("ours", ours_adapter, 0)], False)
     solver = ours_adapter.solver
     out = []
-    for index in range(streams):
-        path = make_stream(rng, bc, frames, 60.0)
-        stream = Stream(_targets_for(bc, fk_poses(bc, path), False))
+    for index, reference in enumerate(reference_streams(cfg, bc)):
+        path = reference.path
+        stream = Stream(reference.targets)
         solver.set_pose(path[0])
         ours = np.empty_like(path)
         missed = 0

@@ -22,15 +22,7 @@ from solver.chain import Chain  # noqa: E402
 from solver.fk import effector_poses  # noqa: E402
 from solver.ik import IKSolver  # noqa: E402
 
-from .ik import (  # noqa: E402
-    Config,
-    _targets_for,
-    chain_rng,
-    fk_poses,
-    make_stream,
-    max_step,
-    ours_options,
-)
+from .ik import Config, max_step, ours_options, reference_streams  # noqa: E402
 from .ik_chains import CHAINS, load  # noqa: E402
 
 
@@ -67,10 +59,8 @@ def main(argv: list[str] | None = None) -> int:
 
     bc = load(args.chain, peer_urdf=False)
     cfg = Config(1, 0, args.seed, 0.005, args.frames, args.fps, args.stream + 1, (), ())
-    rng = chain_rng(cfg, args.chain, "track")
-    paths = [make_stream(rng, bc, args.frames, args.fps) for _ in range(args.stream + 1)]
-    path = paths[args.stream]
-    targets = _targets_for(bc, fk_poses(bc, path), False)
+    stream = list(reference_streams(cfg, bc))[args.stream]
+    path, targets = stream.path, stream.targets
     solver = IKSolver(bc.pose, ours_options(1, stream=True, budget_us=cfg.timeout_s * 1e6))
     solver.set_pose(path[0])
     ours = np.empty_like(path)
