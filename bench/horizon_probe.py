@@ -6,7 +6,8 @@ a whole clip none does (``bench/RESULTS.md``, "iiwa tracking" and "Planned clips
 probe asks what lies between: a client that can wait W frames before it needs an
 answer. From the pose committed so far, ``IKSolver.plan`` plans the next ``window``
 frames, the first ``commit`` of them are kept, and the plan goes on from the last kept
-pose. A frame is then answered once the frame ``window - 1`` after the start of its
+pose, set as the service's ``PUT .../pose`` sets it (W = M: clips planned back to back,
+each from the last answer of the one before). A frame is then answered once the frame ``window - 1`` after the start of its
 chunk has arrived: a latency of ``window - commit`` to ``window - 1`` frames.
 
 The streams are ``bench/ik.py`` part (c)'s (same generator and seed, so the first three
@@ -137,7 +138,11 @@ def answer_stream(
             out[k + i] = r.q
         results += kept
         k += len(kept)
-        solver.q = out[k - 1].copy()  # go on from the last kept pose, not the plan's end
+        if len(kept) < len(plan.results):
+            # Go on from the last kept pose, as a client of the service would: PUT
+            # .../pose (set_pose: the pose and the rest pose). Clips back to back need
+            # nothing: a plan leaves the pose at its last answer.
+            solver.set_pose(out[k - 1])
     return out, results
 
 
