@@ -30,20 +30,22 @@ is judged by the solver's own error measure: a frame counts as solved exactly wh
 Keyframes. Gathering nodes for every frame is what costs (a walked self-motion is
 hundreds per frame). For a clip of at least two keyframes whose frames all walk, or
 all do not (the same kind of task throughout), the programme first runs over keyframes
-only (every ``key_every``-th frame, a self-motion walked ``key_spacing_rad`` apart),
+only (the first frame and every ``key_every``-th frame, a self-motion walked
+``key_spacing_rad`` apart),
 and the frames between are filled in: the straight line
 between the two keyframes' poses, projected onto each frame's targets. Where the line
 cuts a corner of the self-motion (near a singularity, where joints turn fast), the
 filled frames step well above the keyframes' pace (``repair_ratio`` x the keyframe
 path's largest step per frame between keyframes that are reached, at least
-``spacing_rad``), or hold a frame left unreached; those stretches, widened by one
-keyframe on each side, are planned again frame by frame as above, from the path's pose
-before them onto its pose after them (left free at the clip's end), and kept where they
-reach more frames, or as many with a smaller largest step (steps into and out of an
-unreached frame apart, then all); what is still bad is tried again over 3, then 9
-keyframes on each side (but a frame a dense plan left unreached: nothing reaches it),
-and once the stretches would cover more than half the clip, the whole clip is planned
-densely instead. On the benchmark's
+``spacing_rad``; the step from the start pose is not judged: a clip may start away
+from the current pose), or hold a frame left unreached; those stretches, widened by
+one keyframe on each side, are planned again frame by frame as above, from the path's
+pose before them onto its pose after them (left free at the clip's end), and kept
+where they reach more frames, or as many with a smaller largest step (steps into and
+out of an unreached frame, and from the start pose, apart; then all); what is still
+bad is tried again over 3, then 9 keyframes on each side (but a frame a dense plan left
+unreached: nothing reaches it), and once the stretches would cover more than half the
+clip, the whole clip is planned densely instead. On the benchmark's
 streams this is about 10x cheaper than planning every frame densely, and holds the
 same streams within 2x of the reference's step; a 6-DOF arm's (no walk), about 2x
 (``bench/RESULTS.md``, "Planned clips").
@@ -315,6 +317,7 @@ class _Planner:
         along: np.ndarray | None = None,
         end: np.ndarray | None = None,
         span: int = 1,
+        first_span: int = 1,
         reserve: int = 0,
     ) -> tuple[np.ndarray, float]:
         """The dynamic programme over frames ``ks`` from the single pose ``before``:
@@ -323,6 +326,9 @@ class _Planner:
         ``end`` fixes the last frame's pose (a repair joins the path there); ``walk``
         says, per frame, whether to walk the self-motion (one free direction). ``span``:
         frames between consecutive ks (keyframes), which scales the window;
+        ``first_span``: frames the step from ``before`` to ks[0] counts for (the
+        step is ranked as ``first_span`` times itself: a keyframe path starting on
+        the clip's first frame ranks that one-frame step with its keyframe gaps);
         ``reserve``: frames planned later that the work budget keeps shares for."""
         popts = self.popts
         lower, upper = self.solver.chain.lower, self.solver.chain.upper
@@ -358,7 +364,10 @@ class _Planner:
                 # reaches: 3x the best path's largest step so far (at least 4 spacings).
                 window = popts.window_rad * span
                 reach = min(window, max(3.0 * float(worst.min()), 4.0 * spacing))
-                worst, total, back = dp_step(prev, worst, total, nodes, float(reach))
+                scale = float(first_span) if i == 0 else 1.0
+                worst, total, back = dp_step(
+                    prev * scale, worst, total, nodes * scale, float(reach) * scale
+                )
             after_gap = unreached
             assert back.min() >= 0  # every node has a predecessor: there is at least one
             sets.append(nodes)
@@ -379,16 +388,23 @@ class _Planner:
         frame's task has one free direction (else none has)."""
         popts = self.popts
         n = len(self.frames)
-        count = max(2, n // popts.key_every)
-        keys = [((i + 1) * n) // count - 1 for i in range(count)]  # intervals of n/count
-        span = n / count
-        key_path, key_worst = self.dense(
+        per = max(2, n // popts.key_every)
+        span = n / per  # frames per interval
+        # The first frame is a keyframe too: the way from the start pose to the clip
+        # (a jump, when the clip starts away from it) is then taken in one step, not
+        # spread over the frames before the next keyframe. The programme ranks that
+        # step as if it were a keyframe gap (span x itself), else a first frame far
+        # along the self-motion would cost nothing beside the longer gaps.
+        keys = [0] + [((i + 1) * n) // per - 1 for i in range(per)]
+        count = len(keys)
+        key_path, _ = self.dense(
             start,
             keys,
             spacing=popts.key_spacing_rad,
             cap=popts.max_nodes_per_frame,
             walk=[walk] * len(keys),
             span=round(span),
+            first_span=round(span),
             reserve=n,  # the repairs' share
         )
         path = np.empty((n, start.shape[0]))
@@ -397,12 +413,14 @@ class _Planner:
         # per frame. A stretch stepping well above it passed a keyframe badly
         # (interpolation cut a corner of the self-motion, e.g. near a singularity).
         # Measured between keyframes that are reached: a jump to a frame nothing
-        # reaches says nothing of the pace elsewhere.
+        # reaches says nothing of the pace elsewhere, nor does the way from the start
+        # pose to the first keyframe (a clip may start away from the current pose).
+        # No such pair of keyframes: no pace to judge by.
         bounds = [-1, *keys]
         reached = [self._solved_at(k, q) for k, q in zip(keys, key_path, strict=True)]
         gaps = _steps(start, key_path)
-        paced = [gaps[i] for i in range(count) if reached[i] and (i == 0 or reached[i - 1])]
-        pace = max(popts.repair_ratio * max(paced, default=key_worst) / span, popts.spacing_rad)
+        paced = [gaps[i] for i in range(1, count) if reached[i] and reached[i - 1]]
+        pace = max(popts.repair_ratio * max(paced, default=math.inf) / span, popts.spacing_rad)
         # Frames a dense plan has left unreached: nothing reaches them (the tracker's
         # restarts failed there too), so they no longer make a stretch bad. Retrying
         # them would widen every such clip's repairs to a dense plan of the whole clip
@@ -447,14 +465,15 @@ class _Planner:
         given_up: set[int],
     ) -> list[int]:
         """Keyframe intervals holding a frame left unreached (but those in
-        ``given_up``), or a step above ``pace`` between two reached frames."""
+        ``given_up``), or a step above ``pace`` between two reached frames (the step
+        from the start pose is whatever the first frame needs: not judged)."""
         steps = _steps(start, path)
         solved = [self._solved_at(k, path[k]) for k in range(len(path))]
         bad = []
         for i in range(len(bounds) - 1):
             frames = range(bounds[i] + 1, bounds[i + 1] + 1)
             if not all(solved[k] or k in given_up for k in frames) or any(
-                steps[k] > pace for k in frames if solved[k] and (k == 0 or solved[k - 1])
+                steps[k] > pace for k in frames if k > 0 and solved[k] and solved[k - 1]
             ):
                 bad.append(i)
         return bad
@@ -511,11 +530,12 @@ class _Planner:
     ) -> tuple[int, float, float]:
         """How good ``rows`` are as frames first+1.. of ``path`` (smaller is better):
         the frames they leave unreached; the largest step between two reached frames
-        (the stretch's joins included: a jump into or out of an unreached frame is
-        there whichever way the stretch goes); then the largest step of all."""
+        (the stretch's joins included: a jump into or out of an unreached frame, or
+        from the start pose, is there whichever way the stretch goes); then the
+        largest step of all."""
         last = first + len(rows)
         seq = [before, *rows]
-        ok = [first < 0 or self._solved_at(first, before)]
+        ok = [first >= 0 and self._solved_at(first, before)]
         ok += [self._solved_at(first + 1 + i, q) for i, q in enumerate(rows)]
         if last + 1 < len(path):  # the join after the stretch
             seq.append(path[last + 1])

@@ -461,9 +461,9 @@ def out_of_reach(frames: list[list[Target]], gone: tuple[int, ...]) -> list[list
     return frames
 
 
-def repairs_made(monkeypatch, chain, path, frames, key_every):  # type: ignore[no-untyped-def]
-    """Plan ``frames`` from path[0] and return the stretches the keyframe plan
-    re-planned, as (first, last) of ``_Planner._repair``, and the plan."""
+def repairs_made(monkeypatch, chain, path, frames, key_every, start=None):  # type: ignore[no-untyped-def]
+    """Plan ``frames`` from ``start`` (default path[0]) and return the stretches the
+    keyframe plan re-planned, as (first, last) of ``_Planner._repair``, and the plan."""
     calls: list[tuple[int, int]] = []
     repair = _Planner._repair
 
@@ -472,7 +472,8 @@ def repairs_made(monkeypatch, chain, path, frames, key_every):  # type: ignore[n
         repair(self, start, path, first, last, walk)
 
     monkeypatch.setattr(_Planner, "_repair", spy)
-    plan = planned_from(chain, path[0], frames, path_options=PathOptions(key_every=key_every))
+    start = path[0] if start is None else start
+    plan = planned_from(chain, start, frames, path_options=PathOptions(key_every=key_every))
     return calls, plan
 
 
@@ -515,6 +516,47 @@ def test_an_unreached_keyframe_does_not_set_the_pace(monkeypatch) -> None:  # ty
     assert calls == [(14, 59), (194, 239)]
     steps = np.abs(np.diff(np.vstack([path[0], plan.q]), axis=0)).max(axis=1)
     assert max(steps[k] for k in range(240) if k not in (224, 225)) <= 1.5 * ref
+
+
+@pytest.mark.parametrize("seed, frames_in_clip", [(4, 90), (0, 120)])
+def test_a_clip_that_starts_away_from_the_pose_is_planned_as_one_that_does_not(
+    seed: int, frames_in_clip: int
+) -> None:
+    # A session's pose is often not the clip's first frame (a new session sits at
+    # mid-limits). The step there is whatever it must be, so it neither sets the
+    # keyframes' pace nor makes the first stretch "bad" (it was repaired over 1, 3 and
+    # 9 keyframes: 20-30x the answers, and the frames before the first keyframe took
+    # the jump in four steps of up to 1.9x the reference's).
+    chain = panda_arm()
+    path = joint_stream(chain, seed, frames_in_clip)
+    ref = float(np.abs(np.diff(path, axis=0)).max())
+    frames = [pose_targets(chain, q) for q in path]
+    on = planned_from(chain, path[0], frames)
+    away = np.clip(path[0] + 0.5, chain.lower, chain.upper)
+    off = planned_from(chain, away, frames)
+    assert on.success and off.success
+    assert off.nodes < 1.5 * on.nodes
+    steps = np.abs(np.diff(np.vstack([away, off.q]), axis=0)).max(axis=1)
+    assert steps[0] > 0.4  # the jump to the clip, in one step
+    assert steps[1:].max() <= 1.5 * ref
+    for q, targets in zip(off.q, frames, strict=True):
+        assert_reaches(chain, q, targets)
+
+
+def test_the_jump_to_a_clip_does_not_set_the_pace(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # From 0.5 rad away, keyframes 10 apart on the pole-crossing stream: counted in
+    # the keyframes' pace, the jump to the first frame (about 0.5 rad over one
+    # keyframe interval) would hide the corner the keyframes cut near the pole
+    # (3.1x the reference's step, unrepaired); left out, that stretch is planned again.
+    chain = panda_arm()
+    path = joint_stream(chain, 4, 120)
+    ref = float(np.abs(np.diff(path, axis=0)).max())
+    frames = [pose_targets(chain, q) for q in path]
+    away = np.clip(path[0] + 0.5, chain.lower, chain.upper)
+    calls, plan = repairs_made(monkeypatch, chain, path, frames, 10, start=away)
+    assert calls
+    assert plan.success
+    assert largest_step(plan.q[0], plan.q[1:]) <= 1.5 * ref
 
 
 @pytest.mark.parametrize("frames_in_clip", [9, 60], ids=["shorter-than-two-keyframes", "mixed"])
