@@ -1,8 +1,9 @@
 """/v1 HTTP resources: sessions, their frames, pose and options, and one-shot solves.
 
 Codes: 201/200/204 on success; 401 unauthorized, 403 forbidden, 404 not_found,
-413 payload_too_large, 422 invalid_format / invalid_problem, 503 too_many_sessions /
-plans_busy / not_ready (+ Retry-After).
+413 payload_too_large, 422 invalid_format / invalid_problem, 429 rate_limited /
+too_many_plans (+ Retry-After), 503 too_many_sessions / plans_busy / not_ready
+(+ Retry-After).
 """
 
 from __future__ import annotations
@@ -48,7 +49,12 @@ _429_KEY: dict[int | str, dict[str, Any]] = {
     429: {**_E, "description": "This API key holds its maximum of sessions (`key_session_limit`)"}
 }
 _429_RATE: dict[int | str, dict[str, Any]] = {
-    429: {**_E, "description": "Over IK_MAX_FRAMES_PER_S for this session (`rate_limited`)"}
+    429: {
+        **_E,
+        "description": "Over IK_MAX_FRAMES_PER_S for this session (`rate_limited`), or a "
+        "planned clip while this client holds its share of the plan queue "
+        "(`too_many_plans`); Retry-After says when to try again",
+    }
 }
 _413: dict[int | str, dict[str, Any]] = {
     413: {**_E, "description": "Body over IK_MAX_BODY_BYTES (`payload_too_large`)"}

@@ -214,8 +214,10 @@ def test_plan_of_a_single_frame_is_the_nearest_answer() -> None:
     plan = solver.plan([target])
     assert plan.success and len(plan.results) == 1
     assert_reaches(chain, plan.q[0], target)
-    # No answer is nearer than the tracker's by more than a walk's spacing.
+    # Never further than the tracker's answer, and q0 + 0.05 is an answer 0.05 away
+    # in every joint: the plan's is within a walk's spacing of that distance.
     assert plan.largest_step <= plan.tracked_largest_step
+    assert plan.largest_step <= 0.05 + PathOptions().spacing_rad
 
 
 def test_plan_of_a_chain_without_variables() -> None:
