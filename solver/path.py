@@ -36,9 +36,11 @@ and the frames between are filled in: the straight line
 between the two keyframes' poses, projected onto each frame's targets. Where the line
 cuts a corner of the self-motion (near a singularity, where joints turn fast), the
 filled frames step well above the keyframes' pace (``repair_ratio`` x the keyframe
-path's largest step per frame between keyframes that are reached, at least
-``spacing_rad``; the step from the start pose is not judged: a clip may start away
-from the current pose), or hold a frame left unreached; those stretches, widened by
+path's largest step per frame between keyframes that are reached, leaving out the
+gaps where the targets jump, at least ``spacing_rad``; the step from the start pose
+is not judged: a clip may start away from the current pose; nor, after a first
+repair, a step where the targets jump: a cut in an animation), or hold a frame left
+unreached; those stretches, widened by
 one keyframe on each side, are planned again frame by frame as above, from the path's
 pose before them onto its pose after them (left free at the clip's end), and kept
 where they reach more frames, or as many with a smaller largest step (steps into and
@@ -414,20 +416,30 @@ class _Planner:
         # (interpolation cut a corner of the self-motion, e.g. near a singularity).
         # Measured between keyframes that are reached: a jump to a frame nothing
         # reaches says nothing of the pace elsewhere, nor does the way from the start
-        # pose to the first keyframe (a clip may start away from the current pose).
-        # No such pair of keyframes: no pace to judge by.
+        # pose to the first keyframe (a clip may start away from the current pose),
+        # nor a jump of the targets themselves (a cut in an animation). No such pair
+        # of keyframes: no pace to judge by.
         bounds = [-1, *keys]
         reached = [self._solved_at(k, q) for k, q in zip(keys, key_path, strict=True)]
         gaps = _steps(start, key_path)
-        paced = [gaps[i] for i in range(1, count) if reached[i] and reached[i - 1]]
+        cuts = _target_jumps(self.frames, 2 * round(span))
+        paced = [
+            gaps[i]
+            for i in range(1, count)
+            if reached[i] and reached[i - 1] and not any(keys[i - 1] < k <= keys[i] for k in cuts)
+        ]
         pace = max(popts.repair_ratio * max(paced, default=math.inf) / span, popts.spacing_rad)
-        # Frames a dense plan has left unreached: nothing reaches them (the tracker's
-        # restarts failed there too), so they no longer make a stretch bad. Retrying
-        # them would widen every such clip's repairs to a dense plan of the whole clip
-        # (measured: 2-4x the time of the clip without that frame).
+        # Frames no longer judged. Those a dense plan has left unreached: nothing
+        # reaches them (the tracker's restarts failed there too). And after the first
+        # round, the steps where the targets jump: a repair has spread what it can of
+        # the jump, the rest is the targets'. Retrying either widened every such
+        # clip's repairs to a dense plan of the whole clip (measured: 2-4x the time
+        # of the clip without that frame; a cut, up to 27x).
         given_up: set[int] = set()
         for widen in (1, 3, 9):
-            bad = self._bad_intervals(start, path, bounds, pace, given_up)
+            bad = self._bad_intervals(
+                start, path, bounds, pace, given_up if widen == 1 else given_up | cuts
+            )
             if not bad:
                 break
             windows = _windows(bad, widen, count)
@@ -464,16 +476,18 @@ class _Planner:
         pace: float,
         given_up: set[int],
     ) -> list[int]:
-        """Keyframe intervals holding a frame left unreached (but those in
-        ``given_up``), or a step above ``pace`` between two reached frames (the step
-        from the start pose is whatever the first frame needs: not judged)."""
+        """Keyframe intervals holding a frame left unreached, or a step above
+        ``pace`` between two reached frames (the step from the start pose is whatever
+        the first frame needs: not judged); frames in ``given_up`` are not judged."""
         steps = _steps(start, path)
         solved = [self._solved_at(k, path[k]) for k in range(len(path))]
         bad = []
         for i in range(len(bounds) - 1):
             frames = range(bounds[i] + 1, bounds[i + 1] + 1)
             if not all(solved[k] or k in given_up for k in frames) or any(
-                steps[k] > pace for k in frames if k > 0 and solved[k] and solved[k - 1]
+                steps[k] > pace
+                for k in frames
+                if k > 0 and solved[k] and solved[k - 1] and k not in given_up
             ):
                 bad.append(i)
         return bad
@@ -544,6 +558,45 @@ class _Planner:
         between = [steps[i] for i in range(len(steps)) if ok[i] and ok[i + 1]]
         unreached = sum(not x for x in ok[1 : 1 + len(rows)])
         return unreached, max(between, default=0.0), float(steps.max(initial=0.0))
+
+
+def _target_jumps(
+    frames: Sequence[Sequence[Target]], half: int, factor: float = 4.0, floor: float = 1e-3
+) -> set[int]:
+    """Frames whose targets jump (a cut in an animation): the largest change of any
+    target number (position [m], rotation matrix entry, direction) from the frame
+    before is above ``factor`` x its median over the ``half`` frames on each side and
+    itself, plus ``floor`` (a clip that starts moving from rest has not jumped); or
+    the targeted effectors or parts change."""
+    n = len(frames)
+    if n < 2:
+        return set()
+    motion = np.zeros(n)
+    shape = [(t.effector, t.given) for t in frames[0]]
+    if all([(t.effector, t.given) for t in f] == shape for f in frames):
+        if shape:  # one task throughout: the numbers of all frames as one array
+            rows = np.array([[t.packed for t in f] for f in frames])
+            motion[1:] = np.nanmax(np.abs(np.diff(rows, axis=0)), axis=(1, 2))
+    else:
+        for k in range(1, n):
+            before = {t.effector: t for t in frames[k - 1]}
+            if set(before) != {t.effector for t in frames[k]}:
+                motion[k] = math.inf
+                continue
+            for t in frames[k]:
+                if before[t.effector].given != t.given:
+                    motion[k] = math.inf
+                    break
+                change = np.abs(t.packed - before[t.effector].packed)
+                motion[k] = max(motion[k], float(np.nanmax(change, initial=0.0)))
+    # The median over the window around each frame (the frame itself among 2 x half
+    # + 1: one jump does not move it), frame 0 left out (no frame before it).
+    motion[0] = math.nan
+    window = np.lib.stride_tricks.sliding_window_view(
+        np.pad(motion, half, constant_values=math.nan), 2 * half + 1
+    )
+    typical = np.nanmedian(window, axis=1)
+    return {k for k in range(1, n) if motion[k] > factor * typical[k] + floor}
 
 
 def _windows(bad: list[int], widen: int, count: int) -> list[tuple[int, int]]:

@@ -23,7 +23,7 @@ from solver._path_kernels import dp_step, frame_nodes
 from solver.examples import humanoid_arm, panda_arm, two_arm_torso
 from solver.fk import effector_poses
 from solver.ik import STREAM_DEFAULTS, IKOptions, IKResult, pose_targets, with_options
-from solver.path import PathOptions, PlannedPath, _Planner, _windows
+from solver.path import PathOptions, PlannedPath, _Planner, _target_jumps, _windows
 
 from .test_ik import CHAINS
 
@@ -559,6 +559,61 @@ def test_the_jump_to_a_clip_does_not_set_the_pace(monkeypatch) -> None:  # type:
     assert calls
     assert plan.success
     assert largest_step(plan.q[0], plan.q[1:]) <= 1.5 * ref
+
+
+def cut_clip(chain, frames_in_clip: int, cut: float):  # type: ignore[no-untyped-def]
+    """The smooth stream of seed 0 with every joint turned by ``cut`` from the middle
+    frame on (a cut in an animation: the targets jump there), and its frames."""
+    path = joint_stream(chain, 0, frames_in_clip)
+    path[frames_in_clip // 2 :] += cut
+    path = np.clip(path, chain.lower, chain.upper)
+    return path, [pose_targets(chain, q) for q in path]
+
+
+def test_target_jumps_are_the_cuts_of_a_clip() -> None:
+    chain = panda_arm()
+    _, smooth = cut_clip(chain, 120, 0.0)
+    assert _target_jumps(smooth, 10) == set()
+    _, cut = cut_clip(chain, 120, 0.15)
+    assert _target_jumps(cut, 10) == {60}
+    # Starting to move from rest is not a jump (the median of no motion is 0).
+    still = [smooth[0]] * 30 + smooth[:30]
+    assert _target_jumps(still, 10) == set()
+    # A frame whose targeted effectors change is one.
+    two = two_arm_torso()
+    frames = [pose_targets(two, q) for q in joint_stream(two, 0, 40)]
+    frames[20] = frames[20][:1]
+    assert _target_jumps(frames, 10) == {20, 21}
+
+
+def test_a_cut_in_the_targets_is_planned_again_once(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # The jump at the cut is the targets': one repair spreads what it can of it, and
+    # the stretches around it are not widened to the whole clip (they were: 188,000
+    # answers, more than planning every frame densely, for the same largest step).
+    chain = panda_arm()
+    path, frames = cut_clip(chain, 120, 0.15)
+    calls, plan = repairs_made(monkeypatch, chain, path, frames, 5)
+    assert calls and (-1, 119) not in calls
+    dense = planned_from(chain, path[0], frames, path_options=PathOptions(key_every=1))
+    assert plan.success and dense.success
+    assert plan.nodes < dense.nodes
+    assert plan.largest_step <= 1.05 * dense.largest_step
+
+
+def test_a_cut_does_not_set_the_pace() -> None:
+    # The pole-crossing stream, keyframes 10 apart, with a 0.3 rad cut at frame 100:
+    # counted in the keyframes' pace, the cut's keyframe gap would hide the corner
+    # the keyframes cut near the pole (2.1x the reference's step away from the cut).
+    chain = panda_arm()
+    path = joint_stream(chain, 4, 120)
+    ref = float(np.abs(np.diff(path, axis=0)).max())
+    path[100:] += 0.3
+    path = np.clip(path, chain.lower, chain.upper)
+    frames = [pose_targets(chain, q) for q in path]
+    plan = planned_from(chain, path[0], frames, path_options=PathOptions(key_every=10))
+    assert plan.success
+    steps = np.abs(np.diff(np.vstack([path[0], plan.q]), axis=0)).max(axis=1)
+    assert max(steps[k] for k in range(120) if abs(k - 100) > 3) <= 1.5 * ref
 
 
 @pytest.mark.parametrize("frames_in_clip", [9, 60], ids=["shorter-than-two-keyframes", "mixed"])
