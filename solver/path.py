@@ -423,11 +423,9 @@ class _Planner:
         reached = [self._solved_at(k, q) for k, q in zip(keys, key_path, strict=True)]
         gaps = _steps(start, key_path)
         cuts = _target_jumps(self.frames, 2 * round(span))
-        paced = [
-            gaps[i]
-            for i in range(1, count)
-            if reached[i] and reached[i - 1] and not any(keys[i - 1] < k <= keys[i] for k in cuts)
-        ]
+        both = [i for i in range(1, count) if reached[i] and reached[i - 1]]
+        uncut = [i for i in both if not any(keys[i - 1] < k <= keys[i] for k in cuts)]
+        paced = [gaps[i] for i in (uncut or both)]  # a cut in every interval: all count
         pace = max(popts.repair_ratio * max(paced, default=math.inf) / span, popts.spacing_rad)
         # Frames no longer judged. Those a dense plan has left unreached: nothing
         # reaches them (the tracker's restarts failed there too). And after the first
@@ -565,9 +563,8 @@ def _target_jumps(
 ) -> set[int]:
     """Frames whose targets jump (a cut in an animation): the largest change of any
     target number (position [m], rotation matrix entry, direction) from the frame
-    before is above ``factor`` x its median over the ``half`` frames on each side and
-    itself, plus ``floor`` (a clip that starts moving from rest has not jumped); or
-    the targeted effectors or parts change."""
+    before is above ``factor`` x its median over the frames that move within ``half``
+    frames on each side, plus ``floor``; or the targeted effectors or parts change."""
     n = len(frames)
     if n < 2:
         return set()
@@ -589,12 +586,16 @@ def _target_jumps(
                     break
                 change = np.abs(t.packed - before[t.effector].packed)
                 motion[k] = max(motion[k], float(np.nanmax(change, initial=0.0)))
-    # The median over the window around each frame (the frame itself among 2 x half
-    # + 1: one jump does not move it), frame 0 left out (no frame before it).
-    motion[0] = math.nan
+    # Typical: the median over the frames around each one that move at all (above
+    # floor): a clip that holds still between moves (a gesture between holds, poses
+    # held for several frames) moves in only some frames, and a median over all of
+    # them would be 0, every move a jump. None moving around it: 0.
     window = np.lib.stride_tricks.sliding_window_view(
-        np.pad(motion, half, constant_values=math.nan), 2 * half + 1
-    )
+        np.pad(motion, half, constant_values=0.0), 2 * half + 1
+    ).copy()
+    window[:, half] = 0.0  # the frame itself
+    window[window <= floor] = math.nan  # still frames, frame 0 and the padding
+    window[np.isnan(window).all(axis=1)] = 0.0
     typical = np.nanmedian(window, axis=1)
     return {k for k in range(1, n) if motion[k] > factor * typical[k] + floor}
 
