@@ -199,6 +199,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         settings = parse_settings(args.settings)
         caps = [Setting(0, 0, float(c)) for c in filter(None, args.caps.split(","))]
+        if any(not 0.0 < c.cap < math.inf for c in caps):
+            raise ValueError("--caps: each cap must be a positive finite angle (rad)")
     except ValueError as e:
         ap.error(str(e))
     settings = [Setting(0, 0), *caps, *settings, Setting(args.frames, args.frames)]
