@@ -1,0 +1,134 @@
+"""Cold and warm start of ``python -m service``: seconds to ready and the RSS once ready.
+
+Cold means no compiled solver on disk: every numba cache file under ``solver/`` is
+deleted first (what a fresh checkout or image build sees). Warm is the next start,
+which loads that cache. Each start is a real ``python -m service`` on 127.0.0.1, polled
+on ``/readyz`` every 0.2 s; RSS is read from ``/proc`` (the process and its children)
+when ``/readyz`` first answers 200, and the process is then stopped with SIGTERM.
+
+    OPENBLAS_NUM_THREADS=1 python -m bench.cold_start [--warm-runs 3]
+
+Slow on purpose: the cold compile takes 40-270 s on these machines, so run it on idle
+cores and quote the figures with the load they ran under.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+SOLVER = ROOT / "solver"
+
+
+@dataclass(frozen=True, slots=True)
+class Start:
+    kind: str
+    ready_s: float
+    rss_mb: float
+    readyz_progress_seen: bool
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def clear_numba_cache() -> int:
+    """Delete every numba cache file under solver/; returns how many."""
+    gone = 0
+    for pattern in ("*.nbi", "*.nbc"):
+        for path in SOLVER.rglob(pattern):
+            path.unlink()
+            gone += 1
+    return gone
+
+
+def _rss_mb(pid: int) -> float:
+    """RSS of ``pid`` and its descendants, from /proc (Linux)."""
+    total_kb = 0
+    todo = [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            status = Path(f"/proc/{p}/status").read_text()
+        except OSError:
+            continue
+        for line in status.splitlines():
+            if line.startswith("VmRSS:"):
+                total_kb += int(line.split()[1])
+        try:
+            children = Path(f"/proc/{p}/task/{p}/children").read_text().split()
+        except OSError:
+            children = []
+        todo.extend(int(c) for c in children)
+    return total_kb / 1024
+
+
+def start_once(kind: str, timeout_s: float) -> Start:
+    port = _free_port()
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", IK_HOST="127.0.0.1", IK_PORT=str(port))
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "service"],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    progress_seen = False
+    try:
+        while True:
+            if time.perf_counter() - t0 > timeout_s:
+                raise TimeoutError(f"{kind} start not ready within {timeout_s} s")
+            if proc.poll() is not None:
+                raise RuntimeError(f"service exited with {proc.returncode}")
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/readyz", timeout=2) as r:
+                    if r.status == 200:
+                        ready_s = time.perf_counter() - t0
+                        return Start(kind, ready_s, _rss_mb(proc.pid), progress_seen)
+            except urllib.error.HTTPError as e:  # 503 while warming: does it say how far?
+                body = json.loads(e.read() or b"{}")
+                progress_seen = progress_seen or "progress" in body
+            except (urllib.error.URLError, ConnectionError, TimeoutError):
+                pass
+            time.sleep(0.2)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--warm-runs", type=int, default=3, help="warm starts after the cold one")
+    parser.add_argument("--timeout-s", type=float, default=900.0)
+    args = parser.parse_args()
+    cleared = clear_numba_cache()
+    print(f"deleted {cleared} numba cache files under solver/", file=sys.stderr)
+    starts = [start_once("cold", args.timeout_s)]
+    starts += [start_once("warm", args.timeout_s) for _ in range(args.warm_runs)]
+    print("| start | seconds to ready | RSS when ready (MB) | /readyz showed progress |")
+    print("|---|---|---|---|")
+    for s in starts:
+        seen = "yes" if s.readyz_progress_seen else "no"
+        print(f"| {s.kind} | {s.ready_s:.1f} | {s.rss_mb:.0f} | {seen} |")
+
+
+if __name__ == "__main__":
+    main()
