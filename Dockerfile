@@ -14,19 +14,11 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
 
 WORKDIR /app
 
-# The versions the test suite passed with (runtime dependencies and their dependencies).
-RUN printf '%s\n' \
-        annotated-doc==0.0.7 annotated-types==0.7.0 anyio==4.16.0 click==8.4.0 \
-        defusedxml==0.7.1 fastapi==0.165.0 h11==0.16.0 httptools==0.9.0 idna==3.13 \
-        llvmlite==0.50.0 msgpack==1.2.4 numba==0.68.1 numpy==2.4.6 orjson==3.13.0 \
-        prometheus-client==0.26.0 pydantic==2.13.4 pydantic-core==2.46.4 \
-        pydantic-settings==2.14.1 python-dotenv==1.2.2 pyyaml==6.0.3 sniffio==1.3.1 \
-        starlette==1.10.0 typing-extensions==4.16.0 typing-inspection==0.4.2 \
-        uvicorn==0.54.0 uvloop==0.23.0 watchfiles==1.3.0 websockets==17.4 \
-        > /app/constraints.txt \
-    && useradd --create-home --uid 10001 ik
+RUN useradd --create-home --uid 10001 ik
 
-COPY pyproject.toml README.md ./
+# The versions the test suite passed with (constraints.txt: runtime, test and bench
+# extras verified together; README and .ci/run install with it too).
+COPY constraints.txt pyproject.toml README.md ./
 COPY solver/ solver/
 COPY schemas/ schemas/
 COPY service/ service/
@@ -34,7 +26,7 @@ COPY service/ service/
 # Install; drop the sources so that everything imports from site-packages; compile
 # the solver once so its numba cache ships in the image, owned by the runtime user
 # (a container is ready in about a second instead of after a 30-60 s compile).
-RUN pip install --constraint /app/constraints.txt . \
+RUN pip install --constraint constraints.txt . \
     && rm -rf /app/solver /app/schemas /app/service \
     && python -c "import solver; print(f'solver warm in {solver.warmup():.1f} s')" \
     && chown -R 10001:10001 /app/numba-cache
