@@ -1,4 +1,4 @@
-"""Links in README.md, docs/*.md and bench/*.md resolve (fast: files only, no network).
+"""Links in README.md, docs/, bench/ and bench/history/ resolve (fast: no network).
 
 Every relative link must name a file or folder of the repository, and every ``#anchor``
 a heading of the page it points to, slugged as GitHub slugs headings. External links
@@ -19,7 +19,14 @@ from markdown_it import MarkdownIt
 from markdown_it.token import Token
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = sorted([ROOT / "README.md", *(ROOT / "docs").glob("*.md"), *(ROOT / "bench").glob("*.md")])
+PAGES = sorted(
+    [
+        ROOT / "README.md",
+        *(ROOT / "docs").glob("*.md"),
+        *(ROOT / "bench").glob("*.md"),
+        *(ROOT / "bench" / "history").glob("*.md"),
+    ]
+)
 
 # Hosts an external link may point to (none is a CDN), and every external link the
 # pages hold: a new one must be added here on purpose.
@@ -95,6 +102,7 @@ def _is_external(target: str) -> bool:
 def test_the_pages_exist_and_hold_links() -> None:
     names = {p.relative_to(ROOT).as_posix() for p in PAGES}
     assert {"README.md", "docs/README.md", "docs/api.md", "bench/RESULTS.md"} <= names
+    assert any(name.startswith("bench/history/") for name in names)
     assert sum(1 for link in _all_links() if not _is_external(link.target)) > 20
 
 
