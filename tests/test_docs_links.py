@@ -130,6 +130,20 @@ def test_external_links_are_listed_and_allowed() -> None:
     assert all(urlsplit(url).hostname in ALLOWED_HOSTS for url in EXTERNAL_LINKS)
 
 
+def test_python_m_commands_name_modules_of_the_repository() -> None:
+    """A command moved or renamed in the code leaves no stale `python -m` in the pages."""
+    outside = {"pip", "pytest"}  # the installer and the test runner, not ours
+    named = {m for page in PAGES for m in re.findall(r"python -m ([\w.]+)", page.read_text())}
+    ours = named - outside
+    assert {"service", "bench.ik", "loadtest"} <= ours
+
+    def runnable(module: str) -> bool:
+        path = ROOT / module.replace(".", "/")
+        return path.with_name(path.name + ".py").is_file() or (path / "__main__.py").is_file()
+
+    assert [m for m in sorted(ours) if not runnable(m)] == []
+
+
 def test_github_slugs() -> None:
     assert github_slug("HTTP API and errors") == "http-api-and-errors"
     assert (
