@@ -1,5 +1,5 @@
 # IK service image: python -m service (uvicorn + create_app) as a non-root user.
-# Configure with IK_* variables (README, "Configuration"). One process per container:
+# Configure with IK_* variables (docs/operations.md, "Configuration"). One process per container:
 # the session store is in memory, so scale with replicas, not workers.
 FROM python:3.11.7-slim-bookworm
 

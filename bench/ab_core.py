@@ -1,12 +1,13 @@
 """A/B of the compiled solve between two checkouts, in one session.
 
-How the per-commit ratios in ``bench/RESULTS.md`` ("Solver changes of the afternoon")
-were taken: one worker process per checkout (each imports its own ``solver`` and uses
-its own numba cache), both warmed on the same 400 random targets of one arm, then
-alternating batches (A then B, B then A, ...), each reporting the median in-core
-``solve_us`` of one pass over the targets. Paired ratios of batch medians cancel most of
-the shared machine's drift: the same build against itself gave 0.997-1.006 over 11
-rounds, while a 5-round run was once off by 25%, hence the default of 15.
+How the per-commit ratios in ``bench/history/2026-11-23-solver-changes.md`` ("Solver
+changes of the afternoon") were taken: one worker process per checkout (each imports
+its own ``solver`` and uses its own numba cache), both warmed on the same 400 random
+targets of one arm, then alternating batches (A then B, B then A, ...), each reporting
+the median in-core ``solve_us`` of one pass over the targets. Paired ratios of batch
+medians cancel most of the shared machine's drift: the same build against itself gave
+0.997-1.006 over 11 rounds, while a 5-round run was once off by 25%, hence the default
+of 15.
 
     OPENBLAS_NUM_THREADS=1 python -m bench.ab_core CHECKOUT_A CHECKOUT_B --chain panda --part a
 

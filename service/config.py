@@ -1,6 +1,7 @@
 """Settings from environment variables with the ``IK_`` prefix (pydantic-settings).
 
-Every field is one row of the README's configuration table; units are in the names.
+Every field is one row of the configuration table in docs/operations.md (a test checks
+names and defaults); units are in the names.
 """
 
 from __future__ import annotations
@@ -71,7 +72,7 @@ class Settings(BaseSettings):
         default=50_000.0, gt=0, description="Largest per-frame time budget a client may ask [us]"
     )
 
-    # Where solves run (see the README: "Inline or off the event loop").
+    # Where solves run (see docs/operations.md: "Inline or off the event loop").
     inline_budget_us: float = Field(
         default=1_000.0,
         ge=0,

@@ -39,7 +39,7 @@ Conventions: metres, radians, microseconds (`_us`); quaternions are objects
 `{"detail", "code"}`. Session calls need `Authorization: Bearer <token>` (the token
 comes back from `POST /v1/sessions`). When the server has API keys, `POST /v1/sessions`
 and `POST /v1/solve` need `X-API-Key: <key>`. The WebSocket protocol
-(`/v1/sessions/{id}/ws`) is described in the README.
+(`/v1/sessions/{id}/ws`) is described in docs/websocket.md in the repository.
 """
 
 

@@ -1,6 +1,6 @@
 """Where and how frames are solved: inline on the event loop, or in the solver pool.
 
-The rule (measured, see the README and bench/ws_inline_vs_thread.py): a request whose
+The rule (measured, see docs/operations.md and bench/ws_inline_vs_thread.py): a request whose
 worst case, frames x time_budget_us, is at most ``IK_INLINE_BUDGET_US`` is solved inline
 under the session's lock (a hand-off to a thread costs more than a typical solve);
 anything longer runs in a small dedicated thread pool, where the compiled core releases

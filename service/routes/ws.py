@@ -332,7 +332,7 @@ async def session_ws(
     session_id: str,
     results: Annotated[S.ResultView, Query()] = S.ResultView.FULL,
 ) -> None:
-    """Frames over a WebSocket (protocol in the README); ``?results=compact`` answers
+    """Frames over a WebSocket (protocol in docs/websocket.md); ``?results=compact`` answers
     with CompactFrameResults. A bad ``results`` value closes 1008 (FastAPI's check)."""
     svc = services(ws)
     await ws.accept(subprotocol=_subprotocol(ws))

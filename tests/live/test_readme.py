@@ -51,6 +51,8 @@ def test_curl_walkthrough(server: Server, tmp_path: Path) -> None:
     assert '"joint4":-1.5' in text
     assert 'ik_frames_total{success="true",termination="goal_reached"}' in text
     assert text.rstrip().endswith("HTTP 204")
+    # The walk-through kept the session's token in a file; it must not leave it behind.
+    assert "session.json" in script and list(tmp_path.iterdir()) == []
 
 
 def test_python_websocket_client(server: Server, tmp_path: Path) -> None:

@@ -52,13 +52,13 @@ def test_schema_examples_of_solve_and_session(client: TestClient) -> None:
         assert client.patch(f"/v1/sessions/{sid}", json=example, headers=h).status_code == 200
 
 
-def test_readme_hierarchy_example_creates_a_session(client: TestClient) -> None:
+def test_chains_page_hierarchy_example_creates_a_session(client: TestClient) -> None:
     import json
     import re
     from pathlib import Path
 
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    m = re.search(r"<!-- hierarchy-example:start -->\s*```json\n(.*?)```", readme, re.DOTALL)
+    page = (Path(__file__).resolve().parents[2] / "docs" / "chains.md").read_text()
+    m = re.search(r"<!-- hierarchy-example:start -->\s*```json\n(.*?)```", page, re.DOTALL)
     assert m is not None
     chain = json.loads(m.group(1))
     s = create(client, chain)
