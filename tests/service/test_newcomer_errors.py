@@ -1,0 +1,120 @@
+"""The errors a newcomer meets in the first minutes say what to send instead (issue 19).
+
+Codes stay as they were (invalid_format, invalid_problem, unauthorized); what these
+tests check is the message and the field, because here the message is the point.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from typing import Any
+
+import msgpack
+import pytest
+from starlette.testclient import TestClient
+
+import schemas as S
+from schemas.chain import EXAMPLE_ARM
+
+from .helpers import Created, create, hand_frame
+
+
+def arm_with(joint: int, **values: Any) -> dict[str, Any]:
+    chain = copy.deepcopy(EXAMPLE_ARM)
+    chain["joints"][joint].update(values)
+    return chain
+
+
+def ws_exchange(client: TestClient, s: Created, message: Any, *, binary: bool = False) -> Any:
+    """Send one message on a fresh socket; return the answer (decoded)."""
+    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        if binary:
+            ws.send_bytes(msgpack.packb(message))
+            return msgpack.unpackb(ws.receive_bytes())
+        ws.send_text(message if isinstance(message, str) else json.dumps(message))
+        return ws.receive_json()
+
+
+# -- 1. a WebSocket message without a known type --------------------------------------------
+@pytest.mark.parametrize("binary", [False, True], ids=["json", "msgpack"])
+@pytest.mark.parametrize(
+    "message",
+    [{"id": 1}, {"type": "dance", "id": 1}, {"type": 3, "id": 1}, {"type": None, "id": 1}, [1]],
+    ids=["no-type", "unknown-type", "number-type", "null-type", "not-an-object"],
+)
+def test_a_message_without_a_known_type_is_told_the_types(
+    client: TestClient, session: Created, message: Any, binary: bool
+) -> None:
+    answer = ws_exchange(client, session, message, binary=binary)
+    error = answer["error"]
+    assert error["code"] == "invalid_format" and error["field"] == "type", answer
+    for tag in S.CLIENT_MESSAGE_TYPES:
+        assert f'"{tag}"' in error["message"], error
+    if isinstance(message, dict):
+        assert answer["id"] == 1
+
+
+def test_the_listed_types_are_the_ones_the_server_takes(
+    client: TestClient, session: Created
+) -> None:
+    """Each listed type gets past the type check (its error, if any, is about another
+    field), and the list holds every type the README documents."""
+    assert {"frame", "clip", "ping"} <= set(S.CLIENT_MESSAGE_TYPES)
+    with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
+        for i, tag in enumerate(S.CLIENT_MESSAGE_TYPES, start=1):
+            ws.send_json({"type": tag, "id": i})
+            answer = ws.receive_json()
+            assert answer.get("error", {}).get("field") != "type", (tag, answer)
+
+
+def test_a_near_miss_type_is_named(client: TestClient, session: Created) -> None:
+    answer = ws_exchange(client, session, {"type": "frames", "id": 1, **hand_frame(None)})
+    assert 'did you mean "frame"' in answer["error"]["message"], answer
+
+
+# -- 2. an array where a quaternion (or vector) object belongs --------------------------------
+QUATERNION_FORM = '{"w": ..., "x": ..., "y": ..., "z": ...}'
+
+
+def test_an_array_quaternion_in_a_chain_is_422_with_the_object_form(client: TestClient) -> None:
+    chain = arm_with(1, origin={"rotation": [0, 0, 0, 1]})
+    r = client.post("/v1/sessions", json={"chain": chain})
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["code"] == "invalid_format"
+    assert body["field"] == "chain.hierarchy.joints.1.origin.rotation"
+    (error,) = body["detail"]
+    message = error["msg"]
+    assert QUATERNION_FORM in message and "x, y, z, w" in message, message
+    # Both readings of the array, as objects the client can paste.
+    assert '{"w":0,"x":0,"y":0,"z":1}' in message
+    assert '{"w":1,"x":0,"y":0,"z":0}' in message
+
+
+def test_an_array_quaternion_in_a_frame_is_invalid_format_on_both_transports(
+    client: TestClient,
+) -> None:
+    pose_arm = copy.deepcopy(EXAMPLE_ARM)
+    pose_arm["effectors"] = [{"name": "hand", "link": "hand", "mode": "pose"}]
+    s = create(client, pose_arm)
+    target = {"effector": "hand", "orientation": [1, 0, 0, 0]}
+    r = client.post(f"/v1/sessions/{s.id}/frames", json={"targets": [target]}, headers=s.headers)
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
+    assert r.json()["field"] == "frame.targets.0.orientation"
+    assert QUATERNION_FORM in r.json()["detail"][0]["msg"]
+    for binary in (False, True):
+        answer = ws_exchange(
+            client, s, {"type": "frame", "id": 1, "targets": [target]}, binary=binary
+        )
+        error = answer["error"]
+        assert error["code"] == "invalid_format", answer
+        assert error["field"] == "frame.targets.0.orientation"
+        assert QUATERNION_FORM in error["message"] and "x, y, z, w" in error["message"]
+
+
+def test_an_array_position_is_told_the_object_form(client: TestClient, session: Created) -> None:
+    frame = {"targets": [{"effector": "hand", "position": [0.3, 0.1, 0.6]}]}
+    r = client.post(f"/v1/sessions/{session.id}/frames", json=frame, headers=session.headers)
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
+    assert '{"x":0.3,"y":0.1,"z":0.6}' in r.json()["detail"][0]["msg"]
