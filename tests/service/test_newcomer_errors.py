@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from typing import Any
 
 import msgpack
@@ -118,3 +119,59 @@ def test_an_array_position_is_told_the_object_form(client: TestClient, session: 
     r = client.post(f"/v1/sessions/{session.id}/frames", json=frame, headers=session.headers)
     assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
     assert '{"x":0.3,"y":0.1,"z":0.6}' in r.json()["detail"][0]["msg"]
+
+
+# -- 3. rotation limits are radians -------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("joint", "values", "field", "degrees_hint"),
+    [
+        (1, {"lower": [0.0], "upper": [150.0]}, "chain.joints[1].upper", "2.6180"),
+        (0, {"lower": [-180.0, -1.5], "upper": [3.1, 1.5]}, "chain.joints[0].lower", "-3.1416"),
+        (1, {"lower": [0.0], "upper": [7.0]}, "chain.joints[1].upper", "0.1222"),
+        (1, {"lower": [-1e6], "upper": [1e6]}, "chain.joints[1].lower", None),
+    ],
+    ids=["revolute-150", "rotational-minus-180", "revolute-7", "revolute-1e6"],
+)
+def test_a_rotation_limit_beyond_a_full_turn_is_refused_as_degrees(
+    client: TestClient,
+    joint: int,
+    values: dict[str, Any],
+    field: str,
+    degrees_hint: str | None,
+) -> None:
+    r = client.post("/v1/sessions", json={"chain": arm_with(joint, **values)})
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["code"] == "invalid_problem" and body["field"] == field, body
+    name = EXAMPLE_ARM["joints"][joint]["name"]
+    assert repr(name) in body["detail"] and "radians" in body["detail"], body
+    if degrees_hint is not None:
+        assert f"degrees is {degrees_hint}" in body["detail"], body
+
+
+@pytest.mark.parametrize("limit", [2 * math.pi, 6.2832])
+def test_a_full_turn_is_a_valid_limit(client: TestClient, limit: float) -> None:
+    created = create(client, arm_with(1, lower=[-limit], upper=[limit]))
+    assert created.body["dof"][2] == {"name": "elbow", "lower": -limit, "upper": limit}
+
+
+def test_prismatic_limits_are_metres_and_not_checked_as_angles(client: TestClient) -> None:
+    chain = arm_with(1, kind="prismatic", lower=[0.0], upper=[150.0])
+    created = create(client, chain)
+    assert created.body["dof"][2]["upper"] == 150.0
+
+
+@pytest.mark.parametrize("limit", ["1e16", str(2 * math.pi + 1e-6), "100"])
+def test_urdf_limits_are_taken_as_given(client: TestClient, limit: str) -> None:
+    """URDF is radians by definition; files in the wild give unlimited joints huge
+    limits, which must load."""
+    urdf = (
+        '<robot name="r"><link name="base"/><link name="l1"/><link name="tip"/>'
+        '<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>'
+        f'<axis xyz="0 0 1"/><limit lower="-{limit}" upper="{limit}" effort="1" velocity="1"/>'
+        '</joint><joint name="j2" type="fixed"><parent link="l1"/><child link="tip"/>'
+        '<origin xyz="0.5 0 0"/></joint></robot>'
+    )
+    chain = {"format": "urdf", "urdf": urdf, "base_link": "base", "tip_links": ["tip"]}
+    created = create(client, chain)
+    assert created.body["dof"][0]["upper"] == float(limit)
