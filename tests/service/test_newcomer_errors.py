@@ -175,3 +175,28 @@ def test_urdf_limits_are_taken_as_given(client: TestClient, limit: str) -> None:
     chain = {"format": "urdf", "urdf": urdf, "base_link": "base", "tip_links": ["tip"]}
     created = create(client, chain)
     assert created.body["dof"][0]["upper"] == float(limit)
+
+
+# -- 4. JSON bodies end with a newline; WebSocket messages do not ------------------------------
+def test_json_responses_end_with_a_newline(client: TestClient, session: Created) -> None:
+    responses = [
+        client.get("/readyz"),
+        client.get("/healthz"),
+        client.get(f"/v1/sessions/{session.id}", headers=session.headers),
+        client.post(
+            f"/v1/sessions/{session.id}/frames", json=hand_frame(1), headers=session.headers
+        ),
+        client.get("/v1/sessions/nosuchsession", headers=session.headers),  # an error body
+        client.post("/v1/sessions", json={}),  # a validation error
+    ]
+    for r in responses:
+        assert r.headers["content-type"] == "application/json", r.url
+        assert r.content.endswith(b"}\n"), (r.url, r.content[-20:])
+        assert int(r.headers["content-length"]) == len(r.content)
+        assert isinstance(r.json(), dict)
+
+
+def test_websocket_messages_stay_without_a_newline(client: TestClient, session: Created) -> None:
+    with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
+        ws.send_json({"type": "ping", "id": 1})
+        assert ws.receive_text() == '{"id":1,"type":"pong"}'
