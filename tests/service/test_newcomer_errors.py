@@ -200,3 +200,27 @@ def test_websocket_messages_stay_without_a_newline(client: TestClient, session: 
     with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
         ws.send_json({"type": "ping", "id": 1})
         assert ws.receive_text() == '{"id":1,"type":"pong"}'
+
+
+# -- 5. two more first-minute mistakes ----------------------------------------------------------
+def test_a_misspelt_field_is_told_the_near_name(client: TestClient, session: Created) -> None:
+    frame = {"targets": [{"effector": "hand", "positon": {"x": 0.3, "y": 0.1, "z": 0.6}}]}
+    r = client.post(f"/v1/sessions/{session.id}/frames", json=frame, headers=session.headers)
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
+    assert "did you mean 'position'" in r.json()["detail"][0]["msg"]
+    # A name that is nothing like a field keeps pydantic's message.
+    frame = {"targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}, "q": 1}]}
+    r = client.post(f"/v1/sessions/{session.id}/frames", json=frame, headers=session.headers)
+    assert "did you mean" not in r.json()["detail"][0]["msg"], r.text
+
+
+@pytest.mark.parametrize("scheme", ["", "Token "])
+def test_a_token_without_bearer_is_told_the_header_form(
+    client: TestClient, session: Created, scheme: str
+) -> None:
+    headers = {"Authorization": f"{scheme}{session.token}"}
+    r = client.get(f"/v1/sessions/{session.id}", headers=headers)
+    assert r.status_code == 401 and r.json()["code"] == "unauthorized", r.text
+    assert "'Bearer <token>'" in r.json()["detail"]
+    assert session.token not in r.text  # the token is never echoed
+    assert client.get(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 200
