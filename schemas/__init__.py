@@ -52,6 +52,7 @@ from .solve import (
     Target,
 )
 from .ws import (
+    CLIENT_MESSAGE_TYPES,
     ClientMessage,
     ClipMessage,
     ClipResultMessage,
@@ -65,6 +66,7 @@ from .ws import (
 )
 
 __all__ = [
+    "CLIENT_MESSAGE_TYPES",
     "ChainSpec",
     "ClientMessage",
     "ClipMessage",

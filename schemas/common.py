@@ -79,8 +79,9 @@ class ErrorBody(StrictModel):
     """Every HTTP error: FastAPI's ``detail`` plus a stable ``code``.
 
     For ``invalid_format`` (the body failed validation) ``detail`` is FastAPI's list of
-    ``{loc, msg, type}`` entries; for every other code it is a message and ``field``
-    names the offending field when there is one.
+    ``{loc, msg, type}`` entries and ``field`` the first entry's ``loc``, dotted; for
+    every other code ``detail`` is a message and ``field`` names the offending field
+    when there is one.
     """
 
     model_config = ConfigDict(

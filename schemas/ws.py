@@ -7,7 +7,7 @@ client's ``id``: a non-negative integer that must increase within a connection.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from pydantic import Field
 
@@ -53,6 +53,18 @@ class PingMessage(StrictModel):
 
 
 ClientMessage = Annotated[FrameMessage | ClipMessage | PingMessage, Field(discriminator="type")]
+
+
+def _message_types() -> tuple[str, ...]:
+    """The ``type`` tags of ``ClientMessage``, read from its union (so the error that
+    lists them cannot fall behind a new message type)."""
+    union, _field = get_args(ClientMessage)
+    models = get_args(union)
+    return tuple(tag for m in models for tag in get_args(m.model_fields["type"].annotation))
+
+
+CLIENT_MESSAGE_TYPES: tuple[str, ...] = _message_types()
+"""The ``type`` values a client may send: ``("frame", "clip", "ping")``."""
 
 
 class ResultMessage(StrictModel):

@@ -173,6 +173,8 @@ def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
             f"too many effectors: {len(spec.effectors)} > {settings.max_effectors}",
             "chain.effectors",
         )
+    for i, j in enumerate(spec.joints):
+        _check_radians(j, f"chain.joints[{i}]")
     joints = [
         Joint(
             name=j.name,
@@ -206,6 +208,36 @@ def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
         return build_chain(joints, effectors, max_dof=settings.max_dof)
     except InvalidModel as e:
         raise invalid_problem(str(e), _hierarchy_field(spec, e)) from None
+
+
+# The largest rotation limit a JSON chain may give [rad]: a full turn, plus room for a
+# rounded 2*pi (6.2832). Beyond it the number is almost surely degrees (an elbow's
+# "upper": [150]), which would otherwise be taken as 24 turns and leave the joint
+# practically unlimited. URDF files are not checked: the format is radians by
+# definition, and real files give unlimited joints limits such as +-1e16 or 2*pi + eps.
+MAX_ROTATION_LIMIT_RAD = 2 * math.pi + 1e-3
+_ROTATION_KINDS = frozenset({JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.ROTATIONAL})
+
+
+def _check_radians(j: S.JointSpec, where: str) -> None:
+    """Refuse a rotation limit beyond a full turn, saying that limits are radians.
+
+    Raises:
+        ServiceError: ``invalid_problem`` naming ``<where>.lower`` or ``<where>.upper``.
+    """
+    if JointKind(j.kind) not in _ROTATION_KINDS:
+        return  # prismatic limits are metres; fixed joints have none
+    for side, limits in (("lower", j.lower), ("upper", j.upper)):
+        for value in limits:
+            if abs(value) <= MAX_ROTATION_LIMIT_RAD:
+                continue
+            message = (
+                f"joint {j.name!r}: {side} limit {value:g} is beyond 2*pi: limits are in radians"
+            )
+            if abs(value) <= 360:
+                message += f"; {value:g} degrees is {math.radians(value):.4f}"
+            message += '; for unlimited rotation use kind "continuous" with no limits'
+            raise invalid_problem(message, f"{where}.{side}")
 
 
 def _hierarchy_field(spec: S.HierarchyChain, e: InvalidModel) -> str:

@@ -66,12 +66,10 @@ def received_at(request: Request) -> float:
     return float(t0) if t0 is not None else time.perf_counter()
 
 
-def unauthorized() -> ServiceError:
-    return ServiceError(
-        "unauthorized",
-        "this call needs the session's token: Authorization: Bearer <token>",
-        status_code=status.HTTP_401_UNAUTHORIZED,
-    )
+def unauthorized(
+    detail: str = "this call needs the session's token: Authorization: Bearer <token>",
+) -> ServiceError:
+    return ServiceError("unauthorized", detail, status_code=status.HTTP_401_UNAUTHORIZED)
 
 
 def forbidden() -> ServiceError:
@@ -154,8 +152,17 @@ async def session_auth(
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
 ) -> Session:
     """Dependency: the authenticated session of the path's ``session_id``."""
+    if credentials is None and "authorization" in request.headers:
+        raise unauthorized(_NOT_BEARER)  # the header is there, its scheme is not
     token = credentials.credentials if credentials is not None else None
     return await authenticate(services(request).store, session_id, token)
+
+
+# The commonest first 401: the token sent bare, or as "Token <t>", with no "Bearer ".
+_NOT_BEARER = (
+    "the Authorization header must be 'Bearer <token>' (the word Bearer, a space, then "
+    "the token from POST /v1/sessions)"
+)
 
 
 ServicesDep = Annotated[Services, Depends(services_dep)]

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -37,6 +38,7 @@ from starlette.routing import compile_path
 
 from solver.errors import IKError
 
+from .hints import hint
 from .responses import ORJSONResponse
 
 log = logging.getLogger("service")
@@ -143,13 +145,20 @@ def plans_busy(limit: int) -> ServiceError:
 
 
 def validation_errors(errors: Any) -> list[dict[str, Any]]:
-    """pydantic errors without the echoed input (it can be a whole URDF) or URLs."""
+    """pydantic errors without the echoed input (it can be a whole URDF) or URLs; the
+    message says the expected form where service.hints knows it."""
     out = []
     for e in errors:
-        out.append(
-            {"loc": list(e.get("loc", ())), "msg": str(e.get("msg", "")), "type": e.get("type", "")}
-        )
+        msg = hint(e) or str(e.get("msg", ""))
+        out.append({"loc": list(e.get("loc", ())), "msg": msg, "type": e.get("type", "")})
     return out
+
+
+def dotted_field(loc: Sequence[Any]) -> str | None:
+    """The dotted path of a validation error's ``loc`` (``frame.targets.0.orientation``),
+    without FastAPI's leading ``body``."""
+    parts = list(loc[1:] if loc and loc[0] == "body" else loc)
+    return ".".join(str(p) for p in parts) or None
 
 
 _HTTP_CODES = {
@@ -166,10 +175,11 @@ async def _service_error(request: Request, exc: Exception) -> Response:
 
 async def _validation_error(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, RequestValidationError)
-    return ORJSONResponse(
-        {"detail": validation_errors(exc.errors()), "code": "invalid_format"},
-        status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
-    )
+    detail = validation_errors(exc.errors())
+    body: dict[str, Any] = {"detail": detail, "code": "invalid_format"}
+    if detail and (field := dotted_field(detail[0]["loc"])) is not None:
+        body["field"] = field  # the first error's, as the WebSocket's error names it
+    return ORJSONResponse(body, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
 
 
 def solver_error(exc: IKError) -> ServiceError:

@@ -32,13 +32,14 @@ import schemas as S
 from solver.errors import IKError
 from solver.ik import Target as SolverTarget
 
-from .. import convert
+from .. import convert, hints
 from ..deps import Services, authenticate, services
 from ..errors import (
     WS_FORBIDDEN,
     WS_NOT_FOUND,
     WS_UNAUTHORIZED,
     ServiceError,
+    dotted_field,
     solver_error,
     validation_errors,
 )
@@ -49,6 +50,12 @@ router = APIRouter(prefix="/v1")
 
 _CLIENT_MESSAGE: TypeAdapter[S.FrameMessage | S.ClipMessage | S.PingMessage] = TypeAdapter(
     S.ClientMessage
+)
+# pydantic's error types, at the message's top level, for a message whose ``type`` is
+# missing or unknown, or that is not an object at all: answered with the types there are
+# (dict_type from JSON, model_attributes_type from MessagePack).
+_NO_MESSAGE_TYPE = frozenset(
+    {"union_tag_not_found", "union_tag_invalid", "dict_type", "model_attributes_type"}
 )
 _AUTH_CLOSE = {
     "unauthorized": WS_UNAUTHORIZED,
@@ -230,9 +237,11 @@ class _Connection:
                 except orjson.JSONDecodeError:
                     raw = None
             errors = validation_errors(e.errors())
-            first = errors[0] if errors else {"loc": [], "msg": "invalid message"}
-            field = ".".join(str(p) for p in first["loc"]) or None
-            await self.reply_error(binary, _raw_id(raw), "invalid_format", str(first["msg"]), field)
+            first = errors[0] if errors else {"loc": [], "msg": "invalid message", "type": ""}
+            message, field = str(first["msg"]), dotted_field(first["loc"])
+            if field is None and first["type"] in _NO_MESSAGE_TYPE:
+                message, field = hints.message_type_hint(raw), "type"
+            await self.reply_error(binary, _raw_id(raw), "invalid_format", message, field)
             return
         except Exception as e:  # msgpack's errors share no useful base class
             await self.reply_error(

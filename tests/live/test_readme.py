@@ -45,8 +45,9 @@ def test_curl_walkthrough(server: Server, tmp_path: Path) -> None:
     assert '"success": true' in text  # the single frame (jq pretty-prints it)
     assert '{"id":2,"success":true' in text and '{"id":3,"success":true' in text
     assert '"ids":[4,5],"solved":[true,true]}' in text and '"largest_step_rad":' in text
-    assert '"code":"unauthorized"} HTTP 401' in text
-    assert '"field":"targets[0].effector"} HTTP 422' in text
+    # JSON bodies end with a newline, so curl's -w status line follows on its own line.
+    assert re.search(r'"code":"unauthorized"}\n\s*HTTP 401', text), text
+    assert re.search(r'"field":"targets\[0\]\.effector"}\n\s*HTTP 422', text), text
     assert '"time_budget_us":500' in text
     assert '"joint4":-1.5' in text
     assert 'ik_frames_total{success="true",termination="goal_reached"}' in text

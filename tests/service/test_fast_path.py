@@ -59,8 +59,9 @@ GOOD: dict[str, list[dict[str, Any]]] = {
 # Leaf replacements: wrong types, bounds, non-finite numbers, ints for floats.
 ODD_VALUES: list[Any] = [
     None, True, False, 0, 1, -1, 2, 1.0, 0.5, -0.0, "0.3", "NaN", "", "tool", [], {},
-    [0.1, 0.2, 0.3], {"x": 0}, 1e6, -1e6, 1e6 + 1, 1000001, -1e7, 2**53 - 1, 2**53,
-    1e300, 1.0004, 0.9991, 0.998, 1e-10, 5e-324, "x" * 129, float("nan"), float("inf"),
+    [0.1, 0.2, 0.3], [1, 0, 0, 0], [0, 0, 0, 1], {"x": 0}, 1e6, -1e6, 1e6 + 1, 1000001, -1e7,
+    2**53 - 1, 2**53, 1e300, 1.0004, 0.9991, 0.998, 1e-10, 5e-324, "x" * 129, float("nan"),
+    float("inf"),
 ]  # fmt: skip
 
 

@@ -1,0 +1,226 @@
+"""The errors a newcomer meets in the first minutes say what to send instead (issue 19).
+
+Codes stay as they were (invalid_format, invalid_problem, unauthorized); what these
+tests check is the message and the field, because here the message is the point.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from typing import Any
+
+import msgpack
+import pytest
+from starlette.testclient import TestClient
+
+import schemas as S
+from schemas.chain import EXAMPLE_ARM
+
+from .helpers import Created, create, hand_frame
+
+
+def arm_with(joint: int, **values: Any) -> dict[str, Any]:
+    chain = copy.deepcopy(EXAMPLE_ARM)
+    chain["joints"][joint].update(values)
+    return chain
+
+
+def ws_exchange(client: TestClient, s: Created, message: Any, *, binary: bool = False) -> Any:
+    """Send one message on a fresh socket; return the answer (decoded)."""
+    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        if binary:
+            ws.send_bytes(msgpack.packb(message))
+            return msgpack.unpackb(ws.receive_bytes())
+        ws.send_text(message if isinstance(message, str) else json.dumps(message))
+        return ws.receive_json()
+
+
+# -- 1. a WebSocket message without a known type --------------------------------------------
+@pytest.mark.parametrize("binary", [False, True], ids=["json", "msgpack"])
+@pytest.mark.parametrize(
+    "message",
+    [{"id": 1}, {"type": "dance", "id": 1}, {"type": 3, "id": 1}, {"type": None, "id": 1}, [1]],
+    ids=["no-type", "unknown-type", "number-type", "null-type", "not-an-object"],
+)
+def test_a_message_without_a_known_type_is_told_the_types(
+    client: TestClient, session: Created, message: Any, binary: bool
+) -> None:
+    answer = ws_exchange(client, session, message, binary=binary)
+    error = answer["error"]
+    assert error["code"] == "invalid_format" and error["field"] == "type", answer
+    for tag in S.CLIENT_MESSAGE_TYPES:
+        assert f'"{tag}"' in error["message"], error
+    if isinstance(message, dict):
+        assert answer["id"] == 1
+
+
+def test_the_listed_types_are_the_ones_the_server_takes(
+    client: TestClient, session: Created
+) -> None:
+    """Each listed type gets past the type check (its error, if any, is about another
+    field), and the list holds every type the README documents."""
+    assert {"frame", "clip", "ping"} <= set(S.CLIENT_MESSAGE_TYPES)
+    with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
+        for i, tag in enumerate(S.CLIENT_MESSAGE_TYPES, start=1):
+            ws.send_json({"type": tag, "id": i})
+            answer = ws.receive_json()
+            assert answer.get("error", {}).get("field") != "type", (tag, answer)
+
+
+def test_a_near_miss_type_is_named(client: TestClient, session: Created) -> None:
+    answer = ws_exchange(client, session, {"type": "frames", "id": 1, **hand_frame(None)})
+    assert 'did you mean "frame"' in answer["error"]["message"], answer
+
+
+# -- 2. an array where a quaternion (or vector) object belongs --------------------------------
+QUATERNION_FORM = '{"w": ..., "x": ..., "y": ..., "z": ...}'
+
+
+def test_an_array_quaternion_in_a_chain_is_422_with_the_object_form(client: TestClient) -> None:
+    chain = arm_with(1, origin={"rotation": [0, 0, 0, 1]})
+    r = client.post("/v1/sessions", json={"chain": chain})
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["code"] == "invalid_format"
+    assert body["field"] == "chain.hierarchy.joints.1.origin.rotation"
+    (error,) = body["detail"]
+    message = error["msg"]
+    assert QUATERNION_FORM in message and "x, y, z, w" in message, message
+    # Both readings of the array, as objects the client can paste.
+    assert '{"w":0,"x":0,"y":0,"z":1}' in message
+    assert '{"w":1,"x":0,"y":0,"z":0}' in message
+
+
+def test_an_array_quaternion_in_a_frame_is_invalid_format_on_both_transports(
+    client: TestClient,
+) -> None:
+    pose_arm = copy.deepcopy(EXAMPLE_ARM)
+    pose_arm["effectors"] = [{"name": "hand", "link": "hand", "mode": "pose"}]
+    s = create(client, pose_arm)
+    target = {"effector": "hand", "orientation": [1, 0, 0, 0]}
+    r = client.post(f"/v1/sessions/{s.id}/frames", json={"targets": [target]}, headers=s.headers)
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
+    assert r.json()["field"] == "frame.targets.0.orientation"
+    assert QUATERNION_FORM in r.json()["detail"][0]["msg"]
+    for binary in (False, True):
+        answer = ws_exchange(
+            client, s, {"type": "frame", "id": 1, "targets": [target]}, binary=binary
+        )
+        error = answer["error"]
+        assert error["code"] == "invalid_format", answer
+        assert error["field"] == "frame.targets.0.orientation"
+        assert QUATERNION_FORM in error["message"] and "x, y, z, w" in error["message"]
+
+
+def test_an_array_position_is_told_the_object_form(client: TestClient, session: Created) -> None:
+    frame = {"targets": [{"effector": "hand", "position": [0.3, 0.1, 0.6]}]}
+    r = client.post(f"/v1/sessions/{session.id}/frames", json=frame, headers=session.headers)
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
+    assert '{"x":0.3,"y":0.1,"z":0.6}' in r.json()["detail"][0]["msg"]
+
+
+# -- 3. rotation limits are radians -------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("joint", "values", "field", "degrees_hint"),
+    [
+        (1, {"lower": [0.0], "upper": [150.0]}, "chain.joints[1].upper", "2.6180"),
+        (0, {"lower": [-180.0, -1.5], "upper": [3.1, 1.5]}, "chain.joints[0].lower", "-3.1416"),
+        (1, {"lower": [0.0], "upper": [7.0]}, "chain.joints[1].upper", "0.1222"),
+        (1, {"lower": [-1e6], "upper": [1e6]}, "chain.joints[1].lower", None),
+    ],
+    ids=["revolute-150", "rotational-minus-180", "revolute-7", "revolute-1e6"],
+)
+def test_a_rotation_limit_beyond_a_full_turn_is_refused_as_degrees(
+    client: TestClient,
+    joint: int,
+    values: dict[str, Any],
+    field: str,
+    degrees_hint: str | None,
+) -> None:
+    r = client.post("/v1/sessions", json={"chain": arm_with(joint, **values)})
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["code"] == "invalid_problem" and body["field"] == field, body
+    name = EXAMPLE_ARM["joints"][joint]["name"]
+    assert repr(name) in body["detail"] and "radians" in body["detail"], body
+    if degrees_hint is not None:
+        assert f"degrees is {degrees_hint}" in body["detail"], body
+
+
+@pytest.mark.parametrize("limit", [2 * math.pi, 6.2832])
+def test_a_full_turn_is_a_valid_limit(client: TestClient, limit: float) -> None:
+    created = create(client, arm_with(1, lower=[-limit], upper=[limit]))
+    assert created.body["dof"][2] == {"name": "elbow", "lower": -limit, "upper": limit}
+
+
+def test_prismatic_limits_are_metres_and_not_checked_as_angles(client: TestClient) -> None:
+    chain = arm_with(1, kind="prismatic", lower=[0.0], upper=[150.0])
+    created = create(client, chain)
+    assert created.body["dof"][2]["upper"] == 150.0
+
+
+@pytest.mark.parametrize("limit", ["1e16", str(2 * math.pi + 1e-6), "100"])
+def test_urdf_limits_are_taken_as_given(client: TestClient, limit: str) -> None:
+    """URDF is radians by definition; files in the wild give unlimited joints huge
+    limits, which must load."""
+    urdf = (
+        '<robot name="r"><link name="base"/><link name="l1"/><link name="tip"/>'
+        '<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>'
+        f'<axis xyz="0 0 1"/><limit lower="-{limit}" upper="{limit}" effort="1" velocity="1"/>'
+        '</joint><joint name="j2" type="fixed"><parent link="l1"/><child link="tip"/>'
+        '<origin xyz="0.5 0 0"/></joint></robot>'
+    )
+    chain = {"format": "urdf", "urdf": urdf, "base_link": "base", "tip_links": ["tip"]}
+    created = create(client, chain)
+    assert created.body["dof"][0]["upper"] == float(limit)
+
+
+# -- 4. JSON bodies end with a newline; WebSocket messages do not ------------------------------
+def test_json_responses_end_with_a_newline(client: TestClient, session: Created) -> None:
+    responses = [
+        client.get("/readyz"),
+        client.get("/healthz"),
+        client.get(f"/v1/sessions/{session.id}", headers=session.headers),
+        client.post(
+            f"/v1/sessions/{session.id}/frames", json=hand_frame(1), headers=session.headers
+        ),
+        client.get("/v1/sessions/nosuchsession", headers=session.headers),  # an error body
+        client.post("/v1/sessions", json={}),  # a validation error
+    ]
+    for r in responses:
+        assert r.headers["content-type"] == "application/json", r.url
+        assert r.content.endswith(b"}\n"), (r.url, r.content[-20:])
+        assert int(r.headers["content-length"]) == len(r.content)
+        assert isinstance(r.json(), dict)
+
+
+def test_websocket_messages_stay_without_a_newline(client: TestClient, session: Created) -> None:
+    with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
+        ws.send_json({"type": "ping", "id": 1})
+        assert ws.receive_text() == '{"id":1,"type":"pong"}'
+
+
+# -- 5. two more first-minute mistakes ----------------------------------------------------------
+def test_a_misspelt_field_is_told_the_near_name(client: TestClient, session: Created) -> None:
+    frame = {"targets": [{"effector": "hand", "positon": {"x": 0.3, "y": 0.1, "z": 0.6}}]}
+    r = client.post(f"/v1/sessions/{session.id}/frames", json=frame, headers=session.headers)
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
+    assert "did you mean 'position'" in r.json()["detail"][0]["msg"]
+    # A name that is nothing like a field keeps pydantic's message.
+    frame = {"targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}, "q": 1}]}
+    r = client.post(f"/v1/sessions/{session.id}/frames", json=frame, headers=session.headers)
+    assert "did you mean" not in r.json()["detail"][0]["msg"], r.text
+
+
+@pytest.mark.parametrize("scheme", ["", "Token "])
+def test_a_token_without_bearer_is_told_the_header_form(
+    client: TestClient, session: Created, scheme: str
+) -> None:
+    headers = {"Authorization": f"{scheme}{session.token}"}
+    r = client.get(f"/v1/sessions/{session.id}", headers=headers)
+    assert r.status_code == 401 and r.json()["code"] == "unauthorized", r.text
+    assert "'Bearer <token>'" in r.json()["detail"]
+    assert session.token not in r.text  # the token is never echoed
+    assert client.get(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 200
