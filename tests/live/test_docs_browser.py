@@ -27,8 +27,8 @@ pytestmark = pytest.mark.live
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
-# The flags the brief of issue 19 fixed: no GPU, no QUIC, and none of Chromium's own
-# background traffic (component updates, sync, safe browsing lists) during the test.
+# No GPU or QUIC, none of Chromium's own background traffic (component updates, sync,
+# safe browsing lists), and no sandbox (tests and CI run as root, in containers).
 CHROMIUM_ARGS = [
     "--headless",
     "--no-sandbox",
