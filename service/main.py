@@ -24,6 +24,7 @@ from .errors import install_handlers
 from .metrics import Metrics
 from .responses import ORJSONResponse, dumps
 from .routes import health, http, ws
+from .routes.docs import add_docs
 from .sessions import InMemorySessionStore, SessionStore
 from .solving import Runner, Warmup, default_warmup
 
@@ -172,7 +173,11 @@ def create_app(
         description=DESCRIPTION,
         lifespan=lifespan,
         default_response_class=ORJSONResponse,
+        # FastAPI's own pages load their assets from CDNs; add_docs serves them locally.
+        docs_url=None,
+        redoc_url=None,
     )
+    add_docs(app)
     install_handlers(app)
     app.include_router(http.router)
     app.include_router(ws.router)
