@@ -291,13 +291,13 @@ def _motion(
     frames_text = _header_value(lines, k, "Frames:")
     if not frames_text.isdigit():
         raise InvalidModel(
-            f"Frames must be a count, got {frames_text[:40]!r}", joint="MOTION", field=f"line {k + 1}"
+            f"Frames must be a count, got {frames_text[:40]!r}",
+            joint="MOTION",
+            field=f"line {k + 1}",
         )
     n_frames = int(frames_text)
     if n_frames > max_frames:
-        raise InvalidModel(
-            f"more than {max_frames} frames", joint="MOTION", field=f"line {k + 1}"
-        )
+        raise InvalidModel(f"more than {max_frames} frames", joint="MOTION", field=f"line {k + 1}")
     k += 1
     time_text = _header_value(lines, k, "Frame Time:")
     frame_time = _number(time_text, "MOTION", f"line {k + 1}")

@@ -46,7 +46,6 @@ from __future__ import annotations
 import base64
 import binascii
 import json
-import math
 import struct
 from dataclasses import dataclass
 from typing import Any
@@ -136,9 +135,7 @@ def _container(data: bytes | str, *, max_bytes: int, max_json_bytes: int) -> _Co
     if isinstance(data, bytearray | memoryview):
         data = bytes(data)
     if not isinstance(data, bytes | str):
-        raise InvalidModel(
-            f"glTF must be bytes or str, got {type(data).__name__}", joint="glb"
-        )
+        raise InvalidModel(f"glTF must be bytes or str, got {type(data).__name__}", joint="glb")
     if len(data) > max_bytes:
         raise InvalidModel(f"the file is larger than {max_bytes} bytes", joint="glb")
     if isinstance(data, bytes) and data[:4] == _GLB_MAGIC:
@@ -188,16 +185,13 @@ def _glb_chunks(data: bytes, max_json_bytes: int) -> tuple[bytes, int | None]:
         start = offset + 8
         if chunk_length > length - start:
             raise InvalidModel(
-                f"truncated: chunk {index} declares {chunk_length} bytes, "
-                f"{length - start} remain",
+                f"truncated: chunk {index} declares {chunk_length} bytes, {length - start} remain",
                 joint="glb",
                 field=f"chunks[{index}]",
             )
         if index == 0:
             if chunk_type != _CHUNK_JSON:
-                raise InvalidModel(
-                    "the first chunk must be JSON", joint="glb", field="chunks[0]"
-                )
+                raise InvalidModel("the first chunk must be JSON", joint="glb", field="chunks[0]")
             if chunk_length > max_json_bytes:
                 raise InvalidModel(
                     f"the JSON chunk is larger than {max_json_bytes} bytes",
@@ -294,7 +288,9 @@ def _check_buffers(doc: dict[str, Any], container: _Container) -> None:
 def _data_uri_length(uri: str, part: str) -> int:
     header, sep, payload = uri.partition(",")
     if not sep or not header.endswith(";base64"):
-        raise InvalidModel("a data URI must be base64 (data:...;base64,...)", joint=part, field="uri")
+        raise InvalidModel(
+            "a data URI must be base64 (data:...;base64,...)", joint=part, field="uri"
+        )
     try:
         return len(base64.b64decode(payload, validate=True))
     except (binascii.Error, ValueError):
@@ -331,7 +327,9 @@ def _parents(nodes: list[Any]) -> list[int]:
     for i, node in enumerate(nodes):
         children = node.get("children", [])
         if not isinstance(children, list):
-            raise InvalidModel("children must be an array", joint=_node_part(nodes, i), field="children")
+            raise InvalidModel(
+                "children must be an array", joint=_node_part(nodes, i), field="children"
+            )
         for c in children:
             if not _index(c, n):
                 raise InvalidModel(

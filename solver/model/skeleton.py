@@ -418,7 +418,9 @@ def _axes_and_limits(
     axes = axes.lower()
     if not 1 <= len(axes) <= 3 or set(axes) - set("xyz") or len(set(axes)) != len(axes):
         raise InvalidModel(
-            f"axes must be 1-3 distinct letters of 'xyz', got {axes!r}", joint=bone.name, field="axes"
+            f"axes must be 1-3 distinct letters of 'xyz', got {axes!r}",
+            joint=bone.name,
+            field="axes",
         )
     lower, upper = default_limits(axes)
     if (given.lower is None) != (given.upper is None):
@@ -440,10 +442,14 @@ def _free_root_joints(
     lo = np.asarray(free.lower_m, dtype=np.float64)
     hi = np.asarray(free.upper_m, dtype=np.float64)
     if lo.shape != (3,) or hi.shape != (3,):
-        raise InvalidModel("free root limits need 3 values each", joint=bone.name, field="free_root")
+        raise InvalidModel(
+            "free root limits need 3 values each", joint=bone.name, field="free_root"
+        )
     if not (np.isfinite(lo).all() and np.isfinite(hi).all()) or np.any(lo > hi):
         raise InvalidModel(
-            "free root limits must be finite with lower <= upper", joint=bone.name, field="free_root"
+            "free root limits must be finite with lower <= upper",
+            joint=bone.name,
+            field="free_root",
         )
     positions = "".join(c.axis for c in bone.channels if not c.is_rotation)
     # BVH: translate along the axes the file animates; otherwise all three.
@@ -531,7 +537,9 @@ def chain_from_skeleton(skeleton: Skeleton, settings: SkeletonSettings) -> Skele
         origin = _compose(bone.offset, bone.rest)
         if bone.name == free_root_bone:
             assert settings.free_root is not None
-            prismatic, parent_link, origin = _free_root_joints(bone, settings.free_root, parent_link)
+            prismatic, parent_link, origin = _free_root_joints(
+                bone, settings.free_root, parent_link
+            )
             joints.extend(prismatic)
         if bone.name in moving_set:
             axes, lower, upper = _axes_and_limits(bone, given, settings.default_axes)

@@ -131,7 +131,8 @@ def bvh_world_positions(
                 order.append(axis[channel.value[0].lower()])
         r = np.eye(3)
         if len(order) == 3:
-            r = pr.matrix_from_euler(angles, *order, extrinsic=False)
+            i, j, k = order
+            r = pr.matrix_from_euler(angles, i, j, k, False)  # intrinsic
         else:  # fewer than three: compose the active basic rotations by hand
             for a, k in zip(angles, order, strict=True):
                 r = r @ pr.active_matrix_from_angle(k, a)

@@ -235,7 +235,10 @@ def test_channel_count_mismatch_names_joint_and_line() -> None:
     )
     err = _error(text)
     assert err.joint == "LHipJoint"
-    assert err.field == f"line {_line_of(text, chr(9) * 2 + 'CHANNELS 4 Zrotation Yrotation Xrotation')}"
+    assert (
+        err.field
+        == f"line {_line_of(text, chr(9) * 2 + 'CHANNELS 4 Zrotation Yrotation Xrotation')}"
+    )
 
 
 def test_frame_values_inconsistent_with_channels() -> None:
@@ -279,13 +282,32 @@ def test_non_finite_or_malformed_numbers(bad: str) -> None:
     ("edit", "joint"),
     [
         (("JOINT LeftLeg", "JOINT LeftUpLeg"), "LeftUpLeg"),  # duplicate name
-        (("CHANNELS 3 Zrotation Yrotation Xrotation", "CHANNELS 3 Zrotation Zrotation Xrotation"), "LHipJoint"),
-        (("CHANNELS 3 Zrotation Yrotation Xrotation", "CHANNELS 3 Zrotation Wrotation Xrotation"), "LHipJoint"),
+        (
+            (
+                "CHANNELS 3 Zrotation Yrotation Xrotation",
+                "CHANNELS 3 Zrotation Zrotation Xrotation",
+            ),
+            "LHipJoint",
+        ),
+        (
+            (
+                "CHANNELS 3 Zrotation Yrotation Xrotation",
+                "CHANNELS 3 Zrotation Wrotation Xrotation",
+            ),
+            "LHipJoint",
+        ),
         (("OFFSET 0 0 0", "OFFSET 0 0"), "LHipJoint"),
         (("OFFSET 0 0 0", "OFFSET 0 0 0\r\n\t\tOFFSET 0 0 0"), "LHipJoint"),
         (("JOINT LHipJoint\r\n\t{", "JOINT LHipJoint\r\n\t("), "LHipJoint"),
         (("JOINT LHipJoint", "JIONT LHipJoint"), "Hips"),
-        (("\t\tOFFSET 0 0 0\r\n\t\tCHANNELS 3 Zrotation Yrotation Xrotation\r\n\t\tJOINT LeftUpLeg", "\t\tCHANNELS 3 Zrotation Yrotation Xrotation\r\n\t\tJOINT LeftUpLeg"), "LHipJoint"),
+        (
+            (
+                "\t\tOFFSET 0 0 0\r\n"
+                "\t\tCHANNELS 3 Zrotation Yrotation Xrotation\r\n\t\tJOINT LeftUpLeg",
+                "\t\tCHANNELS 3 Zrotation Yrotation Xrotation\r\n\t\tJOINT LeftUpLeg",
+            ),
+            "LHipJoint",
+        ),
     ],
 )
 def test_bad_hierarchy_names_the_joint(edit: tuple[str, str], joint: str) -> None:

@@ -100,9 +100,7 @@ def _doc(**changes: Any) -> dict[str, Any]:
             {"name": "Body", "joints": [2, 3, 4, 5], "skeleton": 2},
             {"name": "Prop", "joints": [7]},
         ],
-        "buffers": [
-            {"byteLength": 64, "uri": f"data:application/octet-stream;base64,{payload}"}
-        ],
+        "buffers": [{"byteLength": 64, "uri": f"data:application/octet-stream;base64,{payload}"}],
     }
     doc.update(changes)
     return doc
@@ -287,7 +285,10 @@ def test_a_deep_chain_within_the_node_cap() -> None:
         ({"rotation": [0, 0, 1]}, "rotation"),
         ({"translation": [0, 1e999, 0]}, "translation"),
         ({"translation": [0, "1", 0]}, "translation"),
-        ({"matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "scale": [1, 1, 1]}, "matrix"),
+        (
+            {"matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "scale": [1, 1, 1]},
+            "matrix",
+        ),
         ({"matrix": [1, 0, 0, 0, 0.5, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]}, "matrix"),  # shear
         ({"matrix": [-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]}, "matrix"),  # mirror
         ({"matrix": [1, 0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]}, "matrix"),  # projective
