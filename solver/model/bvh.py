@@ -165,7 +165,7 @@ def _hierarchy(
         where = f"line {line}"
         keyword = tokens[0]
         current = stack[-1] if stack else None
-        if keyword in ("ROOT", "JOINT") or (keyword == "End" and tokens[1:2] == ["Site"]):
+        if keyword in ("ROOT", "JOINT") or _end_site(tokens):
             if (keyword == "ROOT") != (current is None):
                 raise InvalidModel(
                     "ROOT only at the top level, JOINT and End Site only inside a joint",
@@ -235,6 +235,10 @@ def _hierarchy(
     if not nodes:
         raise InvalidModel("the hierarchy has no ROOT", joint="bvh", field="HIERARCHY")
     return nodes, motion
+
+
+def _end_site(tokens: list[str]) -> bool:
+    return tokens[0] == "End" and len(tokens) > 1 and tokens[1].lower() == "site"
 
 
 def _channels(node: _Node, tokens: list[str], where: str) -> tuple[Channel, ...]:

@@ -18,8 +18,9 @@ What is read:
     URIs (external files) are not fetched, which is fine: no buffer data is needed.
   - nodes: ``name``, ``children``, ``translation``, ``rotation`` (x, y, z, w),
     ``scale`` or ``matrix`` (16 numbers, column-major).
-  - skins: ``joints``, ``skeleton``, ``name``. ``skin`` chooses one by index or
-    name (default: the first).
+  - skins: ``joints``, ``name``, and ``skeleton`` (range-checked only: a bone's parent
+    is found in the node tree). ``skin`` chooses one by index or name (default: the
+    first).
 
 The skeleton. The skin's joint nodes become bones, named after their nodes (a node
 without a name gets ``node_<index>``; a name shared by several joints becomes
@@ -124,7 +125,7 @@ def read_gltf(
     parent = _parents(nodes)
     depth = _depths(nodes, parent, max_depth)
     skin_index, skin_doc = _choose_skin(doc, skin)
-    joints = _skin_joints(skin_doc, skin_index, len(nodes), parent)
+    joints = _skin_joints(skin_doc, skin_index, len(nodes))
     return _skeleton(nodes, parent, depth, joints, _skin_name(skin_doc, skin_index))
 
 
@@ -418,9 +419,7 @@ def _skin_name(skin_doc: dict[str, Any], index: int) -> str:
     return name if isinstance(name, str) and name else f"skin_{index}"
 
 
-def _skin_joints(
-    skin_doc: dict[str, Any], index: int, n_nodes: int, parent: list[int]
-) -> list[int]:
+def _skin_joints(skin_doc: dict[str, Any], index: int, n_nodes: int) -> list[int]:
     part = f"skins[{index}]"
     joints = skin_doc.get("joints")
     if not isinstance(joints, list) or not joints:
@@ -432,28 +431,20 @@ def _skin_joints(
                 joint=part,
                 field="joints",
             )
-    if len(set(joints)) != len(joints):
-        dup = next(j for j in joints if joints.count(j) > 1)
-        raise InvalidModel(f"node {dup} is listed twice", joint=part, field="joints")
+    seen: set[int] = set()
+    for j in joints:  # a set, not list.count: a crafted list may be long
+        if j in seen:
+            raise InvalidModel(f"node {j} is listed twice", joint=part, field="joints")
+        seen.add(j)
     root = skin_doc.get("skeleton")
-    if root is not None:
-        if not _index(root, n_nodes):
-            raise InvalidModel(
-                f"skeleton = {root!r} is not a node index (0..{n_nodes - 1})",
-                joint=part,
-                field="skeleton",
-            )
-        # Spec 5.28: the skeleton root is a common root of the joints (or one of them).
-        for j in joints:
-            node = j
-            while node >= 0 and node != root:
-                node = parent[node]
-            if node != root:
-                raise InvalidModel(
-                    f"joint node {j} is not below the skeleton root node {root}",
-                    joint=part,
-                    field="skeleton",
-                )
+    # Only range-checked: bones take their parents from the node tree, as three.js and
+    # Godot do, so a file whose skeleton root is not above every joint still loads.
+    if root is not None and not _index(root, n_nodes):
+        raise InvalidModel(
+            f"skeleton = {root!r} is not a node index (0..{n_nodes - 1})",
+            joint=part,
+            field="skeleton",
+        )
     return list(joints)
 
 

@@ -115,7 +115,7 @@ class Bone:
     @property
     def can_rotate(self) -> bool:
         """Whether the source lets this bone rotate (see the module's decisions)."""
-        return self.rotation_order is None or self.rotation_order != ""
+        return self.rotation_order != ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -229,8 +229,8 @@ class SkeletonSettings:
     """What ``chain_from_skeleton`` builds.
 
     Attributes:
-        effectors: At least one; each ``link`` is a bone name (tip offset and
-            rotation in that bone's frame).
+        effectors: At least one; each ``link`` is a bone name (tip offset [m] and
+            rotation in that bone's frame; a glTF bone's own scale does not apply).
         moving: Names of the bones that move; None for the default (see the module's
             decisions). The others are fixed at their rest transform.
         bones: Per-bone settings, keyed by bone name (moving bones only, except

@@ -350,3 +350,18 @@ def test_extra_frame_lines_and_bad_header() -> None:
     assert _error(text.replace("Frames: 344", "Frames: -1")).joint == "MOTION"
     assert _error(text.replace("Frame Time: .0083333", "Frame Time: 0")).joint == "MOTION"
     assert _error(text.replace("Frame Time: .0083333", "FrameTime .0083333")).joint == "MOTION"
+
+
+def test_two_roots_lowercase_end_site_and_no_channels() -> None:
+    text = (
+        "HIERARCHY\nROOT A\n{\n OFFSET 1 0 0\n CHANNELS 1 Yrotation\n End site\n {\n"
+        "  OFFSET 0 1 0\n }\n}\nROOT B\n{\n OFFSET -1 0 0\n CHANNELS 0\n}\n"
+        "MOTION\nFrames: 1\nFrame Time: 0.5\n90\n"
+    )
+    bvh = read_bvh(text)
+    assert bvh.skeleton.names == ("A", "A_end", "B")
+    assert [b.name for b in bvh.skeleton.roots] == ["A", "B"]
+    assert bvh.motion is not None and bvh.motion.channels == (("A", Channel.Y_ROTATION),)
+    built = chain_from_skeleton(bvh.skeleton, _settings("A_end"))
+    assert built.moving == ("A",)  # B has no rotation channel: fixed
+    assert_allclose(built.clip(bvh.motion), [[math.pi / 2]])
