@@ -365,3 +365,32 @@ def test_two_roots_lowercase_end_site_and_no_channels() -> None:
     built = chain_from_skeleton(bvh.skeleton, _settings("A_end"))
     assert built.moving == ("A",)  # B has no rotation channel: fixed
     assert_allclose(built.clip(bvh.motion), [[math.pi / 2]])
+
+
+def test_corrupted_files_get_invalid_model_or_load() -> None:
+    """Seeded line deletions, cuts and repeats: InvalidModel or a skeleton and clip that
+    build a chain and replay, never another exception."""
+    rng = np.random.default_rng(20261125)
+    original = walk_text().split("\n")
+    outcomes = {"refused": 0, "loaded": 0}
+    for _ in range(200):
+        lines = original.copy()
+        for _ in range(int(rng.integers(1, 4))):
+            i = int(rng.integers(0, 200))
+            op = int(rng.integers(0, 3))
+            if op == 0:
+                del lines[i]
+            elif op == 1:
+                lines[i] = lines[i][: int(rng.integers(0, max(1, len(lines[i]))))]
+            else:
+                lines.insert(i, lines[int(rng.integers(0, len(lines)))])
+        try:
+            bvh = read_bvh("\n".join(lines))
+            leaf = bvh.skeleton.names[-1]
+            built = chain_from_skeleton(bvh.skeleton, _settings(leaf, free_root=WIDE))
+            if bvh.motion is not None:
+                built.clip(bvh.motion)
+            outcomes["loaded"] += 1
+        except InvalidModel:
+            outcomes["refused"] += 1
+    assert outcomes["refused"] > 50 and outcomes["loaded"] > 0

@@ -311,3 +311,38 @@ def test_bad_transform_names_node_and_field(node: dict[str, Any], field: str) ->
         # 1e999 is valid JSON text that parses to inf (json.dumps would write Infinity).
         err = _error(json.dumps(doc).replace("Infinity", "1e999"))
         assert (err.joint, err.field) == (f"nodes[{index}]({kept['name']})", field)
+
+
+def test_corrupted_files_get_invalid_model_or_load() -> None:
+    """Seeded byte flips, truncations and JSON edits: InvalidModel or a skeleton whose
+    chain builds, never another exception."""
+    rng = np.random.default_rng(20261125)
+    data = asset_bytes("RiggedFigure.glb")
+    doc, _ = split_glb(data)
+    text = json.dumps(doc)
+    outcomes = {"refused": 0, "loaded": 0}
+    for k in range(300):
+        if k % 3 == 0:
+            edited = bytearray(data)
+            for _ in range(int(rng.integers(1, 8))):
+                edited[int(rng.integers(0, 2000))] = int(rng.integers(0, 256))
+            sample: bytes | str = bytes(edited)
+        elif k % 3 == 1:
+            sample = data[: int(rng.integers(0, len(data)))]
+        else:
+            chars = list(text)
+            for _ in range(int(rng.integers(1, 5))):
+                chars[int(rng.integers(0, len(chars)))] = str(
+                    rng.choice(list('0123456789[]{},:"-.e '))
+                )
+            sample = "".join(chars)
+        try:
+            skeleton = read_gltf(sample)
+            leaf = skeleton.names[-1]
+            chain_from_skeleton(
+                skeleton, SkeletonSettings(effectors=[Effector(name="e", link=leaf)])
+            )
+            outcomes["loaded"] += 1
+        except InvalidModel:
+            outcomes["refused"] += 1
+    assert outcomes["refused"] > 100 and outcomes["loaded"] > 0
