@@ -59,7 +59,7 @@ from solver.chain import (
     matrix_to_quaternion,
 )
 from solver.errors import InvalidModel, InvalidProblem
-from solver.fk import link_poses
+from solver.kinematics import ND_R, ND_T, forward_kinematics
 from solver.types import Matrix, Vector
 
 # Bones beyond this make chain building and per-frame output slow for nothing: the
@@ -68,6 +68,13 @@ MAX_BONES = 4096
 MAX_NAME_LENGTH = 256
 
 _AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+# q (x) e for a basis vector e, as q's components (w, x, y, z) permuted and signed:
+# q (x) i = (-x, w, z, -y), q (x) j = (-y, -z, w, x), q (x) k = (-z, y, -x, w).
+_TIMES_BASIS = {
+    "x": ((1, 0, 3, 2), (-1.0, 1.0, 1.0, -1.0)),
+    "y": ((2, 3, 0, 1), (-1.0, -1.0, 1.0, 1.0)),
+    "z": ((3, 2, 1, 0), (-1.0, 1.0, -1.0, 1.0)),
+}
 DEFAULT_AXES = "xyz"
 
 
@@ -272,8 +279,11 @@ class SkeletonChain:
     chain: Chain
     moving: tuple[str, ...]
     _rest_quat: np.ndarray = field(repr=False)  # (n_moving, 4) rest rotations (w, x, y, z)
-    _axis: np.ndarray = field(repr=False)  # (n_moving, 3) axis index per slot, -1 unused
-    _dof: np.ndarray = field(repr=False)  # (n_moving, 3) variable index per slot, -1 unused
+    # Per moving bone and axis slot (3, unused slots pad): the variable's index into q
+    # with a 0 appended (unused: that 0), and q (x) e_axis as a signed permutation.
+    _dof: np.ndarray = field(repr=False)  # int64 (n_moving, 3)
+    _perm: np.ndarray = field(repr=False)  # int64 (3, n_moving, 4)
+    _sign: np.ndarray = field(repr=False)  # float64 (3, n_moving, 4)
 
     def local_rotations(self, q: Vector) -> Matrix:
         """Each moving bone's local rotation for the joint vector q.
@@ -287,17 +297,15 @@ class SkeletonChain:
             ``rotation`` or an engine bone's local rotation holds).
         """
         qa = self._check_q(q)
-        out = self._rest_quat.copy()
+        half = 0.5 * np.append(qa, 0.0)[self._dof]
+        cos, sin = np.cos(half), np.sin(half)
+        out = self._rest_quat
+        rows = np.arange(out.shape[0])[:, None]
         for slot in range(3):
-            used = self._axis[:, slot] >= 0
-            angle = np.where(used, qa[np.maximum(self._dof[:, slot], 0)], 0.0)
-            step = np.zeros_like(out)
-            step[:, 0] = np.cos(0.5 * angle)
-            rows = np.arange(out.shape[0])
-            step[rows, 1 + np.maximum(self._axis[:, slot], 0)] = np.where(
-                used, np.sin(0.5 * angle), 0.0
-            )
-            out = quaternion_multiply(out, step)
+            # out (x) (cos, sin e_k) = cos out + sin (out (x) e_k); the last is a signed
+            # permutation of out's components (Hamilton product with a basis vector).
+            turned = out[rows, self._perm[slot]] * self._sign[slot]
+            out = cos[:, slot, None] * out + sin[:, slot, None] * turned
         return out
 
     def world_transforms(self, q: Vector, bones: Sequence[str] | None = None) -> dict[str, Matrix]:
@@ -315,8 +323,17 @@ class SkeletonChain:
         for name in names:
             if name not in known:
                 raise unknown_bone(name, self.skeleton.names, field="bones")
-        poses = link_poses(self.chain, self._check_q(q))
-        return {name: poses[name] for name in names}
+        cc = self.chain.compiled
+        nd = cc.nd.copy()
+        forward_kinematics(self._check_q(q), cc.ni, nd)
+        out: dict[str, Matrix] = {}
+        for name in names:
+            m = np.eye(4)
+            node = cc.link_node[name]  # every bone is a link; -1 only for the root link
+            m[:3, :3] = nd[node, ND_R : ND_R + 9].reshape(3, 3)
+            m[:3, 3] = nd[node, ND_T : ND_T + 3]
+            out[name] = m
+        return out
 
     def clip(self, motion: Motion) -> Matrix:
         """A BVH clip as joint vectors, one row per frame (replay with FK or as seeds).
@@ -369,21 +386,6 @@ class SkeletonChain:
         if qa.shape != (self.chain.n_dof,):
             raise InvalidProblem(f"q must have {self.chain.n_dof} values, got {qa.shape[0]}")
         return qa
-
-
-def quaternion_multiply(a: Matrix, b: Matrix) -> Matrix:
-    """Hamilton product of quaternions (w, x, y, z), row by row: shape (n, 4)."""
-    aw, ax, ay, az = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
-    bw, bx, by, bz = b[:, 0], b[:, 1], b[:, 2], b[:, 3]
-    return np.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ],
-        axis=1,
-    )
 
 
 def _compose(a: Transform, b: Transform) -> Transform:
@@ -577,12 +579,13 @@ def _with_maps(skeleton: Skeleton, chain: Chain, moving: tuple[str, ...]) -> Ske
     bones = skeleton.by_name()
     n = len(moving)
     rest_quat = np.zeros((n, 4))
-    axis = np.full((n, 3), -1, dtype=np.int64)
-    dof = np.full((n, 3), -1, dtype=np.int64)
+    dof = np.full((n, 3), chain.n_dof, dtype=np.int64)  # q's appended 0
+    perm = np.tile(np.arange(4), (3, n, 1))
+    sign = np.zeros((3, n, 4))
     for row, name in enumerate(moving):
         joint = by_name[name]
         rest_quat[row] = matrix_to_quaternion(bones[name].rest.rotation)
         for slot, a in enumerate(joint.axes):
-            axis[row, slot] = _AXIS_INDEX[a]
             dof[row, slot] = index[f"{name}.{a}"]
-    return SkeletonChain(skeleton, chain, moving, rest_quat, axis, dof)
+            perm[slot, row], sign[slot, row] = _TIMES_BASIS[a]
+    return SkeletonChain(skeleton, chain, moving, rest_quat, dof, perm, sign)
