@@ -308,43 +308,48 @@ def _motion(
     if frame_time <= 0.0:
         raise InvalidModel("Frame Time must be > 0", joint="MOTION", field=f"line {k + 1}")
     n_channels = len(layout)
-    rows: list[list[str]] = []
-    row_lines: list[int] = []
+    # Every value takes a character and a separator: a declared block larger than the
+    # text is truncated, and refusing it here bounds the array allocated below.
+    remaining = sum(len(ln) + 1 for ln in lines[k + 1 :])
+    if 2 * n_frames * n_channels > remaining + 1:
+        raise InvalidModel(
+            f"truncated: Frames declares {n_frames} frames of {n_channels} values, more "
+            "than the rest of the file can hold",
+            joint="MOTION",
+            field=f"line {k}",
+        )
+    values = np.empty((n_frames, n_channels))
+    row = 0
     for j in range(k + 1, len(lines)):
-        tokens = lines[j].split()
+        tokens = lines[j].split()  # one line at a time: no list of all the tokens
         if not tokens:
             continue
-        if len(rows) == n_frames:
+        where = f"line {j + 1}"
+        if row == n_frames:
             raise InvalidModel(
-                f"more frame lines than Frames: {n_frames}", joint="MOTION", field=f"line {j + 1}"
+                f"more frame lines than Frames: {n_frames}", joint="MOTION", field=where
             )
         if len(tokens) != n_channels:
             raise InvalidModel(
-                f"frame {len(rows)} has {len(tokens)} values, the hierarchy has "
-                f"{n_channels} channels",
+                f"frame {row} has {len(tokens)} values, the hierarchy has {n_channels} channels",
                 joint="MOTION",
-                field=f"line {j + 1}",
+                field=where,
             )
-        rows.append(tokens)
-        row_lines.append(j + 1)
-    if len(rows) < n_frames:
+        try:
+            values[row] = np.array(tokens, dtype=np.float64)
+        except ValueError:
+            bad = next((t for t in tokens if not _NUMBER.fullmatch(t)), tokens[0])
+            _number(bad, "MOTION", where)
+        if not np.isfinite(values[row]).all():
+            bad = next(t for t, v in zip(tokens, values[row], strict=True) if not math.isfinite(v))
+            raise InvalidModel(f"{bad[:40]!r} is not a finite number", joint="MOTION", field=where)
+        row += 1
+    if row < n_frames:
         raise InvalidModel(
-            f"truncated: Frames declares {n_frames}, the file has {len(rows)} frame lines",
+            f"truncated: Frames declares {n_frames}, the file has {row} frame lines",
             joint="MOTION",
             field=f"line {len(lines)}",
         )
-    values = np.empty((n_frames, n_channels))
-    for r, tokens in enumerate(rows):
-        try:
-            values[r] = np.array(tokens, dtype=np.float64)
-        except ValueError:
-            bad = next((t for t in tokens if not _NUMBER.fullmatch(t)), tokens[0])
-            _number(bad, "MOTION", f"line {row_lines[r]}")
-        if not np.isfinite(values[r]).all():
-            bad = next(t for t, v in zip(tokens, values[r], strict=True) if not math.isfinite(v))
-            raise InvalidModel(
-                f"{bad[:40]!r} is not a finite number", joint="MOTION", field=f"line {row_lines[r]}"
-            )
     rotation = np.array([c.is_rotation for _, c in layout], dtype=bool)
     values[:, rotation] = np.radians(values[:, rotation])
     values[:, ~rotation] *= unit_m

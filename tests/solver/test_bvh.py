@@ -261,6 +261,12 @@ def test_truncated_motion() -> None:
     assert "truncated" in str(err)
     # Cut inside a line: that frame has too few values.
     assert "values" in str(_error(text[: text.index("MOTION") + 2000]))
+    # The last three frames missing: counted after reading every line.
+    short = "\n".join(text.rstrip().split("\n")[:-3])
+    assert "the file has 341 frame lines" in str(_error(short))
+    # A huge declared count is refused before any array is allocated for it.
+    huge = text.replace("Frames: 344", "Frames: 999999")
+    assert "more than the rest of the file can hold" in str(_error(huge))
 
 
 @pytest.mark.parametrize("bad", ["nan", "NaN", "inf", "-Infinity", "1e999", "0x10", "1,5"])
