@@ -394,13 +394,14 @@ def _compose(a: Transform, b: Transform) -> Transform:
 
 def _moving_bones(skeleton: Skeleton, settings: SkeletonSettings) -> tuple[str, ...]:
     names = skeleton.names
+    known = set(names)
     if settings.moving is None:
         return tuple(b.name for b in skeleton.bones if b.can_rotate)
     if isinstance(settings.moving, str):
         raise InvalidModel("moving must be a list of bone names", field="moving")
     listed = set()
     for name in settings.moving:
-        if name not in names:
+        if name not in known:
             raise unknown_bone(name, names, field="moving")
         if name in listed:
             raise InvalidModel("bone listed twice", joint=name, field="moving")
@@ -497,7 +498,8 @@ def chain_from_skeleton(skeleton: Skeleton, settings: SkeletonSettings) -> Skele
             several roots, or anything ``build_chain`` refuses.
     """
     names = skeleton.names
-    if settings.root_link in names:
+    known = set(names)
+    if settings.root_link in known:
         raise InvalidModel(
             f"a bone is named {settings.root_link!r}, the root link's name: choose another "
             "root_link",
@@ -507,7 +509,7 @@ def chain_from_skeleton(skeleton: Skeleton, settings: SkeletonSettings) -> Skele
     moving = _moving_bones(skeleton, settings)
     moving_set = set(moving)
     for name, given in settings.bones.items():
-        if name not in names:
+        if name not in known:
             raise unknown_bone(name, names, field="bones")
         if name not in moving_set and (
             given.axes is not None or given.lower is not None or given.upper is not None
@@ -519,7 +521,7 @@ def chain_from_skeleton(skeleton: Skeleton, settings: SkeletonSettings) -> Skele
             )
     effectors = list(settings.effectors)
     for e in effectors:
-        if e.link not in names:
+        if e.link not in known:
             raise unknown_bone(e.link, names, field="effectors")
     free_root_bone: str | None = None
     if settings.free_root is not None:
