@@ -346,3 +346,13 @@ def test_corrupted_files_get_invalid_model_or_load() -> None:
         except InvalidModel:
             outcomes["refused"] += 1
     assert outcomes["refused"] > 100 and outcomes["loaded"] > 0
+
+
+def test_documents_without_buffers_as_gltf_and_glb() -> None:
+    doc = _doc()
+    del doc["buffers"]
+    assert read_gltf(json.dumps(doc)).names[0] == "Hips"
+    assert read_gltf(make_glb(doc)).names[0] == "Hips"
+    # A .glb with a BIN chunk but a buffer that points elsewhere is fine too.
+    doc["buffers"] = [{"byteLength": 8, "uri": "data:application/octet-stream;base64,AAAAAAAAAAA="}]
+    assert read_gltf(make_glb(doc, b"\0" * 8)).names[0] == "Hips"
