@@ -30,10 +30,11 @@ channels' axes (so by default it moves about exactly those); every End Site a fi
 named ``<parent>_end`` (a fingertip or toe tip to put an effector on).
 
 Errors are ``InvalidModel`` with ``joint`` the joint's name (or ``bvh``, ``MOTION``)
-and ``field`` ``line <n>`` (1-based): size caps, unknown keywords, a missing brace,
-OFFSET or CHANNELS, a channel count that differs from the channels listed, a repeated
-or unknown channel, a duplicate name, too many joints or too deep, a frame with too
-many or too few values, fewer frame lines than ``Frames``, non-finite numbers.
+and ``field`` ``line <n>`` (1-based; ``HIERARCHY`` when the hierarchy ends early, none
+for the size cap and ``unit_m``): unknown keywords, a missing brace, OFFSET or
+CHANNELS, a channel count that differs from the channels listed, a repeated or unknown
+channel, a duplicate name, too many joints or too deep, a frame with too many or too
+few values, fewer frame lines than ``Frames``, non-finite numbers.
 """
 
 from __future__ import annotations
