@@ -1,0 +1,110 @@
+"""Per-frame cost of a game character: import, a 2-arm + 2-leg stream, bone output.
+
+CesiumMan.glb (shared/assets) becomes a chain with pose effectors on both hands and
+position effectors on both feet; ``IKSolver.track`` with the stream defaults follows
+targets taken from a smooth joint path near the rest pose (so every target is within
+reach); each frame's answer is then turned into what a game engine applies
+(``SkeletonChain.local_rotations`` for the moving bones, ``world_transforms`` of the
+four effector bones). Reported: import times, frames solved, per-frame solve and output
+times (median and 99th percentile, microseconds), for every bone moving (the default)
+and for the limbs only.
+
+    OPENBLAS_NUM_THREADS=1 python -m bench.skeleton --frames 300
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from solver.chain import Effector, EffectorMode  # noqa: E402
+from solver.ik import STREAM_DEFAULTS, IKSolver, pose_targets  # noqa: E402
+from solver.model.bvh import read_bvh  # noqa: E402
+from solver.model.gltf import read_gltf  # noqa: E402
+from solver.model.skeleton import SkeletonSettings, chain_from_skeleton  # noqa: E402
+
+# CesiumMan's joint nodes (shared/assets/README.md gives RiggedFigure's upstream names,
+# same indices): arms 13-15 (right), 16-18 (left); legs 3-6 (right), 7-10 (left).
+LIMBS = tuple(f"node_{i}" for i in range(3, 11)) + tuple(f"node_{i}" for i in range(13, 19))
+
+
+def assets_dir(given: str | None) -> Path:
+    """--assets, $IK_SHARED_ASSETS, or shared/assets beside a parent of this repository."""
+    if given:
+        return Path(given)
+    env = os.environ.get("IK_SHARED_ASSETS")
+    if env:
+        return Path(env)
+    for parent in Path(__file__).resolve().parents:
+        if (parent / "shared" / "assets" / "CesiumMan.glb").is_file():
+            return parent / "shared" / "assets"
+    raise SystemExit("shared/assets not found: pass --assets or set IK_SHARED_ASSETS")
+
+
+def per_call_us(fn: object, repeat: int) -> float:
+    start = time.perf_counter()
+    for _ in range(repeat):
+        fn()  # type: ignore[operator]
+    return (time.perf_counter() - start) / repeat * 1e6
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--assets", default=None)
+    ap.add_argument("--frames", type=int, default=300)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    folder = assets_dir(args.assets)
+
+    glb = (folder / "CesiumMan.glb").read_bytes()
+    with open(folder / "walk.bvh", encoding="ascii", newline="") as f:
+        walk = f.read()
+    print(f"read_gltf CesiumMan.glb: {per_call_us(lambda: read_gltf(glb), 20) / 1e3:.2f} ms")
+    print(f"read_bvh walk.bvh (344 frames): {per_call_us(lambda: read_bvh(walk), 5) / 1e3:.2f} ms")
+
+    skeleton = read_gltf(glb)
+    effectors = [
+        Effector(name="left_hand", link="node_18", mode=EffectorMode.POSE),
+        Effector(name="right_hand", link="node_15", mode=EffectorMode.POSE),
+        Effector(name="left_foot", link="node_10"),
+        Effector(name="right_foot", link="node_6"),
+    ]
+    for label, moving in (("every bone moves", None), ("limbs only", LIMBS)):
+        built = chain_from_skeleton(skeleton, SkeletonSettings(effectors=effectors, moving=moving))
+        chain = built.chain
+        rng = np.random.default_rng(args.seed)
+        amplitude = rng.uniform(-0.4, 0.4, chain.n_dof)
+        phase = rng.uniform(0.0, 2.0 * np.pi, chain.n_dof)
+        t = np.arange(args.frames)[:, None] / args.frames
+        path = amplitude * (np.sin(2.0 * np.pi * t + phase) - np.sin(phase))
+        stream = [pose_targets(chain, np.clip(q, chain.lower, chain.upper)) for q in path]
+        solver = IKSolver(chain, STREAM_DEFAULTS, seed=args.seed)
+        solve_us, output_us, solved = [], [], 0
+        bones = [e.link for e in effectors]
+        for targets in stream:
+            start = time.perf_counter()
+            result = solver.track(targets)
+            mid = time.perf_counter()
+            built.local_rotations(result.q)
+            built.world_transforms(result.q, bones)
+            end = time.perf_counter()
+            solve_us.append((mid - start) * 1e6)
+            output_us.append((end - mid) * 1e6)
+            solved += result.success
+        print(
+            f"{label}: {len(built.moving)} bones, {chain.n_dof} variables, solved "
+            f"{solved}/{args.frames}; solve p50 {np.median(solve_us):.0f} us, "
+            f"p99 {np.percentile(solve_us, 99):.0f} us; bone output p50 "
+            f"{np.median(output_us):.0f} us, p99 {np.percentile(output_us, 99):.0f} us"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,607 @@
+"""Read a skin's skeleton from glTF 2.0: ``.glb`` (binary) or ``.gltf`` (JSON).
+
+Why a reader of our own rather than pygltflib. We need the container, the node graph
+(names, children, rest TRS or matrix) and the skins: no meshes, accessors, images or
+animations. pygltflib (1.16) would bring dataclasses-json, marshmallow and
+typing-inspect into the service's runtime, decodes every part of the document into
+objects, checks no size, count or depth, and leaves graph checks (cycles, a node with
+two parents, indices out of range) to the caller; we would write all of the hardening
+below anyway, around a library that does not help with it. This module is the GLB
+header and chunk walk (glTF 2.0 spec, section 4.4), ``json.loads`` and the checks.
+
+What is read:
+  - GLB: 12-byte header (magic "glTF", version 2, total length equal to the input's
+    length), a JSON chunk first, an optional BIN chunk second; unknown chunk types are
+    skipped (spec 4.4.3.1). ``.gltf``: the JSON document itself (bytes or str).
+  - buffers: only checked, never used. A GLB buffer without ``uri`` must fit the BIN
+    chunk; a ``data:`` URI must decode (base64) to at least ``byteLength`` bytes; other
+    URIs (external files) are not fetched, which is fine: no buffer data is needed.
+  - nodes: ``name``, ``children``, ``translation``, ``rotation`` (x, y, z, w),
+    ``scale`` or ``matrix`` (16 numbers, column-major).
+  - skins: ``joints``, ``name``, and ``skeleton`` (range-checked only: a bone's parent
+    is found in the node tree). ``skin`` chooses one by index or name (default: the
+    first).
+
+The skeleton. The skin's joint nodes become bones, named after their nodes (a node
+without a name gets ``node_<index>``; a name shared by several joints becomes
+``<name>#<index>``). A bone's parent is its nearest ancestor that is a joint of the
+skin; the nodes between them, and for a root bone the path from the top of the node
+tree (a "Z_UP" node, an "Armature" node), are folded into the bone's ``offset``.
+
+Scale. A rigid chain cannot scale, so a node on these paths may carry a uniform scale
+only (components within ``SCALE_TOLERANCE`` of each other, e.g. the 0.01 of an
+exporter's centimetre armature); it is folded exactly into the translations below it:
+a node's translation is multiplied by the product of its ancestors' scales. World
+transforms of bones are then the glTF world matrices with the scale divided out.
+Non-uniform, zero or negative (mirroring) scale, shear, or a projective matrix row on
+these paths is refused. glTF is in metres, Y up, right-handed (spec 3.4).
+
+Errors are ``InvalidModel``. ``joint`` names the part: ``glb``, ``json``, ``asset``,
+``buffers[i]``, ``nodes[i]`` (with the node's name in parentheses when it has one),
+``skins[i]`` or ``skin``; ``field`` the member at fault (``byteLength``, ``uri``,
+``children``, ``rotation``, ``scale``, ``matrix``, ``joints``, ``skeleton``, ...).
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import struct
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from solver.chain import Transform, quaternion_to_matrix
+from solver.errors import InvalidModel
+from solver.model.skeleton import Bone, Skeleton
+from solver.types import Matrix, Vector
+
+MAX_BYTES = 32_000_000  # a whole .glb or .gltf
+MAX_JSON_BYTES = 8_000_000  # a GLB's JSON chunk (a .gltf is all JSON: MAX_BYTES)
+MAX_NODES = 4096
+MAX_DEPTH = 256  # node tree depth
+MAX_SKINS = 1024
+MAX_BUFFERS = 1024
+SCALE_TOLERANCE = 1e-4  # relative spread of scale components still called uniform
+ROTATION_TOLERANCE = 1e-3  # |q| - 1 accepted (and normalised) for float32 exports
+MATRIX_TOLERANCE = 1e-4  # orthogonality of a node matrix's columns after scale
+
+_GLB_MAGIC = b"glTF"
+_CHUNK_JSON = 0x4E4F534A
+_CHUNK_BIN = 0x004E4942
+
+
+@dataclass(frozen=True, slots=True)
+class _Container:
+    document: dict[str, Any]
+    bin_length: int | None  # None: no BIN chunk (or not a GLB)
+    is_glb: bool
+
+
+@dataclass(frozen=True, slots=True)
+class _Local:
+    """A node's rest transform split into its rigid part and a uniform scale."""
+
+    translation: Vector
+    rotation: Matrix
+    scale: float
+
+
+def read_gltf(
+    data: bytes | str,
+    *,
+    skin: int | str | None = None,
+    max_bytes: int = MAX_BYTES,
+    max_json_bytes: int = MAX_JSON_BYTES,
+    max_nodes: int = MAX_NODES,
+    max_depth: int = MAX_DEPTH,
+) -> Skeleton:
+    """The skeleton of one skin of a glTF 2.0 document.
+
+    Args:
+        data: A ``.glb`` file's bytes, or a ``.gltf`` JSON document (bytes or str).
+        skin: Index or name of the skin; None for the first.
+        max_bytes: Cap on the input's size [bytes].
+        max_json_bytes: Cap on a GLB's JSON chunk [bytes].
+        max_nodes: Cap on the document's node count.
+        max_depth: Cap on the node tree's depth.
+
+    Returns:
+        The skeleton (named after the skin, ``skin_<index>`` without a name).
+
+    Raises:
+        InvalidModel: anything in the module docstring; the message names the part.
+    """
+    container = _container(data, max_bytes=max_bytes, max_json_bytes=max_json_bytes)
+    doc = container.document
+    _check_asset(doc)
+    _check_buffers(doc, container)
+    nodes = _list(doc, "nodes", "json", max_len=max_nodes, what="nodes")
+    for i, node in enumerate(nodes):
+        if not isinstance(node, dict):
+            raise InvalidModel("a node must be a JSON object", joint=f"nodes[{i}]")
+    parent = _parents(nodes)
+    depth = _depths(nodes, parent, max_depth)
+    skin_index, skin_doc = _choose_skin(doc, skin)
+    joints = _skin_joints(skin_doc, skin_index, len(nodes))
+    return _skeleton(nodes, parent, depth, joints, _skin_name(skin_doc, skin_index))
+
+
+# -- container -----------------------------------------------------------------
+
+
+def _container(data: bytes | str, *, max_bytes: int, max_json_bytes: int) -> _Container:
+    if isinstance(data, bytearray | memoryview):
+        data = bytes(data)
+    if not isinstance(data, bytes | str):
+        raise InvalidModel(f"glTF must be bytes or str, got {type(data).__name__}", joint="glb")
+    if len(data) > max_bytes:
+        raise InvalidModel(f"the file is larger than {max_bytes} bytes", joint="glb")
+    if isinstance(data, bytes) and data[:4] == _GLB_MAGIC:
+        json_bytes, bin_length = _glb_chunks(data, max_json_bytes)
+        return _Container(_parse_json(json_bytes), bin_length, is_glb=True)
+    if isinstance(data, str):
+        try:
+            data = data.encode("utf-8")
+        except UnicodeEncodeError:
+            raise InvalidModel("the JSON is not valid Unicode", joint="json") from None
+        if len(data) > max_bytes:
+            raise InvalidModel(f"the file is larger than {max_bytes} bytes", joint="glb")
+    return _Container(_parse_json(data), None, is_glb=False)
+
+
+def _glb_chunks(data: bytes, max_json_bytes: int) -> tuple[bytes, int | None]:
+    """The JSON chunk's bytes and the BIN chunk's length (glTF 2.0 spec 4.4)."""
+    size = len(data)
+    if size < 12:
+        raise InvalidModel(f"truncated: {size} bytes, the GLB header alone has 12", joint="glb")
+    _, version, length = struct.unpack_from("<4sII", data, 0)
+    if version != 2:
+        raise InvalidModel(f"GLB version {version} is not supported (2 is)", joint="glb")
+    if length > size:
+        raise InvalidModel(
+            f"truncated: the header declares {length} bytes, the file has {size}",
+            joint="glb",
+            field="length",
+        )
+    if length < size:
+        raise InvalidModel(
+            f"the header declares {length} bytes but the file has {size}",
+            joint="glb",
+            field="length",
+        )
+    json_bytes: bytes | None = None
+    bin_length: int | None = None
+    offset, index = 12, 0
+    while offset < length:
+        if length - offset < 8:
+            raise InvalidModel(
+                f"truncated: chunk {index} header needs 8 bytes, {length - offset} remain",
+                joint="glb",
+                field=f"chunks[{index}]",
+            )
+        chunk_length, chunk_type = struct.unpack_from("<II", data, offset)
+        start = offset + 8
+        if chunk_length > length - start:
+            raise InvalidModel(
+                f"truncated: chunk {index} declares {chunk_length} bytes, {length - start} remain",
+                joint="glb",
+                field=f"chunks[{index}]",
+            )
+        if index == 0:
+            if chunk_type != _CHUNK_JSON:
+                raise InvalidModel("the first chunk must be JSON", joint="glb", field="chunks[0]")
+            if chunk_length > max_json_bytes:
+                raise InvalidModel(
+                    f"the JSON chunk is larger than {max_json_bytes} bytes",
+                    joint="glb",
+                    field="chunks[0]",
+                )
+            json_bytes = data[start : start + chunk_length]
+        elif chunk_type == _CHUNK_JSON:
+            raise InvalidModel("a second JSON chunk", joint="glb", field=f"chunks[{index}]")
+        elif chunk_type == _CHUNK_BIN:
+            if index != 1:
+                raise InvalidModel(
+                    "the BIN chunk must be the second chunk", joint="glb", field=f"chunks[{index}]"
+                )
+            bin_length = chunk_length
+        offset = start + chunk_length
+        index += 1
+    if json_bytes is None:
+        raise InvalidModel("truncated: no JSON chunk", joint="glb", field="chunks[0]")
+    return json_bytes, bin_length
+
+
+def _reject_constant(name: str) -> None:
+    raise ValueError(f"{name} is not JSON")
+
+
+def _parse_json(raw: bytes) -> dict[str, Any]:
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise InvalidModel(f"the JSON is not UTF-8 ({e.reason})", joint="json") from None
+    try:
+        doc = json.loads(text, parse_constant=_reject_constant)
+    except RecursionError:
+        raise InvalidModel("the JSON is nested too deeply", joint="json") from None
+    except ValueError as e:  # JSONDecodeError, NaN/Infinity, integers over 4300 digits
+        raise InvalidModel(f"the JSON is not valid: {e}", joint="json") from None
+    if not isinstance(doc, dict):
+        raise InvalidModel("the JSON document must be an object", joint="json")
+    return doc
+
+
+def _check_asset(doc: dict[str, Any]) -> None:
+    asset = doc.get("asset")
+    version = asset.get("version") if isinstance(asset, dict) else None
+    if not isinstance(version, str):
+        raise InvalidModel("asset.version is missing", joint="asset", field="version")
+    if not version.startswith("2."):
+        raise InvalidModel(
+            f"glTF {version} is not supported (2.x is)", joint="asset", field="version"
+        )
+
+
+def _check_buffers(doc: dict[str, Any], container: _Container) -> None:
+    buffers = _list(doc, "buffers", "json", max_len=MAX_BUFFERS, what="buffers")
+    for i, buf in enumerate(buffers):
+        part = f"buffers[{i}]"
+        if not isinstance(buf, dict):
+            raise InvalidModel("a buffer must be a JSON object", joint=part)
+        declared = buf.get("byteLength")
+        if type(declared) is not int or declared < 1:
+            raise InvalidModel(
+                f"byteLength must be an integer >= 1, got {declared!r}",
+                joint=part,
+                field="byteLength",
+            )
+        uri = buf.get("uri")
+        if uri is None:
+            if not container.is_glb or i != 0:
+                raise InvalidModel(
+                    "only the first buffer of a .glb may omit uri (it is the BIN chunk)",
+                    joint=part,
+                    field="uri",
+                )
+            available = container.bin_length
+            if available is None or declared > available:
+                raise InvalidModel(
+                    f"declares {declared} bytes, the BIN chunk holds {available or 0}",
+                    joint=part,
+                    field="byteLength",
+                )
+        elif not isinstance(uri, str):
+            raise InvalidModel("uri must be a string", joint=part, field="uri")
+        elif uri.startswith("data:"):
+            held = _data_uri_length(uri, part)
+            if declared > held:
+                raise InvalidModel(
+                    f"declares {declared} bytes, its data URI holds {held}",
+                    joint=part,
+                    field="byteLength",
+                )
+
+
+def _data_uri_length(uri: str, part: str) -> int:
+    header, sep, payload = uri.partition(",")
+    if not sep or not header.endswith(";base64"):
+        raise InvalidModel(
+            "a data URI must be base64 (data:...;base64,...)", joint=part, field="uri"
+        )
+    try:
+        return len(base64.b64decode(payload, validate=True))
+    except (binascii.Error, ValueError):
+        raise InvalidModel("the data URI is not valid base64", joint=part, field="uri") from None
+
+
+def _list(doc: dict[str, Any], key: str, part: str, *, max_len: int, what: str) -> list[Any]:
+    value = doc.get(key, [])
+    if not isinstance(value, list):
+        raise InvalidModel(f"{key} must be an array", joint=part, field=key)
+    if len(value) > max_len:
+        raise InvalidModel(f"too many {what}: {len(value)} > {max_len}", joint=part, field=key)
+    return value
+
+
+# -- node graph ----------------------------------------------------------------
+
+
+def _node_part(nodes: list[Any], i: int) -> str:
+    name = nodes[i].get("name")
+    if isinstance(name, str) and name:
+        return f"nodes[{i}]({name[:64]})"
+    return f"nodes[{i}]"
+
+
+def _index(value: Any, n: int) -> bool:
+    return type(value) is int and 0 <= value < n
+
+
+def _parents(nodes: list[Any]) -> list[int]:
+    """Each node's parent (-1 for a root); refuses bad indices and two parents."""
+    n = len(nodes)
+    parent = [-1] * n
+    for i, node in enumerate(nodes):
+        children = node.get("children", [])
+        if not isinstance(children, list):
+            raise InvalidModel(
+                "children must be an array", joint=_node_part(nodes, i), field="children"
+            )
+        for c in children:
+            if not _index(c, n):
+                raise InvalidModel(
+                    f"child {c!r} is not a node index (0..{n - 1})",
+                    joint=_node_part(nodes, i),
+                    field="children",
+                )
+            if c == i:
+                raise InvalidModel(
+                    "a node cannot be its own child", joint=_node_part(nodes, i), field="children"
+                )
+            if parent[c] >= 0:
+                raise InvalidModel(
+                    f"node {c} already has parent node {parent[c]}",
+                    joint=_node_part(nodes, i),
+                    field="children",
+                )
+            parent[c] = i
+    return parent
+
+
+def _depths(nodes: list[Any], parent: list[int], max_depth: int) -> list[int]:
+    """Depth of each node below its root; refuses cycles and trees deeper than the cap."""
+    n = len(nodes)
+    depth = [-1] * n
+    children: list[list[int]] = [[] for _ in range(n)]
+    for c, p in enumerate(parent):
+        if p >= 0:
+            children[p].append(c)
+    stack = [i for i in range(n) if parent[i] < 0]
+    for i in stack:
+        depth[i] = 0
+    while stack:
+        i = stack.pop()
+        for c in children[i]:
+            depth[c] = depth[i] + 1
+            if depth[c] > max_depth:
+                raise InvalidModel(
+                    f"the node tree is deeper than {max_depth}",
+                    joint=_node_part(nodes, c),
+                    field="children",
+                )
+            stack.append(c)
+    if -1 in depth:
+        # Every node has at most one parent, so an unreached node sits on or below a
+        # cycle: walk up from it until a node repeats, and name that one.
+        i, seen = depth.index(-1), set()
+        while i not in seen:
+            seen.add(i)
+            i = parent[i]
+        raise InvalidModel(
+            "the nodes' children form a cycle", joint=_node_part(nodes, i), field="children"
+        )
+    return depth
+
+
+def _choose_skin(doc: dict[str, Any], skin: int | str | None) -> tuple[int, dict[str, Any]]:
+    skins = _list(doc, "skins", "json", max_len=MAX_SKINS, what="skins")
+    if not skins:
+        raise InvalidModel("the document has no skin", joint="skin")
+    for i, s in enumerate(skins):
+        if not isinstance(s, dict):
+            raise InvalidModel("a skin must be a JSON object", joint=f"skins[{i}]")
+    if skin is None:
+        return 0, skins[0]
+    if type(skin) is int:
+        if not 0 <= skin < len(skins):
+            raise InvalidModel(
+                f"skin index {skin} is out of range (the document has {len(skins)})",
+                joint="skin",
+            )
+        return skin, skins[skin]
+    if isinstance(skin, str):
+        found = [i for i, s in enumerate(skins) if s.get("name") == skin]
+        if len(found) == 1:
+            return found[0], skins[found[0]]
+        names = [s.get("name") for s in skins if isinstance(s.get("name"), str)]
+        if found:
+            raise InvalidModel(f"several skins are named {skin!r}: choose by index", joint="skin")
+        raise InvalidModel(f"no skin named {skin!r}; the skins are {names[:10]}", joint="skin")
+    raise InvalidModel(f"skin must be an index or a name, got {skin!r}", joint="skin")
+
+
+def _skin_name(skin_doc: dict[str, Any], index: int) -> str:
+    name = skin_doc.get("name")
+    return name if isinstance(name, str) and name else f"skin_{index}"
+
+
+def _skin_joints(skin_doc: dict[str, Any], index: int, n_nodes: int) -> list[int]:
+    part = f"skins[{index}]"
+    joints = skin_doc.get("joints")
+    if not isinstance(joints, list) or not joints:
+        raise InvalidModel("joints must be a non-empty array", joint=part, field="joints")
+    for k, j in enumerate(joints):
+        if not _index(j, n_nodes):
+            raise InvalidModel(
+                f"joints[{k}] = {j!r} is not a node index (0..{n_nodes - 1})",
+                joint=part,
+                field="joints",
+            )
+    seen: set[int] = set()
+    for j in joints:  # a set, not list.count: a crafted list may be long
+        if j in seen:
+            raise InvalidModel(f"node {j} is listed twice", joint=part, field="joints")
+        seen.add(j)
+    root = skin_doc.get("skeleton")
+    # Only range-checked: bones take their parents from the node tree, as three.js and
+    # Godot do, so a file whose skeleton root is not above every joint still loads.
+    if root is not None and not _index(root, n_nodes):
+        raise InvalidModel(
+            f"skeleton = {root!r} is not a node index (0..{n_nodes - 1})",
+            joint=part,
+            field="skeleton",
+        )
+    return list(joints)
+
+
+# -- transforms ----------------------------------------------------------------
+
+
+def _numbers(node: dict[str, Any], key: str, count: int, part: str) -> Vector | None:
+    value = node.get(key)
+    if value is None:
+        return None
+    if (
+        not isinstance(value, list)
+        or len(value) != count
+        or not all(type(v) in (int, float) for v in value)
+    ):
+        raise InvalidModel(f"{key} must be {count} numbers", joint=part, field=key)
+    arr = np.array(value, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        raise InvalidModel(f"{key} must be finite", joint=part, field=key)
+    return arr
+
+
+def _uniform(scale: Vector, part: str, field: str) -> float:
+    if np.any(scale <= 0.0):
+        raise InvalidModel(
+            f"scale {scale.tolist()} is zero or mirrors (negative): a rigid chain cannot",
+            joint=part,
+            field=field,
+        )
+    if float(scale.max()) > float(scale.min()) * (1.0 + SCALE_TOLERANCE):
+        raise InvalidModel(
+            f"non-uniform scale {scale.tolist()}: only uniform scale can be folded into a "
+            "rigid chain",
+            joint=part,
+            field=field,
+        )
+    return float(scale.mean())
+
+
+def _local(nodes: list[Any], i: int) -> _Local:
+    node, part = nodes[i], _node_part(nodes, i)
+    matrix = _numbers(node, "matrix", 16, part)
+    t = _numbers(node, "translation", 3, part)
+    r = _numbers(node, "rotation", 4, part)
+    s = _numbers(node, "scale", 3, part)
+    if matrix is not None:
+        if t is not None or r is not None or s is not None:
+            raise InvalidModel(
+                "a node has either matrix or translation/rotation/scale, not both",
+                joint=part,
+                field="matrix",
+            )
+        return _from_matrix(matrix, part)
+    rotation = np.eye(3)
+    if r is not None:
+        norm = float(np.linalg.norm(r))
+        if abs(norm - 1.0) > ROTATION_TOLERANCE:
+            raise InvalidModel(
+                f"rotation must be a unit quaternion (x, y, z, w), got |q| = {norm:.6g}",
+                joint=part,
+                field="rotation",
+            )
+        x, y, z, w = r / norm
+        rotation = quaternion_to_matrix(np.array([w, x, y, z]))
+    scale = 1.0 if s is None else _uniform(s, part, "scale")
+    return _Local(np.zeros(3) if t is None else t, rotation, scale)
+
+
+def _from_matrix(values: Vector, part: str) -> _Local:
+    m = values.reshape(4, 4).T  # glTF matrices are column-major
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise InvalidModel(
+            "matrix must be affine (last row 0, 0, 0, 1)", joint=part, field="matrix"
+        )
+    a = m[:3, :3]
+    column_scale = np.linalg.norm(a, axis=0)
+    if np.any(column_scale < 1e-12) or np.linalg.det(a) <= 0.0:
+        raise InvalidModel(
+            "matrix is singular or mirrors (negative determinant)", joint=part, field="matrix"
+        )
+    rotation = a / column_scale
+    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=MATRIX_TOLERANCE):
+        raise InvalidModel("matrix has shear", joint=part, field="matrix")
+    scale = _uniform(column_scale, part, "matrix")
+    # Re-orthonormalise (SVD) so float32 noise does not reach the chain's strict check.
+    u, _, vt = np.linalg.svd(rotation)
+    return _Local(m[:3, 3].copy(), u @ vt, scale)
+
+
+# -- skeleton --------------------------------------------------------------------
+
+
+def _bone_names(nodes: list[Any], joints: list[int]) -> dict[int, str]:
+    names: dict[int, str] = {}
+    for j in joints:
+        name = nodes[j].get("name")
+        if name is not None and not isinstance(name, str):
+            raise InvalidModel("name must be a string", joint=f"nodes[{j}]", field="name")
+        names[j] = name if name else f"node_{j}"
+    counts: dict[str, int] = {}
+    for name in names.values():
+        counts[name] = counts.get(name, 0) + 1
+    return {j: (f"{name}#{j}" if counts[name] > 1 else name) for j, name in names.items()}
+
+
+def _skeleton(
+    nodes: list[Any], parent: list[int], depth: list[int], joints: list[int], name: str
+) -> Skeleton:
+    joint_set = set(joints)
+    names = _bone_names(nodes, joints)
+    locals_: dict[int, _Local] = {}
+    cumulative: dict[int, float] = {}  # product of the scales of a node and its ancestors
+
+    def local(i: int) -> _Local:
+        if i not in locals_:
+            locals_[i] = _local(nodes, i)
+        return locals_[i]
+
+    def scale_above(i: int) -> float:
+        """Product of the scales of i's ancestors (what i's translation is scaled by)."""
+        path = []
+        node = parent[i]
+        while node >= 0 and node not in cumulative:
+            path.append(node)
+            node = parent[node]
+        acc = 1.0 if node < 0 else cumulative[node]
+        for k in reversed(path):
+            acc *= local(k).scale
+            cumulative[k] = acc
+        return 1.0 if parent[i] < 0 else cumulative[parent[i]]
+
+    def rigid(i: int) -> Transform:
+        loc = local(i)
+        return Transform(loc.translation * scale_above(i), loc.rotation)
+
+    bones = []
+    # Depth order puts every bone after its parent bone (an ancestor); ties keep skin order.
+    for j in sorted(joints, key=lambda k: depth[k]):
+        between: list[int] = []
+        node = parent[j]
+        while node >= 0 and node not in joint_set:
+            between.append(node)
+            node = parent[node]
+        offset = Transform()
+        for k in reversed(between):
+            step = rigid(k)
+            offset = Transform(
+                offset.rotation @ step.translation + offset.translation,
+                offset.rotation @ step.rotation,
+            )
+        local(j)  # refuse a bad transform on a leaf bone too
+        bones.append(
+            Bone(
+                name=names[j],
+                parent=None if node < 0 else names[node],
+                rest=rigid(j),
+                offset=offset,
+            )
+        )
+    return Skeleton(name, tuple(bones))
