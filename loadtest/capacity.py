@@ -27,7 +27,6 @@ import math
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -40,14 +39,10 @@ from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import httpx  # noqa: E402
-
 from .clients import create_session_sticky  # noqa: E402
 from .report import summarize  # noqa: E402
 from .run import RunConfig, run  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-READY_TIMEOUT_S = 240.0
+from .service_process import READY_TIMEOUT_S, ROOT, free_port, readyz  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -67,12 +62,6 @@ SCENARIOS = (
     Scenario("http-floor-1", "floors", 1, "http", 10),
     Scenario("http-service-1", "service", 1, "http", 4),
 )
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class Deployment:
@@ -121,10 +110,8 @@ class Deployment:
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
                 raise RuntimeError("deployment exited before it was ready")
-            try:
-                ok = httpx.get(f"{self.url}/readyz", timeout=2.0).status_code == 200
-            except httpx.HTTPError:
-                ok = False
+            answer = readyz(self.url)
+            ok = answer is not None and answer[0] == 200
             streak = streak + 1 if ok else 0
             if streak >= 4 * self.workers:
                 return
