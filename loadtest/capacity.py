@@ -39,6 +39,7 @@ from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+from .cli import add_load_options, parser, run_config  # noqa: E402
 from .clients import create_session_sticky  # noqa: E402
 from .report import summarize  # noqa: E402
 from .run import RunConfig, run  # noqa: E402
@@ -150,16 +151,13 @@ class Deployment:
 
 
 def trial(dep: Deployment, sc: Scenario, clients: int, args: argparse.Namespace) -> dict[str, Any]:
-    cfg = RunConfig(
+    cfg = run_config(
+        args,
         url=dep.url,
         transport=sc.transport,
         clients=clients,
-        rate_hz=args.rate,
-        duration_s=args.duration,
-        warmup_s=args.warmup,
         drain_s=10.0,
         processes=args.processes,
-        results=getattr(args, "results", "full"),
     )
     cpu0, t0 = dep.cpu_s(), time.perf_counter()
     s = summarize(run(cfg))
@@ -410,23 +408,11 @@ def markdown(results: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m loadtest.capacity",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    ap = parser("python -m loadtest.capacity", __doc__)
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "loadtest")
     ap.add_argument("--only", default="", help="comma-separated scenario names")
-    ap.add_argument("--duration", type=float, default=6.0)
-    ap.add_argument("--warmup", type=float, default=1.0)
-    ap.add_argument("--rate", type=float, default=60.0)
+    add_load_options(ap, clients=None, duration_s=6.0)
     ap.add_argument("--processes", type=int, default=1, help="generator processes")
-    ap.add_argument(
-        "--results",
-        choices=("full", "compact"),
-        default="full",
-        help="frame results the generator asks the service for (?results=compact)",
-    )
     ap.add_argument(
         "--repeats",
         type=int,
