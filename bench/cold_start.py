@@ -2,9 +2,10 @@
 
 Cold means no compiled solver on disk: every numba cache file under ``solver/`` is
 deleted first (what a fresh checkout or image build sees). Warm is the next start,
-which loads that cache. Each start is a real ``python -m service`` on 127.0.0.1, polled
-on ``/readyz`` every 0.2 s; RSS is read from ``/proc`` (the process and its children)
-when ``/readyz`` first answers 200, and the process is then stopped with SIGTERM.
+which loads that cache. Each start is a real ``python -m service`` on 127.0.0.1
+(``loadtest.service_process``), polled on ``/readyz`` every 0.2 s; RSS is read from
+``/proc`` (the process and its children) when ``/readyz`` first answers 200, and the
+process is then stopped with SIGTERM.
 
     OPENBLAS_NUM_THREADS=1 python -m bench.cold_start [--warm-runs 3]
 
@@ -16,18 +17,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import signal
-import socket
-import subprocess
 import sys
-import time
-import urllib.error
-import urllib.request
 from dataclasses import dataclass
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from loadtest.service_process import ROOT, ServiceProcess, rss_mb
+
 SOLVER = ROOT / "solver"
 
 
@@ -37,13 +31,6 @@ class Start:
     ready_s: float
     rss_mb: float
     readyz_progress_seen: bool
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 def clear_numba_cache() -> int:
@@ -56,62 +43,16 @@ def clear_numba_cache() -> int:
     return gone
 
 
-def _rss_mb(pid: int) -> float:
-    """RSS of ``pid`` and its descendants, from /proc (Linux)."""
-    total_kb = 0
-    todo = [pid]
-    while todo:
-        p = todo.pop()
-        try:
-            status = Path(f"/proc/{p}/status").read_text()
-        except OSError:
-            continue
-        for line in status.splitlines():
-            if line.startswith("VmRSS:"):
-                total_kb += int(line.split()[1])
-        try:
-            children = Path(f"/proc/{p}/task/{p}/children").read_text().split()
-        except OSError:
-            children = []
-        todo.extend(int(c) for c in children)
-    return total_kb / 1024
-
-
 def start_once(kind: str, timeout_s: float) -> Start:
-    port = _free_port()
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", IK_HOST="127.0.0.1", IK_PORT=str(port))
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "service"],
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
     progress_seen = False
-    try:
-        while True:
-            if time.perf_counter() - t0 > timeout_s:
-                raise TimeoutError(f"{kind} start not ready within {timeout_s} s")
-            if proc.poll() is not None:
-                raise RuntimeError(f"service exited with {proc.returncode}")
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/readyz", timeout=2) as r:
-                    if r.status == 200:
-                        ready_s = time.perf_counter() - t0
-                        return Start(kind, ready_s, _rss_mb(proc.pid), progress_seen)
-            except urllib.error.HTTPError as e:  # 503 while warming: does it say how far?
-                body = json.loads(e.read() or b"{}")
-                progress_seen = progress_seen or "progress" in body
-            except (urllib.error.URLError, ConnectionError, TimeoutError):
-                pass
-            time.sleep(0.2)
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+
+    def warming(_status: int, body: bytes) -> None:  # 503 while warming: does it say how far?
+        nonlocal progress_seen
+        progress_seen = progress_seen or "progress" in json.loads(body or b"{}")
+
+    with ServiceProcess() as server:
+        ready_s = server.wait_ready(timeout_s, on_not_ready=warming)
+        return Start(kind, ready_s, rss_mb(server.proc.pid), progress_seen)
 
 
 def main() -> None:

@@ -1,4 +1,4 @@
-"""Chains for bench/ik.py: the three URDF arms and our two example chains, each with a
+"""Chains for bench/ik/: the three URDF arms and our two example chains, each with a
 pose-mode chain, a position-mode chain, and (where one exists) a URDF the peers can load.
 
 The URDF arms come from bench/robots.py and are built with solver.urdf.chain_from_urdf.
@@ -8,7 +8,7 @@ bench/out/urdf/: a rotational joint with axes "zxy" becomes three revolute joint
 z, x, y (intrinsic, as our model composes them) joined by massless links; a pivot p
 becomes origin * Tr(p) on the first of them and a fixed Tr(-p) joint after the last; the
 effector's tip offset becomes a fixed joint to a `<effector>__tip` link. The peers'
-FK is compared with ours on random q before any timing (bench/ik.py prints it), so a
+FK is compared with ours on random q before any timing (python -m bench.ik prints it), so a
 mistake here shows up as a peer skipped for FK mismatch, not as a silent handicap.
 """
 

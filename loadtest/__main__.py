@@ -19,33 +19,16 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: solves are tiny here
 
+from .cli import add_load_options, parser, run_config  # noqa: E402
 from .paths import DEFAULT_CHAINS  # noqa: E402
 from .report import summarize, table  # noqa: E402
-from .run import MAX_CLIENTS, MAX_DURATION_S, RunConfig, run  # noqa: E402
+from .run import run  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(
-        prog="python -m loadtest",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    ap = parser("python -m loadtest", __doc__)
     ap.add_argument("--url", default="http://127.0.0.1:8000", help="the service's base URL")
-    ap.add_argument("--transport", choices=("ws", "http"), default="ws")
-    ap.add_argument("--clients", type=int, default=20, help=f"sessions (at most {MAX_CLIENTS})")
-    ap.add_argument("--rate", type=float, default=60.0, help="frames per second per client")
-    ap.add_argument(
-        "--duration",
-        type=float,
-        default=10.0,
-        help=f"seconds each client streams (at most {MAX_DURATION_S:g})",
-    )
-    ap.add_argument(
-        "--warmup",
-        type=float,
-        default=1.0,
-        help="seconds at the start of each client not counted in the figures",
-    )
+    add_load_options(ap, clients=20, duration_s=10.0)
     ap.add_argument(
         "--drain",
         type=float,
@@ -69,12 +52,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help="session option time_budget_us (server default if left out)",
     )
-    ap.add_argument(
-        "--results",
-        choices=("full", "compact"),
-        default="full",
-        help="ask for full frame results (default) or compact ones (?results=compact)",
-    )
     ap.add_argument("--json", type=Path, help="write the summary as JSON here ('-': stdout)")
     ap.add_argument("--png", type=Path, help="write latency over time + histogram here")
     ap.add_argument("--quiet", action="store_true", help="no progress line")
@@ -89,18 +66,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     a = parse_args(argv)
     options = {} if a.time_budget_us is None else {"time_budget_us": a.time_budget_us}
-    cfg = RunConfig(
+    cfg = run_config(
+        a,
         url=a.url,
-        transport=a.transport,
-        clients=a.clients,
-        rate_hz=a.rate,
-        duration_s=a.duration,
-        warmup_s=a.warmup,
         drain_s=a.drain,
         chains=tuple(c.strip() for c in a.chains.split(",") if c.strip()),
         processes=a.processes,
         options=options,
-        results=a.results,
         allow_remote=a.allow_remote,
     )
     try:

@@ -27,7 +27,6 @@ import math
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -40,14 +39,11 @@ from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import httpx  # noqa: E402
-
+from .cli import add_load_options, parser, run_config  # noqa: E402
 from .clients import create_session_sticky  # noqa: E402
 from .report import summarize  # noqa: E402
 from .run import RunConfig, run  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-READY_TIMEOUT_S = 240.0
+from .service_process import READY_TIMEOUT_S, ROOT, free_port, readyz  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -67,12 +63,6 @@ SCENARIOS = (
     Scenario("http-floor-1", "floors", 1, "http", 10),
     Scenario("http-service-1", "service", 1, "http", 4),
 )
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class Deployment:
@@ -121,10 +111,8 @@ class Deployment:
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
                 raise RuntimeError("deployment exited before it was ready")
-            try:
-                ok = httpx.get(f"{self.url}/readyz", timeout=2.0).status_code == 200
-            except httpx.HTTPError:
-                ok = False
+            answer = readyz(self.url)
+            ok = answer is not None and answer[0] == 200
             streak = streak + 1 if ok else 0
             if streak >= 4 * self.workers:
                 return
@@ -163,16 +151,13 @@ class Deployment:
 
 
 def trial(dep: Deployment, sc: Scenario, clients: int, args: argparse.Namespace) -> dict[str, Any]:
-    cfg = RunConfig(
+    cfg = run_config(
+        args,
         url=dep.url,
         transport=sc.transport,
         clients=clients,
-        rate_hz=args.rate,
-        duration_s=args.duration,
-        warmup_s=args.warmup,
         drain_s=10.0,
         processes=args.processes,
-        results=getattr(args, "results", "full"),
     )
     cpu0, t0 = dep.cpu_s(), time.perf_counter()
     s = summarize(run(cfg))
@@ -423,23 +408,11 @@ def markdown(results: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m loadtest.capacity",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    ap = parser("python -m loadtest.capacity", __doc__)
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "loadtest")
     ap.add_argument("--only", default="", help="comma-separated scenario names")
-    ap.add_argument("--duration", type=float, default=6.0)
-    ap.add_argument("--warmup", type=float, default=1.0)
-    ap.add_argument("--rate", type=float, default=60.0)
+    add_load_options(ap, clients=None, duration_s=6.0)
     ap.add_argument("--processes", type=int, default=1, help="generator processes")
-    ap.add_argument(
-        "--results",
-        choices=("full", "compact"),
-        default="full",
-        help="frame results the generator asks the service for (?results=compact)",
-    )
     ap.add_argument(
         "--repeats",
         type=int,

@@ -23,7 +23,9 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from .capacity import ROOT, Deployment, Scenario, summarize_profile, trial
+from .capacity import Deployment, Scenario, summarize_profile, trial
+from .cli import add_load_options, parser
+from .service_process import ROOT
 
 
 def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None) -> dict[str, Any]:
@@ -64,20 +66,11 @@ def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None)
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m loadtest.cost",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    ap = parser("python -m loadtest.cost", __doc__)
     ap.add_argument("--apps", default="service,floors", help="comma-separated: service, floors")
-    ap.add_argument("--transport", choices=("ws", "http"), default="ws")
-    ap.add_argument("--clients", type=int, default=12)
-    ap.add_argument("--rate", type=float, default=60.0)
-    ap.add_argument("--duration", type=float, default=6.0)
-    ap.add_argument("--warmup", type=float, default=1.0)
+    add_load_options(ap, clients=12, duration_s=6.0)
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--processes", type=int, default=1, help=argparse.SUPPRESS)
-    ap.add_argument("--results", choices=("full", "compact"), default="full")
     ap.add_argument(
         "--profile",
         type=Path,

@@ -1,4 +1,4 @@
-"""Peer IK solvers for bench/ik.py, each behind the same small protocol.
+"""Peer IK solvers for bench/ik/, each behind the same small protocol.
 
 The peers are benchmark extras (see bench/PEERS.md): a peer whose package does not
 import is skipped, and the reason is kept in SKIPPED so the benchmark can print it.

@@ -1,83 +1,19 @@
-"""A real `python -m service` on 127.0.0.1 (a free port), ready before the tests run.
-
-Polls /readyz (bounded: at most READY_TIMEOUT_S, every 0.2 s) instead of sleeping a
-fixed time; the first start in a fresh checkout compiles the solver.
+"""Real `python -m service` processes on 127.0.0.1 (a free port each), ready before the
+tests run: ``loadtest.service_process`` polls /readyz (bounded, every 0.2 s) instead of
+sleeping a fixed time; the first start in a fresh checkout compiles the solver.
 """
 
 from __future__ import annotations
 
-import os
-import socket
-import subprocess
-import sys
-import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
-import httpx
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-READY_TIMEOUT_S = 240.0
+from loadtest.service_process import ROOT, ServiceProcess
 
+__all__ = ["ROOT", "Server"]
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-class Server:
-    """A `python -m service` process; ``base`` is its http://127.0.0.1:PORT."""
-
-    def __init__(self, log_path: Path, **env: str) -> None:
-        self.port = free_port()
-        self.base = f"http://127.0.0.1:{self.port}"
-        self.log_path = log_path
-        full_env = {
-            **os.environ,
-            "IK_HOST": "127.0.0.1",
-            "IK_PORT": str(self.port),
-            "PYTHONUNBUFFERED": "1",
-            **env,
-        }
-        full_env.pop("OPENBLAS_NUM_THREADS", None)  # python -m service sets it itself
-        self._log = open(log_path, "wb")  # noqa: SIM115 (closed in stop())
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "service"],
-            cwd=ROOT,
-            env=full_env,
-            stdout=self._log,
-            stderr=subprocess.STDOUT,
-        )
-
-    def wait_ready(self) -> None:
-        deadline = time.monotonic() + READY_TIMEOUT_S
-        while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"server exited:\n{self.log()}")
-            try:
-                if httpx.get(f"{self.base}/readyz", timeout=2.0).status_code == 200:
-                    return
-            except httpx.HTTPError:
-                pass
-            time.sleep(0.2)
-        raise RuntimeError(f"server not ready in {READY_TIMEOUT_S} s:\n{self.log()}")
-
-    def log(self) -> str:
-        self._log.flush()
-        return self.log_path.read_text(errors="replace")
-
-    def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(30.0)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(10.0)
-        self._log.close()
-        return int(self.proc.returncode)
+Server = ServiceProcess  # the name the live tests use: a `python -m service`, `base` its URL
 
 
 @pytest.fixture(scope="session")
@@ -88,7 +24,7 @@ def start_server(
 
     def start(**env: str) -> Server:
         log = tmp_path_factory.mktemp("server") / "server.log"
-        server = Server(log, **env)
+        server = Server(env=env, log_path=log)
         servers.append(server)
         server.wait_ready()
         return server

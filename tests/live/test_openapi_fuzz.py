@@ -5,7 +5,7 @@ Bounded for CI: a fixed number of examples per operation (IK_FUZZ_EXAMPLES, defa
 10), derandomized (Hypothesis derives every example from the test's name, so a run is
 reproducible), no example database, the "examples" and "fuzzing" phases (the coverage
 phase enumerates boundary values of every field, hundreds of cases per operation:
-bench/fuzz.py turns it on). Every response must be non-5xx, carry a documented status
+loadtest/fuzz.py turns it on). Every response must be non-5xx, carry a documented status
 code, content type and headers, and match its documented schema. Session routes get a
 fresh session and its token for every case, so generated bodies reach the handlers
 instead of stopping at 401/404.

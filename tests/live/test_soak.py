@@ -1,13 +1,13 @@
 """The 60-second soak (issue #6 item 6): steady WebSocket and HTTP traffic with session
 churn against a real `python -m service`; RSS may not grow more than 10% after the
 warm-up, and no session, WebSocket or event-loop task may be left behind.
-The long run is `python -m bench.soak` (10 minutes by default)."""
+The long run is `python -m loadtest.soak` (10 minutes by default)."""
 
 from __future__ import annotations
 
 import pytest
 
-from bench.soak import run, verdict
+from loadtest.soak import run, verdict
 
 pytestmark = [pytest.mark.live, pytest.mark.slow]
 

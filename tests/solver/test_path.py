@@ -38,7 +38,7 @@ STREAM = with_options(
 
 
 def joint_stream(chain, seed: int, frames: int) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """bench/ik.py's reference paths: q(t) = c + A sin(2 pi f t + phi) at 60 Hz."""
+    """bench/ik/streams.py's reference paths: q(t) = c + A sin(2 pi f t + phi) at 60 Hz."""
     rng = np.random.default_rng(seed)
     lo, hi = chain.lower, chain.upper
     n = chain.n_dof

@@ -3,7 +3,7 @@
 (RSS), round-trip p99 over time, and what is left behind (sessions, WebSockets,
 event-loop tasks, threads).
 
-    python -m bench.soak [--duration 600] [--ws-clients 3] [--http-clients 1]
+    python -m loadtest.soak [--duration 600] [--ws-clients 3] [--http-clients 1]
                          [--rate 50] [--churn 10] [--append]
 
 Each WebSocket client creates a session, opens a socket, streams panda frames at
@@ -21,22 +21,18 @@ import argparse
 import datetime as dt
 import json
 import math
-import os
 import re
-import socket
-import subprocess
 import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import httpx
-import psutil
 from websockets.sync.client import connect
 
-ROOT = Path(__file__).resolve().parents[1]
+from .service_process import ROOT, ServiceProcess, rss_mb, thread_count
+
 RESULTS = ROOT / "bench" / "RESULTS.md"
 PANDA = {"format": "example", "name": "panda_arm"}
 
@@ -138,12 +134,6 @@ def _metric(text: str, name: str) -> float:
     return float(m.group(1)) if m else float("nan")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @dataclass
 class Sample:
     t_s: float
@@ -168,42 +158,17 @@ def run(
     log: Any = print,
 ) -> dict[str, Any]:
     """Run a soak; returns the samples and the verdict figures."""
-    port = _free_port()
-    base = f"http://127.0.0.1:{port}"
-    env = {
-        **os.environ,
-        "IK_HOST": "127.0.0.1",
-        "IK_PORT": str(port),
-        "IK_LOG_LEVEL": "warning",
-        "IK_GRACEFUL_SHUTDOWN_S": "2",
-    }
-    env.pop("OPENBLAS_NUM_THREADS", None)
-    server = subprocess.Popen(
-        [sys.executable, "-m", "service"],
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
+    server = ServiceProcess(env={"IK_LOG_LEVEL": "warning", "IK_GRACEFUL_SHUTDOWN_S": "2"})
     try:
-        deadline = time.monotonic() + 240.0
-        while True:
-            try:
-                if httpx.get(f"{base}/readyz", timeout=2.0).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                pass
-            if server.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError("server did not become ready")
-            time.sleep(0.2)
-        proc = psutil.Process(server.pid)
+        server.wait_ready()
+        base, pid = server.base, server.proc.pid
 
         def scrape() -> str:
             return httpx.get(f"{base}/metrics", timeout=10.0).text
 
         before = scrape()
         tasks0 = _metric(before, "ik_event_loop_tasks")
-        threads0 = proc.num_threads()
+        threads0 = thread_count(pid)
         shared = Shared()
         clients = [
             threading.Thread(target=ws_client, args=(base, shared, rate, churn_s), daemon=True)
@@ -228,13 +193,13 @@ def run(
             p99 = window[min(len(window) - 1, int(0.99 * len(window)))] * 1e3 if window else 0.0
             sample = Sample(
                 t_s=time.monotonic() - t_start,
-                rss_mb=proc.memory_info().rss / 2**20,
+                rss_mb=rss_mb(pid),
                 p99_ms=p99,
                 frames=frames,
                 sessions=_metric(text, "ik_active_sessions"),
                 websockets=_metric(text, "ik_websockets"),
                 tasks=_metric(text, "ik_event_loop_tasks"),
-                threads=proc.num_threads(),
+                threads=thread_count(pid),
             )
             samples.append(sample)
             log(
@@ -270,7 +235,7 @@ def run(
             "websockets_left": left[1],
             "tasks_left": left[2],
             "threads_start": threads0,
-            "threads_end": proc.num_threads(),
+            "threads_end": thread_count(pid),
             "frames": shared.frames,
             "sessions_created": shared.sessions,
             "errors": dict(shared.errors),
@@ -279,12 +244,7 @@ def run(
             "churn_s": churn_s,
         }
     finally:
-        server.terminate()
-        try:
-            server.wait(30.0)
-        except subprocess.TimeoutExpired:
-            server.kill()
-            server.wait(10.0)
+        server.stop()
 
 
 def verdict(out: dict[str, Any], max_growth: float) -> list[str]:
@@ -340,7 +300,7 @@ def main() -> int:
         sample_s=args.sample,
     )
     problems = verdict(out, args.max_growth)
-    cmd = "python -m bench.soak " + " ".join(sys.argv[1:])
+    cmd = "python -m loadtest.soak " + " ".join(sys.argv[1:])
     text = _markdown(out, cmd.strip(), problems)
     print(text)
     if args.append:

@@ -1,7 +1,7 @@
 """The long schemathesis run: tests/live/test_openapi_fuzz.py with many examples per
 operation and the coverage phase on, against a real `python -m service` on 127.0.0.1.
 
-    python -m bench.fuzz --examples 200 [--phases examples,coverage,fuzzing] [--append]
+    python -m loadtest.fuzz --examples 200 [--phases examples,coverage,fuzzing] [--append]
 
 Prints the pytest summary, the wall time and the server's /metrics error counts;
 ``--append`` adds the figures to bench/RESULTS.md under "## Fuzzing".
@@ -16,9 +16,9 @@ import re
 import subprocess
 import sys
 import time
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from .service_process import ROOT
+
 RESULTS = ROOT / "bench" / "RESULTS.md"
 
 
@@ -61,7 +61,7 @@ def main() -> int:
         if "\n## Fuzzing\n" not in text:
             text += "\n## Fuzzing\n"
         text += (
-            f"\nCommand: `python -m bench.fuzz --examples {args.examples} "
+            f"\nCommand: `python -m loadtest.fuzz --examples {args.examples} "
             f"--phases {args.phases} --append` (run {when}, 2 shared cores).\n\n"
             f"- operations x examples: every operation of /openapi.json, up to "
             f"{args.examples} generated examples each, phases {args.phases}, "

@@ -12,7 +12,7 @@ Starts the server twice on 127.0.0.1 (IK_INLINE_BUDGET_US=1e12: every frame inli
 
 Usage (from the repository root; bounded: a few thousand frames, < 1 min):
 
-    OPENBLAS_NUM_THREADS=1 python -m bench.ws_inline_vs_thread [--clients 4] [--frames 2000]
+    OPENBLAS_NUM_THREADS=1 python -m loadtest.ws_inline_vs_thread [--clients 4] [--frames 2000]
 """
 
 from __future__ import annotations
@@ -20,11 +20,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
-import os
-import socket
 import statistics
-import subprocess
-import sys
 import time
 from typing import Any
 
@@ -36,33 +32,23 @@ from solver.chain import matrix_to_quaternion
 from solver.examples import panda_arm
 from solver.fk import effector_poses
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from .service_process import ServiceProcess
 
 
-def start_server(port: int, inline_budget_us: float, budget_us: float) -> subprocess.Popen[bytes]:
-    env = {
-        **os.environ,
-        "IK_PORT": str(port),
-        "IK_LOG_LEVEL": "warning",
-        "IK_INLINE_BUDGET_US": str(inline_budget_us),
-        "IK_MAX_TIME_BUDGET_US": str(max(budget_us, 50_000.0)),
-        "OPENBLAS_NUM_THREADS": "1",
-    }
-    proc = subprocess.Popen([sys.executable, "-m", "service"], env=env)
-    deadline = time.monotonic() + 180.0
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/readyz", timeout=1.0).status_code == 200:
-                return proc
-        except httpx.HTTPError:
-            pass
-        time.sleep(0.2)
-    proc.kill()
-    raise RuntimeError("server did not become ready")
+def start_server(inline_budget_us: float, budget_us: float) -> ServiceProcess:
+    server = ServiceProcess(
+        env={
+            "IK_LOG_LEVEL": "warning",
+            "IK_INLINE_BUDGET_US": str(inline_budget_us),
+            "IK_MAX_TIME_BUDGET_US": str(max(budget_us, 50_000.0)),
+        }
+    )
+    try:
+        server.wait_ready(180.0)
+    except BaseException:
+        server.stop()
+        raise
+    return server
 
 
 def panda_path(n: int) -> list[dict[str, Any]]:
@@ -193,13 +179,9 @@ def main() -> None:
     rows: dict[str, list[dict[str, float]]] = {"inline": [], "pool": []}
     for _ in range(args.repeats):
         for mode, inline_budget in (("inline", 1e12), ("pool", 0.0)):
-            port = free_port()
-            proc = start_server(port, inline_budget, args.budget_us)
-            try:
-                rows[mode].append(asyncio.run(run(port, args.clients, args.frames, args.budget_us)))
-            finally:
-                proc.terminate()
-                proc.wait(30)
+            with start_server(inline_budget, args.budget_us) as server:
+                result = asyncio.run(run(server.port, args.clients, args.frames, args.budget_us))
+            rows[mode].append(result)
     keys = list(rows["inline"][0])
     print(
         f"clients={args.clients} frames/client={args.frames} heavy budget={args.budget_us:g} us "
