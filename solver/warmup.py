@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba.core import event
 
+from ._path_kernels import dp_step, frame_nodes, project_onto
 from .chain import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
 from .examples import panda_arm
 from .ik import IKOptions, IKSolver, Target, pose_targets
@@ -47,12 +48,45 @@ def _solve_and_track(mode: EffectorMode) -> None:
 
 
 def _plan() -> None:
-    # The planner's kernels (solver/path.py): a two-frame clip of a 7-DOF pose task.
+    # The planner (solver/path.py) end to end: a two-frame clip of a 7-DOF pose task.
+    solver, targets, q = _planning_arm()
+    solver.set_pose(q)
+    solver.plan([targets, pose_targets(solver.chain, q + 0.01)])
+
+
+# The planner's kernels, each called as ``plan`` calls it (the same argument types, so
+# the same compiled code): two thirds of the whole compile, and independent of the IK
+# core and of each other, so that separate processes may compile them side by side.
+
+
+def _plan_nodes() -> None:
+    solver, targets, q = _planning_arm()
+    box = _loaded_box(solver, targets, q)
+    anchors = np.ascontiguousarray([q], dtype=np.float64)
+    frame_nodes(anchors, solver._data, box, True, 0.05, 4)
+
+
+def _plan_projection() -> None:
+    solver, targets, q = _planning_arm()
+    box = _loaded_box(solver, targets, q)
+    project_onto(q.copy(), solver._data, box, 30)
+    nodes = np.ascontiguousarray([q, q + 0.01], dtype=np.float64)
+    dp_step(nodes[:1] * 1.0, np.zeros(1), np.zeros(1), nodes * 1.0, 0.5)
+
+
+def _planning_arm() -> tuple[IKSolver, list[Target], np.ndarray]:
     chain = panda_arm()
     q = chain.mid_limits() + 0.1
-    planner = IKSolver(chain, IKOptions(time_budget_us=None, max_iter=50))
-    planner.set_pose(q)
-    planner.plan([pose_targets(chain, q), pose_targets(chain, q + 0.01)])
+    solver = IKSolver(chain, IKOptions(time_budget_us=None, max_iter=50))
+    return solver, pose_targets(chain, q), q
+
+
+def _loaded_box(
+    solver: IKSolver, targets: list[Target], q: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Load ``targets`` into the solver's data as the planner does; the planner's box."""
+    solver._prepare(targets, solver.options, q)
+    return solver.chain.lower, solver.chain.upper, solver._free_mask()
 
 
 def _no_variables() -> None:
@@ -72,8 +106,10 @@ STEPS: tuple[WarmupStep, ...] = (
     WarmupStep("pose", lambda: _solve_and_track(EffectorMode.POSE)),
     WarmupStep("position", lambda: _solve_and_track(EffectorMode.POSITION)),
     WarmupStep("aim", lambda: _solve_and_track(EffectorMode.AIM)),
-    WarmupStep("plan", _plan),
     WarmupStep("no_variables", _no_variables),
+    WarmupStep("plan_projection", _plan_projection),
+    WarmupStep("plan_nodes", _plan_nodes),
+    WarmupStep("plan", _plan),
 )
 STEP_NAMES: tuple[str, ...] = tuple(step.name for step in STEPS)
 
