@@ -4,9 +4,10 @@ Cold means no compiled solver on disk: every numba cache file under ``solver/`` 
 deleted first (what a fresh checkout or image build sees). Warm is the next start,
 which loads that cache. Each start is a real ``python -m service`` on 127.0.0.1, polled
 on ``/readyz`` every 0.2 s; RSS is read from ``/proc`` (the process and its children)
-when ``/readyz`` first answers 200, and the process is then stopped with SIGTERM.
+at every poll (the peak) and when ``/readyz`` first answers 200, and the process is then
+stopped with SIGTERM. The 1-minute load average is read at each start and at ready.
 
-    OPENBLAS_NUM_THREADS=1 python -m bench.cold_start [--warm-runs 3]
+    OPENBLAS_NUM_THREADS=1 python -m bench.cold_start [--cold-runs 1] [--warm-runs 3]
 
 Slow on purpose: the cold compile takes 40-270 s on these machines, so run it on idle
 cores and quote the figures with the load they ran under.
@@ -19,6 +20,7 @@ import json
 import os
 import signal
 import socket
+import statistics
 import subprocess
 import sys
 import time
@@ -36,7 +38,11 @@ class Start:
     kind: str
     ready_s: float
     rss_mb: float
+    peak_rss_mb: float
     readyz_progress_seen: bool
+    last_progress: str  # the last progress /readyz showed before 200
+    load_at_start: float
+    load_at_ready: float
 
 
 def _free_port() -> int:
@@ -89,20 +95,41 @@ def start_once(kind: str, timeout_s: float) -> Start:
         stderr=subprocess.DEVNULL,
     )
     progress_seen = False
+    last_progress = "-"
+    peak = 0.0
+    load_at_start = os.getloadavg()[0]
     try:
         while True:
             if time.perf_counter() - t0 > timeout_s:
                 raise TimeoutError(f"{kind} start not ready within {timeout_s} s")
             if proc.poll() is not None:
                 raise RuntimeError(f"service exited with {proc.returncode}")
+            peak = max(peak, _rss_mb(proc.pid))
             try:
                 with urllib.request.urlopen(f"http://127.0.0.1:{port}/readyz", timeout=2) as r:
                     if r.status == 200:
                         ready_s = time.perf_counter() - t0
-                        return Start(kind, ready_s, _rss_mb(proc.pid), progress_seen)
+                        rss = _rss_mb(proc.pid)
+                        load = os.getloadavg()[0]
+                        return Start(
+                            kind,
+                            ready_s,
+                            rss,
+                            max(peak, rss),
+                            progress_seen,
+                            last_progress,
+                            load_at_start,
+                            load,
+                        )
             except urllib.error.HTTPError as e:  # 503 while warming: does it say how far?
                 body = json.loads(e.read() or b"{}")
-                progress_seen = progress_seen or "progress" in body
+                p = body.get("progress")
+                if p is not None:
+                    progress_seen = True
+                    last_progress = (
+                        f"{p['phase']} {p['done']}/{p['total']}, {p['compiled']} compiled, "
+                        f"{p['elapsed_s']:.0f} s"
+                    )
             except (urllib.error.URLError, ConnectionError, TimeoutError):
                 pass
             time.sleep(0.2)
@@ -116,18 +143,36 @@ def start_once(kind: str, timeout_s: float) -> Start:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cold-runs", type=int, default=1, help="cold starts (cache deleted)")
     parser.add_argument("--warm-runs", type=int, default=3, help="warm starts after the cold one")
     parser.add_argument("--timeout-s", type=float, default=900.0)
     args = parser.parse_args()
-    cleared = clear_numba_cache()
-    print(f"deleted {cleared} numba cache files under solver/", file=sys.stderr)
-    starts = [start_once("cold", args.timeout_s)]
+    starts = []
+    for _ in range(args.cold_runs):
+        cleared = clear_numba_cache()
+        print(f"deleted {cleared} numba cache files under solver/", file=sys.stderr)
+        starts.append(start_once("cold", args.timeout_s))
+        print(starts[-1], file=sys.stderr)
     starts += [start_once("warm", args.timeout_s) for _ in range(args.warm_runs)]
-    print("| start | seconds to ready | RSS when ready (MB) | /readyz showed progress |")
-    print("|---|---|---|---|")
+    print(
+        "| start | seconds to ready | RSS when ready (MB) | peak RSS, all processes (MB) "
+        "| load avg at start / ready | last /readyz progress |"
+    )
+    print("|---|---|---|---|---|---|")
     for s in starts:
-        seen = "yes" if s.readyz_progress_seen else "no"
-        print(f"| {s.kind} | {s.ready_s:.1f} | {s.rss_mb:.0f} | {seen} |")
+        print(
+            f"| {s.kind} | {s.ready_s:.1f} | {s.rss_mb:.0f} | {s.peak_rss_mb:.0f} "
+            f"| {s.load_at_start:.2f} / {s.load_at_ready:.2f} | {s.last_progress} |"
+        )
+    for kind in ("cold", "warm"):
+        of_kind = [s for s in starts if s.kind == kind]
+        if len(of_kind) > 1:
+            print(
+                f"| {kind}, median of {len(of_kind)} "
+                f"| {statistics.median(s.ready_s for s in of_kind):.1f} "
+                f"| {statistics.median(s.rss_mb for s in of_kind):.0f} "
+                f"| {statistics.median(s.peak_rss_mb for s in of_kind):.0f} | | |"
+            )
 
 
 if __name__ == "__main__":
