@@ -29,7 +29,7 @@ from typing import IO
 
 import solver
 from schemas import StartupPhase, StartupProgress
-from solver.warmup import STEP_NAMES, NotCached, WarmupProgress
+from solver.warmup import STEP_NAMES, NotCached, WarmupProgress, warmup
 
 log = logging.getLogger("service")
 
@@ -73,7 +73,7 @@ def warm_solver(report: Report, *, processes: int = 2, steps: Sequence[str] = ST
     start = time.perf_counter()
     log.info("loading the compiled solver from its on-disk cache (%s)", CACHE_DIR)
     try:
-        solver.warmup(_relay(report, StartupPhase.LOADING, start), steps=steps, load_only=True)
+        warmup(_relay(report, StartupPhase.LOADING, start), steps=steps, load_only=True)
     except NotCached as missing:
         split = shares(processes, steps)
         log.info(
@@ -126,7 +126,7 @@ def _load_after_compile(report: Report, start: float, steps: Sequence[str]) -> f
             _progress(StartupPhase.LOADING, p.done, p.total, time.perf_counter() - start, compiled)
         )
 
-    seconds = solver.warmup(relay, steps=steps)
+    seconds = warmup(relay, steps=steps)
     if compiled:
         log.warning(
             "solver: %d functions were missing from the on-disk cache after the compile "
