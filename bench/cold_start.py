@@ -75,15 +75,16 @@ def _rss_mb(pid: int) -> float:
         for line in status.splitlines():
             if line.startswith("VmRSS:"):
                 total_kb += int(line.split()[1])
-        try:
-            children = Path(f"/proc/{p}/task/{p}/children").read_text().split()
-        except OSError:
-            children = []
-        todo.extend(int(c) for c in children)
+        # Children of every thread: the service starts its compile processes from one.
+        for task in Path(f"/proc/{p}/task").glob("*"):
+            try:
+                todo.extend(int(c) for c in (task / "children").read_text().split())
+            except OSError:
+                pass
     return total_kb / 1024
 
 
-def start_once(kind: str, timeout_s: float) -> Start:
+def start_once(kind: str, timeout_s: float, log_path: Path | None = None) -> Start:
     port = _free_port()
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", IK_HOST="127.0.0.1", IK_PORT=str(port))
     t0 = time.perf_counter()
@@ -92,7 +93,7 @@ def start_once(kind: str, timeout_s: float) -> Start:
         cwd=ROOT,
         env=env,
         stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL if log_path is None else log_path.open("wb"),
     )
     progress_seen = False
     last_progress = "-"
@@ -146,14 +147,24 @@ def main() -> None:
     parser.add_argument("--cold-runs", type=int, default=1, help="cold starts (cache deleted)")
     parser.add_argument("--warm-runs", type=int, default=3, help="warm starts after the cold one")
     parser.add_argument("--timeout-s", type=float, default=900.0)
+    parser.add_argument("--log-dir", type=Path, help="keep each start's service log here")
     args = parser.parse_args()
+
+    def log_path(name: str) -> Path | None:
+        if args.log_dir is None:
+            return None
+        args.log_dir.mkdir(parents=True, exist_ok=True)
+        return args.log_dir / f"{name}.log"
+
     starts = []
-    for _ in range(args.cold_runs):
+    for i in range(args.cold_runs):
         cleared = clear_numba_cache()
         print(f"deleted {cleared} numba cache files under solver/", file=sys.stderr)
-        starts.append(start_once("cold", args.timeout_s))
+        starts.append(start_once("cold", args.timeout_s, log_path(f"cold-{i}")))
         print(starts[-1], file=sys.stderr)
-    starts += [start_once("warm", args.timeout_s) for _ in range(args.warm_runs)]
+    starts += [
+        start_once("warm", args.timeout_s, log_path(f"warm-{i}")) for i in range(args.warm_runs)
+    ]
     print(
         "| start | seconds to ready | RSS when ready (MB) | peak RSS, all processes (MB) "
         "| load avg at start / ready | last /readyz progress |"

@@ -38,18 +38,16 @@ Report = Callable[[StartupProgress], None]
 # Where numba keeps the compiled solver (solver/_jit.py's in-tree cache locator).
 CACHE_DIR = Path(solver.__file__).resolve().parent / "__pycache__"
 
-# How the warm-up's steps are shared out. Measured (bench/cold_start.py, the numba
-# compile events of each step): the IK core (pose) is a sixth of the compile, the
-# planner's node search (plan_nodes) half, its projection and DP (plan_projection) the
-# rest. With two processes the node search gets one to itself; the other compiles the
-# IK core and the projection, and is done first, so that "plan" (after plan_nodes)
-# finds those two in the cache instead of compiling them again.
+# How the warm-up's steps are shared out. Measured (numba's compile events of each
+# step, on busy cores): the IK core (pose) is ~15% of the compile, the planner's node
+# search (plan_nodes) ~53%, its projection and DP (plan_projection) ~30%. With two
+# processes the node search gets one to itself, the other compiles the rest. "plan"
+# (the planner end to end) then only combines what the two compiled: it runs in the
+# loading process (in a child it would compile whichever kernel the other child had
+# not yet written to the cache, a second time).
 _SHARES: dict[int, tuple[tuple[str, ...], ...]] = {
     1: (STEP_NAMES,),
-    2: (
-        ("pose", "position", "aim", "no_variables", "plan_projection"),
-        ("plan_nodes", "plan"),
-    ),
+    2: (("pose", "position", "aim", "no_variables", "plan_projection"), ("plan_nodes",)),
 }
 
 # The children import this process's solver: the one under this root, first.
@@ -60,7 +58,8 @@ _LOG_EVERY_S = 15.0
 
 
 def shares(processes: int, steps: Sequence[str] = STEP_NAMES) -> list[tuple[str, ...]]:
-    """``steps`` split over at most ``processes`` compile processes."""
+    """``steps`` split over at most ``processes`` compile processes (each step in one
+    share at most; see ``_SHARES``)."""
     split = _SHARES[min(max(processes, 1), max(_SHARES))]
     chosen = [tuple(n for n in share if n in steps) for share in split]
     return [share for share in chosen if share]

@@ -20,13 +20,17 @@ from solver.warmup import STEP_NAMES
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_every_step_is_compiled_by_exactly_one_process() -> None:
+def test_each_step_is_compiled_by_one_process_at_most() -> None:
     for processes in (1, 2, 5):
         split = startup.shares(processes)
         names = [name for share in split for name in share]
-        assert sorted(names) == sorted(STEP_NAMES)
+        assert len(names) == len(set(names)) and set(names) <= set(STEP_NAMES)
+        # Only the planner end to end is left to the loading process (it combines
+        # kernels that other steps compile).
+        assert set(STEP_NAMES) - set(names) <= {"plan"}
         assert 1 <= len(split) <= processes
-    assert startup.shares(2, ["plan"]) == [("plan",)]
+    assert startup.shares(1) == [STEP_NAMES]
+    assert startup.shares(2, ["plan_nodes", "pose"]) == [("pose",), ("plan_nodes",)]
 
 
 def test_a_warm_cache_is_loaded_and_the_log_says_so(
@@ -99,15 +103,16 @@ def test_a_cold_cache_is_filled_by_child_processes_then_loaded(tmp_path: Path) -
     _copy_packages(tmp_path)
     cache = tmp_path / "solver" / "__pycache__"
     n = len(STEP_NAMES)
+    shared = sum(len(share) for share in startup.shares(2))
 
     reports, log = _warm_in(tmp_path)
     assert "compiling it now, in 2 process(es)" in log and "once per checkout or image" in log
-    assert f"compiling the solver: {n}/{n} steps done" in log
+    assert f"compiling the solver: {shared}/{shared} steps done" in log
     assert "compiled and loaded" in log
     # The shares compiled everything the warm-up needs: this process compiled nothing.
     assert "missing from the on-disk cache" not in log
     compiling = [r for r in reports if r["phase"] == "compiling"]
-    assert compiling and compiling[-1]["done"] == n and compiling[-1]["compiled"] > 0
+    assert compiling and compiling[-1]["done"] == shared and compiling[-1]["compiled"] > 0
     assert reports[-1]["phase"] == "loading" and reports[-1]["done"] == n
     assert reports[-1]["compiled"] == 0
     assert list(cache.glob("*.nbi")), "the children wrote no cache index"
