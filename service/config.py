@@ -84,8 +84,8 @@ class Settings(BaseSettings):
         ge=1,
         le=2,
         description="Processes that compile the solver when its on-disk cache is empty "
-        "(first start of a checkout or image): 2 is faster on two or more cores, 1 needs "
-        "less memory while compiling (~1.9 GB peak instead of ~2.4 GB)",
+        "(first start of a checkout or image): 2 is faster on two or more cores (two "
+        "compiles at once peak at ~2.4 GB together), 1 compiles one share at a time",
     )
     max_queued_plans: int = Field(
         default=4,

@@ -10,7 +10,8 @@ up to ``processes`` of them, each compiling its share of the warm-up's steps int
 cache, and this process then loads the result. Why children: a compile holds ~1.5 GB
 (numba's and LLVM's working memory, never given back) while the loaded code needs
 ~250 MB, and independent shares compile in parallel on separate cores (two at once
-peak at ~2.4 GB together, bench/cold_start.py; one process: ~1.9 GB, slower).
+peak at ~2.4 GB together, bench/cold_start.py; one compile in-process peaked at
+~1.9 GB).
 
 Progress goes to ``report`` (readyz shows the last one) and to the log.
 """
