@@ -43,7 +43,7 @@ from .cli import add_load_options, parser, run_config  # noqa: E402
 from .clients import create_session_sticky  # noqa: E402
 from .report import summarize  # noqa: E402
 from .run import RunConfig, run  # noqa: E402
-from .service_process import READY_TIMEOUT_S, ROOT, free_port, readyz  # noqa: E402
+from .service_process import READY_LIMIT_S, ROOT, free_port, readyz  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -106,7 +106,7 @@ class Deployment:
 
     def wait_ready(self) -> None:
         """Ready when 4 x workers fresh connections in a row answer 200 (each worker warm)."""
-        deadline = time.monotonic() + READY_TIMEOUT_S
+        deadline = time.monotonic() + READY_LIMIT_S
         streak = 0
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:

@@ -44,7 +44,7 @@ def start_server(inline_budget_us: float, budget_us: float) -> ServiceProcess:
         }
     )
     try:
-        server.wait_ready(180.0)
+        server.wait_ready()
     except BaseException:
         server.stop()
         raise

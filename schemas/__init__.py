@@ -25,6 +25,7 @@ from .chain import (
     UrdfChain,
 )
 from .common import ErrorBody, FiniteFloat, Quaternion, StrictModel, Vec3
+from .health import NotReadyBody, StartupPhase, StartupProgress
 from .solve import (
     ClipRequest,
     CompactFrameResult,
@@ -80,6 +81,9 @@ __all__ = [
     "EffectorSpec",
     "ErrorBody",
     "ErrorMessage",
+    "NotReadyBody",
+    "StartupPhase",
+    "StartupProgress",
     "ErrorPayload",
     "ExampleChain",
     "FiniteFloat",

@@ -10,7 +10,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
@@ -26,7 +26,7 @@ from .responses import ORJSONResponse, dumps
 from .routes import health, http, ws
 from .routes.docs import add_docs
 from .sessions import InMemorySessionStore, SessionStore
-from .solving import Runner, Warmup, default_warmup
+from .solving import Runner, Warmup, WarmupFn, default_warmup
 
 log = logging.getLogger("service")
 
@@ -118,14 +118,16 @@ async def _too_large(send: Send, limit: int) -> None:
 def create_app(
     settings: Settings | None = None,
     *,
-    warmup: Callable[[], float] = default_warmup,
+    warmup: WarmupFn | None = None,
     store: SessionStore | None = None,
 ) -> FastAPI:
     """Build the app.
 
     Args:
         settings: Configuration; default ``get_settings()`` (the environment).
-        warmup: Loads the compiled solver; /readyz is 503 until it returns.
+        warmup: Loads the compiled solver, passing its progress to the callable it
+            gets (/readyz shows it); /readyz is 503 until it returns. Default:
+            ``default_warmup(settings.compile_processes)``.
         store: Session store; default an ``InMemorySessionStore`` from the settings.
     """
     settings = settings or get_settings()
@@ -140,7 +142,7 @@ def create_app(
                 max_per_owner=settings.max_sessions_per_key,
             )
         metrics = Metrics(lambda: len(sessions))
-        warm = Warmup(warmup)
+        warm = Warmup(warmup or default_warmup(settings.compile_processes))
         runner = Runner(
             inline_budget_us=settings.inline_budget_us,
             threads=settings.solver_threads,

@@ -23,6 +23,7 @@ from typing import Any, TypeVar
 import numpy as np
 from starlette import status
 
+from schemas import StartupProgress
 from solver.ik import IKOptions, IKResult, IKSolver
 from solver.ik import Target as SolverTarget
 from solver.path import PlannedPath
@@ -31,6 +32,7 @@ from . import convert
 from .errors import ServiceError, not_found, not_ready, plans_busy, too_many_plans
 from .metrics import Metrics
 from .sessions import Session, SessionStore
+from .startup import Report, warm_solver
 
 log = logging.getLogger("service")
 T = TypeVar("T")
@@ -39,48 +41,60 @@ T = TypeVar("T")
 FrameJob = tuple[int | None, list[SolverTarget]]
 
 
-def default_warmup() -> float:
-    """Load (or compile) the solver's numba core; returns the seconds it took."""
-    import solver
+WarmupFn = Callable[[Report], float]
 
-    fn: Any = getattr(solver, "warmup", None)
-    if fn is not None and not callable(fn):  # a ``solver.warmup`` module
-        fn = getattr(fn, "warmup", None)
-    if callable(fn):
-        return float(fn())
-    from solver.examples import panda_arm
-    from solver.ik import IKSolver, pose_targets
 
-    t = time.perf_counter()
-    chain = panda_arm()
-    IKSolver(chain).solve(pose_targets(chain, chain.mid_limits() + 0.1))
-    return time.perf_counter() - t
+def default_warmup(compile_processes: int) -> WarmupFn:
+    """The service's warm-up: load the solver's compiled core, compiling it first in
+    up to ``compile_processes`` child processes when the on-disk cache lacks it."""
+
+    def warm(report: Report) -> float:
+        return warm_solver(report, processes=compile_processes)
+
+    return warm
 
 
 class Warmup:
-    """Runs the warm-up once in a thread; ``ready`` flips when it is done."""
+    """Runs the warm-up once in a thread; ``ready`` flips when it is done, ``progress``
+    holds its last report until then."""
 
-    def __init__(self, fn: Callable[[], float]) -> None:
+    def __init__(self, fn: WarmupFn) -> None:
         self._fn = fn
         self.ready = threading.Event()
         self.seconds: float | None = None
         self.error: str | None = None
+        self._progress: StartupProgress | None = None
+        self._started = time.monotonic()
         self._thread = threading.Thread(target=self._run, name="ik-warmup", daemon=True)
 
     def start(self) -> None:
+        self._started = time.monotonic()
         self._thread.start()
+
+    def _report(self, progress: StartupProgress) -> None:
+        self._progress = progress  # one reference swap: readers see the old or the new
+
+    @property
+    def progress(self) -> StartupProgress | None:
+        """The warm-up's last report, its ``elapsed_s`` brought up to now (a single
+        function may compile for a minute between two reports)."""
+        last = self._progress
+        if last is None:
+            return None
+        elapsed = round(max(last.elapsed_s, time.monotonic() - self._started), 1)
+        return last.model_copy(update={"elapsed_s": elapsed})
 
     def _run(self) -> None:
         t = time.perf_counter()
         try:
-            self._fn()
+            self._fn(self._report)
         except Exception as e:  # readyz stays 503 and says why
             self.error = f"{type(e).__name__}: {e}"
             log.exception("solver warm-up failed")
             return
         self.seconds = time.perf_counter() - t
         freeze_long_lived_objects()
-        log.info("solver warm in %.2f s", self.seconds)
+        log.info("solver warm in %.2f s: ready", self.seconds)
         self.ready.set()
 
 

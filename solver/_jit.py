@@ -32,9 +32,16 @@ _MARK = "__ik_solver_cache__"
 _SOLVER_DIR = Path(__file__).resolve().parent
 
 
+# Files that hold no compiled function and that no compiled function reads: editing
+# them must not throw the whole compiled package away.
+_NOT_COMPILED = frozenset({"warmup.py"})
+
+
 def _package_digest() -> bytes:
     h = hashlib.sha256(numba.__version__.encode())
     for path in sorted(_SOLVER_DIR.glob("*.py")):
+        if path.name in _NOT_COMPILED:
+            continue
         h.update(path.name.encode())
         h.update(path.read_bytes())
     return h.digest()

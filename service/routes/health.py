@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from fastapi import APIRouter, Response
 from prometheus_client import CONTENT_TYPE_LATEST
 from starlette import status
@@ -24,18 +22,47 @@ async def healthz() -> dict[str, str]:
 
 @router.get(
     "/readyz",
-    responses={503: {"model": S.ErrorBody, "description": "`not_ready`: still warming up"}},
+    responses={
+        503: {
+            "model": S.NotReadyBody,
+            "description": "`not_ready`: still warming up (`progress` says how far: a first "
+            "start compiles the solver, minutes; later starts load it, about a second), "
+            "or `warmup_failed`",
+        }
+    },
 )
 async def readyz(svc: ServicesDep) -> Response:
     """Ready once the compiled solver is loaded and warm (503 until then)."""
     warm = svc.runner.warmup
     if warm.ready.is_set():
         return ORJSONResponse({"status": "ready", "warmup_s": warm.seconds})
-    body: dict[str, Any] = {"detail": "the solver is warming up", "code": "not_ready"}
     if warm.error is not None:
-        body = {"detail": f"solver warm-up failed: {warm.error}", "code": "warmup_failed"}
+        body = S.NotReadyBody(detail=f"solver warm-up failed: {warm.error}", code="warmup_failed")
+    else:
+        progress = warm.progress
+        body = S.NotReadyBody(
+            detail=not_ready_detail(progress), code="not_ready", progress=progress
+        )
     return ORJSONResponse(
-        body, status_code=status.HTTP_503_SERVICE_UNAVAILABLE, headers={"Retry-After": "1"}
+        body.model_dump(mode="json", exclude_none=True),
+        status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
+        headers={"Retry-After": "1"},
+    )
+
+
+def not_ready_detail(progress: S.StartupProgress | None) -> str:
+    """What a person reading /readyz should know about the warm-up."""
+    if progress is None:
+        return "the solver is warming up"
+    if progress.phase is S.StartupPhase.COMPILING:
+        return (
+            "compiling the solver (first start of this checkout or image; the compiled code "
+            f"is cached on disk, later starts take about a second): {progress.done}/"
+            f"{progress.total} steps, {progress.compiled} functions, {progress.elapsed_s:.0f} s"
+        )
+    return (
+        "loading the compiled solver from its on-disk cache: "
+        f"{progress.done}/{progress.total} steps, {progress.elapsed_s:.1f} s"
     )
 
 

@@ -48,6 +48,14 @@ def test_logs_where_the_docs_are(server: Server) -> None:
     assert httpx.get(f"{server.base}/healthz", timeout=TIMEOUT_S).json() == {"status": "ok"}
 
 
+def test_logs_how_the_solver_got_warm(server: Server) -> None:
+    log = server.log()
+    loaded = "solver loaded from its on-disk cache" in log  # a warm checkout
+    compiled = "compiling it now" in log and "solver compiled and loaded" in log  # a fresh one
+    assert loaded != compiled, log
+    assert "ready" in httpx.get(f"{server.base}/readyz", timeout=TIMEOUT_S).json()["status"]
+
+
 def test_ws_json_and_msgpack_frames_in_order(server: Server) -> None:
     sid, headers = session(server)
     with ws_connect(server, sid, headers) as ws:

@@ -31,7 +31,7 @@ def warm_solver() -> float:
     return float(solver.warmup())
 
 
-def _no_warmup() -> float:
+def _no_warmup(report: object) -> float:
     return 0.0
 
 

@@ -209,7 +209,7 @@ small = st.floats(-2.0, 2.0, allow_nan=False)
 def property_app(warm_solver: float) -> Any:
     from service.main import create_app
 
-    app = create_app(Settings(max_frames_per_s=0), warmup=lambda: 0.0)
+    app = create_app(Settings(max_frames_per_s=0), warmup=lambda _report: 0.0)
     with TestClient(app) as client:
         assert app.state.ik.runner.warmup.ready.wait(30)
         r = client.post("/v1/sessions", json={"chain": ARM})

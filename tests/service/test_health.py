@@ -7,6 +7,8 @@ from collections.abc import Callable
 
 from starlette.testclient import TestClient
 
+from schemas import StartupPhase, StartupProgress
+
 from .helpers import Created, create, hand_frame
 
 
@@ -18,7 +20,7 @@ def test_healthz(client: TestClient) -> None:
 def test_readyz_is_503_until_the_warmup_returns(make_client: Callable[..., TestClient]) -> None:
     gate = threading.Event()
 
-    def warmup() -> float:
+    def warmup(report: object) -> float:
         assert gate.wait(30.0)
         return 0.0
 
@@ -32,10 +34,70 @@ def test_readyz_is_503_until_the_warmup_returns(make_client: Callable[..., TestC
     assert r.status_code == 200 and r.json()["status"] == "ready"
 
 
+def test_readyz_shows_how_far_the_warmup_is(make_client: Callable[..., TestClient]) -> None:
+    reported, gate = threading.Event(), threading.Event()
+
+    def warmup(report: Callable[[StartupProgress], None]) -> float:
+        report(
+            StartupProgress(
+                phase=StartupPhase.COMPILING, done=2, total=5, elapsed_s=3.0, compiled=40
+            )
+        )
+        reported.set()
+        assert gate.wait(30.0)
+        return 0.0
+
+    client = make_client(warmup=warmup)
+    try:
+        assert reported.wait(30.0)
+        r = client.get("/readyz")
+        assert r.status_code == 503 and r.headers["retry-after"] == "1"
+        body = r.json()
+        assert body["code"] == "not_ready"
+        progress = body["progress"]
+        assert progress.pop("elapsed_s") >= 3.0  # brought up to the time of the request
+        assert progress == {"phase": "compiling", "done": 2, "total": 5, "compiled": 40}
+        assert "compiling the solver" in body["detail"] and "cached on disk" in body["detail"]
+        assert "2/5 steps" in body["detail"]
+    finally:
+        gate.set()
+    assert client.app.state.ik.runner.warmup.ready.wait(30.0)  # type: ignore[attr-defined]
+    r = client.get("/readyz")
+    assert r.status_code == 200 and "progress" not in r.json()
+
+
+def test_readyz_before_the_first_report_has_no_progress(
+    make_client: Callable[..., TestClient],
+) -> None:
+    gate = threading.Event()
+
+    def warmup(report: object) -> float:
+        assert gate.wait(30.0)
+        return 0.0
+
+    client = make_client(warmup=warmup)
+    try:
+        body = client.get("/readyz").json()
+        assert body == {"detail": "the solver is warming up", "code": "not_ready"}
+    finally:
+        gate.set()
+
+
+def test_readyz_503_body_is_documented(client: TestClient) -> None:
+    spec = client.get("/openapi.json").json()
+    content = spec["paths"]["/readyz"]["get"]["responses"]["503"]["content"]
+    ref = content["application/json"]["schema"]["$ref"].rsplit("/", 1)[-1]
+    schemas = spec["components"]["schemas"]
+    assert "progress" in schemas[ref]["properties"]
+    progress = schemas["StartupProgress"]
+    assert set(progress["required"]) == {"phase", "done", "total", "elapsed_s", "compiled"}
+    assert set(schemas["StartupPhase"]["enum"]) == {"compiling", "loading"}
+
+
 def test_readyz_reports_a_failed_warmup(make_client: Callable[..., TestClient]) -> None:
     done = threading.Event()
 
-    def warmup() -> float:
+    def warmup(report: object) -> float:
         done.set()
         raise RuntimeError("no compiler")
 

@@ -453,7 +453,7 @@ def test_not_ready_until_warm(make_client: Callable[..., TestClient]) -> None:
 
     gate = threading.Event()
 
-    def slow_warmup() -> float:
+    def slow_warmup(report: object) -> float:
         assert gate.wait(30.0)
         return 0.0
 

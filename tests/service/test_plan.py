@@ -168,7 +168,7 @@ class _HeldPlans:
         self.options = convert.session_defaults(settings)
         self.release = threading.Event()
         self.ran: list[str] = []
-        warm = solving.Warmup(lambda: 0.0)
+        warm = solving.Warmup(lambda _report: 0.0)
         warm._run()
         self.runner = solving.Runner(
             inline_budget_us=0.0,

@@ -46,7 +46,7 @@ def test_frames_run_inline_or_in_the_pool(
 
 
 def test_inline_rule_is_frames_times_budget() -> None:
-    warm = solving.Warmup(lambda: 0.0)
+    warm = solving.Warmup(lambda _report: 0.0)
     runner = solving.Runner(
         inline_budget_us=1000.0, threads=1, metrics=Metrics(lambda: 0), warmup=warm
     )
@@ -68,7 +68,7 @@ def test_concurrent_pooled_requests_of_one_session_run_in_arrival_order(
     options = convert.session_defaults(settings)
 
     async def scenario() -> list[float]:
-        warm = solving.Warmup(lambda: 0.0)
+        warm = solving.Warmup(lambda _report: 0.0)
         warm._run()
         runner = solving.Runner(
             inline_budget_us=0.0, threads=2, metrics=Metrics(lambda: 1), warmup=warm
@@ -121,7 +121,7 @@ def test_warm_up_freezes_what_is_alive_so_later_collections_skip_it() -> None:
     gc.unfreeze()
     loaded = {"like": ["numba's", "objects"]}  # a tracked container alive before warm-up
     assert any(o is loaded for o in gc.get_objects())  # the collector walks it
-    warm = solving.Warmup(lambda: 0.0)
+    warm = solving.Warmup(lambda _report: 0.0)
     warm._run()
     assert warm.ready.is_set()
     assert gc.get_freeze_count() > 0
