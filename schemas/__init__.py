@@ -25,6 +25,7 @@ from .chain import (
     UrdfChain,
 )
 from .common import ErrorBody, FiniteFloat, Quaternion, StrictModel, Vec3
+from .errors import ERROR_CODE_DESCRIPTIONS, ErrorCode
 from .solve import (
     ClipRequest,
     CompactFrameResult,
@@ -78,7 +79,9 @@ __all__ = [
     "EffectorErrorOut",
     "EffectorInfo",
     "EffectorSpec",
+    "ERROR_CODE_DESCRIPTIONS",
     "ErrorBody",
+    "ErrorCode",
     "ErrorMessage",
     "ErrorPayload",
     "ExampleChain",
