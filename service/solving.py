@@ -23,20 +23,18 @@ from typing import Any, TypeVar
 import numpy as np
 from starlette import status
 
+from schemas import ErrorCode
 from solver.ik import IKOptions, IKResult, IKSolver
 from solver.ik import Target as SolverTarget
 from solver.path import PlannedPath
 
-from . import convert
+from .convert import ChainView, FrameJob, SolvedFrame
 from .errors import ServiceError, not_found, not_ready, plans_busy, too_many_plans
 from .metrics import Metrics
 from .sessions import Session, SessionStore
 
 log = logging.getLogger("service")
 T = TypeVar("T")
-
-# One frame to solve: (client frame id, solver targets).
-FrameJob = tuple[int | None, list[SolverTarget]]
 
 
 def default_warmup() -> float:
@@ -157,16 +155,14 @@ class Runner:
         jobs: Sequence[FrameJob],
         t0: float,
         transport: str,
-        build: convert.ResultBuilder = convert.result_dict,
-    ) -> list[dict[str, Any]]:
+    ) -> list[SolvedFrame]:
         """Solve a session's frames in order, each warm-started from the previous answer.
 
-        ``build`` turns each IKResult into its answer (``convert.result_builder``).
-
         Frames of one session never overlap: the session's lock is held until the last
-        frame is done, also when the caller goes away while a pooled solve runs.
+        frame is done, also when the caller goes away while a pooled solve runs. The
+        caller renders the answers (``convert.render_frames``).
         """
-        out, _ = await self._under_lock(session, store, jobs, t0, transport, build, plan=False)
+        out, _ = await self._under_lock(session, store, jobs, t0, transport, plan=False)
         return out
 
     async def session_plan(
@@ -176,10 +172,9 @@ class Runner:
         jobs: Sequence[FrameJob],
         t0: float,
         transport: str,
-        build: convert.ResultBuilder = convert.result_dict,
-    ) -> tuple[list[dict[str, Any]], PlannedPath]:
-        """Solve a session's clip as a whole (``IKSolver.plan``): the answers and the
-        plan. Always off the loop, on the planning thread: a plan takes milliseconds
+    ) -> tuple[list[SolvedFrame], PlannedPath]:
+        """Solve a session's clip as a whole (``IKSolver.plan``): the solved frames and
+        the plan. Always off the loop, on the planning thread: a plan takes milliseconds
         per frame. At most ``max_queued_plans`` at once (503 ``plans_busy``), and at
         most half of them (at least one) for one client (429 ``too_many_plans``): a
         plan counts from here until its thread is done, also if its caller went away."""
@@ -200,7 +195,7 @@ class Runner:
 
         try:
             out, plan = await self._under_lock(
-                session, store, jobs, t0, transport, build, plan=True, on_submit=on_submit
+                session, store, jobs, t0, transport, plan=True, on_submit=on_submit
             )
         finally:
             if not handed_over:  # refused or failed before it reached the thread
@@ -223,11 +218,10 @@ class Runner:
         jobs: Sequence[FrameJob],
         t0: float,
         transport: str,
-        build: convert.ResultBuilder,
         *,
         plan: bool,
         on_submit: Callable[[asyncio.Future[Any]], None] | None = None,
-    ) -> tuple[list[dict[str, Any]], PlannedPath | None]:
+    ) -> tuple[list[SolvedFrame], PlannedPath | None]:
         self.check_ready()
         wait_s = session.take_frames(
             len(jobs), now=store.clock(), rate_per_s=self.max_frames_per_s, burst=self.burst
@@ -241,11 +235,11 @@ class Runner:
                 raise not_found()
             options = session.options
             metrics = self.metrics
-            work: Callable[..., tuple[list[dict[str, Any]], PlannedPath | None]] = (
+            work: Callable[..., tuple[list[SolvedFrame], PlannedPath | None]] = (
                 _plan_all if plan else _track_all
             )
             if not plan and self.inline(len(jobs), options):
-                out = work(session, jobs, options, t0, metrics.frames, transport, build)
+                out = work(session, jobs, options, t0, metrics.frames, transport)
             else:
                 loop = asyncio.get_running_loop()
 
@@ -254,7 +248,7 @@ class Runner:
                     with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
                         loop.call_soon_threadsafe(metrics.frames, batch, transport)
 
-                args = (session, jobs, options, t0, record, transport, build)
+                args = (session, jobs, options, t0, record, transport)
                 pool = self.plan_pool if plan else self.pool
                 fut = loop.run_in_executor(pool, work, *args)
                 if on_submit is not None:
@@ -272,7 +266,7 @@ class Runner:
 
 def rate_limited(wait_s: float, rate: float) -> ServiceError:
     return ServiceError(
-        "rate_limited",
+        ErrorCode.RATE_LIMITED,
         f"more than {rate:g} frames per second on this session (IK_MAX_FRAMES_PER_S)",
         status_code=status.HTTP_429_TOO_MANY_REQUESTS,
         retry_after_s=wait_s,
@@ -286,18 +280,17 @@ def _track_all(
     t0: float,
     record: Callable[[list[tuple[IKResult, float]], str], None],
     transport: str,
-    build: convert.ResultBuilder,
-) -> tuple[list[dict[str, Any]], None]:
+) -> tuple[list[SolvedFrame], None]:
     """Runs under the session's lock (inline or in the pool); counts as it goes and
     hands the frames solved to ``record`` (metrics), also when a later frame fails."""
-    out = []
+    out: list[SolvedFrame] = []
     done: list[tuple[IKResult, float]] = []
     solver = session.solver
     try:
         for frame_id, targets in jobs:
             r = solver.track(targets, options=options)
             server_us = (time.perf_counter() - t0) * 1e6
-            out.append(build(r, frame_id, server_us))
+            out.append(SolvedFrame(frame_id, r, server_us))
             done.append((r, server_us * 1e-6))
             session.frames += 1
             session.solved += int(r.success)
@@ -313,8 +306,7 @@ def _plan_all(
     t0: float,
     record: Callable[[list[tuple[IKResult, float]], str], None],
     transport: str,
-    build: convert.ResultBuilder,
-) -> tuple[list[dict[str, Any]], PlannedPath]:
+) -> tuple[list[SolvedFrame], PlannedPath]:
     """``_track_all`` for a planned clip: all frames or none (a rejected target fails
     the request and leaves the session's pose as it was)."""
     if session.closed:  # deleted while the plan waited for the planning thread
@@ -322,7 +314,8 @@ def _plan_all(
     plan = session.solver.plan([targets for _, targets in jobs], options=options)
     server_us = (time.perf_counter() - t0) * 1e6
     out = [
-        build(r, frame_id, server_us) for (frame_id, _), r in zip(jobs, plan.results, strict=True)
+        SolvedFrame(frame_id, r, server_us)
+        for (frame_id, _), r in zip(jobs, plan.results, strict=True)
     ]
     session.frames += len(plan.results)
     session.solved += sum(r.success for r in plan.results)
@@ -330,23 +323,19 @@ def _plan_all(
     return out, plan
 
 
-def make_solver(view: convert.ChainView, options: IKOptions) -> IKSolver:
+def make_solver(view: ChainView, options: IKOptions) -> IKSolver:
     """A session's solver (runs in the pool: it allocates per-chain arrays)."""
-    # chain.mid_limits() computes -inf + inf for continuous joints (then maps it to 0);
-    # keep numpy from warning about it (reported to the solver's owner).
-    with np.errstate(invalid="ignore"):
-        return IKSolver(view.chain, options)
+    return IKSolver(view.chain, options)
 
 
 def solve_once(
-    view: convert.ChainView,
+    view: ChainView,
     targets: list[SolverTarget],
     seed: np.ndarray | None,
     options: IKOptions,
     frame_id: int | None,
     t0: float,
-) -> tuple[IKResult, dict[str, Any]]:
+) -> SolvedFrame:
     """A stateless one-shot solve (runs in the pool)."""
-    with np.errstate(invalid="ignore"):  # see make_solver
-        r = IKSolver(view.chain, options).solve(targets, seed, options=options)
-    return r, convert.result_dict(r, frame_id, (time.perf_counter() - t0) * 1e6)
+    r = IKSolver(view.chain, options).solve(targets, seed, options=options)
+    return SolvedFrame(frame_id, r, (time.perf_counter() - t0) * 1e6)

@@ -10,7 +10,7 @@ from starlette import status
 
 import schemas as S
 
-from ..deps import ServicesDep
+from ..dependencies import ServicesDep
 from ..responses import ORJSONResponse
 
 router = APIRouter(tags=["operations"])

@@ -108,7 +108,7 @@ def test_concurrent_pooled_requests_of_one_session_run_in_arrival_order(
             )
         finally:
             runner.shutdown()
-        assert [out[0]["id"] for out in outs] == list(range(8))
+        assert [out[0].frame_id for out in outs] == list(range(8))
         assert session.frames == 8
         return order
 
