@@ -3,7 +3,7 @@
 
 The string values are the stable contract; ``ERROR_CODE_DESCRIPTIONS`` says when each
 is sent and feeds the OpenAPI schema. docs/api.md lists exactly these codes
-(tests/schemas/test_error_codes.py checks it).
+(tests/service/test_error_codes.py checks it).
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ shutting_down        --     close 1012 (the server is shutting down)
 internal_error       500    error message, then close 1011
 ==================== ====== =====================================================
 
-The codes are ``schemas.ErrorCode`` (tests/schemas/test_error_codes.py keeps this table,
+The codes are ``schemas.ErrorCode`` (tests/service/test_error_codes.py keeps this table,
 the enum and docs/api.md in step).
 """
 
