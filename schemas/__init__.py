@@ -26,24 +26,26 @@ from .chain import (
 )
 from .common import ErrorBody, FiniteFloat, Quaternion, StrictModel, Vec3
 from .errors import ERROR_CODE_DESCRIPTIONS, ErrorCode
-from .solve import (
-    ClipRequest,
+from .results import (
     CompactFrameResult,
     CompactFrameResults,
-    DofInfo,
     EffectorErrorOut,
+    FrameResult,
+    FrameResults,
+    FramesQuery,
+    PlanSummary,
+    ResultView,
+)
+from .solve import (
+    ClipRequest,
+    DofInfo,
     EffectorInfo,
     Frame,
     FrameRequest,
-    FrameResult,
-    FrameResults,
     FramesBody,
-    FramesQuery,
     OptionsPatch,
-    PlanSummary,
     Pose,
     PoseIn,
-    ResultView,
     SessionCounters,
     SessionCreate,
     SessionCreated,

@@ -13,15 +13,13 @@ from pydantic import Field
 
 from .common import StrictModel
 from .errors import ErrorCode
+from .results import CompactFrameResult, FrameResult, PlanSummary
 from .solve import (
     HARD_MAX_FRAMES,
     HARD_MAX_TARGETS,
     ClipRequest,
-    CompactFrameResult,
     Frame,
     FrameId,
-    FrameResult,
-    PlanSummary,
     Target,
 )
 
