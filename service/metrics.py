@@ -25,6 +25,7 @@ from prometheus_client.core import CounterMetricFamily, HistogramMetricFamily, M
 from prometheus_client.registry import Collector
 from prometheus_client.utils import floatToGoString
 
+from schemas import ErrorCode
 from solver.ik import IKResult
 from solver.termination import Termination
 
@@ -145,8 +146,9 @@ class Metrics:
         for r, server_s in batch:
             self.frame(r, server_s, transport)
 
-    def error(self, code: str, transport: str) -> None:
-        self.errors.labels(code=code, transport=transport).inc()
+    def error(self, code: ErrorCode, transport: str) -> None:
+        """Count one client-visible error (the label is the code's value)."""
+        self.errors.labels(code=code.value, transport=transport).inc()
 
     def render(self) -> bytes:
         return generate_latest(self.registry)
