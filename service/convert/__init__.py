@@ -1,4 +1,5 @@
-"""schemas <-> solver: the only package that imports both.
+"""schemas <-> solver: the one place where requests become solver objects and results
+become answers.
 
 One module per concern:
 
