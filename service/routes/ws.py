@@ -8,8 +8,8 @@ text answers, MessagePack binary messages get MessagePack answers.
 A message's way through this module: ``_serve`` receives it, ``_Connection.handle``
 decodes it (``convert.fast_frame``, else pydantic), checks its id once, runs it
 (``convert`` -> ``Runner`` -> ``convert.render_frames``) and sends the envelope
-``ws_messages`` builds; ``_Connection.error_reply`` is the one place that turns an
-exception into an error message.
+``ws_messages`` builds; ``_Connection.exception_reply`` is the one place that turns
+an exception into an error message.
 
 Recoverable errors (an error ``result`` message; the socket stays open): invalid_format,
 invalid_problem, id_reuse, not_ready, rate_limited, and for a planned clip plans_busy
@@ -203,15 +203,16 @@ class _Connection:
             _Unreadable: not JSON / MessagePack, or not a valid client message.
         """
         raw: Any = None
-        try:
-            if binary:
+        if binary:
+            try:
                 raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
-            else:
+            except Exception as e:  # msgpack's errors share no useful base class
+                raise _Unreadable(None, f"not MessagePack: {type(e).__name__}") from None
+        else:
+            try:
                 raw = orjson.loads(data)
-        except orjson.JSONDecodeError:
-            pass  # pydantic's validate_json below gives the error
-        except Exception as e:  # msgpack's errors share no useful base class
-            raise _Unreadable(None, f"not MessagePack: {type(e).__name__}") from None
+            except orjson.JSONDecodeError:
+                pass  # validate_json below says why
         if raw is not None and (fast := convert.fast_frame(raw, self.session.view)) is not None:
             return fast
         try:
