@@ -24,7 +24,7 @@ import numpy as np
 from starlette import status
 
 from schemas import ErrorCode
-from solver.ik import IKOptions, IKResult, IKSolver
+from solver.ik import IKOptions, IKSolver
 from solver.ik import Target as SolverTarget
 from solver.path import PlannedPath
 
@@ -243,7 +243,7 @@ class Runner:
             else:
                 loop = asyncio.get_running_loop()
 
-                def record(batch: list[tuple[IKResult, float]], transport: str) -> None:
+                def record(batch: list[SolvedFrame], transport: str) -> None:
                     # The metrics are the loop's: hand the batch over (one wake-up).
                     with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
                         loop.call_soon_threadsafe(metrics.frames, batch, transport)
@@ -278,24 +278,21 @@ def _track_all(
     jobs: Sequence[FrameJob],
     options: IKOptions,
     t0: float,
-    record: Callable[[list[tuple[IKResult, float]], str], None],
+    record: Callable[[list[SolvedFrame], str], None],
     transport: str,
 ) -> tuple[list[SolvedFrame], None]:
     """Runs under the session's lock (inline or in the pool); counts as it goes and
     hands the frames solved to ``record`` (metrics), also when a later frame fails."""
     out: list[SolvedFrame] = []
-    done: list[tuple[IKResult, float]] = []
     solver = session.solver
     try:
         for frame_id, targets in jobs:
             r = solver.track(targets, options=options)
-            server_us = (time.perf_counter() - t0) * 1e6
-            out.append(SolvedFrame(frame_id, r, server_us))
-            done.append((r, server_us * 1e-6))
+            out.append(SolvedFrame(frame_id, r, (time.perf_counter() - t0) * 1e6))
             session.frames += 1
             session.solved += int(r.success)
     finally:
-        record(done, transport)
+        record(out, transport)
     return out, None
 
 
@@ -304,7 +301,7 @@ def _plan_all(
     jobs: Sequence[FrameJob],
     options: IKOptions,
     t0: float,
-    record: Callable[[list[tuple[IKResult, float]], str], None],
+    record: Callable[[list[SolvedFrame], str], None],
     transport: str,
 ) -> tuple[list[SolvedFrame], PlannedPath]:
     """``_track_all`` for a planned clip: all frames or none (a rejected target fails
@@ -319,7 +316,7 @@ def _plan_all(
     ]
     session.frames += len(plan.results)
     session.solved += sum(r.success for r in plan.results)
-    record([(r, server_us * 1e-6) for r in plan.results], transport)
+    record(out, transport)
     return out, plan
 
 

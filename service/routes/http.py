@@ -303,7 +303,7 @@ async def post_frames(
     if isinstance(body, S.ClipRequest):
         jobs = convert.clip_jobs(body.frames, session.view, svc.settings.max_frames_per_request)
     else:
-        jobs = [convert.FrameJob(body.id, convert.targets(body.targets, session.view, "targets"))]
+        jobs = [(body.id, convert.targets(body.targets, session.view, "targets"))]
     build = convert.result_builder(query.results)
     if plan:
         solved, planned = await svc.runner.session_plan(session, svc.store, jobs, t0, "http")

@@ -259,9 +259,8 @@ class _Connection:
 
     async def frame(self, msg_id: int, targets: list[SolverTarget], t0: float) -> dict[str, Any]:
         """Solve one valid frame (from the fast path, or validated by pydantic)."""
-        job = convert.FrameJob(msg_id, targets)
         (solved,) = await self.svc.runner.session_frames(
-            self.session, self.svc.store, [job], t0, "ws"
+            self.session, self.svc.store, [(msg_id, targets)], t0, "ws"
         )
         return result_message(msg_id, self.build(solved.result, msg_id, solved.server_us))
 

@@ -180,7 +180,7 @@ class _HeldPlans:
         )
         self.store = InMemorySessionStore(max_sessions=10, ttl_s=60.0)
         frame = S.Frame.model_validate(hand_frame(1))
-        self.jobs = [convert.FrameJob(1, convert.targets(frame.targets, self.view, "t"))]
+        self.jobs = [(1, convert.targets(frame.targets, self.view, "t"))]
 
     async def session(self, name: str, owner: str | None = None) -> Session:
         session, _ = new_session(
