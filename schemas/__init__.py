@@ -25,25 +25,28 @@ from .chain import (
     UrdfChain,
 )
 from .common import ErrorBody, FiniteFloat, Quaternion, StrictModel, Vec3
+from .errors import ERROR_CODE_DESCRIPTIONS, ErrorCode
 from .health import NotReadyBody, StartupPhase, StartupProgress
-from .solve import (
-    ClipRequest,
+from .results import (
     CompactFrameResult,
     CompactFrameResults,
-    DofInfo,
     EffectorErrorOut,
+    FrameResult,
+    FrameResults,
+    FramesQuery,
+    PlanSummary,
+    ResultView,
+)
+from .solve import (
+    ClipRequest,
+    DofInfo,
     EffectorInfo,
     Frame,
     FrameRequest,
-    FrameResult,
-    FrameResults,
     FramesBody,
-    FramesQuery,
     OptionsPatch,
-    PlanSummary,
     Pose,
     PoseIn,
-    ResultView,
     SessionCounters,
     SessionCreate,
     SessionCreated,
@@ -79,7 +82,9 @@ __all__ = [
     "EffectorErrorOut",
     "EffectorInfo",
     "EffectorSpec",
+    "ERROR_CODE_DESCRIPTIONS",
     "ErrorBody",
+    "ErrorCode",
     "ErrorMessage",
     "NotReadyBody",
     "StartupPhase",

@@ -7,6 +7,8 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from .errors import ErrorCode
+
 # Finite floats only: NaN and +-inf are rejected at the boundary (JSON has no literal
 # for them anyway, but MessagePack and Python clients can send them).
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
@@ -97,7 +99,11 @@ class ErrorBody(StrictModel):
     )
 
     detail: str | list[dict[str, object]] = Field(description="What went wrong")
-    code: str = Field(description="Stable error code (see the README's table)")
+    # strict=False: a client (or a test) validating a decoded body passes the string.
+    code: ErrorCode = Field(
+        strict=False,
+        description="Stable error code (the ErrorCode schema lists and explains them)",
+    )
     field: str | None = Field(
         default=None, description="Dotted path of the offending field, when known"
     )

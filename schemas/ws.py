@@ -12,15 +12,14 @@ from typing import Annotated, Literal, get_args
 from pydantic import Field
 
 from .common import StrictModel
+from .errors import ErrorCode
+from .results import CompactFrameResult, FrameResult, PlanSummary
 from .solve import (
     HARD_MAX_FRAMES,
     HARD_MAX_TARGETS,
     ClipRequest,
-    CompactFrameResult,
     Frame,
     FrameId,
-    FrameResult,
-    PlanSummary,
     Target,
 )
 
@@ -96,7 +95,10 @@ class ClipResultMessage(StrictModel):
 class ErrorPayload(StrictModel):
     """A recoverable error: the message was not solved, the socket stays open."""
 
-    code: str = Field(description="invalid_format | invalid_problem | id_reuse | not_ready | ...")
+    code: ErrorCode = Field(
+        strict=False,  # a decoded message's string validates (see ErrorBody)
+        description="Stable error code (the ErrorCode schema lists and explains them)",
+    )
     message: str
     field: str | None = None
     retry_after_s: float | None = Field(

@@ -10,16 +10,26 @@ invalid_problem      422    error message, socket stays open
 id_reuse             --     error message (id not greater than the previous one)
 unauthorized         401    close 4401 (no token)
 forbidden            403    close 4403 (wrong token)
+forbidden_origin     --     close 4403 (a browser Origin not in IK_CORS_ORIGINS)
 not_found            404    close 4404 (no such session, or it expired / was deleted)
 method_not_allowed   405    --
+http_error           other  -- (any other status the framework raises; none today)
 payload_too_large    413    close 1009 (message larger than IK_WS_MAX_MESSAGE_BYTES)
 too_many_sessions    503    -- (+ Retry-After)
+key_session_limit    429    --
+rate_limited         429    error message (+ Retry-After / retry_after_s)
 not_ready            503    error message (solver still warming up) (+ Retry-After)
+warmup_failed        503    -- (/readyz only)
 plans_busy           503    error message (IK_MAX_QUEUED_PLANS planned clips already queued)
 too_many_plans       429    error message (this client holds half of IK_MAX_QUEUED_PLANS)
 too_many_websockets  --     close 1013 (try again later)
+slow_reader          --     close 1008 (the client stopped reading its answers)
+shutting_down        --     close 1012 (the server is shutting down)
 internal_error       500    error message, then close 1011
 ==================== ====== =====================================================
+
+The codes are ``schemas.ErrorCode`` (tests/service/test_error_codes.py keeps this table,
+the enum and docs/api.md in step).
 """
 
 from __future__ import annotations
@@ -36,6 +46,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import Response
 from starlette.routing import compile_path
 
+from schemas import ErrorCode
 from solver.errors import IKError
 
 from .hints import hint
@@ -64,7 +75,7 @@ class ServiceError(Exception):
     """An error a client caused or must handle; carries its stable code.
 
     Args:
-        code: Stable error code (module docstring).
+        code: Stable error code.
         detail: Human-readable message.
         status_code: HTTP status.
         field: Dotted path of the offending field, if any.
@@ -73,7 +84,7 @@ class ServiceError(Exception):
 
     def __init__(
         self,
-        code: str,
+        code: ErrorCode,
         detail: str,
         *,
         status_code: int,
@@ -88,7 +99,7 @@ class ServiceError(Exception):
         self.retry_after_s = retry_after_s
 
     def body(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"detail": self.detail, "code": self.code}
+        out: dict[str, Any] = {"detail": self.detail, "code": self.code.value}
         if self.field is not None:
             out["field"] = self.field
         return out
@@ -105,7 +116,7 @@ class ServiceError(Exception):
 def invalid_problem(detail: str, field: str | None) -> ServiceError:
     where = f"{field}: " if field and not detail.startswith(field) else ""
     return ServiceError(
-        "invalid_problem",
+        ErrorCode.INVALID_PROBLEM,
         f"{where}{detail}",
         status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
         field=field,
@@ -113,12 +124,12 @@ def invalid_problem(detail: str, field: str | None) -> ServiceError:
 
 
 def not_found(detail: str = "no such session") -> ServiceError:
-    return ServiceError("not_found", detail, status_code=status.HTTP_404_NOT_FOUND)
+    return ServiceError(ErrorCode.NOT_FOUND, detail, status_code=status.HTTP_404_NOT_FOUND)
 
 
 def not_ready() -> ServiceError:
     return ServiceError(
-        "not_ready",
+        ErrorCode.NOT_READY,
         "the solver is still warming up (see /readyz)",
         status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
         retry_after_s=1.0,
@@ -127,7 +138,7 @@ def not_ready() -> ServiceError:
 
 def too_many_plans(limit: int) -> ServiceError:
     return ServiceError(
-        "too_many_plans",
+        ErrorCode.TOO_MANY_PLANS,
         f"this client already has {limit} planned clip(s) queued or running (half of "
         "IK_MAX_QUEUED_PLANS, per API key, or per session when the server has no keys)",
         status_code=status.HTTP_429_TOO_MANY_REQUESTS,
@@ -137,7 +148,7 @@ def too_many_plans(limit: int) -> ServiceError:
 
 def plans_busy(limit: int) -> ServiceError:
     return ServiceError(
-        "plans_busy",
+        ErrorCode.PLANS_BUSY,
         f"{limit} planned clips are already queued or running (IK_MAX_QUEUED_PLANS)",
         status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
         retry_after_s=1.0,
@@ -162,9 +173,9 @@ def dotted_field(loc: Sequence[Any]) -> str | None:
 
 
 _HTTP_CODES = {
-    status.HTTP_404_NOT_FOUND: "not_found",
-    status.HTTP_405_METHOD_NOT_ALLOWED: "method_not_allowed",
-    status.HTTP_413_CONTENT_TOO_LARGE: "payload_too_large",
+    status.HTTP_404_NOT_FOUND: ErrorCode.NOT_FOUND,
+    status.HTTP_405_METHOD_NOT_ALLOWED: ErrorCode.METHOD_NOT_ALLOWED,
+    status.HTTP_413_CONTENT_TOO_LARGE: ErrorCode.PAYLOAD_TOO_LARGE,
 }
 
 
@@ -176,7 +187,7 @@ async def _service_error(request: Request, exc: Exception) -> Response:
 async def _validation_error(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, RequestValidationError)
     detail = validation_errors(exc.errors())
-    body: dict[str, Any] = {"detail": detail, "code": "invalid_format"}
+    body: dict[str, Any] = {"detail": detail, "code": ErrorCode.INVALID_FORMAT}
     if detail and (field := dotted_field(detail[0]["loc"])) is not None:
         body["field"] = field  # the first error's, as the WebSocket's error names it
     return ORJSONResponse(body, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
@@ -203,11 +214,11 @@ async def _http_error(request: Request, exc: Exception) -> Response:
         return ORJSONResponse(
             {
                 "detail": [{"loc": ["body"], "msg": str(exc.detail), "type": "json_invalid"}],
-                "code": "invalid_format",
+                "code": ErrorCode.INVALID_FORMAT,
             },
             status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
         )
-    code = _HTTP_CODES.get(exc.status_code, "http_error")
+    code = _HTTP_CODES.get(exc.status_code, ErrorCode.HTTP_ERROR)
     headers = dict(exc.headers or {})
     if exc.status_code == status.HTTP_405_METHOD_NOT_ALLOWED:
         headers["Allow"] = _allowed_methods(request)
@@ -242,7 +253,7 @@ _METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"
 async def _internal_error(request: Request, exc: Exception) -> Response:
     # Starlette's ServerErrorMiddleware logs the traceback once and re-raises.
     return ORJSONResponse(
-        {"detail": "internal server error", "code": "internal_error"},
+        {"detail": "internal server error", "code": ErrorCode.INTERNAL_ERROR},
         status_code=status.HTTP_500_INTERNAL_SERVER_ERROR,
     )
 

@@ -9,20 +9,19 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
-from starlette import status
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from .auth import API_KEY_HEADER
 from .config import Settings, get_settings
-from .deps import API_KEY_HEADER, T0_KEY, Services
+from .dependencies import Services
 from .errors import install_handlers
 from .metrics import Metrics
-from .responses import ORJSONResponse, dumps
+from .middleware import TimingAndLimits
+from .responses import ORJSONResponse
 from .routes import health, http, ws
 from .routes.docs import add_docs
 from .sessions import InMemorySessionStore, SessionStore
@@ -42,77 +41,6 @@ comes back from `POST /v1/sessions`). When the server has API keys, `POST /v1/se
 and `POST /v1/solve` need `X-API-Key: <key>`. The WebSocket protocol
 (`/v1/sessions/{id}/ws`) is described in docs/websocket.md in the repository.
 """
-
-
-class _TimingAndLimits:
-    """Pure ASGI middleware: stamps arrival time; rejects HTTP bodies over the limit (413)."""
-
-    def __init__(self, app: ASGIApp, max_body_bytes: int) -> None:
-        self.app = app
-        self.max_body_bytes = max_body_bytes
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        scope[T0_KEY] = time.perf_counter()
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        limit = self.max_body_bytes
-        for name, value in scope["headers"]:
-            if name == b"content-length":
-                try:
-                    too_big = int(value) > limit
-                except ValueError:
-                    too_big = False
-                if too_big:
-                    await _too_large(send, limit)
-                    return
-        seen = 0
-        started = False
-
-        async def limited_receive() -> Message:
-            nonlocal seen
-            message = await receive()
-            if message["type"] == "http.request":
-                seen += len(message.get("body", b""))
-                if seen > limit:
-                    raise _BodyTooLarge
-            return message
-
-        async def tracking_send(message: Message) -> None:
-            nonlocal started
-            if message["type"] == "http.response.start":
-                started = True
-            await send(message)
-
-        try:
-            await self.app(scope, limited_receive, tracking_send)
-        except _BodyTooLarge:
-            if not started:
-                await _too_large(send, limit)
-
-
-class _BodyTooLarge(Exception):
-    pass
-
-
-async def _too_large(send: Send, limit: int) -> None:
-    body = dumps(
-        {
-            "detail": f"body larger than {limit} bytes (IK_MAX_BODY_BYTES)",
-            "code": "payload_too_large",
-        }
-    )
-    await send(
-        {
-            "type": "http.response.start",
-            "status": status.HTTP_413_CONTENT_TOO_LARGE,
-            "headers": [
-                (b"content-type", b"application/json"),
-                (b"content-length", str(len(body)).encode()),
-            ],
-        }
-    )
-    await send({"type": "http.response.body", "body": body})
 
 
 def create_app(
@@ -186,7 +114,7 @@ def create_app(
     app.include_router(health.router)
     # Added before CORS, so CORS wraps it: a 413 it answers early carries the CORS
     # headers too (a browser shows a CORS failure instead of a 413 otherwise).
-    app.add_middleware(_TimingAndLimits, max_body_bytes=settings.max_body_bytes)
+    app.add_middleware(TimingAndLimits, max_body_bytes=settings.max_body_bytes)
     origins = settings.cors_origin_list()
     if origins:  # closed by default: no CORS headers at all
         app.add_middleware(

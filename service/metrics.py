@@ -18,15 +18,18 @@ from __future__ import annotations
 import asyncio
 import time
 from bisect import bisect_left
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, generate_latest
 from prometheus_client.core import CounterMetricFamily, HistogramMetricFamily, Metric
 from prometheus_client.registry import Collector
 from prometheus_client.utils import floatToGoString
 
+from schemas import ErrorCode
 from solver.ik import IKResult
 from solver.termination import Termination
+
+from .convert import SolvedFrame
 
 # 10 us .. ~0.33 s, x2 steps: solves take microseconds to the frame's budget.
 _BUCKETS = tuple(10e-6 * 2**k for k in range(16))
@@ -140,13 +143,14 @@ class Metrics:
         series.solve.observe(r.solve_us * 1e-6)
         series.server[transport].observe(server_s)
 
-    def frames(self, batch: list[tuple[IKResult, float]], transport: str) -> None:
-        """Count frames given as (result, server seconds). Event loop's thread only."""
-        for r, server_s in batch:
-            self.frame(r, server_s, transport)
+    def frames(self, batch: Sequence[SolvedFrame], transport: str) -> None:
+        """Count solved frames. Event loop's thread only."""
+        for solved in batch:
+            self.frame(solved.result, solved.server_us * 1e-6, transport)
 
-    def error(self, code: str, transport: str) -> None:
-        self.errors.labels(code=code, transport=transport).inc()
+    def error(self, code: ErrorCode, transport: str) -> None:
+        """Count one client-visible error (the label is the code's value)."""
+        self.errors.labels(code=code.value, transport=transport).inc()
 
     def render(self) -> bytes:
         return generate_latest(self.registry)

@@ -23,12 +23,12 @@ from typing import Any, TypeVar
 import numpy as np
 from starlette import status
 
-from schemas import StartupProgress
-from solver.ik import IKOptions, IKResult, IKSolver
+from schemas import ErrorCode, StartupProgress
+from solver.ik import IKOptions, IKSolver
 from solver.ik import Target as SolverTarget
 from solver.path import PlannedPath
 
-from . import convert
+from .convert import ChainView, FrameJob, SolvedFrame
 from .errors import ServiceError, not_found, not_ready, plans_busy, too_many_plans
 from .metrics import Metrics
 from .sessions import Session, SessionStore
@@ -36,9 +36,6 @@ from .startup import Report, warm_solver
 
 log = logging.getLogger("service")
 T = TypeVar("T")
-
-# One frame to solve: (client frame id, solver targets).
-FrameJob = tuple[int | None, list[SolverTarget]]
 
 
 WarmupFn = Callable[[Report], float]
@@ -171,16 +168,14 @@ class Runner:
         jobs: Sequence[FrameJob],
         t0: float,
         transport: str,
-        build: convert.ResultBuilder = convert.result_dict,
-    ) -> list[dict[str, Any]]:
+    ) -> list[SolvedFrame]:
         """Solve a session's frames in order, each warm-started from the previous answer.
 
-        ``build`` turns each IKResult into its answer (``convert.result_builder``).
-
         Frames of one session never overlap: the session's lock is held until the last
-        frame is done, also when the caller goes away while a pooled solve runs.
+        frame is done, also when the caller goes away while a pooled solve runs. The
+        caller renders the answers (``convert.render_frames``).
         """
-        out, _ = await self._under_lock(session, store, jobs, t0, transport, build, plan=False)
+        out, _ = await self._under_lock(session, store, jobs, t0, transport, plan=False)
         return out
 
     async def session_plan(
@@ -190,10 +185,9 @@ class Runner:
         jobs: Sequence[FrameJob],
         t0: float,
         transport: str,
-        build: convert.ResultBuilder = convert.result_dict,
-    ) -> tuple[list[dict[str, Any]], PlannedPath]:
-        """Solve a session's clip as a whole (``IKSolver.plan``): the answers and the
-        plan. Always off the loop, on the planning thread: a plan takes milliseconds
+    ) -> tuple[list[SolvedFrame], PlannedPath]:
+        """Solve a session's clip as a whole (``IKSolver.plan``): the solved frames and
+        the plan. Always off the loop, on the planning thread: a plan takes milliseconds
         per frame. At most ``max_queued_plans`` at once (503 ``plans_busy``), and at
         most half of them (at least one) for one client (429 ``too_many_plans``): a
         plan counts from here until its thread is done, also if its caller went away."""
@@ -214,7 +208,7 @@ class Runner:
 
         try:
             out, plan = await self._under_lock(
-                session, store, jobs, t0, transport, build, plan=True, on_submit=on_submit
+                session, store, jobs, t0, transport, plan=True, on_submit=on_submit
             )
         finally:
             if not handed_over:  # refused or failed before it reached the thread
@@ -237,11 +231,10 @@ class Runner:
         jobs: Sequence[FrameJob],
         t0: float,
         transport: str,
-        build: convert.ResultBuilder,
         *,
         plan: bool,
         on_submit: Callable[[asyncio.Future[Any]], None] | None = None,
-    ) -> tuple[list[dict[str, Any]], PlannedPath | None]:
+    ) -> tuple[list[SolvedFrame], PlannedPath | None]:
         self.check_ready()
         wait_s = session.take_frames(
             len(jobs), now=store.clock(), rate_per_s=self.max_frames_per_s, burst=self.burst
@@ -255,20 +248,20 @@ class Runner:
                 raise not_found()
             options = session.options
             metrics = self.metrics
-            work: Callable[..., tuple[list[dict[str, Any]], PlannedPath | None]] = (
+            work: Callable[..., tuple[list[SolvedFrame], PlannedPath | None]] = (
                 _plan_all if plan else _track_all
             )
             if not plan and self.inline(len(jobs), options):
-                out = work(session, jobs, options, t0, metrics.frames, transport, build)
+                out = work(session, jobs, options, t0, metrics.frames, transport)
             else:
                 loop = asyncio.get_running_loop()
 
-                def record(batch: list[tuple[IKResult, float]], transport: str) -> None:
+                def record(batch: list[SolvedFrame], transport: str) -> None:
                     # The metrics are the loop's: hand the batch over (one wake-up).
                     with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
                         loop.call_soon_threadsafe(metrics.frames, batch, transport)
 
-                args = (session, jobs, options, t0, record, transport, build)
+                args = (session, jobs, options, t0, record, transport)
                 pool = self.plan_pool if plan else self.pool
                 fut = loop.run_in_executor(pool, work, *args)
                 if on_submit is not None:
@@ -286,7 +279,7 @@ class Runner:
 
 def rate_limited(wait_s: float, rate: float) -> ServiceError:
     return ServiceError(
-        "rate_limited",
+        ErrorCode.RATE_LIMITED,
         f"more than {rate:g} frames per second on this session (IK_MAX_FRAMES_PER_S)",
         status_code=status.HTTP_429_TOO_MANY_REQUESTS,
         retry_after_s=wait_s,
@@ -298,25 +291,21 @@ def _track_all(
     jobs: Sequence[FrameJob],
     options: IKOptions,
     t0: float,
-    record: Callable[[list[tuple[IKResult, float]], str], None],
+    record: Callable[[list[SolvedFrame], str], None],
     transport: str,
-    build: convert.ResultBuilder,
-) -> tuple[list[dict[str, Any]], None]:
+) -> tuple[list[SolvedFrame], None]:
     """Runs under the session's lock (inline or in the pool); counts as it goes and
     hands the frames solved to ``record`` (metrics), also when a later frame fails."""
-    out = []
-    done: list[tuple[IKResult, float]] = []
+    out: list[SolvedFrame] = []
     solver = session.solver
     try:
         for frame_id, targets in jobs:
             r = solver.track(targets, options=options)
-            server_us = (time.perf_counter() - t0) * 1e6
-            out.append(build(r, frame_id, server_us))
-            done.append((r, server_us * 1e-6))
+            out.append(SolvedFrame(frame_id, r, (time.perf_counter() - t0) * 1e6))
             session.frames += 1
             session.solved += int(r.success)
     finally:
-        record(done, transport)
+        record(out, transport)
     return out, None
 
 
@@ -325,10 +314,9 @@ def _plan_all(
     jobs: Sequence[FrameJob],
     options: IKOptions,
     t0: float,
-    record: Callable[[list[tuple[IKResult, float]], str], None],
+    record: Callable[[list[SolvedFrame], str], None],
     transport: str,
-    build: convert.ResultBuilder,
-) -> tuple[list[dict[str, Any]], PlannedPath]:
+) -> tuple[list[SolvedFrame], PlannedPath]:
     """``_track_all`` for a planned clip: all frames or none (a rejected target fails
     the request and leaves the session's pose as it was)."""
     if session.closed:  # deleted while the plan waited for the planning thread
@@ -336,31 +324,28 @@ def _plan_all(
     plan = session.solver.plan([targets for _, targets in jobs], options=options)
     server_us = (time.perf_counter() - t0) * 1e6
     out = [
-        build(r, frame_id, server_us) for (frame_id, _), r in zip(jobs, plan.results, strict=True)
+        SolvedFrame(frame_id, r, server_us)
+        for (frame_id, _), r in zip(jobs, plan.results, strict=True)
     ]
     session.frames += len(plan.results)
     session.solved += sum(r.success for r in plan.results)
-    record([(r, server_us * 1e-6) for r in plan.results], transport)
+    record(out, transport)
     return out, plan
 
 
-def make_solver(view: convert.ChainView, options: IKOptions) -> IKSolver:
+def make_solver(view: ChainView, options: IKOptions) -> IKSolver:
     """A session's solver (runs in the pool: it allocates per-chain arrays)."""
-    # chain.mid_limits() computes -inf + inf for continuous joints (then maps it to 0);
-    # keep numpy from warning about it (reported to the solver's owner).
-    with np.errstate(invalid="ignore"):
-        return IKSolver(view.chain, options)
+    return IKSolver(view.chain, options)
 
 
 def solve_once(
-    view: convert.ChainView,
+    view: ChainView,
     targets: list[SolverTarget],
     seed: np.ndarray | None,
     options: IKOptions,
     frame_id: int | None,
     t0: float,
-) -> tuple[IKResult, dict[str, Any]]:
+) -> SolvedFrame:
     """A stateless one-shot solve (runs in the pool)."""
-    with np.errstate(invalid="ignore"):  # see make_solver
-        r = IKSolver(view.chain, options).solve(targets, seed, options=options)
-    return r, convert.result_dict(r, frame_id, (time.perf_counter() - t0) * 1e6)
+    r = IKSolver(view.chain, options).solve(targets, seed, options=options)
+    return SolvedFrame(frame_id, r, (time.perf_counter() - t0) * 1e6)

@@ -8,7 +8,7 @@ from starlette import status
 
 import schemas as S
 
-from ..deps import ServicesDep
+from ..dependencies import ServicesDep
 from ..responses import ORJSONResponse
 
 router = APIRouter(tags=["operations"])
@@ -37,11 +37,13 @@ async def readyz(svc: ServicesDep) -> Response:
     if warm.ready.is_set():
         return ORJSONResponse({"status": "ready", "warmup_s": warm.seconds})
     if warm.error is not None:
-        body = S.NotReadyBody(detail=f"solver warm-up failed: {warm.error}", code="warmup_failed")
+        body = S.NotReadyBody(
+            detail=f"solver warm-up failed: {warm.error}", code=S.ErrorCode.WARMUP_FAILED
+        )
     else:
         progress = warm.progress
         body = S.NotReadyBody(
-            detail=not_ready_detail(progress), code="not_ready", progress=progress
+            detail=not_ready_detail(progress), code=S.ErrorCode.NOT_READY, progress=progress
         )
     return ORJSONResponse(
         body.model_dump(mode="json", exclude_none=True),

@@ -14,11 +14,13 @@ from fastapi import APIRouter, Body, Query, Request, Response
 from starlette import status
 
 import schemas as S
+from schemas import ErrorCode
 from schemas.chain import EXAMPLE_ARM
 
 from .. import convert
-from ..deps import OwnerDep, ServicesDep, SessionDep, received_at
+from ..dependencies import OwnerDep, ServicesDep, SessionDep
 from ..errors import ServiceError, not_found
+from ..middleware import received_at
 from ..responses import ORJSONResponse
 from ..sessions import OwnerFull, Session, SessionStore, StoreFull, new_session
 from ..solving import make_solver, solve_once
@@ -192,14 +194,14 @@ async def create_session(
         await svc.store.add(session)
     except OwnerFull as e:
         raise ServiceError(
-            "key_session_limit",
+            ErrorCode.KEY_SESSION_LIMIT,
             f"this API key holds its maximum of {e.limit} sessions (IK_MAX_SESSIONS_PER_KEY); "
             "delete one first",
             status_code=status.HTTP_429_TOO_MANY_REQUESTS,
         ) from None
     except StoreFull as e:
         raise ServiceError(
-            "too_many_sessions",
+            ErrorCode.TOO_MANY_SESSIONS,
             f"the server holds its maximum of {settings.max_sessions} sessions",
             status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
             retry_after_s=e.retry_after_s,
@@ -304,10 +306,11 @@ async def post_frames(
         jobs = [(body.id, convert.targets(body.targets, session.view, "targets"))]
     build = convert.result_builder(query.results)
     if plan:
-        out, planned = await svc.runner.session_plan(session, svc.store, jobs, t0, "http", build)
-        return ORJSONResponse({"results": out, "plan": convert.plan_summary(planned)})
-    out = await svc.runner.session_frames(session, svc.store, jobs, t0, "http", build)
-    return ORJSONResponse({"results": out})
+        solved, planned = await svc.runner.session_plan(session, svc.store, jobs, t0, "http")
+        results = convert.render_frames(solved, build)
+        return ORJSONResponse({"results": results, "plan": convert.plan_summary(planned)})
+    solved = await svc.runner.session_frames(session, svc.store, jobs, t0, "http")
+    return ORJSONResponse({"results": convert.render_frames(solved, build)})
 
 
 @router.post(
@@ -329,6 +332,6 @@ async def solve(
     seed = None
     if body.seed is not None:
         seed = convert.pose_vector(body.seed, view, view.mid_limits, "seed")
-    r, out = await svc.runner.in_pool(solve_once, view, targets, seed, options, body.id, t0)
-    svc.metrics.frame(r, out["server_us"] * 1e-6, "http")
-    return ORJSONResponse(out)
+    solved = await svc.runner.in_pool(solve_once, view, targets, seed, options, body.id, t0)
+    svc.metrics.frame(solved.result, solved.server_us * 1e-6, "http")
+    return ORJSONResponse(convert.result_dict(solved.result, solved.frame_id, solved.server_us))

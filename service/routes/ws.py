@@ -5,13 +5,19 @@ solved in order or planned as a whole, and ``ping``), each with an increasing ``
 the server answers each one, in order, before reading the next. JSON text messages get JSON
 text answers, MessagePack binary messages get MessagePack answers.
 
+A message's way through this module: ``_serve`` receives it, ``_Connection.handle``
+decodes it (``convert.fast_frame``, else pydantic), checks its id once, runs it
+(``convert`` -> ``Runner`` -> ``convert.render_frames``) and sends the envelope
+``ws_messages`` builds; ``_Connection.exception_reply`` is the one place that turns
+an exception into an error message.
+
 Recoverable errors (an error ``result`` message; the socket stays open): invalid_format,
 invalid_problem, id_reuse, not_ready, rate_limited, and for a planned clip plans_busy
-and too_many_plans. Closes: 4401 unauthorized, 4403
-forbidden (wrong token, or an Origin not in IK_CORS_ORIGINS),
-4404 not_found (at connect, or when the session was deleted / expired), 1009 message
-too big, 1013 too many WebSockets, 1011 unexpected error (after an internal_error
-message), 1012 server shutting down (uvicorn).
+and too_many_plans. Closes: 4401 unauthorized, 4403 forbidden (wrong token) or
+forbidden_origin (an Origin not in IK_CORS_ORIGINS), 4404 not_found (at connect, or when
+the session was deleted / expired), 1009 payload_too_large, 1013 too_many_websockets,
+1008 slow_reader, 1011 internal_error (after an internal_error message), 1012
+shutting_down.
 """
 
 from __future__ import annotations
@@ -29,11 +35,13 @@ from pydantic import TypeAdapter, ValidationError
 from starlette import status
 
 import schemas as S
+from schemas import ErrorCode
 from solver.errors import IKError
 from solver.ik import Target as SolverTarget
 
 from .. import convert, hints
-from ..deps import Services, authenticate, services
+from ..auth import authenticate, origin_allowed, websocket_subprotocol, websocket_token
+from ..dependencies import Services, services
 from ..errors import (
     WS_FORBIDDEN,
     WS_NOT_FOUND,
@@ -44,13 +52,13 @@ from ..errors import (
     validation_errors,
 )
 from ..sessions import Session
+from .ws_messages import clip_result_message, error_message, pong_message, result_message
 
 log = logging.getLogger("service")
 router = APIRouter(prefix="/v1")
 
-_CLIENT_MESSAGE: TypeAdapter[S.FrameMessage | S.ClipMessage | S.PingMessage] = TypeAdapter(
-    S.ClientMessage
-)
+ClientMessage = S.FrameMessage | S.ClipMessage | S.PingMessage
+_CLIENT_MESSAGE: TypeAdapter[ClientMessage] = TypeAdapter(S.ClientMessage)
 # pydantic's error types, at the message's top level, for a message whose ``type`` is
 # missing or unknown, or that is not an object at all: answered with the types there are
 # (dict_type from JSON, model_attributes_type from MessagePack).
@@ -58,51 +66,10 @@ _NO_MESSAGE_TYPE = frozenset(
     {"union_tag_not_found", "union_tag_invalid", "dict_type", "model_attributes_type"}
 )
 _AUTH_CLOSE = {
-    "unauthorized": WS_UNAUTHORIZED,
-    "forbidden": WS_FORBIDDEN,
-    "not_found": WS_NOT_FOUND,
+    ErrorCode.UNAUTHORIZED: WS_UNAUTHORIZED,
+    ErrorCode.FORBIDDEN: WS_FORBIDDEN,
+    ErrorCode.NOT_FOUND: WS_NOT_FOUND,
 }
-
-
-SUBPROTOCOL = "ik.v1"
-TOKEN_SUBPROTOCOL_PREFIX = "ik.token."
-
-
-def _token(ws: WebSocket) -> str | None:
-    """The session token: ``Authorization: Bearer``, else a ``ik.token.<token>``
-    subprotocol (browsers can set subprotocols, not headers), else ``?token=``."""
-    auth = ws.headers.get("authorization")
-    if auth is not None:
-        scheme, _, value = auth.partition(" ")
-        if scheme.lower() == "bearer" and value.strip():
-            return value.strip()
-    for proto in ws.scope.get("subprotocols", ()):
-        if proto.startswith(TOKEN_SUBPROTOCOL_PREFIX) and len(proto) > len(
-            TOKEN_SUBPROTOCOL_PREFIX
-        ):
-            return str(proto[len(TOKEN_SUBPROTOCOL_PREFIX) :])
-    return ws.query_params.get("token")
-
-
-def _subprotocol(ws: WebSocket) -> str | None:
-    """Echo ``ik.v1`` when offered (browsers fail a handshake that offered subprotocols
-    and got none back); never echo the token."""
-    return SUBPROTOCOL if SUBPROTOCOL in ws.scope.get("subprotocols", ()) else None
-
-
-def _error(
-    msg_id: int | None,
-    code: str,
-    message: str,
-    field: str | None = None,
-    retry_after_s: float | None = None,
-) -> dict[str, Any]:
-    err: dict[str, Any] = {"code": code, "message": message}
-    if field is not None:
-        err["field"] = field
-    if retry_after_s is not None:
-        err["retry_after_s"] = retry_after_s
-    return {"id": msg_id, "type": "result", "success": False, "error": err}
 
 
 def _raw_id(raw: Any) -> int | None:
@@ -118,11 +85,14 @@ class _SlowReader(Exception):
     """The client stopped reading its answers."""
 
 
-def _origin_ok(ws: WebSocket, allowed: list[str]) -> bool:
-    """Browsers send Origin; other clients usually do not. Only configured origins
-    (IK_CORS_ORIGINS) may open a WebSocket from a browser."""
-    origin = ws.headers.get("origin")
-    return origin is None or origin in allowed or "*" in allowed
+class _Unreadable(Exception):
+    """A message that is not a valid client message: answered ``invalid_format``."""
+
+    def __init__(self, msg_id: int | None, message: str, field: str | None = None) -> None:
+        super().__init__(message)
+        self.msg_id = msg_id
+        self.message = message
+        self.field = field
 
 
 class _Connection:
@@ -198,141 +168,117 @@ class _Connection:
         finally:
             self._sending_since = None
 
-    async def reply_error(
+    def error_reply(
         self,
-        binary: bool,
         msg_id: int | None,
-        code: str,
+        code: ErrorCode,
         message: str,
         field: str | None = None,
         retry_after_s: float | None = None,
-    ) -> None:
+    ) -> dict[str, Any]:
+        """An error message for ``msg_id``, counted in the metrics."""
         self.svc.metrics.error(code, "ws")
-        await self.send(_error(msg_id, code, message, field, retry_after_s), binary)
+        return error_message(msg_id, code, message, field, retry_after_s)
 
-    async def reply_service_error(self, binary: bool, msg_id: int, e: ServiceError) -> None:
-        await self.reply_error(binary, msg_id, e.code, e.detail, e.field, e.retry_after_s)
+    def exception_reply(self, msg_id: int, exc: ServiceError | IKError) -> dict[str, Any]:
+        """The one place that turns a handler's exception into an error message
+        (Home Assistant's ``async_handle_exception``).
 
-    async def handle(self, data: str | bytes, t0: float) -> None:
-        binary = isinstance(data, bytes)
-        view = self.session.view
+        Raises:
+            ServiceError: ``not_found``: the session went away while the message waited;
+                ``_serve`` closes the socket 4404.
+        """
+        # convert names the field first; a solver error that got past it is still the
+        # invalid_problem it is, as over HTTP (errors.solver_error is HTTP's safety net).
+        err = solver_error(exc) if isinstance(exc, IKError) else exc
+        if err.code is ErrorCode.NOT_FOUND:
+            raise err
+        return self.error_reply(msg_id, err.code, err.detail, err.field, err.retry_after_s)
+
+    def decode(self, data: str | bytes, binary: bool) -> convert.FastFrame | ClientMessage:
+        """A well-formed frame as the fast path's ``(id, targets)`` (convert.fast_frame);
+        any other message validated by pydantic, which gives the documented error.
+
+        Raises:
+            _Unreadable: not JSON / MessagePack, or not a valid client message.
+        """
         raw: Any = None
-        msg: S.FrameMessage | S.ClipMessage | S.PingMessage | None = None
-        # A well-formed frame takes the fast path (convert.fast_frame); anything else is
-        # validated by pydantic, which gives the documented error.
+        if binary:
+            try:
+                raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
+            except Exception as e:  # msgpack's errors share no useful base class
+                raise _Unreadable(None, f"not MessagePack: {type(e).__name__}") from None
+        else:
+            try:
+                raw = orjson.loads(data)
+            except orjson.JSONDecodeError:
+                pass  # validate_json below says why
+        if raw is not None and (fast := convert.fast_frame(raw, self.session.view)) is not None:
+            return fast
         try:
             if binary:
-                raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
-                fast = convert.fast_frame(raw, view)
-                if fast is None:
-                    msg = _CLIENT_MESSAGE.validate_python(raw)
-            else:
-                fast = convert.fast_frame_json(data, view)
-                if fast is None:
-                    msg = _CLIENT_MESSAGE.validate_json(data)
+                return _CLIENT_MESSAGE.validate_python(raw)
+            # validate_json, not validate_python(raw): JSON mode is the documented schema
+            return _CLIENT_MESSAGE.validate_json(data)
         except ValidationError as e:
-            if raw is None and not binary:
-                try:
-                    raw = orjson.loads(data)
-                except orjson.JSONDecodeError:
-                    raw = None
             errors = validation_errors(e.errors())
             first = errors[0] if errors else {"loc": [], "msg": "invalid message", "type": ""}
             message, field = str(first["msg"]), dotted_field(first["loc"])
             if field is None and first["type"] in _NO_MESSAGE_TYPE:
                 message, field = hints.message_type_hint(raw), "type"
-            await self.reply_error(binary, _raw_id(raw), "invalid_format", message, field)
-            return
-        except Exception as e:  # msgpack's errors share no useful base class
-            await self.reply_error(
-                binary, None, "invalid_format", f"not MessagePack: {type(e).__name__}"
-            )
-            return
-        if fast is not None:
-            await self.frame(binary, *fast, t0)
-            return
-        assert msg is not None
-        if msg.id <= self.last_id:
-            await self.reply_error(
-                binary, msg.id, "id_reuse", f"id must be greater than {self.last_id}", "id"
-            )
-            return
-        self.last_id = msg.id
-        if isinstance(msg, S.PingMessage):
-            await self.send({"id": msg.id, "type": "pong"}, binary)
-            return
-        if isinstance(msg, S.ClipMessage):
-            await self.clip(binary, msg, t0)
-            return
-        try:
-            targets = convert.targets(msg.targets, view, "targets")
-        except ServiceError as e:
-            await self.reply_error(binary, msg.id, e.code, e.detail, e.field)
-            return
-        await self.frame(binary, msg.id, targets, t0, checked_id=True)
+            raise _Unreadable(_raw_id(raw), message, field) from None
 
-    async def frame(
-        self,
-        binary: bool,
-        msg_id: int,
-        targets: list[SolverTarget],
-        t0: float,
-        *,
-        checked_id: bool = False,
-    ) -> None:
-        """Solve one valid frame (from the fast path, or validated by pydantic) and
-        answer it."""
-        if not checked_id:
-            if msg_id <= self.last_id:
-                await self.reply_error(
-                    binary, msg_id, "id_reuse", f"id must be greater than {self.last_id}", "id"
-                )
-                return
-            self.last_id = msg_id
+    async def handle(self, data: str | bytes, t0: float) -> None:
+        """Answer one message: decode, check its id, run it, send the one reply."""
+        binary = isinstance(data, bytes)
         try:
-            (result,) = await self.svc.runner.session_frames(
-                self.session, self.svc.store, [(msg_id, targets)], t0, "ws", self.build
-            )
-        except ServiceError as e:
-            if e.code == "not_found":
-                raise
-            await self.reply_service_error(binary, msg_id, e)
+            msg = self.decode(data, binary)
+        except _Unreadable as e:
+            reply = self.error_reply(e.msg_id, ErrorCode.INVALID_FORMAT, e.message, e.field)
+            await self.send(reply, binary)
             return
-        except IKError as e:  # convert.py names the field first; this is the safety net
-            await self.reply_service_error(binary, msg_id, solver_error(e))
+        msg_id = msg[0] if isinstance(msg, tuple) else msg.id
+        if msg_id <= self.last_id:
+            message = f"id must be greater than {self.last_id}"
+            await self.send(self.error_reply(msg_id, ErrorCode.ID_REUSE, message, "id"), binary)
             return
-        await self.send(
-            {"id": msg_id, "type": "result", "success": result["success"], "result": result}, binary
-        )
-
-    async def clip(self, binary: bool, msg: S.ClipMessage, t0: float) -> None:
-        """Solve a clip (in order, or planned as a whole) and answer it in one
-        ``clip_result``; as ``POST .../frames`` with ``{"frames": [...]}``."""
-        runner = self.svc.runner
+        self.last_id = msg_id
         try:
-            limit = self.svc.settings.max_frames_per_request
-            jobs = convert.clip_jobs(msg.frames, self.session.view, limit)
-            plan = None
-            if msg.plan:
-                out, planned = await runner.session_plan(
-                    self.session, self.svc.store, jobs, t0, "ws", self.build
-                )
-                plan = convert.plan_summary(planned)
+            if isinstance(msg, tuple):  # the fast path's (id, targets)
+                reply = await self.frame(msg_id, msg[1], t0)
+            elif isinstance(msg, S.FrameMessage):
+                targets = convert.targets(msg.targets, self.session.view, "targets")
+                reply = await self.frame(msg_id, targets, t0)
+            elif isinstance(msg, S.ClipMessage):
+                reply = await self.clip(msg, t0)
             else:
-                out = await runner.session_frames(
-                    self.session, self.svc.store, jobs, t0, "ws", self.build
-                )
-        except ServiceError as e:
-            if e.code == "not_found":
-                raise
-            await self.reply_service_error(binary, msg.id, e)
-            return
-        except IKError as e:  # convert.py names the field first; this is the safety net
-            await self.reply_service_error(binary, msg.id, solver_error(e))
-            return
-        success = all(r["success"] for r in out)
-        reply = {"id": msg.id, "type": "clip_result", "success": success, "results": out}
-        await self.send({**reply, "plan": plan}, binary)
+                reply = pong_message(msg_id)
+        except (ServiceError, IKError) as e:
+            reply = self.exception_reply(msg_id, e)
+        await self.send(reply, binary)
+
+    async def frame(self, msg_id: int, targets: list[SolverTarget], t0: float) -> dict[str, Any]:
+        """Solve one valid frame (from the fast path, or validated by pydantic)."""
+        (solved,) = await self.svc.runner.session_frames(
+            self.session, self.svc.store, [(msg_id, targets)], t0, "ws"
+        )
+        return result_message(msg_id, self.build(solved.result, msg_id, solved.server_us))
+
+    async def clip(self, msg: S.ClipMessage, t0: float) -> dict[str, Any]:
+        """Solve a clip (in order, or planned as a whole); as ``POST .../frames`` with
+        ``{"frames": [...]}``."""
+        runner = self.svc.runner
+        limit = self.svc.settings.max_frames_per_request
+        jobs = convert.clip_jobs(msg.frames, self.session.view, limit)
+        plan = None
+        if msg.plan:
+            solved, planned = await runner.session_plan(
+                self.session, self.svc.store, jobs, t0, "ws"
+            )
+            plan = convert.plan_summary(planned)
+        else:
+            solved = await runner.session_frames(self.session, self.svc.store, jobs, t0, "ws")
+        return clip_result_message(msg.id, convert.render_frames(solved, self.build), plan)
 
 
 @router.websocket("/sessions/{session_id}/ws")
@@ -344,20 +290,17 @@ async def session_ws(
     """Frames over a WebSocket (protocol in docs/websocket.md); ``?results=compact`` answers
     with CompactFrameResults. A bad ``results`` value closes 1008 (FastAPI's check)."""
     svc = services(ws)
-    await ws.accept(subprotocol=_subprotocol(ws))
-    if not _origin_ok(ws, svc.settings.cors_origin_list()):
-        svc.metrics.error("forbidden_origin", "ws")
-        await ws.close(code=WS_FORBIDDEN, reason="forbidden_origin")
+    await ws.accept(subprotocol=websocket_subprotocol(ws))
+    if not origin_allowed(ws, svc.settings.cors_origin_list()):
+        await _close(ws, svc, WS_FORBIDDEN, ErrorCode.FORBIDDEN_ORIGIN)
         return
     try:
-        session = await authenticate(svc.store, session_id, _token(ws))
+        session = await authenticate(svc.store, session_id, websocket_token(ws))
     except ServiceError as e:
-        svc.metrics.error(e.code, "ws")
-        await ws.close(code=_AUTH_CLOSE[e.code], reason=e.code)
+        await _close(ws, svc, _AUTH_CLOSE[e.code], e.code)
         return
     if svc.open_websockets >= svc.settings.max_websockets:
-        svc.metrics.error("too_many_websockets", "ws")
-        await ws.close(code=status.WS_1013_TRY_AGAIN_LATER, reason="too_many_websockets")
+        await _close(ws, svc, status.WS_1013_TRY_AGAIN_LATER, ErrorCode.TOO_MANY_WEBSOCKETS)
         return
     # The frame loop runs in a task of its own. Awaited here, it would sit under the
     # ~20 coroutine frames of uvicorn's and Starlette's ASGI stack, and every resume
@@ -397,10 +340,12 @@ async def _serve(
             if data is None:
                 continue
             if len(data) > limit:
-                await ws.close(code=status.WS_1009_MESSAGE_TOO_BIG, reason="payload_too_large")
+                await ws.close(
+                    code=status.WS_1009_MESSAGE_TOO_BIG, reason=ErrorCode.PAYLOAD_TOO_LARGE
+                )
                 return
             if session.closed:
-                await ws.close(code=WS_NOT_FOUND, reason="not_found")
+                await ws.close(code=WS_NOT_FOUND, reason=ErrorCode.NOT_FOUND)
                 return
             svc.ws_in_flight += 1
             try:
@@ -411,26 +356,34 @@ async def _serve(
             finally:
                 svc.ws_in_flight -= 1
             if svc.draining:  # shutting down: this message was answered; no more
-                await ws.close(code=status.WS_1012_SERVICE_RESTART, reason="shutting_down")
+                await ws.close(code=status.WS_1012_SERVICE_RESTART, reason=ErrorCode.SHUTTING_DOWN)
                 return
     except WebSocketDisconnect:
         return
     except _SlowReader:
-        svc.metrics.error("slow_reader", "ws")
+        svc.metrics.error(ErrorCode.SLOW_READER, "ws")
         log.info("dropped a WebSocket whose client stopped reading")
         # The close frame queues behind the unread answers; if even that cannot be
         # written, give up: returning lets the server close the transport.
         with contextlib.suppress(Exception):
             await asyncio.wait_for(
-                ws.close(code=status.WS_1008_POLICY_VIOLATION, reason="slow_reader"), 1.0
+                ws.close(code=status.WS_1008_POLICY_VIOLATION, reason=ErrorCode.SLOW_READER),
+                1.0,
             )
         return
     except Exception:
         log.exception("unexpected error on a WebSocket")
         try:
-            await conn.send(_error(None, "internal_error", "internal server error"), False)
-            await ws.close(code=status.WS_1011_INTERNAL_ERROR, reason="internal_error")
+            internal = ErrorCode.INTERNAL_ERROR
+            await conn.send(error_message(None, internal, "internal server error"), False)
+            await ws.close(code=status.WS_1011_INTERNAL_ERROR, reason=internal)
         except Exception:  # the socket may be gone already
             pass
     finally:
         conn.stop_watch()
+
+
+async def _close(ws: WebSocket, svc: Services, code: int, reason: ErrorCode) -> None:
+    """Refuse the socket at connect: count the reason, close with ``code``."""
+    svc.metrics.error(reason, "ws")
+    await ws.close(code=code, reason=reason)

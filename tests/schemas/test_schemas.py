@@ -15,7 +15,7 @@ from pydantic import TypeAdapter, ValidationError
 
 import schemas as S
 from schemas.chain import EXAMPLE_ARM, EffectorModeName, ExampleName, JointKindName
-from schemas.solve import IKStatusName, TerminationName
+from schemas.results import IKStatusName, TerminationName
 from solver.chain import EffectorMode, JointKind
 from solver.examples import EXAMPLES
 from solver.ik import IKStatus

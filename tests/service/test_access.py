@@ -15,8 +15,8 @@ from starlette.testclient import TestClient
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from schemas.chain import EXAMPLE_ARM
+from service.auth import check_api_key
 from service.config import Settings
-from service.deps import check_api_key
 from service.errors import ServiceError
 from service.sessions import InMemorySessionStore
 

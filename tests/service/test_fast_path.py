@@ -100,7 +100,7 @@ def check(raw: Any, view: convert.ChainView) -> bool:
         text = orjson.dumps(raw)
     except TypeError:
         return fast is not None
-    fast_json = convert.fast_frame_json(text.decode(), view)
+    fast_json = convert.fast_frame(orjson.loads(text), view)  # what a text frame gives
     if fast_json is not None:
         msg = CLIENT_MESSAGE.validate_json(text)  # must not raise
         assert isinstance(msg, S.FrameMessage)

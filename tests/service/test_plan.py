@@ -256,7 +256,7 @@ def test_plans_beyond_the_queue_limit_are_refused_at_once(warm_solver: float) ->
         assert (await h.refused(sessions[2])).code == "plans_busy"
         h.release.set()
         out, plan = await first
-        assert out[0]["success"] and plan.success
+        assert out[0].result.success and plan.success
         await h.settled()
         assert sessions[1].frames == 1  # the cancelled request's plan did run
         # A plan refused before it reaches the thread gives its place back.
@@ -290,7 +290,7 @@ def test_one_client_holds_at_most_half_the_plan_places(warm_solver: float) -> No
         h.release.set()
         for task in running:
             out, _ = await task
-            assert out[0]["success"]
+            assert out[0].result.success
         await h.settled()
 
     _with_held_plans(4, body)
@@ -305,7 +305,7 @@ def test_a_plan_whose_session_is_deleted_while_queued_does_not_run(warm_solver: 
         await h.store.remove(queued.id)  # deleted while its plan waits
         h.release.set()
         out, _ = await tasks[0]
-        assert out[0]["success"]
+        assert out[0].result.success
         with pytest.raises(ServiceError) as refused:
             await tasks[1]
         assert refused.value.code == "not_found"

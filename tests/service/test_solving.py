@@ -17,7 +17,7 @@ from service import convert, solving
 from service.config import Settings
 from service.metrics import Metrics
 from service.sessions import InMemorySessionStore, new_session
-from solver.ik import IKSolver
+from solver.ik import IKResult, IKSolver
 
 from .helpers import ARM, create, hand_frame
 
@@ -108,7 +108,7 @@ def test_concurrent_pooled_requests_of_one_session_run_in_arrival_order(
             )
         finally:
             runner.shutdown()
-        assert [out[0]["id"] for out in outs] == list(range(8))
+        assert [out[0].frame_id for out in outs] == list(range(8))
         assert session.frames == 8
         return order
 
@@ -128,3 +128,30 @@ def test_warm_up_freezes_what_is_alive_so_later_collections_skip_it() -> None:
     assert not any(o is loaded for o in gc.get_objects())  # frozen: no longer walked
     made_later = {"a": ["session"]}
     assert any(o is made_later for o in gc.get_objects())  # new objects are collected as usual
+
+
+@pytest.mark.parametrize("plan", [False, True])
+def test_pooled_frames_come_back_typed_and_the_route_renders_them(
+    make_client: Callable[..., TestClient], monkeypatch: pytest.MonkeyPatch, plan: bool
+) -> None:
+    """The solver's threads return SolvedFrames (an IKResult and its timing); the route
+    builds the JSON, off the solver's and the planner's threads."""
+    calls: list[tuple[str, list[Any]]] = []
+    real = convert.render_frames
+
+    def spy(frames: Any, build: Any) -> Any:
+        frames = list(frames)
+        calls.append((threading.current_thread().name, frames))
+        return real(frames, build)
+
+    monkeypatch.setattr(convert, "render_frames", spy)
+    client = make_client(Settings(inline_budget_us=0.0))  # every frame in the pool
+    s = create(client)
+    body = {"frames": [hand_frame(1), hand_frame(2, y=0.12)], "plan": plan}
+    r = client.post(f"/v1/sessions/{s.id}/frames", json=body, headers=s.headers)
+    assert r.status_code == 200
+    assert [x["id"] for x in r.json()["results"]] == [1, 2]
+    ((thread, frames),) = calls
+    assert not thread.startswith(("ik-solve", "ik-plan"))
+    assert [f.frame_id for f in frames] == [1, 2]
+    assert all(isinstance(f.result, IKResult) for f in frames)

@@ -1,0 +1,55 @@
+"""schemas <-> solver: the one place where requests become solver objects and results
+become answers.
+
+One module per concern:
+
+- ``chains``: chain specs (JSON joints, URDF, examples) -> ``ChainView``;
+- ``options``: the server's default ``IKOptions`` and a request's patch on them;
+- ``frames``: a request's frames and targets -> solver targets (the pydantic path);
+- ``fast_path``: the WebSocket's per-frame fast path (decoded message -> targets);
+- ``poses``: ``q`` / ``joints`` <-> joint vectors;
+- ``results``: solved frames -> JSON-ready answers;
+- ``geometry``: vectors and quaternions -> arrays, shared by the others.
+
+Every solver exception raised while turning a request into solver objects becomes a
+``ServiceError`` ``invalid_problem`` naming the request field (``chain.joints[2].lower``).
+Routes call these through the package (``convert.targets(...)``).
+"""
+
+from .chains import ChainView, chain_from_spec
+from .fast_path import FastFrame, fast_frame
+from .frames import FrameJob, clip_jobs, targets
+from .options import apply_options, oneshot_defaults, options_dict, session_defaults
+from .poses import pose_dict, pose_vector
+from .results import (
+    ResultBuilder,
+    SolvedFrame,
+    compact_result_dict,
+    plan_summary,
+    render_frames,
+    result_builder,
+    result_dict,
+)
+
+__all__ = [
+    "ChainView",
+    "FastFrame",
+    "FrameJob",
+    "ResultBuilder",
+    "SolvedFrame",
+    "apply_options",
+    "chain_from_spec",
+    "clip_jobs",
+    "compact_result_dict",
+    "fast_frame",
+    "oneshot_defaults",
+    "options_dict",
+    "plan_summary",
+    "pose_dict",
+    "pose_vector",
+    "render_frames",
+    "result_builder",
+    "result_dict",
+    "session_defaults",
+    "targets",
+]

@@ -1,0 +1,220 @@
+"""Chain specs (joints as JSON, URDF text, a built-in example) -> a validated solver chain.
+
+Every ``InvalidModel`` the solver raises becomes a ``ServiceError`` ``invalid_problem``
+naming the request field (``chain.joints[2].lower``, ``chain.effectors[0].link``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, cast
+
+import schemas as S
+from schemas.chain import MAX_NAME_LENGTH
+from solver.chain import (
+    Chain,
+    Effector,
+    EffectorMode,
+    Joint,
+    JointKind,
+    Transform,
+    build_chain,
+)
+from solver.errors import InvalidModel
+from solver.examples import EXAMPLES
+from solver.types import Vector
+from solver.urdf import chain_from_urdf
+
+from ..config import Settings
+from ..errors import invalid_problem
+from .geometry import rotation_matrix, vec3
+
+_EFFECTOR_FIELDS = frozenset(
+    {"link", "tip_offset", "tip_rotation", "aim_axis", "position_weight", "rotation_weight", "mode"}
+)
+_URDF_REQUEST_FIELDS = frozenset({"base_link", "tip_links", "mode"})
+
+
+@dataclass(frozen=True, slots=True)
+class ChainView:
+    """A chain plus the lookups the service needs on every frame."""
+
+    chain: Chain
+    effector_modes: dict[str, EffectorMode]
+    dof_index: dict[str, int]
+    summary: dict[str, Any]  # n_dof, dof (with limits), effectors: JSON-ready
+    mid_limits: Vector  # the default seed: middle of each range, 0 if unbounded
+    # The effectors a target may name (a valid Name) -> mode: the fast path's lookup.
+    fast_modes: dict[str, EffectorMode]
+
+    @classmethod
+    def of(cls, chain: Chain) -> ChainView:
+        modes = {e.name: e.mode for e in chain.effectors}
+        dof = [
+            {"name": n, "lower": _finite_or_none(lo), "upper": _finite_or_none(hi)}
+            for n, lo, hi in zip(chain.dof_names, chain.lower, chain.upper, strict=True)
+        ]
+        summary = {
+            "n_dof": chain.n_dof,
+            "dof": dof,
+            "effectors": [{"name": e.name, "mode": e.mode.value} for e in chain.effectors],
+        }
+        index = {n: i for i, n in enumerate(chain.dof_names)}
+        mid = chain.mid_limits()
+        fast = {n: m for n, m in modes.items() if 1 <= len(n) <= MAX_NAME_LENGTH}
+        return cls(chain, modes, index, summary, mid, fast)
+
+
+def _finite_or_none(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
+
+
+def chain_from_spec(
+    spec: S.HierarchyChain | S.UrdfChain | S.ExampleChain, settings: Settings
+) -> ChainView:
+    """Build and validate the chain a request describes, within the server's limits.
+
+    Raises:
+        ServiceError: ``invalid_problem`` naming the field (``chain.joints[i].<field>``).
+    """
+    if isinstance(spec, S.ExampleChain):
+        factory = cast(Callable[[], Chain], EXAMPLES[spec.name])
+        chain = factory()
+    elif isinstance(spec, S.UrdfChain):
+        chain = _urdf_chain(spec, settings)
+    else:
+        chain = _hierarchy_chain(spec, settings)
+    if chain.n_dof > settings.max_dof:
+        raise invalid_problem(
+            f"too many degrees of freedom: {chain.n_dof} > {settings.max_dof}", "chain"
+        )
+    if len(chain.joints) > settings.max_joints:
+        raise invalid_problem(
+            f"too many joints: {len(chain.joints)} > {settings.max_joints}", "chain"
+        )
+    return ChainView.of(chain)
+
+
+def _urdf_chain(spec: S.UrdfChain, settings: Settings) -> Chain:
+    if len(spec.tip_links) > settings.max_effectors:
+        raise invalid_problem(
+            f"too many tip links: {len(spec.tip_links)} > {settings.max_effectors}",
+            "chain.tip_links",
+        )
+    try:
+        return chain_from_urdf(
+            spec.urdf,
+            base_link=spec.base_link,
+            tip_links=spec.tip_links,
+            mode=EffectorMode(spec.mode),
+            max_dof=settings.max_dof,
+            max_bytes=settings.max_urdf_bytes,
+        )
+    except InvalidModel as e:
+        field = f"chain.{e.field}" if e.field in _URDF_REQUEST_FIELDS else "chain.urdf"
+        raise invalid_problem(str(e), field) from None
+
+
+def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
+    if len(spec.joints) > settings.max_joints:
+        raise invalid_problem(
+            f"too many joints: {len(spec.joints)} > {settings.max_joints}", "chain.joints"
+        )
+    if len(spec.effectors) > settings.max_effectors:
+        raise invalid_problem(
+            f"too many effectors: {len(spec.effectors)} > {settings.max_effectors}",
+            "chain.effectors",
+        )
+    for i, j in enumerate(spec.joints):
+        _check_radians(j, f"chain.joints[{i}]")
+    joints = [
+        Joint(
+            name=j.name,
+            parent=j.parent,
+            child=j.child,
+            kind=JointKind(j.kind),
+            origin=Transform(vec3(j.origin.translation), rotation_matrix(j.origin.rotation)),
+            pivot=vec3(j.pivot),
+            axis=vec3(j.axis),
+            axes=j.axes,
+            lower=tuple(j.lower),
+            upper=tuple(j.upper),
+            terminator=j.terminator,
+        )
+        for j in spec.joints
+    ]
+    effectors = [
+        Effector(
+            name=e.name,
+            link=e.link,
+            tip_offset=vec3(e.tip_offset),
+            tip_rotation=rotation_matrix(e.tip_rotation),
+            mode=EffectorMode(e.mode),
+            aim_axis=vec3(e.aim_axis),
+            position_weight=e.position_weight,
+            rotation_weight=e.rotation_weight,
+        )
+        for e in spec.effectors
+    ]
+    try:
+        return build_chain(joints, effectors, max_dof=settings.max_dof)
+    except InvalidModel as e:
+        raise invalid_problem(str(e), _hierarchy_field(spec, e)) from None
+
+
+# The largest rotation limit a JSON chain may give [rad]: a full turn, plus room for a
+# rounded 2*pi (6.2832). Beyond it the number is almost surely degrees (an elbow's
+# "upper": [150]), which would otherwise be taken as 24 turns and leave the joint
+# practically unlimited. URDF files are not checked: the format is radians by
+# definition, and real files give unlimited joints limits such as +-1e16 or 2*pi + eps.
+MAX_ROTATION_LIMIT_RAD = 2 * math.pi + 1e-3
+_ROTATION_KINDS = frozenset({JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.ROTATIONAL})
+
+
+def _check_radians(j: S.JointSpec, where: str) -> None:
+    """Refuse a rotation limit beyond a full turn, saying that limits are radians.
+
+    Raises:
+        ServiceError: ``invalid_problem`` naming ``<where>.lower`` or ``<where>.upper``.
+    """
+    if JointKind(j.kind) not in _ROTATION_KINDS:
+        return  # prismatic limits are metres; fixed joints have none
+    for side, limits in (("lower", j.lower), ("upper", j.upper)):
+        for value in limits:
+            if abs(value) <= MAX_ROTATION_LIMIT_RAD:
+                continue
+            message = (
+                f"joint {j.name!r}: {side} limit {value:g} is beyond 2*pi: limits are in radians"
+            )
+            if abs(value) <= 360:
+                message += f"; {value:g} degrees is {math.radians(value):.4f}"
+            message += '; for unlimited rotation use kind "continuous" with no limits'
+            raise invalid_problem(message, f"{where}.{side}")
+
+
+def _hierarchy_field(spec: S.HierarchyChain, e: InvalidModel) -> str:
+    """The request path of the joint / effector field an InvalidModel names."""
+    field = e.field or ""
+    if field in ("rotation", "translation"):
+        field = f"origin.{field}"
+    if e.joint is not None:
+        if field in _EFFECTOR_FIELDS or (
+            field == "name" and not any(j.name == e.joint for j in spec.joints)
+        ):
+            for i, eff in enumerate(spec.effectors):
+                if eff.name == e.joint:
+                    return f"chain.effectors[{i}].{field}" if field else f"chain.effectors[{i}]"
+        indexed = list(enumerate(spec.joints))
+        if field == "name":  # a duplicate: the later joint is the one at fault
+            indexed.reverse()
+        for i, j in indexed:
+            # A duplicate variable is named "<joint>.<axis>" for rotational joints.
+            if e.joint in (j.name, *(f"{j.name}.{a}" for a in j.axes)):
+                return f"chain.joints[{i}].{field}" if field else f"chain.joints[{i}]"
+    if field in ("joints", "effectors"):
+        return f"chain.{field}"
+    if field in ("parent", "name", "child"):
+        return "chain.joints"
+    return f"chain.{field}" if field else "chain"

@@ -1,0 +1,41 @@
+"""Vectors and quaternions of the JSON contract as the solver's arrays.
+
+Shared by chains (joint origins, effector tips), targets and the fast path, so that
+the three build the same rotation for the same quaternion (tests/service/test_convert.py
+checks the convention against ``solver.chain.quaternion_to_matrix``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+import schemas as S
+from solver.types import Vector
+
+# A 3x3 rotation matrix as nine plain floats, row after row.
+Flat9 = tuple[float, float, float, float, float, float, float, float, float]
+
+
+def vec3(v: S.Vec3) -> Vector:
+    """The vector as an array, shape (3,)."""
+    return np.array((v.x, v.y, v.z), dtype=np.float64)
+
+
+def rotation_matrix(q: S.Quaternion) -> Vector:
+    """Rotation matrix of the normalised quaternion, shape (3, 3)."""
+    return np.array(rotation_rows(q.w, q.x, q.y, q.z)).reshape(3, 3)
+
+
+def rotation_rows(qw: float, qx: float, qy: float, qz: float) -> Flat9:
+    """Rotation matrix of the normalised quaternion (w, x, y, z), row after row as
+    plain floats: this is per frame, and the fast path packs them into the target's
+    row as they are."""
+    n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    w, x, y, z = qw / n, qx / n, qy / n, qz / n
+    return (
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    )  # fmt: skip

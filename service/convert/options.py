@@ -1,0 +1,77 @@
+"""Solver options: the server's defaults, a request's patch on them, and their JSON view."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import schemas as S
+from solver.errors import IKError
+from solver.ik import STREAM_DEFAULTS, IKOptions
+
+from ..config import Settings
+from ..errors import invalid_problem
+
+
+def _with_server_defaults(base: IKOptions, settings: Settings) -> IKOptions:
+    """``base`` with the tolerances, budget and limits the server is configured with."""
+    return replace(
+        base,
+        time_budget_us=settings.default_time_budget_us,
+        position_tolerance_m=settings.default_position_tolerance_m,
+        rotation_tolerance_rad=settings.default_rotation_tolerance_rad,
+        max_iter=settings.default_max_iter,
+        max_restarts=settings.default_max_restarts,
+    )
+
+
+def session_defaults(settings: Settings) -> IKOptions:
+    """Stream defaults (local restarts, light limit pull) with the server's settings."""
+    return _with_server_defaults(STREAM_DEFAULTS, settings)
+
+
+def oneshot_defaults(settings: Settings) -> IKOptions:
+    """One-shot defaults (restarts anywhere in the limits) with the server's settings."""
+    return _with_server_defaults(IKOptions(), settings)
+
+
+def apply_options(
+    patch: S.OptionsPatch | None, base: IKOptions, settings: Settings, *, field: str = "options"
+) -> IKOptions:
+    """``base`` with the fields ``patch`` sets, validated by the solver and the server caps.
+
+    Raises:
+        ServiceError: ``invalid_problem`` naming ``<field>.time_budget_us`` (over
+            IK_MAX_TIME_BUDGET_US) or ``<field>`` (a value the solver refuses).
+    """
+    if patch is None:
+        return base
+    changes = patch.model_dump(exclude_none=True)
+    budget = changes.get("time_budget_us")
+    if budget is not None and budget > settings.max_time_budget_us:
+        raise invalid_problem(
+            f"time_budget_us must be at most {settings.max_time_budget_us:g} "
+            "(IK_MAX_TIME_BUDGET_US)",
+            f"{field}.time_budget_us",
+        )
+    try:
+        return replace(base, **changes)
+    except IKError as e:
+        raise invalid_problem(str(e), field) from None
+
+
+def options_dict(o: IKOptions) -> dict[str, Any]:
+    """The SolverOptions view of IKOptions (JSON-ready)."""
+    return {
+        "position_tolerance_m": o.position_tolerance_m,
+        "rotation_tolerance_rad": o.rotation_tolerance_rad,
+        "time_budget_us": o.time_budget_us,
+        "max_iter": o.max_iter,
+        "max_restarts": o.max_restarts,
+        "restart_radius_rad": o.restart_radius_rad if math.isfinite(o.restart_radius_rad) else 1e9,
+        "max_step_rad": o.max_step_rad,
+        "posture_weight": o.posture_weight,
+        "limit_weight": o.limit_weight,
+        "limit_margin": o.limit_margin,
+    }

@@ -1,0 +1,47 @@
+"""Poses: a request's ``q`` or ``joints`` -> a full joint vector, and back to JSON."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+import schemas as S
+from solver.types import Vector
+
+from ..errors import invalid_problem
+from .chains import ChainView
+
+
+def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str) -> Vector:
+    """A full q from a PoseIn (``joints`` fills in ``current``), clipped into the limits.
+
+    Raises:
+        ServiceError: ``invalid_problem`` naming ``<field>.q`` (wrong length) or
+            ``<field>.joints.<name>`` (no such DOF).
+    """
+    chain = view.chain
+    if pose.q is not None:
+        if len(pose.q) != chain.n_dof:
+            raise invalid_problem(
+                f"q must have {chain.n_dof} values (one per DOF), got {len(pose.q)}", f"{field}.q"
+            )
+        q = np.array(pose.q, dtype=np.float64)
+    else:
+        assert pose.joints is not None
+        q = np.array(current, dtype=np.float64)
+        for name, value in pose.joints.items():
+            i = view.dof_index.get(name)
+            if i is None:
+                raise invalid_problem(
+                    f"unknown DOF {name!r} (DOFs: {list(chain.dof_names)})",
+                    f"{field}.joints.{name}",
+                )
+            q[i] = value
+    return np.clip(q, chain.lower, chain.upper)
+
+
+def pose_dict(view: ChainView, q: Vector) -> dict[str, Any]:
+    """A ``Pose``: q in DOF order and by name."""
+    values = q.tolist()
+    return {"q": values, "joints": dict(zip(view.chain.dof_names, values, strict=True))}

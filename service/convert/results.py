@@ -1,0 +1,120 @@
+"""Solved frames -> the JSON/MessagePack-ready answers (``FrameResult``,
+``CompactFrameResult``, ``PlanSummary``).
+
+Rendering runs in the route layer, on the event loop, after the solve: the solving
+layer (``service/solving.py``) returns typed ``SolvedFrame``s and never builds JSON.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from typing import Any, NamedTuple
+
+import schemas as S
+from solver.ik import IKResult
+from solver.path import PlannedPath
+
+
+class SolvedFrame(NamedTuple):
+    """One frame's outcome, as the solving layer hands it to the renderer."""
+
+    frame_id: int | None  # the client's id, echoed (None if it sent none)
+    result: IKResult
+    server_us: float  # request or message received -> this frame solved [us]
+
+
+# Renders one solved frame (result, frame id, server_us) as the answer a view asks for.
+ResultBuilder = Callable[[IKResult, int | None, float], dict[str, Any]]
+
+
+def result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str, Any]:
+    """A FrameResult as a JSON/MessagePack-ready dict (the hot path: no re-validation;
+    tests check the shape against ``schemas.FrameResult``).
+
+    The per-effector errors are read from the result's raw rows (position error or NaN,
+    rotation error or NaN, targeted flag) with the names and tolerances the solver's
+    ``layout`` holds once per session and options, not through ``IKResult.effectors``,
+    which builds an object per effector first (the same values; tests compare them).
+    """
+    layout = r.layout
+    values = r.q.tolist()
+    tol_p, tol_r = layout.tolerances
+    isnan = math.isnan
+    effectors = []
+    for name, (pos, rot, targeted) in zip(
+        layout.effector_names, r.raw_errors.tolist(), strict=True
+    ):
+        if not targeted:
+            continue
+        p = None if isnan(pos) else pos
+        e = None if isnan(rot) else rot
+        effectors.append(
+            {
+                "name": name,
+                "position_error_m": p,
+                "rotation_error_rad": e,
+                "within_tolerance": (p is None or p <= tol_p) and (e is None or e <= tol_r),
+            }
+        )
+    return {
+        "id": frame_id,
+        "success": r.success,
+        "status": r.status.value,
+        "termination": r.termination.value,
+        "joints": dict(zip(layout.dof_names, values, strict=True)),
+        "q": values,
+        "effectors": effectors,
+        "iterations": r.iterations,
+        "function_evals": r.function_evals,
+        "passes": r.passes,
+        "restarts": r.restarts,
+        "solve_us": r.solve_us,
+        "server_us": server_us,
+    }
+
+
+def plan_summary(plan: PlannedPath) -> dict[str, Any]:
+    """A PlanSummary's fields."""
+    return {
+        "largest_step_rad": plan.largest_step,
+        "tracked_largest_step_rad": plan.tracked_largest_step,
+        "candidates": plan.nodes,
+        "plan_us": plan.plan_us,
+    }
+
+
+def compact_result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str, Any]:
+    """A CompactFrameResult (``?results=compact``): no ``joints`` by name and no
+    per-effector errors, which a stream reading ``q`` does not need. About a third of
+    a panda answer's bytes and less work to build and encode; tests check the shape
+    against ``schemas.CompactFrameResult``."""
+    return {
+        "id": frame_id,
+        "success": r.success,
+        "status": r.status.value,
+        "termination": r.termination.value,
+        "q": r.q.tolist(),
+        "iterations": r.iterations,
+        "function_evals": r.function_evals,
+        "passes": r.passes,
+        "restarts": r.restarts,
+        "solve_us": r.solve_us,
+        "server_us": server_us,
+    }
+
+
+_RESULT_BUILDERS: dict[S.ResultView, ResultBuilder] = {
+    S.ResultView.FULL: result_dict,
+    S.ResultView.COMPACT: compact_result_dict,
+}
+
+
+def result_builder(view: S.ResultView) -> ResultBuilder:
+    """What turns an IKResult into the answer ``view`` asks for."""
+    return _RESULT_BUILDERS[view]
+
+
+def render_frames(frames: Iterable[SolvedFrame], build: ResultBuilder) -> list[dict[str, Any]]:
+    """The answers of solved frames, in order, as ``build`` renders them."""
+    return [build(f.result, f.frame_id, f.server_us) for f in frames]

@@ -1,0 +1,98 @@
+"""Pure ASGI middleware: stamps each request's arrival time and refuses bodies over
+IK_MAX_BODY_BYTES with 413 ``payload_too_large`` before the app reads them.
+
+Pure ASGI rather than ``BaseHTTPMiddleware`` (starlette's docs): it adds no task or
+stream per request and does not buffer the body.
+"""
+
+from __future__ import annotations
+
+import time
+
+from starlette import status
+from starlette.requests import Request
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from schemas import ErrorCode
+
+from .responses import dumps
+
+# The scope key holding perf_counter() at arrival (``received_at``).
+T0_KEY = "ik.t0"
+
+
+def received_at(request: Request) -> float:
+    """perf_counter() when the request arrived (set by ``TimingAndLimits``)."""
+    t0 = request.scope.get(T0_KEY)
+    return float(t0) if t0 is not None else time.perf_counter()
+
+
+class TimingAndLimits:
+    """Pure ASGI middleware: stamps arrival time; rejects HTTP bodies over the limit (413)."""
+
+    def __init__(self, app: ASGIApp, max_body_bytes: int) -> None:
+        self.app = app
+        self.max_body_bytes = max_body_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        scope[T0_KEY] = time.perf_counter()
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        limit = self.max_body_bytes
+        for name, value in scope["headers"]:
+            if name == b"content-length":
+                try:
+                    too_big = int(value) > limit
+                except ValueError:
+                    too_big = False
+                if too_big:
+                    await _too_large(send, limit)
+                    return
+        seen = 0
+        started = False
+
+        async def limited_receive() -> Message:
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > limit:
+                    raise _BodyTooLarge
+            return message
+
+        async def tracking_send(message: Message) -> None:
+            nonlocal started
+            if message["type"] == "http.response.start":
+                started = True
+            await send(message)
+
+        try:
+            await self.app(scope, limited_receive, tracking_send)
+        except _BodyTooLarge:
+            if not started:
+                await _too_large(send, limit)
+
+
+class _BodyTooLarge(Exception):
+    pass
+
+
+async def _too_large(send: Send, limit: int) -> None:
+    body = dumps(
+        {
+            "detail": f"body larger than {limit} bytes (IK_MAX_BODY_BYTES)",
+            "code": ErrorCode.PAYLOAD_TOO_LARGE,
+        }
+    )
+    await send(
+        {
+            "type": "http.response.start",
+            "status": status.HTTP_413_CONTENT_TOO_LARGE,
+            "headers": [
+                (b"content-type", b"application/json"),
+                (b"content-length", str(len(body)).encode()),
+            ],
+        }
+    )
+    await send({"type": "http.response.body", "body": body})

@@ -1,0 +1,53 @@
+"""The WebSocket's server messages: one builder per envelope (Home Assistant's
+``websocket_api/messages.py``: ``result_message`` / ``error_message``).
+
+Every answer the socket sends is built here, so its shape is in one place; the schemas
+are ``schemas.ws`` (``ResultMessage``, ``ClipResultMessage``, ``ErrorMessage``,
+``PongMessage``), which tests validate the answers against.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from schemas import ErrorCode
+
+
+def result_message(msg_id: int, result: dict[str, Any]) -> dict[str, Any]:
+    """The answer to a ``frame``: one rendered frame result."""
+    return {"id": msg_id, "type": "result", "success": result["success"], "result": result}
+
+
+def clip_result_message(
+    msg_id: int, results: list[dict[str, Any]], plan: dict[str, Any] | None
+) -> dict[str, Any]:
+    """The answer to a ``clip``: its frames' results, ``plan`` set when planned."""
+    success = all(r["success"] for r in results)
+    return {
+        "id": msg_id,
+        "type": "clip_result",
+        "success": success,
+        "results": results,
+        "plan": plan,
+    }
+
+
+def pong_message(msg_id: int) -> dict[str, Any]:
+    """The answer to a ``ping``."""
+    return {"id": msg_id, "type": "pong"}
+
+
+def error_message(
+    msg_id: int | None,
+    code: ErrorCode,
+    message: str,
+    field: str | None = None,
+    retry_after_s: float | None = None,
+) -> dict[str, Any]:
+    """A recoverable error: message ``msg_id`` (None when it could not be read) failed."""
+    error: dict[str, Any] = {"code": code.value, "message": message}
+    if field is not None:
+        error["field"] = field
+    if retry_after_s is not None:
+        error["retry_after_s"] = retry_after_s
+    return {"id": msg_id, "type": "result", "success": False, "error": error}
