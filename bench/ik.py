@@ -13,7 +13,7 @@ Solvers (settings written out in the report):
               every iteration) with tolerances 1e-5 m / 1e-4 rad and a 5000 us budget
   ours-bfgs   the same with metric_every=0 (the article's BFGS: metric only at pass start)
   scipy       scipy.optimize.minimize(method="L-BFGS-B", jac=True, bounds=limits) on OUR
-              compiled objective and FK (solver.kinematics.ik_objective on the IKSolver's
+              compiled objective and FK (solver.ik.kinematics.ik_objective on the IKSolver's
               data tuple after _load_targets), tightened ftol/gtol, no restarts
   rtb         roboticstoolbox-python's C++ ik_LM (bench/peers/rtb_peer.py)
   ikpy        ikpy 4 (bench/peers/ikpy_peer.py)
@@ -24,7 +24,7 @@ writes one from the Chain, and every peer's FK is checked against ours before ti
 Parts:
   a. TRAC-IK's protocol: N uniform random q within limits -> FK pose; solve from the
      mid-limits seed; success = position <= 1e-5 m and rotation <= 1e-4 rad by OUR FK
-     (solver.fk.effector_poses on the chain), all joints within limits, and a wall time
+     (solver.model.forward.effector_poses on the chain), all joints within limits, and a wall time
      <= 5 ms. Never a solver's own flag.
   b. Position only, same targets, <= 1e-5 m.
   c. Tracking: smooth joint paths q(t) = c + A sin(2 pi f t + phi) (inside the limits)
@@ -51,7 +51,7 @@ import shlex
 import sys
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -63,10 +63,10 @@ import numpy as np
 
 from bench.ik_chains import CHAINS, BenchChain, load
 from bench.peers import SKIPPED, PeerSolver, available_peers
-from solver.fk import effector_poses
-from solver.ik import STREAM_DEFAULTS, IKOptions, IKSolver, Target, with_options
-from solver.kinematics import effector_errors, ik_objective
-from solver.path import PlannedPath
+from solver.ik import STREAM_DEFAULTS, IKOptions, IKSolver, Target
+from solver.ik.kinematics import effector_errors, ik_objective
+from solver.model.forward import effector_poses
+from solver.path import PlannedPath, plan_path
 
 POS_TOL = 1e-5  # m
 ROT_TOL = 1e-4  # rad
@@ -140,7 +140,7 @@ def ours_options(
     metric_every: int = 1, stream: bool = False, carry: bool = False, budget_us: float = 5000.0
 ) -> IKOptions:
     base = STREAM_DEFAULTS if stream else IKOptions()
-    return with_options(
+    return replace(
         base,
         position_tolerance_m=POS_TOL,
         rotation_tolerance_rad=ROT_TOL,
@@ -212,7 +212,7 @@ class Ours:
 
 
 class OursPlanned:
-    """``IKSolver.plan`` over a whole stream (part (c) only): the stream is planned at
+    """``solver.path.plan_path`` over a whole stream (part (c) only): the stream is planned at
     once, after the frame-by-frame solvers have run it; each frame is charged the
     plan's time divided by the frames."""
 
@@ -232,7 +232,7 @@ class OursPlanned:
         self._planned = None
 
     def plan(self) -> PlannedPath:
-        self._planned = self.solver.plan(self.targets)
+        self._planned = plan_path(self.solver, self.targets)
         return self._planned
 
     def solve(self, k: int, seed: np.ndarray) -> tuple[np.ndarray | None, float, bool | None]:
@@ -268,7 +268,6 @@ class ScipyLBFGSB:
         self._minimize = minimize
         self._ik = IKSolver(bc.position if position_only else bc.pose, opts)
         self._opts = opts
-        self._data = self._ik._data
         self._bounds = Bounds(bc.pose.lower, bc.pose.upper)
         self._n = bc.pose.n_dof
         self._timeout = timeout_s
@@ -287,8 +286,8 @@ class ScipyLBFGSB:
         pass
 
     def solve(self, k: int, seed: np.ndarray) -> tuple[np.ndarray | None, float, bool | None]:
-        data, n = self._data, self._n
-        self._ik._load_targets(self.targets[k], self._opts)
+        n = self._n
+        data = self._ik.load_frame(self.targets[k], seed, options=self._opts)
         deadline = time.perf_counter() + self._timeout
         best: list[np.ndarray] = [seed]
 
@@ -1239,8 +1238,8 @@ def report(
         f"- ours (IKSolver.track, part c): STREAM_DEFAULTS with the same tolerances and budget: "
         f"{ours_settings(ours_options(1, stream=True))}; carry_hessian=True rows carry H between frames",
         "- scipy L-BFGS-B: scipy.optimize.minimize(method='L-BFGS-B', jac=True, bounds=limits) on "
-        "solver.kinematics.ik_objective(q, g, True, data) with the IKSolver's data tuple after "
-        "_load_targets (same FK, weights w_p=1, w_r=0.01, exact gradient); "
+        "solver.ik.kinematics.ik_objective(q, g, True, data) with the IKSolver's data tuple from "
+        "IKSolver.load_frame (same FK, weights w_p=1, w_r=0.01, exact gradient); "
         f"ftol={SCIPY_FTOL:g}, gtol={SCIPY_GTOL:g} (scipy's defaults 2.2e-9 / 1e-5 stop around 5e-5 m, short "
         f"of 1e-5 m), maxiter={SCIPY_MAXITER}, maxfun={20 * SCIPY_MAXITER}, maxcor=10 (default); stops as soon "
         "as an iterate is within tolerance (callback), gives no answer once 5 ms have passed (checked "

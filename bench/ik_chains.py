@@ -22,9 +22,9 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from bench.robots import ROBOTS, RobotSpec, robot
-from solver.chain import Chain, EffectorMode, JointKind
-from solver.examples import humanoid_arm, tail
-from solver.urdf import chain_from_urdf
+from solver.model import Chain, EffectorMode, JointKind
+from solver.model.examples import humanoid_arm, tail
+from solver.model.urdf import chain_from_urdf
 
 OUT_DIR = Path(__file__).resolve().parent / "out" / "urdf"
 EXAMPLES: tuple[str, ...] = ("tail40", "humanoid_arm")
@@ -119,7 +119,7 @@ def _rpy(r: np.ndarray) -> tuple[float, float, float]:
 
 
 def _origin(t: np.ndarray, r: np.ndarray) -> str:
-    from solver.chain import rpy_to_matrix
+    from solver.model import rpy_to_matrix
 
     rpy = _rpy(r)
     if not np.allclose(rpy_to_matrix(*rpy), r, atol=1e-12):

@@ -7,7 +7,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
-from solver.termination import Termination
+from solver.optim import Termination
 
 from .chain import EXAMPLE_ARM, ChainSpec, EffectorModeName, Name
 from .common import FiniteFloat, Quaternion, StrictModel, Vec3

@@ -18,17 +18,8 @@ import schemas as S
 from schemas.chain import MAX_NAME_LENGTH
 from schemas.common import MAX_COORDINATE, QUATERNION_NORM_TOLERANCE
 from schemas.solve import HARD_MAX_TARGETS, MAX_FRAME_ID
-from solver.chain import (
-    Chain,
-    Effector,
-    EffectorMode,
-    Joint,
-    JointKind,
-    Transform,
-    build_chain,
-)
+from solver.arrays import Vector
 from solver.errors import IKError, InvalidModel
-from solver.examples import EXAMPLES
 from solver.ik import (
     GIVEN_DIRECTION,
     GIVEN_POSITION,
@@ -39,9 +30,18 @@ from solver.ik import (
     IKResult,
 )
 from solver.ik import Target as SolverTarget
+from solver.model import (
+    Chain,
+    Effector,
+    EffectorMode,
+    Joint,
+    JointKind,
+    Transform,
+    build_chain,
+)
+from solver.model.examples import EXAMPLES
+from solver.model.urdf import chain_from_urdf
 from solver.path import PlannedPath
-from solver.types import Vector
-from solver.urdf import chain_from_urdf
 
 from .config import Settings
 from .errors import invalid_problem

@@ -26,7 +26,7 @@ from prometheus_client.registry import Collector
 from prometheus_client.utils import floatToGoString
 
 from solver.ik import IKResult
-from solver.termination import Termination
+from solver.optim import Termination
 
 # 10 us .. ~0.33 s, x2 steps: solves take microseconds to the frame's budget.
 _BUCKETS = tuple(10e-6 * 2**k for k in range(16))

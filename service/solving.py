@@ -25,7 +25,7 @@ from starlette import status
 
 from solver.ik import IKOptions, IKResult, IKSolver
 from solver.ik import Target as SolverTarget
-from solver.path import PlannedPath
+from solver.path import PlannedPath, plan_path
 
 from . import convert
 from .errors import ServiceError, not_found, not_ready, plans_busy, too_many_plans
@@ -48,8 +48,8 @@ def default_warmup() -> float:
         fn = getattr(fn, "warmup", None)
     if callable(fn):
         return float(fn())
-    from solver.examples import panda_arm
     from solver.ik import IKSolver, pose_targets
+    from solver.model.examples import panda_arm
 
     t = time.perf_counter()
     chain = panda_arm()
@@ -319,7 +319,7 @@ def _plan_all(
     the request and leaves the session's pose as it was)."""
     if session.closed:  # deleted while the plan waited for the planning thread
         raise not_found()
-    plan = session.solver.plan([targets for _, targets in jobs], options=options)
+    plan = plan_path(session.solver, [targets for _, targets in jobs], options=options)
     server_us = (time.perf_counter() - t0) * 1e6
     out = [
         build(r, frame_id, server_us) for (frame_id, _), r in zip(jobs, plan.results, strict=True)

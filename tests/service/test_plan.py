@@ -18,12 +18,11 @@ from service.config import Settings
 from service.errors import ServiceError
 from service.metrics import Metrics
 from service.sessions import InMemorySessionStore, Session, new_session
-from solver.examples import panda_arm
 from solver.ik import IKSolver
-from tests.solver.test_path import joint_stream
+from solver.model.examples import panda_arm
+from tests.solver.helpers import joint_stream
 
-from .helpers import ARM, Created, create, hand_frame
-from .test_http import _panda_target
+from .helpers import ARM, Created, create, hand_frame, panda_target
 
 # Tolerances of the benchmark; a budget no loaded CI machine runs out of.
 TIGHT = {"position_tolerance_m": 1e-5, "rotation_tolerance_rad": 1e-4, "time_budget_us": 50_000}
@@ -39,7 +38,7 @@ def _panda_session(client: TestClient, q0: np.ndarray) -> Created:
 
 
 def _clip(path: np.ndarray, plan: bool) -> dict[str, Any]:
-    frames = [{"id": i, "targets": [_panda_target(q)]} for i, q in enumerate(path)]
+    frames = [{"id": i, "targets": [panda_target(q)]} for i, q in enumerate(path)]
     return {"frames": frames, "plan": plan}
 
 

@@ -2,7 +2,7 @@
 
 A fresh checkout compiles the core once (tens of seconds on these machines) and
 writes it to ``solver/__pycache__``; later processes load it in about a second.
-The service calls ``warmup()`` at startup and reports ready only afterwards.
+The service calls ``solver.warmup()`` at startup and reports ready only afterwards.
 """
 
 from __future__ import annotations
@@ -11,9 +11,10 @@ import time
 
 import numpy as np
 
-from .chain import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
-from .examples import panda_arm
 from .ik import IKOptions, IKSolver, Target, pose_targets
+from .model import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from .model.examples import panda_arm
+from .path import plan_path
 
 
 def warmup() -> float:
@@ -26,12 +27,12 @@ def warmup() -> float:
         q = chain.mid_limits() + 0.1
         solver.solve(pose_targets(chain, q))
         solver.track(pose_targets(chain, q + 0.01))
-    # The planner's kernels (solver/path.py): a two-frame clip of a 7-DOF pose task.
+    # The planner's kernels (solver/path/): a two-frame clip of a 7-DOF pose task.
     chain = panda_arm()
     q = chain.mid_limits() + 0.1
     planner = IKSolver(chain, IKOptions(time_budget_us=None, max_iter=50))
     planner.set_pose(q)
-    planner.plan([pose_targets(chain, q), pose_targets(chain, q + 0.01)])
+    plan_path(planner, [pose_targets(chain, q), pose_targets(chain, q + 0.01)])
     # A chain with no variables takes its own compiled path (errors only).
     bolt = Joint(
         name="bolt",
