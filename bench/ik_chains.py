@@ -1,7 +1,7 @@
 """Chains for bench/ik.py: the three URDF arms and our two example chains, each with a
 pose-mode chain, a position-mode chain, and (where one exists) a URDF the peers can load.
 
-The URDF arms come from bench/robots.py and are built with solver.urdf.chain_from_urdf.
+The URDF arms come from bench/robots.py and are built with solver.model.urdf.chain_from_urdf.
 The examples (solver.examples.tail(20): 40 DOF; humanoid_arm(): 7 DOF with a three-axis
 shoulder) have no URDF, so `example_urdf` writes one from the Chain itself into
 bench/out/urdf/: a rotational joint with axes "zxy" becomes three revolute joints about
@@ -70,7 +70,7 @@ def load(name: str, *, peer_urdf: bool = True) -> BenchChain:
         )
         source = (
             f"{spec.urdf_path.name} ({spec.base_link} -> {spec.tip_link}), "
-            "solver.urdf.chain_from_urdf"
+            "solver.model.urdf.chain_from_urdf"
         )
         return BenchChain(name, pose, position, spec, source, True, _perm(pose, spec.joint_names))
     if name == "tail40":

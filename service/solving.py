@@ -178,7 +178,7 @@ class Runner:
         transport: str,
         build: convert.ResultBuilder = convert.result_dict,
     ) -> tuple[list[dict[str, Any]], PlannedPath]:
-        """Solve a session's clip as a whole (``IKSolver.plan``): the answers and the
+        """Solve a session's clip as a whole (``solver.path.plan_path``): the answers and the
         plan. Always off the loop, on the planning thread: a plan takes milliseconds
         per frame. At most ``max_queued_plans`` at once (503 ``plans_busy``), and at
         most half of them (at least one) for one client (429 ``too_many_plans``): a
