@@ -35,10 +35,13 @@ sys.path.insert(0, sys.argv[1])
 import numpy as np
 from bench import ik, ik_chains
 from solver.ik import IKSolver
-try:
+import os
+# Decided by the checkout's files, not by trying the import: the editable install's
+# finder can resolve a missing subpackage to another tree's directory.
+if os.path.exists(os.path.join(sys.argv[1], "solver", "model", "forward.py")):
     from solver.model.forward import effector_poses
-except ImportError:  # a checkout from before solver/ had layers
-    from solver.model.forward import effector_poses
+else:  # a checkout from before solver/ had layers
+    from solver.fk import effector_poses
 bc = ik_chains.load(sys.argv[2], peer_urdf=False)
 part = sys.argv[3]
 c = bc.pose

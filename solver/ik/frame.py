@@ -149,16 +149,9 @@ def solve_frame(  # type: ignore[no-untyped-def]
     # The build without reference counting: the IK objective and metric allocate
     # nothing (their scratch is DD's rows), see _jit.jit_leaf.
     res = run_solver_leaf(
-        None,
-        data,
-        x0,
-        h,
-        (dd[DD_LO], dd[DD_HI]),
-        (fopt, iopt, policy),
-        (log, trace),
-        (out_x, out_g),
-        (work, ints),
-    )
+        None, data, x0, h, dd[DD_LO], dd[DD_HI], fopt, iopt, policy, log, trace, out_x, out_g,
+        work, ints,
+    )  # fmt: skip
     code = res.code
     # The solve's answer is usually the point it evaluated last (ED holds its errors,
     # MISC its goal measure): reuse that instead of one more FK.

@@ -63,35 +63,50 @@ WORK_ROWS = 12
 
 
 @jit
-def run_solver(fg, data, x0, h, bounds, settings, records, best):  # type: ignore[no-untyped-def]
+def run_solver(  # type: ignore[no-untyped-def]
+    fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g
+):
     """The core for any objective (``minimize``: user objectives, MGH); see
     ``solve_passes``. Allocates its work arrays, so the objective may allocate too."""
-    work = (np.empty((WORK_ROWS, x0.shape[0])), np.empty(3, dtype=np.int64))
-    return solve_passes(fg, data, x0, h, bounds, settings, records, best, work)
+    vectors = np.empty((WORK_ROWS, x0.shape[0]))
+    ints = np.empty(3, dtype=np.int64)
+    return solve_passes(
+        fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
+    )
 
 
 @jit_leaf
-def run_solver_leaf(fg, data, x0, h, bounds, settings, records, best, work):  # type: ignore[no-untyped-def]
+def run_solver_leaf(  # type: ignore[no-untyped-def]
+    fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
+):
     """The same core compiled without reference counting (``jit_leaf``), for the IK
     objective, which allocates nothing: ~2.4x faster per iteration, same iterates.
-    ``work`` is (float64[WORK_ROWS, n], int64[3]), the caller's."""
-    return solve_passes(fg, data, x0, h, bounds, settings, records, best, work)
+    ``vectors`` is float64[WORK_ROWS, n] and ``ints`` int64[3], both the caller's.
+
+    Flat arguments on purpose: the same core taking them grouped in tuples ((lo, hi),
+    (fopt, iopt, policy), ...) made the IK solve 1.5% (panda, pose) to 5% (iiwa,
+    tracking) slower in ``bench/ab_core.py``."""
+    return solve_passes(
+        fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
+    )
 
 
 @jit_inline
-def check_termination(f, m, x, g, lo, hi, nit, nfev, fopt, iopt, deadline):  # type: ignore[no-untyped-def]
+def check_termination(  # type: ignore[no-untyped-def]
+    f, m, x, g, lo, hi, nit, nfev, has_goal, f_goal, gtol, max_iter, max_fev, deadline
+):
     """The stopping tests at the top of every iteration: a termination code, or
     RUNNING to go on. Order matters: a non-finite point is never judged further, and
-    a met goal wins over the budgets."""
+    a met goal wins over the budgets. Options come as scalars the caller read once."""
     if not (math.isfinite(f) and all_finite(g)):
         return C.NONFINITE
-    if iopt[C.I_HAS_GOAL] != 0 and m <= fopt[C.F_F_GOAL]:
+    if has_goal and m <= f_goal:
         return C.GOAL_REACHED
-    if projected_gradient_norm(x, g, lo, hi) <= fopt[C.F_GTOL]:
+    if projected_gradient_norm(x, g, lo, hi) <= gtol:
         return C.GTOL
-    if nit >= iopt[C.I_MAX_ITER]:
+    if nit >= max_iter:
         return C.MAX_ITER
-    if nfev >= iopt[C.I_MAX_FEV]:
+    if nfev >= max_fev:
         return C.MAX_FEV
     if now_s() >= deadline:
         return C.DEADLINE
@@ -99,19 +114,20 @@ def check_termination(f, m, x, g, lo, hi, nit, nfev, fopt, iopt, deadline):  # t
 
 
 @jit_inline
-def search_step(fg, data, x, f, g, lo, hi, h, fopt, iopt, vectors, counters):  # type: ignore[no-untyped-def]
+def search_step(  # type: ignore[no-untyped-def]
+    fg, data, x, f, g, lo, hi, h, fopt, iopt, trial, counters, max_step, grad_at_trial
+):
     """One iteration's move from x: the projected descent direction (steepest descent
     if H has lost positive definiteness), capped to ``max_step`` per variable, and the
     line search along it. Returns (line-search status, f at x+, lambda, whether H was
-    reset to I); x+ and its gradient are left in the trial rows of ``vectors``."""
+    reset to I); x+ and its gradient are left in ``trial``'s x_new and g_new.
+
+    ``trial`` is (x_new, g_new, d, gm, work, keep), rows of the work block cut once
+    per solve; ``grad_at_trial``: the search evaluates f only (finite differences
+    without the curvature phase), so x+ needs its gradient here.
+    """
     n = x.shape[0]
-    x_new = vectors[2]
-    g_new = vectors[3]
-    d = vectors[4]
-    gm = vectors[5]
-    work = vectors[9]
-    keep = vectors[10:12]
-    grad_mode = iopt[C.I_GRAD_MODE]
+    x_new, g_new, d, gm, work, keep = trial
     reset = False
     slope = descent_direction(h, g, x, lo, hi, d, gm)
     if not (slope < 0.0):
@@ -123,7 +139,6 @@ def search_step(fg, data, x, f, g, lo, hi, h, fopt, iopt, vectors, counters):  #
     for i in range(n):
         if abs(d[i]) > big:
             big = abs(d[i])
-    max_step = fopt[C.F_MAX_STEP]
     if big > max_step:
         # Step cap (inf-norm: per variable, e.g. radians per joint).
         scale = max_step / big
@@ -132,8 +147,8 @@ def search_step(fg, data, x, f, g, lo, hi, h, fopt, iopt, vectors, counters):  #
     status, f_trial, lam = line_search(
         fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters, keep
     )
-    if status == C.LS_ACCEPTED and grad_mode != C.GRAD_ANALYTIC and iopt[C.I_CURVATURE] == 0:
-        # Finite differences: the search evaluated f only; x+ needs its gradient.
+    if status == C.LS_ACCEPTED and grad_at_trial:
+        grad_mode = iopt[C.I_GRAD_MODE]
         f_trial = evaluate(fg, data, x_new, g_new, True, grad_mode, lo, hi, work, counters)
     return status, f_trial, lam, reset
 
@@ -170,19 +185,18 @@ def step_vectors(x, x_new, g, g_new, s, y):  # type: ignore[no-untyped-def]
 
 
 @jit_inline
-def metric_due(iopt, pass_iters, goal_met):  # type: ignore[no-untyped-def]
+def metric_due(every, until, final_metric, pass_iters, goal_met):  # type: ignore[no-untyped-def]
     """Whether this iteration re-seeds H from the objective's metric (if it has one)
-    instead of the BFGS update. Not at a point that meets the goal: the pass ends
-    there, and a metric for a step never taken would be wasted (a third of a
-    warm-started stream frame's work) unless the caller carries this H to its next
-    solve (I_FINAL_METRIC)."""
-    every = iopt[C.I_METRIC_EVERY]
-    until = iopt[C.I_METRIC_UNTIL]
+    instead of the BFGS update: every ``every`` iterations of a pass, during its first
+    ``until`` (0: always). Not at a point that meets the goal: the pass ends there,
+    and a metric for a step never taken would be wasted (a third of a warm-started
+    stream frame's work) unless the caller carries this H to its next solve
+    (``final_metric``)."""
     return (
         every > 0
         and pass_iters % every == 0
         and (until == 0 or pass_iters < until)
-        and (iopt[C.I_FINAL_METRIC] != 0 or not goal_met)
+        and (final_metric or not goal_met)
     )
 
 
@@ -242,7 +256,9 @@ def log_pass(log, row, start_kind, iterations, code, f_start, f_end, goal, actio
 
 
 @jit_inline
-def solve_passes(fg, data, x0, h, bounds, settings, records, best, work):  # type: ignore[no-untyped-def]
+def solve_passes(  # type: ignore[no-untyped-def]
+    fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
+):
     """Multi-pass projected BFGS under the analyzer; the whole solve in one call.
 
     Args:
@@ -256,28 +272,23 @@ def solve_passes(fg, data, x0, h, bounds, settings, records, best, work):  # typ
         x0: Start, shape (n,); projected into the box here.
         h: Inverse-Hessian approximation, shape (n, n): the initial H on entry
             (identity or the caller's), the final H on return.
-        bounds: (lower, upper), shape (n,) each; +-inf allowed; lower <= upper
-            checked by the caller.
-        settings: (fopt, iopt, policy): the option vectors laid out as in ``codes``
-            (F_*, I_*; iopt[I_SEED] is written on return: the restart generator's
-            state, as a seed) and the analyzer table int64[n_codes, 3].
-        records: (log, trace): the pass log float64[max_passes, N_LOG], filled row by
-            row, and float64[rows, 5]: for each accepted step (while rows last) f
-            before, f after, g.(x+ - x), lambda, and the smallest distance of x+ to a
-            bound (negative would mean it left the box). Shape (0, 5) records nothing.
-        best: (out_x, out_g): receive the best x and its gradient.
-        work: (float64[WORK_ROWS, n], int64[3]) work blocks (contents ignored): the
-            caller's, so that this body allocates nothing.
+        lo, hi: Bounds, shape (n,) each; +-inf allowed; lo <= hi checked by the
+            caller.
+        fopt, iopt, policy: The option vectors laid out as in ``codes`` (F_*, I_*;
+            iopt[I_SEED] is written on return: the restart generator's state, as a
+            seed) and the analyzer table int64[n_codes, 3].
+        log, trace: The pass log float64[max_passes, N_LOG], filled row by row, and
+            float64[rows, 5]: for each accepted step (while rows last) f before, f
+            after, g.(x+ - x), lambda, and the smallest distance of x+ to a bound
+            (negative would mean it left the box). Shape (0, 5) records nothing.
+        out_x, out_g: Receive the best x and its gradient.
+        vectors, ints: Work blocks float64[WORK_ROWS, n] and int64[3] (contents
+            ignored): the caller's, so that this body allocates nothing.
 
     Returns:
         A ``CoreResult``.
     """
     t_start = now_s()
-    lo, hi = bounds
-    fopt, iopt, policy = settings
-    log, trace = records
-    out_x, out_g = best
-    vectors, ints = work
     max_iter = iopt[C.I_MAX_ITER]
     max_fev = iopt[C.I_MAX_FEV]
     stall_window = iopt[C.I_STALL_WINDOW]
@@ -286,6 +297,12 @@ def solve_passes(fg, data, x0, h, bounds, settings, records, best, work):  # typ
     has_goal = iopt[C.I_HAS_GOAL] != 0
     scale_h0 = iopt[C.I_SCALE_H0] != 0
     max_passes = min(iopt[C.I_MAX_PASSES], log.shape[0])
+    metric_every = iopt[C.I_METRIC_EVERY]
+    metric_until = iopt[C.I_METRIC_UNTIL]
+    final_metric = iopt[C.I_FINAL_METRIC] != 0
+    grad_at_trial = grad_mode != C.GRAD_ANALYTIC and iopt[C.I_CURVATURE] == 0
+    gtol = fopt[C.F_GTOL]
+    max_step = fopt[C.F_MAX_STEP]
     xtol = fopt[C.F_XTOL]
     ftol = fopt[C.F_FTOL]
     f_goal = fopt[C.F_F_GOAL]
@@ -309,6 +326,7 @@ def solve_passes(fg, data, x0, h, bounds, settings, records, best, work):  # typ
     y = vectors[7]
     hy = vectors[8]
     scratch = vectors[9]
+    trial = (x_new, g_new, vectors[4], vectors[5], scratch, vectors[10:12])
 
     project(x0, lo, hi, x)
     f = evaluate(fg, data, x, g, True, grad_mode, lo, hi, scratch, counters)
@@ -338,11 +356,14 @@ def solve_passes(fg, data, x0, h, bounds, settings, records, best, work):  # typ
         began_fresh = h_fresh
         stall_count = 0
         while True:
-            code = check_termination(f, m, x, g, lo, hi, nit, counters[0], fopt, iopt, deadline)
+            code = check_termination(
+                f, m, x, g, lo, hi, nit, counters[0], has_goal, f_goal, gtol, max_iter, max_fev,
+                deadline,
+            )  # fmt: skip
             if code != C.RUNNING:
                 break
             status, f_trial, lam, h_reset = search_step(
-                fg, data, x, f, g, lo, hi, h, fopt, iopt, vectors, counters
+                fg, data, x, f, g, lo, hi, h, fopt, iopt, trial, counters, max_step, grad_at_trial
             )
             if h_reset:
                 h_is_identity = True
@@ -360,9 +381,10 @@ def solve_passes(fg, data, x0, h, bounds, settings, records, best, work):  # typ
                 scale_initial_h(h, s, y)
             # The goal at the new point first: it decides whether a metric is due.
             m_new = call_goal(fg, f_trial, x_new, data) if has_goal else f_trial
-            if metric_due(iopt, pass_iters, has_goal and m_new <= f_goal) and call_metric(
-                fg, x_new, g_new, lo, hi, data, h
-            ):
+            goal_met = has_goal and m_new <= f_goal
+            if metric_due(
+                metric_every, metric_until, final_metric, pass_iters, goal_met
+            ) and call_metric(fg, x_new, g_new, lo, hi, data, h):
                 # Re-seed H from the objective's metric (every step: damped Gauss-Newton).
                 h_is_identity = False
             elif bfgs_update(h, s, y, hy, eps_curv):

@@ -159,7 +159,7 @@ def minimize(
     # A registered objective is bound at compile time (cached); others are passed in.
     fg = None if registered_for(objective) else objective
     core = run_solver(
-        fg, data, x, h, (lo, hi), (fopt, iopt, policy.as_array()), (log, trace), (out_x, out_g)
+        fg, data, x, h, lo, hi, fopt, iopt, policy.as_array(), log, trace, out_x, out_g
     )
     pass_log = unpack_pass_log(log, core.passes)
     return MinimizeResult(

@@ -42,20 +42,20 @@ def _run(
     log = np.zeros((16, C.N_LOG))
     out_x = np.empty(n)
     out_g = np.empty(n)
-    args = [
-        None,
-        data,
-        x0,
-        h,
-        (dd[DD_LO], dd[DD_HI]),
-        (fopt, iopt, solver.options.policy.as_array()),
-        (log, np.empty((0, 5))),
-        (out_x, out_g),
-    ]
+    policy = solver.options.policy.as_array()
+    trace = np.empty((0, 5))
     if leaf:
         # Garbage in the work blocks: the core must not read what it has not written.
-        args.append((np.full((WORK_ROWS, n), np.nan), np.full(3, -7, dtype=np.int64)))
-    res = core(*args)
+        work = np.full((WORK_ROWS, n), np.nan)
+        ints = np.full(3, -7, dtype=np.int64)
+        res = core(
+            None, data, x0, h, dd[DD_LO], dd[DD_HI], fopt, iopt, policy, log, trace, out_x,
+            out_g, work, ints,
+        )  # fmt: skip
+    else:
+        res = core(
+            None, data, x0, h, dd[DD_LO], dd[DD_HI], fopt, iopt, policy, log, trace, out_x, out_g
+        )
     return res[:-1], out_x, out_g, h, log  # res[-1] is the elapsed time
 
 
