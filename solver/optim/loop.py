@@ -81,11 +81,7 @@ def run_solver_leaf(  # type: ignore[no-untyped-def]
 ):
     """The same core compiled without reference counting (``jit_leaf``), for the IK
     objective, which allocates nothing: ~2.4x faster per iteration, same iterates.
-    ``vectors`` is float64[WORK_ROWS, n] and ``ints`` int64[3], both the caller's.
-
-    Flat arguments on purpose: the same core taking them grouped in tuples ((lo, hi),
-    (fopt, iopt, policy), ...) made the IK solve 1.5% (panda, pose) to 5% (iiwa,
-    tracking) slower in ``bench/ab_core.py``."""
+    ``vectors`` is float64[WORK_ROWS, n] and ``ints`` int64[3], both the caller's."""
     return solve_passes(
         fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
     )
