@@ -1,7 +1,7 @@
 """Chains for bench/ik/: the three URDF arms and our two example chains, each with a
 pose-mode chain, a position-mode chain, and (where one exists) a URDF the peers can load.
 
-The URDF arms come from bench/robots.py and are built with solver.urdf.chain_from_urdf.
+The URDF arms come from bench/robots.py and are built with solver.model.urdf.chain_from_urdf.
 The examples (solver.examples.tail(20): 40 DOF; humanoid_arm(): 7 DOF with a three-axis
 shoulder) have no URDF, so `example_urdf` writes one from the Chain itself into
 bench/out/urdf/: a rotational joint with axes "zxy" becomes three revolute joints about
@@ -22,9 +22,9 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from bench.robots import ROBOTS, RobotSpec, robot
-from solver.chain import Chain, EffectorMode, JointKind
-from solver.examples import humanoid_arm, tail
-from solver.urdf import chain_from_urdf
+from solver.model import Chain, EffectorMode, JointKind
+from solver.model.examples import humanoid_arm, tail
+from solver.model.urdf import chain_from_urdf
 
 OUT_DIR = Path(__file__).resolve().parent / "out" / "urdf"
 EXAMPLES: tuple[str, ...] = ("tail40", "humanoid_arm")
@@ -70,7 +70,7 @@ def load(name: str, *, peer_urdf: bool = True) -> BenchChain:
         )
         source = (
             f"{spec.urdf_path.name} ({spec.base_link} -> {spec.tip_link}), "
-            "solver.urdf.chain_from_urdf"
+            "solver.model.urdf.chain_from_urdf"
         )
         return BenchChain(name, pose, position, spec, source, True, _perm(pose, spec.joint_names))
     if name == "tail40":
@@ -119,7 +119,7 @@ def _rpy(r: np.ndarray) -> tuple[float, float, float]:
 
 
 def _origin(t: np.ndarray, r: np.ndarray) -> str:
-    from solver.chain import rpy_to_matrix
+    from solver.model import rpy_to_matrix
 
     rpy = _rpy(r)
     if not np.allclose(rpy_to_matrix(*rpy), r, atol=1e-12):

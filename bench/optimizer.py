@@ -32,8 +32,8 @@ import scipy
 from scipy.optimize import minimize as scipy_minimize
 
 from solver import AnalyzerPolicy, GradientMode, MinimizeOptions, minimize
-from solver._dispatch import register_objective
-from solver.mgh import PROBLEMS, MGHProblem, mgh_objective
+from solver.optim import register_objective
+from tests.solver.mgh import PROBLEMS, MGHProblem, mgh_objective
 
 register_objective(mgh_objective, None, PROBLEMS[0].data())
 

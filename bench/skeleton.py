@@ -23,8 +23,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from solver.chain import Effector, EffectorMode  # noqa: E402
 from solver.ik import STREAM_DEFAULTS, IKSolver, pose_targets  # noqa: E402
+from solver.model import Effector, EffectorMode  # noqa: E402
 from solver.model.bvh import read_bvh  # noqa: E402
 from solver.model.gltf import read_gltf  # noqa: E402
 from solver.model.skeleton import SkeletonSettings, chain_from_skeleton  # noqa: E402

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 import orjson
 
-from solver.chain import Chain, EffectorMode, matrix_to_quaternion
-from solver.examples import EXAMPLES
-from solver.fk import effector_poses
+from solver.model import Chain, EffectorMode, matrix_to_quaternion
+from solver.model.examples import EXAMPLES
+from solver.model.forward import effector_poses
 
 # The chains the issue names: a 7-DOF arm, a humanoid arm, a 40-DOF tail.
 DEFAULT_CHAINS: tuple[str, ...] = ("panda_arm", "humanoid_arm", "tail")
@@ -52,8 +52,7 @@ def make_path(chain_name: str, rate_hz: float, *, loop_s: float = LOOP_S) -> Pat
         raise ValueError(f"unknown example chain {chain_name!r}; one of {sorted(EXAMPLES)}")
     chain: Chain = EXAMPLES[chain_name]()  # type: ignore[operator]  # untyped table
     n = max(2, round(rate_hz * loop_s))
-    with np.errstate(invalid="ignore"):  # mid_limits of unbounded joints: see solver
-        mid = chain.mid_limits()
+    mid = chain.mid_limits()
     half = 0.5 * (chain.upper - chain.lower)
     amp = np.minimum(np.where(np.isfinite(half), 0.25 * half, 0.5), 0.5)
     j = np.arange(chain.n_dof)

@@ -28,9 +28,9 @@ import httpx
 import numpy as np
 from websockets.asyncio.client import connect
 
-from solver.chain import matrix_to_quaternion
-from solver.examples import panda_arm
-from solver.fk import effector_poses
+from solver.model import matrix_to_quaternion
+from solver.model.examples import panda_arm
+from solver.model.forward import effector_poses
 
 from .service_process import ServiceProcess
 

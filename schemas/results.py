@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from solver.termination import Termination
+from solver.optim.termination import Termination
 
 from .common import StrictModel
 

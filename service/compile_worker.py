@@ -1,7 +1,7 @@
 """``python -m service.compile_worker [STEP ...]``: compile the solver into numba's
 on-disk cache, then exit (started by ``service.startup``; no steps = all of them).
 
-Prints one JSON line per progress report (``solver.warmup.WarmupProgress``) on stdout.
+Prints one JSON line per progress report (``solver.precompile.WarmupProgress``) on stdout.
 When its stdin is a pipe, exits as soon as that closes: its parent died, so nobody
 waits for the compile.
 """
@@ -15,7 +15,7 @@ import sys
 import threading
 from dataclasses import asdict
 
-from solver.warmup import WarmupProgress, warmup
+from solver.precompile import WarmupProgress, warmup
 
 
 def _print(p: WarmupProgress) -> None:

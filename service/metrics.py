@@ -27,7 +27,7 @@ from prometheus_client.utils import floatToGoString
 
 from schemas import ErrorCode
 from solver.ik import IKResult
-from solver.termination import Termination
+from solver.optim import Termination
 
 from .convert import SolvedFrame
 

@@ -26,7 +26,7 @@ from starlette import status
 from schemas import ErrorCode, StartupProgress
 from solver.ik import IKOptions, IKSolver
 from solver.ik import Target as SolverTarget
-from solver.path import PlannedPath
+from solver.path import PlannedPath, plan_path
 
 from .convert import ChainView, FrameJob, SolvedFrame
 from .errors import ServiceError, not_found, not_ready, plans_busy, too_many_plans
@@ -186,8 +186,8 @@ class Runner:
         t0: float,
         transport: str,
     ) -> tuple[list[SolvedFrame], PlannedPath]:
-        """Solve a session's clip as a whole (``IKSolver.plan``): the solved frames and
-        the plan. Always off the loop, on the planning thread: a plan takes milliseconds
+        """Solve a session\'s clip as a whole (``solver.path.plan_path``): the solved frames
+        and the plan. Always off the loop, on the planning thread: a plan takes milliseconds
         per frame. At most ``max_queued_plans`` at once (503 ``plans_busy``), and at
         most half of them (at least one) for one client (429 ``too_many_plans``): a
         plan counts from here until its thread is done, also if its caller went away."""
@@ -321,7 +321,7 @@ def _plan_all(
     the request and leaves the session's pose as it was)."""
     if session.closed:  # deleted while the plan waited for the planning thread
         raise not_found()
-    plan = session.solver.plan([targets for _, targets in jobs], options=options)
+    plan = plan_path(session.solver, [targets for _, targets in jobs], options=options)
     server_us = (time.perf_counter() - t0) * 1e6
     out = [
         SolvedFrame(frame_id, r, server_us)

@@ -31,7 +31,7 @@ from typing import IO
 
 import solver
 from schemas import StartupPhase, StartupProgress
-from solver.warmup import STEP_NAMES, NotCached, WarmupProgress, warmup
+from solver.precompile import STEP_NAMES, NotCached, WarmupProgress, warmup
 
 log = logging.getLogger("service")
 

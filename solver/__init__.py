@@ -1,16 +1,33 @@
 """Bound-constrained multi-pass BFGS with an analyzer, and the IK built on it.
 
 numpy + a numba-compiled core; no web, logging or environment access here.
+Layers (each imports only those above it; see ARCHITECTURE.md):
+    optim/    the article's optimizer (knows no kinematics)
+    model/    chains, joints, rotations, forward kinematics, importers (knows no optimizer)
+    ik/       inverse kinematics on both: targets, options, results, the solver object
+    path/     planned clips, on ik's documented surface
+    precompile.py   ``warmup``: load or compile every compiled path before serving
 """
 
-from .analyzer import AnalyzerPolicy
-from .bfgs import minimize
-from .chain import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
 from .errors import DimensionMismatch, IKError, InvalidModel, InvalidProblem
 from .ik import IKOptions, IKResult, IKSolver, IKStatus, Target, solve
-from .termination import TERMINATION_MESSAGES, Action, GoalStatus, PassStart, Termination
-from .types import AcceptedStep, GradientMode, MinimizeOptions, MinimizeResult, PassRecord
-from .warmup import warmup
+from .model import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from .optim import (
+    TERMINATION_MESSAGES,
+    AcceptedStep,
+    Action,
+    AnalyzerPolicy,
+    GoalStatus,
+    GradientMode,
+    MinimizeOptions,
+    MinimizeResult,
+    PassRecord,
+    PassStart,
+    Termination,
+    minimize,
+)
+from .path import PathOptions, PlannedPath, plan_path
+from .precompile import warmup
 
 __all__ = [
     "AcceptedStep",
@@ -24,9 +41,12 @@ __all__ = [
     "IKStatus",
     "Joint",
     "JointKind",
+    "PathOptions",
+    "PlannedPath",
     "Target",
     "Transform",
     "build_chain",
+    "plan_path",
     "solve",
     "warmup",
     "AnalyzerPolicy",

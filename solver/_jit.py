@@ -10,10 +10,17 @@
   service's event loop) keep running while it works.
 
 Cache invalidation. numba stamps a cached function with its *own* source file only;
-a caller in ik.py keeps its cached machine code, with the old callee compiled in,
-after kinematics.py changes. That is how an upgrade would silently run old code. So
-every function compiled through ``jit`` is stamped with a hash of all of solver/'s
-sources plus its own file: any change anywhere in the package recompiles everything.
+a caller in ik/frame.py keeps its cached machine code, with the old callee compiled
+in, after ik/kinematics.py changes. That is how an upgrade would silently run old
+code. So every function compiled through ``jit`` is stamped with a hash of all of
+solver/'s sources, its subpackages' included, plus its own file: any change anywhere
+in the package recompiles everything.
+
+One gap the stamp cannot close: an objective registered from outside solver/
+(``solver.optim.register_objective``, e.g. the tests' MGH problems) is compiled into
+the core's cached code under solver/'s stamp. After editing such an objective, delete
+the ``__pycache__`` directories under solver/ (or set ``NUMBA_CACHE_DIR`` to a fresh
+directory) so that the core is compiled again with the new objective.
 """
 
 from __future__ import annotations
@@ -34,15 +41,16 @@ _SOLVER_DIR = Path(__file__).resolve().parent
 
 # Files that hold no compiled function and that no compiled function reads: editing
 # them must not throw the whole compiled package away.
-_NOT_COMPILED = frozenset({"warmup.py"})
+_NOT_COMPILED = frozenset({"precompile.py"})
 
 
 def _package_digest() -> bytes:
     h = hashlib.sha256(numba.__version__.encode())
-    for path in sorted(_SOLVER_DIR.glob("*.py")):
-        if path.name in _NOT_COMPILED:
+    for path in sorted(_SOLVER_DIR.rglob("*.py")):
+        name = path.relative_to(_SOLVER_DIR).as_posix()
+        if name in _NOT_COMPILED:
             continue
-        h.update(path.name.encode())
+        h.update(name.encode())
         h.update(path.read_bytes())
     return h.digest()
 
@@ -109,8 +117,9 @@ def jit_leaf(fn: F) -> F:
     caller compiles a helper first decides its build) and numba's on-disk cache key
     does not record it, so an allocation added to a shared helper could compile with
     a warm cache and fail in a fresh one: every helper the IK path reaches is
-    therefore marked ``jit_leaf`` itself (``_curvature_phase`` excepted: it calls
-    ``minimize()``'s objectives, which may allocate; it allocates nothing itself).
+    therefore marked ``jit_leaf`` itself (``optim.line_search.curvature_phase``
+    excepted: it calls ``minimize()``'s objectives, which may allocate; it allocates
+    nothing itself).
     """
     compiled: F = _compile(fn, _nrt=False)
     return compiled

@@ -13,7 +13,7 @@ Solvers (settings written out in the report):
               every iteration) with tolerances 1e-5 m / 1e-4 rad and a 5000 us budget
   ours-bfgs   the same with metric_every=0 (the article's BFGS: metric only at pass start)
   scipy       scipy.optimize.minimize(method="L-BFGS-B", jac=True, bounds=limits) on OUR
-              compiled objective and FK (solver.kinematics.ik_objective on the IKSolver's
+              compiled objective and FK (solver.ik.kinematics.ik_objective on the IKSolver's
               data tuple after _load_targets), tightened ftol/gtol, no restarts
   rtb         roboticstoolbox-python's C++ ik_LM (bench/peers/rtb_peer.py)
   ikpy        ikpy 4 (bench/peers/ikpy_peer.py)
@@ -24,7 +24,7 @@ writes one from the Chain, and every peer's FK is checked against ours before ti
 Parts:
   a. TRAC-IK's protocol: N uniform random q within limits -> FK pose; solve from the
      mid-limits seed; success = position <= 1e-5 m and rotation <= 1e-4 rad by OUR FK
-     (solver.fk.effector_poses on the chain), all joints within limits, and a wall time
+     (solver.model.forward.effector_poses on the chain), all joints within limits, and a wall time
      <= 5 ms. Never a solver's own flag.
   b. Position only, same targets, <= 1e-5 m.
   c. Tracking: smooth joint paths q(t) = c + A sin(2 pi f t + phi) (inside the limits)

@@ -11,7 +11,7 @@ import numpy as np
 
 from bench.ik_chains import CHAINS, BenchChain, load
 from bench.peers import SKIPPED, PeerSolver, available_peers
-from solver.fk import effector_poses
+from solver.model.forward import effector_poses
 
 from . import __doc__ as PACKAGE_DOC
 from .adapters import peer_key

@@ -4,14 +4,15 @@ the peers of bench/peers/. scipy's L-BFGS-B is in scipy_lbfgsb.py."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any, Protocol
 
 import numpy as np
 
 from bench.ik_chains import BenchChain
 from bench.peers import PeerSolver
-from solver.ik import STREAM_DEFAULTS, IKOptions, IKSolver, Target, with_options
-from solver.path import PlannedPath
+from solver.ik import STREAM_DEFAULTS, IKOptions, IKSolver, Target
+from solver.path import PlannedPath, plan_path
 
 from .config import POS_TOL, ROT_TOL
 
@@ -20,7 +21,7 @@ def ours_options(
     metric_every: int = 1, stream: bool = False, carry: bool = False, budget_us: float = 5000.0
 ) -> IKOptions:
     base = STREAM_DEFAULTS if stream else IKOptions()
-    return with_options(
+    return replace(
         base,
         position_tolerance_m=POS_TOL,
         rotation_tolerance_rad=ROT_TOL,
@@ -114,7 +115,7 @@ class OursPlanned:
         self._planned = None
 
     def plan(self) -> PlannedPath:
-        self._planned = self.solver.plan(self.targets)
+        self._planned = plan_path(self.solver, self.targets)
         return self._planned
 
     def solve(self, k: int, seed: np.ndarray) -> tuple[np.ndarray | None, float, bool | None]:

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bench.ik_chains import BenchChain
-from solver.fk import effector_poses
+from solver.model.forward import effector_poses
 
 from .config import POS_TOL, ROT_TOL
 

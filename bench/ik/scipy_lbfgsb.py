@@ -1,5 +1,5 @@
-"""scipy's L-BFGS-B on our compiled objective: the one adapter that reaches into the
-solver's internals (the IKSolver's data tuple after ``_load_targets``)."""
+"""scipy's L-BFGS-B on our compiled objective: the IKSolver's data tuple for a frame
+(``IKSolver.load_frame``, its documented surface) handed to scipy."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 
 from bench.ik_chains import BenchChain
 from solver.ik import IKOptions, IKSolver, Target
-from solver.kinematics import effector_errors, ik_objective
+from solver.ik.kinematics import effector_errors, ik_objective
 
 
 class _Deadline(Exception):
@@ -23,11 +23,11 @@ class _GoalMet(Exception):
 
 
 SCIPY_FTOL, SCIPY_GTOL, SCIPY_MAXITER = 1e-16, 1e-12, 1000
-# The report's line on this adapter (with the reach into the solver it describes).
+# The report's line on this adapter.
 SCIPY_DESCRIPTION = (
     "scipy L-BFGS-B: scipy.optimize.minimize(method='L-BFGS-B', jac=True, bounds=limits) on "
-    "solver.kinematics.ik_objective(q, g, True, data) with the IKSolver's data tuple after "
-    "_load_targets (same FK, weights w_p=1, w_r=0.01, exact gradient); "
+    "solver.ik.kinematics.ik_objective(q, g, True, data) with the IKSolver's data tuple from "
+    "IKSolver.load_frame (same FK, weights w_p=1, w_r=0.01, exact gradient); "
     f"ftol={SCIPY_FTOL:g}, gtol={SCIPY_GTOL:g} (scipy's defaults 2.2e-9 / 1e-5 stop around 5e-5 m, short "
     f"of 1e-5 m), maxiter={SCIPY_MAXITER}, maxfun={20 * SCIPY_MAXITER}, maxcor=10 (default); stops as soon "
     "as an iterate is within tolerance (callback), gives no answer once 5 ms have passed (checked "
@@ -51,7 +51,6 @@ class ScipyLBFGSB:
         self._minimize = minimize
         self._ik = IKSolver(bc.position if position_only else bc.pose, opts)
         self._opts = opts
-        self._data = self._ik._data
         self._bounds = Bounds(bc.pose.lower, bc.pose.upper)
         self._n = bc.pose.n_dof
         self._timeout = timeout_s
@@ -70,8 +69,8 @@ class ScipyLBFGSB:
         pass
 
     def solve(self, k: int, seed: np.ndarray) -> tuple[np.ndarray | None, float, bool | None]:
-        data, n = self._data, self._n
-        self._ik._load_targets(self.targets[k], self._opts)
+        n = self._n
+        data = self._ik.load_frame(self.targets[k], seed, options=self._opts)
         deadline = time.perf_counter() + self._timeout
         best: list[np.ndarray] = [seed]
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.ik_chains import CHAINS, BenchChain, load
-from solver.fk import effector_poses
 from solver.ik import Target
+from solver.model.forward import effector_poses
 
 from .config import Config
 

@@ -13,7 +13,9 @@ from typing import Any, cast
 
 import schemas as S
 from schemas.chain import MAX_NAME_LENGTH
-from solver.chain import (
+from solver.arrays import Vector
+from solver.errors import InvalidModel
+from solver.model import (
     Chain,
     Effector,
     EffectorMode,
@@ -22,10 +24,8 @@ from solver.chain import (
     Transform,
     build_chain,
 )
-from solver.errors import InvalidModel
-from solver.examples import EXAMPLES
-from solver.types import Vector
-from solver.urdf import chain_from_urdf
+from solver.model.examples import EXAMPLES
+from solver.model.urdf import chain_from_urdf
 
 from ..config import Settings
 from ..errors import invalid_problem

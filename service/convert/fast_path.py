@@ -19,9 +19,9 @@ import numpy as np
 
 from schemas.common import MAX_COORDINATE, QUATERNION_NORM_TOLERANCE
 from schemas.solve import HARD_MAX_TARGETS, MAX_FRAME_ID
-from solver.chain import EffectorMode
 from solver.ik import GIVEN_DIRECTION, GIVEN_POSITION, GIVEN_ROTATION, TARGET_PLACEHOLDER_ROW
 from solver.ik import Target as SolverTarget
+from solver.model import EffectorMode
 
 from .chains import ChainView
 from .geometry import Flat9, rotation_rows

@@ -11,8 +11,8 @@ import math
 from collections.abc import Sequence
 
 import schemas as S
-from solver.chain import EffectorMode
 from solver.ik import Target as SolverTarget
+from solver.model import EffectorMode
 
 from ..errors import invalid_problem
 from .chains import ChainView

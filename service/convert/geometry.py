@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 import schemas as S
-from solver.types import Vector
+from solver.arrays import Vector
 
 # A 3x3 rotation matrix as nine plain floats, row after row.
 Flat9 = tuple[float, float, float, float, float, float, float, float, float]

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 import schemas as S
-from solver.types import Vector
+from solver.arrays import Vector
 
 from ..errors import invalid_problem
 from .chains import ChainView

@@ -53,10 +53,10 @@ from typing import Any
 
 import numpy as np
 
-from solver.chain import Transform, quaternion_to_matrix
+from solver.arrays import Matrix, Vector
 from solver.errors import InvalidModel
+from solver.model import Transform, quaternion_to_matrix
 from solver.model.skeleton import Bone, Skeleton
-from solver.types import Matrix, Vector
 
 MAX_BYTES = 32_000_000  # a whole .glb or .gltf
 MAX_JSON_BYTES = 8_000_000  # a GLB's JSON chunk (a .gltf is all JSON: MAX_BYTES)

@@ -48,7 +48,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from solver.chain import (
+from solver.arrays import Matrix, Vector
+from solver.errors import InvalidModel, InvalidProblem
+from solver.model import (
     MAX_DOF_HARD,
     Chain,
     Effector,
@@ -58,9 +60,8 @@ from solver.chain import (
     build_chain,
     matrix_to_quaternion,
 )
-from solver.errors import InvalidModel, InvalidProblem
-from solver.kinematics import ND_R, ND_T, forward_kinematics
-from solver.types import Matrix, Vector
+from solver.model.forward import forward_kinematics
+from solver.model.layout import ND_R, ND_T
 
 # Bones beyond this make chain building and per-frame output slow for nothing: the
 # largest game rigs (faces and fingers included) have a few hundred.

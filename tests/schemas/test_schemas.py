@@ -16,10 +16,10 @@ from pydantic import TypeAdapter, ValidationError
 import schemas as S
 from schemas.chain import EXAMPLE_ARM, EffectorModeName, ExampleName, JointKindName
 from schemas.results import IKStatusName, TerminationName
-from solver.chain import EffectorMode, JointKind
-from solver.examples import EXAMPLES
 from solver.ik import IKStatus
-from solver.termination import Termination
+from solver.model import EffectorMode, JointKind
+from solver.model.examples import EXAMPLES
+from solver.optim import Termination
 
 CLIENT: TypeAdapter[Any] = TypeAdapter(S.ClientMessage)
 FRAMES: TypeAdapter[Any] = TypeAdapter(S.FramesBody)

@@ -4,7 +4,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from schemas.chain import EXAMPLE_ARM
+from solver.model import matrix_to_quaternion
+from solver.model.examples import panda_arm
+from solver.model.forward import effector_poses
 
 if TYPE_CHECKING:
     from starlette.testclient import TestClient
@@ -38,3 +43,15 @@ def hand_frame(
     if frame_id is not None:
         frame["id"] = frame_id
     return frame
+
+
+def panda_target(q: np.ndarray) -> dict[str, Any]:
+    """A pose target the Panda reaches at q (w >= 0 quaternion of the flange)."""
+    pose = effector_poses(panda_arm(), q)[0]
+    w, x, y, z = matrix_to_quaternion(pose[:3, :3])
+    px, py, pz = pose[:3, 3]
+    return {
+        "effector": "tool",
+        "position": {"x": px, "y": py, "z": pz},
+        "orientation": {"w": w, "x": x, "y": y, "z": z},
+    }

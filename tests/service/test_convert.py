@@ -10,7 +10,7 @@ from numpy.testing import assert_allclose
 import schemas as S
 from service import convert
 from service.convert.geometry import rotation_matrix
-from solver.chain import matrix_to_quaternion, quaternion_to_matrix
+from solver.model import matrix_to_quaternion, quaternion_to_matrix
 
 
 def test_rotation_matches_the_solver_convention_wxyz() -> None:
@@ -34,8 +34,8 @@ def test_rotation_normalises_slightly_off_quaternions() -> None:
 
 def test_result_dict_effectors_match_ikresult_effectors() -> None:
     """result_dict reads the raw error rows; IKResult.effectors is the reference."""
-    from solver.examples import EXAMPLES
     from solver.ik import IKSolver, pose_targets
+    from solver.model.examples import EXAMPLES
 
     for factory in EXAMPLES.values():
         chain = factory()

@@ -24,9 +24,9 @@ from starlette.testclient import TestClient
 import schemas as S
 from service import convert
 from service.errors import ServiceError
-from solver.chain import EffectorMode
-from solver.examples import panda_arm, two_arm_torso
 from solver.ik import Target
+from solver.model import EffectorMode
+from solver.model.examples import panda_arm, two_arm_torso
 
 from .helpers import Created, create
 

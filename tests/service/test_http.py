@@ -11,24 +11,9 @@ from starlette.testclient import TestClient
 
 import schemas as S
 from service.config import Settings
-from solver.examples import panda_arm
-from solver.fk import effector_poses
+from solver.model.examples import panda_arm
 
-from .helpers import ARM, Created, create, hand_frame
-
-
-def _panda_target(q: np.ndarray) -> dict[str, Any]:
-    """A pose target the Panda reaches at q (w >= 0 quaternion of the flange)."""
-    from solver.chain import matrix_to_quaternion
-
-    pose = effector_poses(panda_arm(), q)[0]
-    w, x, y, z = matrix_to_quaternion(pose[:3, :3])
-    px, py, pz = pose[:3, 3]
-    return {
-        "effector": "tool",
-        "position": {"x": px, "y": py, "z": pz},
-        "orientation": {"w": w, "x": x, "y": y, "z": z},
-    }
+from .helpers import ARM, Created, create, hand_frame, panda_target
 
 
 # --- sessions: create / get / patch / pose / delete ------------------------------------
@@ -170,7 +155,7 @@ def test_panda_pose_targets_from_forward_kinematics_are_solved(client: TestClien
     frames = []
     for i in range(10):
         q = np.clip(q + rng.normal(0.0, 0.02, q.shape), chain.lower, chain.upper)
-        frames.append({"id": i, "targets": [_panda_target(q)]})
+        frames.append({"id": i, "targets": [panda_target(q)]})
     r = client.post(f"/v1/sessions/{s.id}/frames", json={"frames": frames}, headers=s.headers)
     results = r.json()["results"]
     # A stream of small steps: judge the success rate, not each frame.
@@ -205,7 +190,7 @@ def test_solve_one_shot_with_seed(client: TestClient) -> None:
 
 def test_solve_panda_example_pose(client: TestClient) -> None:
     q = panda_arm().mid_limits() + 0.2
-    body = {"chain": {"format": "example", "name": "panda_arm"}, "targets": [_panda_target(q)]}
+    body = {"chain": {"format": "example", "name": "panda_arm"}, "targets": [panda_target(q)]}
     r = client.post("/v1/solve", json=body)
     assert r.status_code == 200 and r.json()["success"] is True
 

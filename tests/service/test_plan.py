@@ -18,12 +18,11 @@ from service.config import Settings
 from service.errors import ServiceError
 from service.metrics import Metrics
 from service.sessions import InMemorySessionStore, Session, new_session
-from solver.examples import panda_arm
 from solver.ik import IKSolver
-from tests.solver.test_path import joint_stream
+from solver.model.examples import panda_arm
+from tests.solver.helpers import joint_stream
 
-from .helpers import ARM, Created, create, hand_frame
-from .test_http import _panda_target
+from .helpers import ARM, Created, create, hand_frame, panda_target
 
 # Tolerances of the benchmark; a budget no loaded CI machine runs out of.
 TIGHT = {"position_tolerance_m": 1e-5, "rotation_tolerance_rad": 1e-4, "time_budget_us": 50_000}
@@ -39,7 +38,7 @@ def _panda_session(client: TestClient, q0: np.ndarray) -> Created:
 
 
 def _clip(path: np.ndarray, plan: bool) -> dict[str, Any]:
-    frames = [{"id": i, "targets": [_panda_target(q)]} for i, q in enumerate(path)]
+    frames = [{"id": i, "targets": [panda_target(q)]} for i, q in enumerate(path)]
     return {"frames": frames, "plan": plan}
 
 
@@ -142,13 +141,13 @@ def test_a_planned_clip_runs_on_the_planning_thread(
 ) -> None:
     # Plans take seconds: they must not occupy the pool that serves frames and solves.
     threads: list[str] = []
-    real = IKSolver.plan
+    real = solving.plan_path
 
-    def spy(self: IKSolver, *args: Any, **kwargs: Any) -> Any:
+    def spy(*args: Any, **kwargs: Any) -> Any:
         threads.append(threading.current_thread().name)
-        return real(self, *args, **kwargs)
+        return real(*args, **kwargs)
 
-    monkeypatch.setattr(IKSolver, "plan", spy)
+    monkeypatch.setattr(solving, "plan_path", spy)
     r = client.post(
         f"/v1/sessions/{session.id}/frames",
         json={"frames": [hand_frame(1), hand_frame(2, y=0.11)], "plan": True},
@@ -162,12 +161,14 @@ class _HeldPlans:
     """A Runner on the example arm whose sessions' plans wait for ``release``: what
     the plan-queue tests drive. ``ran`` names the sessions whose plan started."""
 
-    def __init__(self, max_queued_plans: int) -> None:
+    def __init__(self, max_queued_plans: int, real_plan: Callable[..., Any]) -> None:
+        self.real_plan = real_plan
         settings = Settings()
         self.view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
         self.options = convert.session_defaults(settings)
         self.release = threading.Event()
         self.ran: list[str] = []
+        self.names: dict[int, str] = {}  # id of a session's solver -> session name
         warm = solving.Warmup(lambda _report: 0.0)
         warm._run()
         self.runner = solving.Runner(
@@ -191,15 +192,14 @@ class _HeldPlans:
             owner=owner,
         )
         await self.store.add(session)
-        real = session.solver.plan
-
-        def held(*args: Any, **kwargs: Any) -> Any:
-            self.ran.append(name)
-            self.release.wait(timeout=30)
-            return real(*args, **kwargs)
-
-        session.solver.plan = held  # type: ignore[method-assign]
+        self.names[id(session.solver)] = name
         return session
+
+    def held_plan(self, solver: IKSolver, *args: Any, **kwargs: Any) -> Any:
+        """``plan_path`` for the service, waiting for ``release`` first."""
+        self.ran.append(self.names[id(solver)])
+        self.release.wait(timeout=30)
+        return self.real_plan(solver, *args, **kwargs)
 
     def plan(self, session: Session) -> Coroutine[Any, Any, Any]:
         return self.runner.session_plan(session, self.store, self.jobs, 0.0, "http")
@@ -228,14 +228,21 @@ class _HeldPlans:
 
 
 def _with_held_plans(max_queued_plans: int, body: Callable[[_HeldPlans], Awaitable[None]]) -> None:
+    real = solving.plan_path
+    holder: list[_HeldPlans] = []
+
     async def scenario() -> None:
-        held = _HeldPlans(max_queued_plans)
+        held = _HeldPlans(max_queued_plans, real)
+        holder.append(held)
         try:
             await body(held)
         finally:
             held.close()
 
-    asyncio.run(scenario())
+    with pytest.MonkeyPatch.context() as patch:
+        # The service plans through solving.plan_path: each session's plan waits.
+        patch.setattr(solving, "plan_path", lambda *a, **k: holder[0].held_plan(*a, **k))
+        asyncio.run(scenario())
 
 
 def test_plans_beyond_the_queue_limit_are_refused_at_once(warm_solver: float) -> None:

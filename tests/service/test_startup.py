@@ -15,7 +15,7 @@ import pytest
 
 from schemas import StartupPhase, StartupProgress
 from service import startup
-from solver.warmup import STEP_NAMES
+from solver.precompile import STEP_NAMES
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -491,13 +491,13 @@ def test_a_solver_error_in_a_clip_is_an_error_message_not_a_close(
 ) -> None:
     # convert.py rejects bad targets first, naming the field; a solver error that got
     # past it is still a recoverable invalid_problem, as over HTTP.
+    from service import solving
     from solver.errors import InvalidProblem
-    from solver.ik import IKSolver
 
     def refuse(*args: Any, **kwargs: Any) -> Any:
         raise InvalidProblem("refused for the test")
 
-    monkeypatch.setattr(IKSolver, "plan", refuse)
+    monkeypatch.setattr(solving, "plan_path", refuse)
     with client.websocket_connect(url(session), headers=session.headers) as ws:
         ws.send_json(_clip(1, 2, True))
         err = S.ErrorMessage.model_validate(ws.receive_json())

@@ -13,9 +13,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
-from solver._dispatch import register_objective
-from solver._jit import jit
+from solver.optim import register_objective
+
+jit = njit(cache=True, error_model="numpy")
 
 QUADRATIC = 0
 ROSENBROCK = 1

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from solver import Action, AnalyzerPolicy, GoalStatus, MinimizeOptions, Termination, minimize
-from solver import _codes as C
-from solver.analyzer import DEFAULT_TABLE, decide
+from solver.optim import codes as C
+from solver.optim.analyzer import DEFAULT_TABLE, decide
 
 from .objectives import NONCONVEX, make_data, toy_objective
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from solver.chain import Effector
 from solver.errors import InvalidModel
-from solver.fk import link_poses
+from solver.model import Effector
 from solver.model.bvh import read_bvh
+from solver.model.forward import link_poses
 from solver.model.skeleton import Channel, FreeRoot, SkeletonSettings, chain_from_skeleton
 from tests.solver.skeleton_refs import WALK_UNIT_M, bvh_world_positions, walk_text
 

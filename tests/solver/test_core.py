@@ -18,8 +18,8 @@ from solver import (
     Termination,
     minimize,
 )
-from solver import _codes as C
-from solver._core import _evaluate
+from solver.optim import codes as C
+from solver.optim.evaluate import evaluate
 
 from .objectives import (
     NAN_REGION,
@@ -106,7 +106,7 @@ def test_finite_difference_gradient_agrees_with_analytic(
         counters = np.zeros(2, dtype=np.int64)
         toy_objective(x, g_exact, True, data)
         code = C.GRAD_FORWARD if mode is GradientMode.FORWARD else C.GRAD_CENTRAL
-        _evaluate(None, data, x.copy(), g_fd, True, code, lo, hi, np.zeros(4), counters)
+        evaluate(None, data, x.copy(), g_fd, True, code, lo, hi, np.zeros(4), counters)
         tol = 1e-6 if mode is GradientMode.FORWARD else 1e-9
         assert_allclose(g_fd, g_exact, rtol=tol, atol=tol)
         assert counters[0] == (5 if mode is GradientMode.FORWARD else 9)
@@ -118,7 +118,7 @@ def test_finite_differences_never_step_outside_the_box() -> None:
     x = np.array([1.0, 1.0])
     g = np.zeros(2)
     counters = np.zeros(2, dtype=np.int64)
-    f = _evaluate(
+    f = evaluate(
         None,
         data,
         x,

@@ -27,10 +27,10 @@ import pytest
 from numpy.testing import assert_allclose
 from pytransform3d.urdf import UrdfTransformManager
 
-from solver.chain import Chain, Effector, Joint, JointKind, Transform, build_chain
-from solver.examples import EXAMPLES, panda_arm, two_arm_torso
-from solver.fk import effector_poses, link_poses
-from solver.urdf import chain_from_urdf
+from solver.model import Chain, Effector, Joint, JointKind, Transform, build_chain
+from solver.model.examples import EXAMPLES, panda_arm, two_arm_torso
+from solver.model.forward import effector_poses, link_poses
+from solver.model.urdf import chain_from_urdf
 
 DATA = Path(__file__).resolve().parent / "data"
 REPO = Path(__file__).resolve().parents[2]

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from solver.chain import Effector
 from solver.errors import InvalidModel
+from solver.model import Effector
 from solver.model.gltf import MAX_NODES, read_gltf
 from solver.model.skeleton import SkeletonSettings, chain_from_skeleton
 from tests.solver.skeleton_refs import (

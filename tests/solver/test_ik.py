@@ -27,73 +27,16 @@ from solver import (
     Transform,
     build_chain,
 )
-from solver.examples import humanoid_arm, panda_arm, tail, two_arm_torso
-from solver.fk import effector_poses
-from solver.ik import STREAM_DEFAULTS, IKResult, pose_targets, with_options
-from solver.kinematics import ik_objective
+from solver.ik import STREAM_DEFAULTS, IKResult, pose_targets
+from solver.ik.frame import solve_frame
+from solver.ik.kinematics import DD_HI, DD_LO, ik_objective
+from solver.ik.metric import ik_metric
+from solver.model.examples import humanoid_arm, panda_arm, tail, two_arm_torso
+from solver.model.forward import effector_poses
+
+from .helpers import CHAINS, slider_arm
 
 TIGHT = IKOptions(position_tolerance_m=1e-5, rotation_tolerance_rad=1e-4, time_budget_us=None)
-
-
-def slider_arm():  # type: ignore[no-untyped-def]
-    """A prismatic base, a revolute with an off-axis pivot, and an aim effector."""
-    joints = [
-        Joint(
-            name="slide",
-            parent="world",
-            child="carriage",
-            kind=JointKind.PRISMATIC,
-            axis=np.array([1.0, 1.0, 0.0]),
-            lower=(-0.5,),
-            upper=(0.5,),
-        ),
-        Joint(
-            name="turn",
-            parent="carriage",
-            child="arm",
-            kind=JointKind.REVOLUTE,
-            axis=np.array([0.0, 0.0, 1.0]),
-            pivot=np.array([0.1, 0.0, 0.0]),
-            origin=Transform.from_rpy([0.0, 0.0, 0.2], 0.1, 0.2, 0.3),
-            lower=(-2.0,),
-            upper=(2.0,),
-        ),
-        Joint(
-            name="tilt",
-            parent="arm",
-            child="head",
-            kind=JointKind.ROTATIONAL,
-            axes="yx",
-            origin=Transform(np.array([0.4, 0.0, 0.0])),
-            lower=(-1.0, -1.0),
-            upper=(1.0, 1.0),
-        ),
-    ]
-    return build_chain(
-        joints,
-        [
-            Effector(
-                name="eye",
-                link="head",
-                tip_offset=np.array([0.05, 0.0, 0.0]),
-                mode=EffectorMode.AIM,
-                aim_axis=np.array([1.0, 0.0, 0.0]),
-                position_weight=0.5,
-                rotation_weight=0.2,
-            ),
-        ],
-    )
-
-
-CHAINS = {
-    "panda-pose": lambda: panda_arm(),
-    "panda-position": lambda: panda_arm(EffectorMode.POSITION),
-    "humanoid-pose": lambda: humanoid_arm(),
-    "humanoid-aim": lambda: humanoid_arm(EffectorMode.AIM),
-    "two-arms": two_arm_torso,
-    "slider-aim": slider_arm,
-    "tail": lambda: tail(8),
-}
 
 
 @pytest.mark.parametrize("name", sorted(CHAINS))
@@ -105,8 +48,7 @@ def test_gradient_matches_central_differences(name: str, posture: float, limit: 
         chain, IKOptions(posture_weight=posture, limit_weight=limit, limit_margin=0.3)
     )
     targets = pose_targets(chain, rng.uniform(chain.lower, chain.upper))
-    solver._load_targets(targets, solver.options)
-    data = solver._data
+    data = solver.load_frame(targets, chain.mid_limits())
     data[5][0:3] = (posture, limit, 0.3)
     data[4][0] = rng.uniform(chain.lower, chain.upper)
     for _ in range(4):
@@ -354,7 +296,7 @@ def test_metric_until_switches_from_gauss_newton_to_bfgs_updates() -> None:
     base = IKOptions(max_restarts=0, time_budget_us=None)
 
     def run(**changes: object) -> IKResult:
-        return IKSolver(chain, with_options(base, **changes)).solve(targets)
+        return IKSolver(chain, dataclasses.replace(base, **changes)).solve(targets)
 
     bfgs, until_1 = run(metric_every=0), run(metric_until=1)
     assert until_1.iterations == bfgs.iterations
@@ -481,18 +423,16 @@ def test_track_checks_the_stream_pose_it_starts_from() -> None:
 def test_odd_layouts_and_number_types_reuse_the_compiled_frame() -> None:
     """A Fortran-ordered H, an int null-space step or a float32 stream pose must not
     make numba compile another specialisation of the frame (seconds, at run time)."""
-    from solver.ik import _solve_frame
-
     chain = panda_arm()
     targets = pose_targets(chain, chain.mid_limits() + 0.05)
     IKSolver(chain, STREAM_DEFAULTS).track(targets)  # the usual signature
-    before = len(_solve_frame.signatures)
-    solver = IKSolver(chain, with_options(STREAM_DEFAULTS, null_space_step_rad=0))
+    before = len(solve_frame.signatures)
+    solver = IKSolver(chain, dataclasses.replace(STREAM_DEFAULTS, null_space_step_rad=0))
     solver.q = chain.mid_limits().astype(np.float32)
     assert solver.track(targets).success
     h = np.asfortranarray(np.eye(chain.n_dof) * 0.5)
     assert solver.solve(targets, initial_inverse_hessian=h).success
-    assert len(_solve_frame.signatures) == before
+    assert len(solve_frame.signatures) == before
 
 
 def test_later_solves_skip_type_dispatch_and_still_convert_odd_seeds() -> None:
@@ -500,13 +440,11 @@ def test_later_solves_skip_type_dispatch_and_still_convert_odd_seeds() -> None:
     (no per-call type dispatch), so every argument must reach it with the compiled
     types: strided, float32, read-only and list seeds are converted first, and give
     the same answer as a solver that has not cached the entry point."""
-    from solver.ik import _solve_frame
-
     chain = panda_arm()
     targets = pose_targets(chain, chain.mid_limits() + 0.05)
     solver = IKSolver(chain)
     assert solver.solve(targets).success
-    assert solver._solve_call is not _solve_frame
+    assert solver._solve_call is not solve_frame
     seed = chain.mid_limits() + 0.01
     readonly = seed.copy()
     readonly.flags.writeable = False
@@ -523,14 +461,12 @@ def test_carried_h_is_the_metric_at_the_answer(carry: bool) -> None:
     """A solve that meets the goal skips the Gauss-Newton metric for the step it will
     not take, unless the caller carries H to its next solve (carry_hessian): then
     the H handed back is the metric at the answer, as before that saving."""
-    from solver.kinematics import DD_HI, DD_LO, ik_metric
-
     chain = panda_arm()
     targets = pose_targets(chain, chain.mid_limits() + 0.1)
     solver = IKSolver(chain, IKOptions(carry_hessian=carry))
     result = solver.solve(targets)
     assert result.success and result.iterations >= 1
-    data = solver._data
+    data = solver.load_frame(targets, result.q)
     h = np.empty((chain.n_dof, chain.n_dof))
     g = np.zeros(chain.n_dof)  # the answer is inside the limits: nothing is held
     ik_objective(result.q, np.empty(chain.n_dof), True, data)
@@ -540,7 +476,7 @@ def test_carried_h_is_the_metric_at_the_answer(carry: bool) -> None:
 
 
 def _solve_with_floor(chain, targets, seed, **changes):  # type: ignore[no-untyped-def]
-    opts = with_options(TIGHT, **{"damping": 0.01, "damping_scale": 1.0, **changes})
+    opts = dataclasses.replace(TIGHT, **{"damping": 0.01, "damping_scale": 1.0, **changes})
     return IKSolver(chain, seed=0).solve(targets, seed, options=opts)
 
 
@@ -580,7 +516,7 @@ def test_damping_floor_follows_the_target_set_under_the_same_options() -> None:
     seed = lo + 0.45 * (hi - lo)
     full = pose_targets(chain, lo + 0.7 * (hi - lo))[0]
     aim_only = Target(effector=full.effector, direction=full.direction)
-    opts = with_options(TIGHT, damping=0.01, damping_scale=1.0, damping_redundant_only=True)
+    opts = dataclasses.replace(TIGHT, damping=0.01, damping_scale=1.0, damping_redundant_only=True)
     solver = IKSolver(chain, opts, seed=0)
     for targets, floor in (([full], False), ([aim_only], True), ([full], False)):
         got = solver.solve(targets, seed)
@@ -674,7 +610,7 @@ def test_redundancy_is_recounted_when_a_target_set_is_rejected() -> None:
     lo, hi = chain.lower, chain.upper
     seed = lo + 0.45 * (hi - lo)
     tip, mid = pose_targets(chain, lo + 0.7 * (hi - lo))
-    opts = with_options(TIGHT, damping=0.01, damping_scale=1.0, damping_redundant_only=True)
+    opts = dataclasses.replace(TIGHT, damping=0.01, damping_scale=1.0, damping_redundant_only=True)
     solver = IKSolver(chain, opts, seed=0)
     assert solver.solve([tip], seed).success
     with pytest.raises(InvalidProblem, match="unknown effector"):

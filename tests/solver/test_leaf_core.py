@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 
 from solver import EffectorMode, IKOptions, IKSolver
-from solver import _codes as C
-from solver._core import WORK_ROWS, run_solver, run_solver_leaf
-from solver.chain import Chain, Effector, build_chain
-from solver.examples import humanoid_arm, panda_arm, tail
 from solver.ik import pose_targets
-from solver.kinematics import DD_HI, DD_LO, DD_QREF
+from solver.ik.kinematics import DD_HI, DD_LO, DD_QREF
+from solver.model import Chain, Effector, build_chain
+from solver.model.examples import humanoid_arm, panda_arm, tail
+from solver.optim import codes as C
+from solver.optim.loop import WORK_ROWS, run_solver, run_solver_leaf
+from solver.optim.minimize import pack_options
 
 
 def _tail_with_two_points() -> Chain:
@@ -28,11 +29,12 @@ def _tail_with_two_points() -> Chain:
     )
 
 
-def _run(core: Callable[..., tuple[float, ...]], solver: IKSolver, x0: np.ndarray, leaf: bool):  # type: ignore[no-untyped-def]
+def _run(
+    core: Callable[..., tuple[float, ...]], solver: IKSolver, targets, x0: np.ndarray, leaf: bool
+):  # type: ignore[no-untyped-def]
     """One core call on private copies of everything the core writes."""
-    packed = solver._last_packed
-    assert packed is not None
-    data = tuple(a.copy() for a in solver._data)
+    fopt, iopt = pack_options(solver.options.minimize_options(), seed=0)
+    data = tuple(a.copy() for a in solver.load_frame(targets, x0))
     dd = data[4]
     dd[DD_QREF] = x0
     n = x0.shape[0]
@@ -40,14 +42,20 @@ def _run(core: Callable[..., tuple[float, ...]], solver: IKSolver, x0: np.ndarra
     log = np.zeros((16, C.N_LOG))
     out_x = np.empty(n)
     out_g = np.empty(n)
-    args = [
-        None, None, data, x0, dd[DD_LO], dd[DD_HI], h, packed.fopt.copy(), packed.iopt.copy(),
-        packed.policy, log, np.empty((0, 5)), out_x, out_g,
-    ]  # fmt: skip
+    policy = solver.options.policy.as_array()
+    trace = np.empty((0, 5))
     if leaf:
         # Garbage in the work blocks: the core must not read what it has not written.
-        args += [np.full((WORK_ROWS, n), np.nan), np.full(3, -7, dtype=np.int64)]
-    res = core(*args)
+        work = np.full((WORK_ROWS, n), np.nan)
+        ints = np.full(3, -7, dtype=np.int64)
+        res = core(
+            None, data, x0, h, dd[DD_LO], dd[DD_HI], fopt, iopt, policy, log, trace, out_x,
+            out_g, work, ints,
+        )  # fmt: skip
+    else:
+        res = core(
+            None, data, x0, h, dd[DD_LO], dd[DD_HI], fopt, iopt, policy, log, trace, out_x, out_g
+        )
     return res[:-1], out_x, out_g, h, log  # res[-1] is the elapsed time
 
 
@@ -64,10 +72,11 @@ def test_leaf_core_takes_the_generic_cores_iterates(factory, curvature: bool) ->
     # A budget that never runs out, so that timing cannot change a path.
     solver = IKSolver(chain, IKOptions(curvature=curvature, time_budget_us=None))
     for _ in range(3):
-        solver.solve(pose_targets(chain, rng.uniform(lo, hi)))  # loads targets, packs options
+        targets = pose_targets(chain, rng.uniform(lo, hi))
+        solver.solve(targets)  # sets the options' weights in the compiled arrays
         x0 = rng.uniform(lo, hi)
-        generic = _run(run_solver, solver, x0, leaf=False)
-        leaf = _run(run_solver_leaf, solver, x0, leaf=True)
+        generic = _run(run_solver, solver, targets, x0, leaf=False)
+        leaf = _run(run_solver_leaf, solver, targets, x0, leaf=True)
         assert generic[0] == leaf[0]  # f, goal, pg, code, iterations, evaluations, ...
         assert generic[0][4] > 0  # it iterated
         for a, b in zip(generic[1:], leaf[1:], strict=True):

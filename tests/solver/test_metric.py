@@ -9,11 +9,13 @@ import pytest
 from numpy.testing import assert_allclose
 
 from solver import EffectorMode, IKOptions, IKSolver
-from solver.chain import Chain, Effector, build_chain
-from solver.examples import humanoid_arm, panda_arm, tail, two_arm_torso
-from solver.fk import effector_poses
 from solver.ik import pose_targets
-from solver.kinematics import DD_HI, DD_LO, ED_WP, ED_WR, ik_metric, ik_objective
+from solver.ik.kinematics import DD_HI, DD_LO, ik_objective
+from solver.ik.metric import ik_metric
+from solver.model import Chain, Effector, build_chain
+from solver.model.examples import humanoid_arm, panda_arm, tail, two_arm_torso
+from solver.model.forward import effector_poses
+from solver.model.layout import ED_WP, ED_WR
 
 
 def _weighted_jacobian_fd(chain: Chain, q: np.ndarray, eps: float = 1e-6) -> np.ndarray:
@@ -74,7 +76,7 @@ def test_metric_is_the_damped_gauss_newton_inverse(
     solver = IKSolver(chain, IKOptions(damping=damping, damping_scale=damping_scale))
     targets = pose_targets(chain, rng.uniform(lo, hi) * 0.5)
     solver.solve(targets)  # loads the targets and options into the compiled arrays
-    data = solver._data
+    data = solver.load_frame(targets, chain.mid_limits())  # as the solve loaded them
     q = rng.uniform(lo, hi) * 0.8  # strictly inside the limits: nothing held
     g = np.empty(chain.n_dof)
     f = ik_objective(q, g, True, data)

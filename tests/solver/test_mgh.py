@@ -11,8 +11,8 @@ import pytest
 from scipy.optimize import minimize as scipy_minimize
 
 from solver import GoalStatus, MinimizeOptions, Termination, minimize
-from solver._dispatch import register_objective
-from solver.mgh import PROBLEMS, MGHProblem, mgh_objective, problem
+from solver.optim import register_objective
+from tests.solver.mgh import PROBLEMS, MGHProblem, mgh_objective, problem
 
 register_objective(mgh_objective, None, PROBLEMS[0].data())
 

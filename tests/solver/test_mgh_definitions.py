@@ -1,4 +1,4 @@
-"""Checks of the More-Garbow-Hillstrom problems in solver/mgh.py.
+"""Checks of the More-Garbow-Hillstrom problems in tests/solver/mgh.py.
 
 For every standard instance: the analytic Jacobian against a 4th-order central
 difference (at x0, at a seeded random point and at x*), mgh_objective's f and gradient
@@ -21,7 +21,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.optimize import least_squares, root
 
-from solver.mgh import (
+from tests.solver.mgh import (
     NAMES,
     PROBLEMS,
     MGHProblem,
@@ -422,7 +422,7 @@ import json, sys
 import numpy as np
 from numba.core import config
 assert config.DISABLE_JIT
-from solver.mgh import PROBLEMS, problem
+from tests.solver.mgh import PROBLEMS, problem
 out = {}
 for p in PROBLEMS:
     rng = np.random.default_rng(0)

@@ -19,36 +19,24 @@ from solver import (
     Transform,
     build_chain,
 )
-from solver._path_kernels import dp_step, frame_nodes
-from solver.examples import humanoid_arm, panda_arm, two_arm_torso
-from solver.fk import effector_poses
-from solver.ik import STREAM_DEFAULTS, IKOptions, IKResult, pose_targets, with_options
-from solver.path import PathOptions, PlannedPath, _Planner, _target_jumps, _windows
+from solver.ik import STREAM_DEFAULTS, IKOptions, IKResult, pose_targets
+from solver.model.examples import humanoid_arm, panda_arm, two_arm_torso
+from solver.model.forward import effector_poses
+from solver.path import PathOptions, PlannedPath, keyframes, plan_path
+from solver.path.kernels import dp_step, frame_nodes
+from solver.path.keyframes import repair_windows, target_jumps
+from solver.path.programme import Planner
 
-from .test_ik import CHAINS
+from .helpers import CHAINS, joint_stream
 
 # The benchmark's tracking settings, without a time budget: a loaded CI machine must
 # not change which answers a test sees.
-STREAM = with_options(
+STREAM = dataclasses.replace(
     STREAM_DEFAULTS,
     position_tolerance_m=1e-5,
     rotation_tolerance_rad=1e-4,
     time_budget_us=None,
 )
-
-
-def joint_stream(chain, seed: int, frames: int) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """bench/ik/streams.py's reference paths: q(t) = c + A sin(2 pi f t + phi) at 60 Hz."""
-    rng = np.random.default_rng(seed)
-    lo, hi = chain.lower, chain.upper
-    n = chain.n_dof
-    c = lo + (hi - lo) * rng.uniform(0.25, 0.75, n)
-    amp = np.minimum(0.6, 0.8 * np.minimum(c - lo, hi - c))
-    f = rng.uniform(0.05, 0.3, n)
-    phi = rng.uniform(0.0, 2 * math.pi, n)
-    t = np.arange(frames)[:, None] / 60.0
-    q: np.ndarray = c + amp * np.sin(2 * math.pi * f * t + phi)
-    return q
 
 
 def largest_step(start: np.ndarray, qs: np.ndarray) -> float:
@@ -73,7 +61,7 @@ def planned_from(  # type: ignore[no-untyped-def]
 ) -> PlannedPath:
     planner = IKSolver(chain, options)
     planner.set_pose(start)
-    return planner.plan(frames, path_options=path_options)
+    return plan_path(planner, frames, path_options=path_options)
 
 
 def rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -182,7 +170,7 @@ def test_plan_starts_from_the_current_pose_and_ends_at_the_last_answer() -> None
     solver = IKSolver(chain, STREAM)
     start = path[0] + 0.2  # off the first target: the first step is measured from here
     solver.set_pose(start)
-    plan = solver.plan(frames)
+    plan = plan_path(solver, frames)
     first = float(np.abs(plan.results[0].q - start).max())
     assert first >= 0.05
     assert plan.largest_step == largest_step(start, plan.q)
@@ -201,7 +189,7 @@ def test_plan_is_reproducible() -> None:
     for _ in range(2):
         solver = IKSolver(chain, STREAM)
         solver.set_pose(path[0])
-        plans.append(solver.plan(frames).q)
+        plans.append(plan_path(solver, frames).q)
     assert np.array_equal(plans[0], plans[1])
 
 
@@ -211,7 +199,7 @@ def test_plan_of_a_single_frame_is_the_nearest_answer() -> None:
     solver = IKSolver(chain, STREAM)
     solver.set_pose(q0)
     target = pose_targets(chain, q0 + 0.05)
-    plan = solver.plan([target])
+    plan = plan_path(solver, [target])
     assert plan.success and len(plan.results) == 1
     assert_reaches(chain, plan.q[0], target)
     # Never further than the tracker's answer, and q0 + 0.05 is an answer 0.05 away
@@ -234,7 +222,7 @@ def test_plan_of_a_chain_without_variables() -> None:
         [Target(effector="tip", position=np.array([0.0, 0.0, 1.0]))],
         [Target(effector="tip", position=np.array([0.0, 0.5, 1.0]))],
     ]
-    plan = solver.plan(frames)
+    plan = plan_path(solver, frames)
     assert [r.success for r in plan.results] == [True, False]
     assert plan.largest_step == 0.0 and plan.q.shape == (2, 0)
 
@@ -245,10 +233,10 @@ def test_plan_reaches_frames_the_tracker_misses() -> None:
     chain = panda_arm()
     path = joint_stream(chain, 1, 300)[::10]
     frames = [pose_targets(chain, q) for q in path]
-    weak = with_options(STREAM, max_iter=1, max_restarts=0, global_fallback=False)
+    weak = dataclasses.replace(STREAM, max_iter=1, max_restarts=0, global_fallback=False)
     solver = IKSolver(chain, weak)
     solver.set_pose(path[0])
-    plan = solver.plan(frames)
+    plan = plan_path(solver, frames)
     missed = sum(not r.success for r in tracked_from(chain, path[0], frames, weak))
     assert missed >= 5
     assert plan.success
@@ -260,24 +248,24 @@ def test_a_rejected_plan_keeps_the_carried_state() -> None:
     chain = panda_arm()
     path = joint_stream(chain, 0, 10)
     frames = [pose_targets(chain, q) for q in path]
-    carry = with_options(STREAM, carry_hessian=True)
+    carry = dataclasses.replace(STREAM, carry_hessian=True)
     solver = IKSolver(chain, carry)
     solver.set_pose(path[0])
     solver.track(frames[0])
-    h, q = solver._h, solver.q.copy()
+    h, q = solver.stream_state().inverse_hessian, solver.q.copy()
     assert h is not None
     good = frames[5][0]
     bad = Target(effector=good.effector, position=good.position, rotation=2.0 * good.rotation)
     with pytest.raises(InvalidProblem, match="orthonormal"):
-        solver.plan(frames[:5] + [[bad]] + frames[6:])
-    assert solver._h is h and np.array_equal(solver.q, q)
+        plan_path(solver, frames[:5] + [[bad]] + frames[6:])
+    assert solver.stream_state().inverse_hessian is h and np.array_equal(solver.q, q)
 
 
 def test_plan_of_no_frames_changes_nothing() -> None:
     chain = panda_arm()
     solver = IKSolver(chain, STREAM)
     before = solver.q.copy()
-    plan = solver.plan([])
+    plan = plan_path(solver, [])
     assert isinstance(plan, PlannedPath)
     assert plan.results == () and plan.largest_step == 0.0 and plan.success
     assert np.array_equal(solver.q, before)
@@ -294,9 +282,9 @@ def test_plan_rejects_bad_targets_as_solve_does_and_stays_usable() -> None:
     solver = IKSolver(chain, STREAM)
     solver.set_pose(path[0])
     with pytest.raises(InvalidProblem, match="finite"):
-        solver.plan(frames[:5] + [[broken]] + frames[6:])
+        plan_path(solver, frames[:5] + [[broken]] + frames[6:])
     assert np.array_equal(solver.q, path[0])  # a rejected clip changes nothing
-    assert solver.plan(frames).success
+    assert plan_path(solver, frames).success
 
 
 def test_plan_with_two_effectors() -> None:
@@ -363,8 +351,8 @@ def test_a_repair_that_would_lengthen_a_step_is_not_kept() -> None:
     tracked, boxes = [], []
     for targets in frames:
         tracked.append(solver.track(targets, options=STREAM))
-        boxes.append((chain.lower, chain.upper, solver._free_mask()))
-    planner = _Planner(solver, frames, STREAM, PathOptions(), tracked, boxes)
+        boxes.append((chain.lower, chain.upper, solver.free_mask()))
+    planner = Planner(solver, frames, STREAM, PathOptions(), tracked, boxes)
     rougher, _ = planner.dense(
         path[9],
         range(10, 30),
@@ -377,17 +365,17 @@ def test_a_repair_that_would_lengthen_a_step_is_not_kept() -> None:
     window = np.vstack([path[10:30], path[30:31]])
     assert largest_step(path[9], np.vstack([rougher, path[30:31]])) > largest_step(path[9], window)
     repaired = path.copy()
-    planner._repair(path[0], repaired, 9, 29, True)
+    keyframes.repair(planner, path[0], repaired, 9, 29, True)
     np.testing.assert_array_equal(repaired, path)
 
 
 def test_repair_windows_widen_and_merge() -> None:
-    assert _windows([3], 1, 10) == [(2, 4)]
-    assert _windows([0, 9], 1, 10) == [(0, 1), (8, 9)]  # clipped to the clip
-    assert _windows([2, 4], 1, 10) == [(1, 5)]  # overlapping
-    assert _windows([2, 5], 1, 10) == [(1, 6)]  # touching: one window
-    assert _windows([2, 6], 1, 10) == [(1, 3), (5, 7)]
-    assert _windows([4], 3, 6) == [(1, 5)]
+    assert repair_windows([3], 1, 10) == [(2, 4)]
+    assert repair_windows([0, 9], 1, 10) == [(0, 1), (8, 9)]  # clipped to the clip
+    assert repair_windows([2, 4], 1, 10) == [(1, 5)]  # overlapping
+    assert repair_windows([2, 5], 1, 10) == [(1, 6)]  # touching: one window
+    assert repair_windows([2, 6], 1, 10) == [(1, 3), (5, 7)]
+    assert repair_windows([4], 3, 6) == [(1, 5)]
 
 
 def test_the_work_budget_bounds_a_plan_and_keeps_its_guarantees() -> None:
@@ -399,9 +387,11 @@ def test_the_work_budget_bounds_a_plan_and_keeps_its_guarantees() -> None:
     solver = IKSolver(chain, STREAM)
     solver.set_pose(path[0])
     dense = PathOptions(key_every=1)
-    small = solver.plan(frames, path_options=dataclasses.replace(dense, max_work=answers * 7**3))
+    small = plan_path(
+        solver, frames, path_options=dataclasses.replace(dense, max_work=answers * 7**3)
+    )
     solver.set_pose(path[0])
-    full = solver.plan(frames, path_options=dense)
+    full = plan_path(solver, frames, path_options=dense)
     # Each frame may still keep its anchors (25) and the tracker's answer.
     assert small.nodes <= answers + 90 * 26 < full.nodes
     assert small.success
@@ -465,15 +455,15 @@ def out_of_reach(frames: list[list[Target]], gone: tuple[int, ...]) -> list[list
 
 def repairs_made(monkeypatch, chain, path, frames, key_every, start=None):  # type: ignore[no-untyped-def]
     """Plan ``frames`` from ``start`` (default path[0]) and return the stretches the
-    keyframe plan re-planned, as (first, last) of ``_Planner._repair``, and the plan."""
+    keyframe plan re-planned, as (first, last) of ``keyframes.repair``, and the plan."""
     calls: list[tuple[int, int]] = []
-    repair = _Planner._repair
+    repair = keyframes.repair
 
-    def spy(self, start, path, first, last, walk):  # type: ignore[no-untyped-def]
+    def spy(planner, start, path, first, last, walk):  # type: ignore[no-untyped-def]
         calls.append((first, last))
-        repair(self, start, path, first, last, walk)
+        repair(planner, start, path, first, last, walk)
 
-    monkeypatch.setattr(_Planner, "_repair", spy)
+    monkeypatch.setattr(keyframes, "repair", spy)
     start = path[0] if start is None else start
     plan = planned_from(chain, start, frames, path_options=PathOptions(key_every=key_every))
     return calls, plan
@@ -578,23 +568,23 @@ def cut_clip(chain, frames_in_clip: int, cut: float):  # type: ignore[no-untyped
 def test_target_jumps_are_the_cuts_of_a_clip() -> None:
     chain = panda_arm()
     _, smooth = cut_clip(chain, 120, 0.0)
-    assert _target_jumps(smooth, 10) == set()
+    assert target_jumps(smooth, 10) == set()
     _, cut = cut_clip(chain, 120, 0.15)
-    assert _target_jumps(cut, 10) == {60}
+    assert target_jumps(cut, 10) == {60}
     # Moving between holds is not jumping: a clip that starts from rest, a gesture
     # between two holds, poses held for three frames each (the median over all the
     # frames around would be 0, every move a jump).
     still = [smooth[0]] * 30 + smooth[:30]
-    assert _target_jumps(still, 10) == set()
+    assert target_jumps(still, 10) == set()
     gesture = [smooth[0]] * 40 + smooth[:8] + [smooth[7]] * 40
-    assert _target_jumps(gesture, 10) == set()
+    assert target_jumps(gesture, 10) == set()
     held = [f for f in smooth[::3] for _ in range(3)]
-    assert _target_jumps(held, 30) == set()
+    assert target_jumps(held, 30) == set()
     # A frame whose targeted effectors change is one.
     two = two_arm_torso()
     frames = [pose_targets(two, q) for q in joint_stream(two, 0, 40)]
     frames[20] = frames[20][:1]
-    assert _target_jumps(frames, 10) == {20, 21}
+    assert target_jumps(frames, 10) == {20, 21}
 
 
 def test_a_cut_in_the_targets_does_not_widen_repairs_to_the_whole_clip(monkeypatch) -> None:  # type: ignore[no-untyped-def]
@@ -683,9 +673,9 @@ def test_walk_samples_the_self_motion_on_the_target() -> None:
     q0 = chain.mid_limits() + 0.1
     targets = pose_targets(chain, q0)
     solver = IKSolver(chain, STREAM)
-    solver._prepare(targets, STREAM, q0)
-    box = (chain.lower, chain.upper, solver._free_mask())
-    nodes = frame_nodes(q0[None, :].copy(), solver._data, box, True, 0.01, 4096)
+    data = solver.load_frame(targets, q0, options=STREAM)
+    box = (chain.lower, chain.upper, solver.free_mask())
+    nodes = frame_nodes(q0[None, :].copy(), data, box, True, 0.01, 4096)
     assert len(nodes) > 100
     steps = np.abs(np.diff(nodes, axis=0)).max(axis=1)
     assert steps.max() <= 3 * 0.01

@@ -54,7 +54,7 @@ def test_plain_python_mode_runs_the_same_code() -> None:
         """
         import numpy as np
         from solver import IKOptions, IKSolver, minimize
-        from solver.examples import panda_arm
+        from solver.model.examples import panda_arm
         from solver.ik import pose_targets
         from tests.solver.objectives import ROSENBROCK, make_data, toy_objective
         data = make_data(ROSENBROCK, np.zeros(2), np.zeros((1, 1)))

@@ -11,11 +11,11 @@ import pytest
 import pytransform3d.rotations as pr
 from numpy.testing import assert_allclose
 
-from solver.chain import Effector, EffectorMode, JointKind
 from solver.errors import InvalidModel
-from solver.fk import effector_poses
 from solver.ik import IKOptions, IKSolver, pose_targets
+from solver.model import Effector, EffectorMode, JointKind
 from solver.model.bvh import read_bvh
+from solver.model.forward import effector_poses
 from solver.model.gltf import read_gltf
 from solver.model.skeleton import (
     Bone,

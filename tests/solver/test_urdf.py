@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-import solver.urdf
-from solver.chain import EffectorMode, JointKind
+import solver.model.urdf
 from solver.errors import InvalidModel
-from solver.fk import effector_poses, link_poses
-from solver.urdf import MAX_FIXED_JOINTS, chain_from_urdf
+from solver.model import EffectorMode, JointKind
+from solver.model.forward import effector_poses, link_poses
+from solver.model.urdf import MAX_FIXED_JOINTS, chain_from_urdf
 
 DATA = Path(__file__).resolve().parent / "data"
 REPO = Path(__file__).resolve().parents[2]
@@ -201,7 +201,7 @@ def test_oversize_is_rejected_before_parsing(monkeypatch: pytest.MonkeyPatch) ->
     def no_parse(*args: object, **kwargs: object) -> None:
         raise AssertionError("the parser must not see oversize text")
 
-    monkeypatch.setattr(solver.urdf.DET, "fromstring", no_parse)
+    monkeypatch.setattr(solver.model.urdf.DET, "fromstring", no_parse)
     big = '<robot name="t">' + " " * 2_000_000 + "</robot>"
     with pytest.raises(InvalidModel) as info:
         chain_from_urdf(big, base_link="base", tip_links="tip")

@@ -16,10 +16,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba.core import event
 
-from ._path_kernels import dp_step, frame_nodes, project_onto
-from .chain import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
-from .examples import panda_arm
-from .ik import IKOptions, IKSolver, Target, pose_targets
+from .ik import IKData, IKOptions, IKSolver, Target, pose_targets
+from .model import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from .model.examples import panda_arm
+from .path import plan_path
+from .path.kernels import dp_step, frame_nodes, project_onto
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,10 +49,10 @@ def _solve_and_track(mode: EffectorMode) -> None:
 
 
 def _plan() -> None:
-    # The planner (solver/path.py) end to end: a two-frame clip of a 7-DOF pose task.
+    # The planner (solver/path/) end to end: a two-frame clip of a 7-DOF pose task.
     solver, targets, q = _planning_arm()
     solver.set_pose(q)
-    solver.plan([targets, pose_targets(solver.chain, q + 0.01)])
+    plan_path(solver, [targets, pose_targets(solver.chain, q + 0.01)])
 
 
 # The planner's kernels, each called as ``plan`` calls it (the same argument types, so
@@ -61,15 +62,15 @@ def _plan() -> None:
 
 def _plan_nodes() -> None:
     solver, targets, q = _planning_arm()
-    box = _loaded_box(solver, targets, q)
+    data, box = _loaded(solver, targets, q)
     anchors = np.ascontiguousarray([q], dtype=np.float64)
-    frame_nodes(anchors, solver._data, box, True, 0.05, 4)
+    frame_nodes(anchors, data, box, True, 0.05, 4)
 
 
 def _plan_projection() -> None:
     solver, targets, q = _planning_arm()
-    box = _loaded_box(solver, targets, q)
-    project_onto(q.copy(), solver._data, box, 30)
+    data, box = _loaded(solver, targets, q)
+    project_onto(q.copy(), data, box, 30)
     nodes = np.ascontiguousarray([q, q + 0.01], dtype=np.float64)
     dp_step(nodes[:1] * 1.0, np.zeros(1), np.zeros(1), nodes * 1.0, 0.5)
 
@@ -81,12 +82,13 @@ def _planning_arm() -> tuple[IKSolver, list[Target], np.ndarray]:
     return solver, pose_targets(chain, q), q
 
 
-def _loaded_box(
+def _loaded(
     solver: IKSolver, targets: list[Target], q: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Load ``targets`` into the solver's data as the planner does; the planner's box."""
-    solver._prepare(targets, solver.options, q)
-    return solver.chain.lower, solver.chain.upper, solver._free_mask()
+) -> tuple[IKData, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Load ``targets`` as the planner does (``IKSolver.load_frame``): the compiled data
+    and the planner's box."""
+    data = solver.load_frame(targets, q)
+    return data, (solver.chain.lower, solver.chain.upper, solver.free_mask())
 
 
 def _no_variables() -> None:

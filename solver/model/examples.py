@@ -15,7 +15,8 @@ import math
 
 import numpy as np
 
-from .chain import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from .chain import Chain, build_chain
+from .joints import Effector, EffectorMode, Joint, JointKind, Transform
 
 _PANDA_MDH = (  # (a_{i-1}, d_i, alpha_{i-1}) per joint, Franka's documentation
     (0.0, 0.333, 0.0),

@@ -1,10 +1,13 @@
-"""Integer mirrors of the enums in ``termination`` for the compiled core.
+"""Integer mirrors of the enums in ``termination`` for the compiled core, and the
+layout of the option vectors and the pass log it reads and writes.
 
 numba folds module-level ints into constants; the order here must match the
 tuples below, which the Python layer uses to turn ints back into enums.
 """
 
 from __future__ import annotations
+
+import enum
 
 from .termination import Action, GoalStatus, PassStart, Termination
 
@@ -51,6 +54,20 @@ PASS_STARTS: tuple[PassStart, ...] = (
     PassStart.RESET_H,
     PassStart.RESTART_RANDOM,
 )
+
+
+class LineSearchStatus(enum.IntEnum):
+    """How a line search ended (``line_search.line_search``); never leaves the core."""
+
+    ACCEPTED = 0  # a step with sufficient decrease (and curvature, if asked) was found
+    STEP_TOO_SMALL = 1  # lambda fell below its minimum: the pass ends LINE_SEARCH_FAILED
+    BUDGET_SPENT = 2  # the evaluation budget ran out: the pass ends MAX_FEV
+
+
+# The same values as plain ints, which numba folds into the compiled code.
+LS_ACCEPTED = int(LineSearchStatus.ACCEPTED)
+LS_STEP_TOO_SMALL = int(LineSearchStatus.STEP_TOO_SMALL)
+LS_BUDGET_SPENT = int(LineSearchStatus.BUDGET_SPENT)
 
 GRAD_ANALYTIC = 0
 GRAD_FORWARD = 1

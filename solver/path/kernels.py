@@ -1,4 +1,4 @@
-"""Compiled pieces of the path planner (``path.py``).
+"""Compiled pieces of the path planner (``planner``, ``programme``, ``keyframes``).
 
 - ``_task_system``: the targeted rows' residual and Jacobian at q (sqrt(W)-weighted, as
   the solver's metric weighs them), after the errors the solver itself reports.
@@ -21,11 +21,18 @@ import math
 
 import numpy as np
 
-from ._jit import jit, jit_inline
-from .kinematics import (
+from .._jit import jit, jit_inline
+from ..ik.kinematics import (
     DD_GSCRATCH,
     DD_J,
     DD_XLAST,
+    effector_terms,
+    goal_measure,
+    pose_rotation_error,
+)
+from ..ik.metric import cholesky_in_place, weighted_jacobian
+from ..model.forward import effector_frame
+from ..model.layout import (
     ED_AIM,
     ED_TDIR,
     ED_TPOS,
@@ -36,12 +43,6 @@ from .kinematics import (
     MODE_AIM,
     MODE_POSE,
     MODE_POSITION,
-    _effector_terms,
-    _goal_measure,
-    _weighted_jacobian,
-    cholesky_in_place,
-    effector_frame,
-    pose_rotation_error,
 )
 
 # A node closer than this to a node already found is the same answer (projections of
@@ -63,7 +64,7 @@ def _task_system(q, data, free, r, jac):  # type: ignore[no-untyped-def]
     weight is; variables that are not free (``free[i] == 0``: locked, or outside every
     targeted chain) get zero columns."""
     ni, nd, ei, ed, dd, misc = data
-    _effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
+    effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
     if q.shape[0] > 0:
         # ND and ED now describe q, not the solver's last point: mark it stale, as
         # effector_errors does.
@@ -100,7 +101,7 @@ def _task_system(q, data, free, r, jac):  # type: ignore[no-untyped-def]
             r[rows + 2] = sr * (az - ed[e, ED_TDIR + 2])
             rows += 3
         # The Jacobian as the solver's metric weighs it (DD's Jacobian rows are scratch).
-        _weighted_jacobian(e, ni, nd, ei, ed, dd)
+        weighted_jacobian(e, ni, nd, ei, ed, dd)
         for i in range(n):
             if o0 > p0:
                 for row in range(3):
@@ -178,7 +179,7 @@ def _project(q, data, ws, box, max_iter):  # type: ignore[no-untyped-def]
     goal = math.inf
     for it in range(max_iter + 1):
         rows = _task_system(q, data, free, r, jac)
-        goal = _goal_measure(data[2], data[3])
+        goal = goal_measure(data[2], data[3])
         if not math.isfinite(goal):
             return math.inf
         # Done when tight, or when within tolerance and no longer improving quickly.

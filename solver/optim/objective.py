@@ -1,4 +1,5 @@
-"""How the compiled core reaches an objective without receiving it as a value.
+"""Registering an objective, and how the compiled core reaches it without receiving
+it as a value.
 
 numba can pass a compiled function as an argument, but a caller that receives one
 whose body uses libm (cos, sqrt, ...) cannot be written to the on-disk cache, so the
@@ -8,6 +9,11 @@ IK core would recompile (tens of seconds) in every process. Instead an objective
 type up and binds the registered function statically, which caches like any
 direct call. Passing a compiled function as ``fg`` still works (the generic
 ``minimize`` path for user objectives); it is compiled per process.
+
+``register_objective`` is public (``solver.optim``): ``minimize`` of a registered
+objective loads the core from numba's cache instead of compiling it in every
+process. An objective registered from outside solver/ is compiled into that cache
+under solver/'s source stamp: see ``solver._jit`` for what to do after editing one.
 """
 
 from __future__ import annotations
@@ -59,7 +65,7 @@ def call_objective(fg: Any, x: Any, g: Any, need_grad: bool, data: Any) -> float
     return float(fg(x, g, need_grad, data))
 
 
-def call_goal(goal_fn: Any, fg: Any, f: float, x: Any, data: Any) -> float:
+def call_goal(fg: Any, f: float, x: Any, data: Any) -> float:
     """The goal measure at x: the registered goal function, else f itself."""
     if fg is None:
         goal = _lookup(numba.typeof(data))[1]
@@ -86,17 +92,17 @@ def _call_objective_compiled(fg, x, g, need_grad, data):  # type: ignore[no-unty
 
 
 @overload(call_goal, inline="always")
-def _call_goal_compiled(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def]
+def _call_goal_compiled(fg, f, x, data):  # type: ignore[no-untyped-def]
     if isinstance(fg, types.NoneType):
         goal = _lookup(data)[1]
         if goal is not None:
 
-            def impl_goal(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def]
+            def impl_goal(fg, f, x, data):  # type: ignore[no-untyped-def]
                 return goal(f, x, data)
 
             return impl_goal
 
-    def impl_f(goal_fn, fg, f, x, data):  # type: ignore[no-untyped-def]
+    def impl_f(fg, f, x, data):  # type: ignore[no-untyped-def]
         return f
 
     return impl_f

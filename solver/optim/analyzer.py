@@ -25,8 +25,8 @@ from types import MappingProxyType
 import numpy as np
 import numpy.typing as npt
 
-from . import _codes as C
-from ._jit import jit_leaf
+from .._jit import jit_leaf
+from . import codes as C
 from .termination import Action, GoalStatus, Termination
 
 PolicyTable = Mapping[tuple[Termination, GoalStatus], Action]
@@ -136,12 +136,12 @@ def decide(
     pass_improved: bool,
     pass_was_reset: bool,
 ) -> int:
-    """Next action (an ``_codes`` action int) for a pass that ended with ``code``.
+    """Next action (a ``codes`` action int) for a pass that ended with ``code``.
 
     Args:
         policy: int64[n_codes, 3] from ``AnalyzerPolicy.as_array``.
-        code: The pass's termination (``_codes`` int).
-        goal: NO_GOAL, MET or MISSED (``_codes`` int).
+        code: The pass's termination (``codes`` int).
+        goal: NO_GOAL, MET or MISSED (``codes`` int).
         restarts_left: Random restarts still allowed.
         budget_left: False once iterations, evaluations or time are spent.
         pass_began_with_identity: The pass started with H = I.

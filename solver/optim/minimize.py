@@ -1,6 +1,6 @@
 """Public entry point of the optimizer: ``minimize`` over a box with the multi-pass BFGS.
 
-The loop itself lives in ``_core`` (compiled); this module validates input, packs
+The loop itself lives in ``loop`` (compiled); this module validates input, packs
 options into the core's vectors and turns its integers back into typed results.
 """
 
@@ -13,20 +13,14 @@ import numpy as np
 import numpy.typing as npt
 from numba.core.registry import CPUDispatcher
 
-from . import _codes as C
-from ._core import run_solver
-from ._dispatch import registered_for
+from ..arrays import Matrix, Vector
+from ..errors import DimensionMismatch, InvalidProblem
+from . import codes as C
 from .analyzer import AnalyzerPolicy
-from .errors import DimensionMismatch, InvalidProblem
-from .types import (
-    AcceptedStep,
-    GradientMode,
-    Matrix,
-    MinimizeOptions,
-    MinimizeResult,
-    PassRecord,
-    Vector,
-)
+from .loop import run_solver
+from .objective import registered_for
+from .options import GradientMode, MinimizeOptions
+from .result import AcceptedStep, MinimizeResult, PassRecord
 
 _GRAD_MODES = {
     GradientMode.ANALYTIC: C.GRAD_ANALYTIC,
@@ -38,7 +32,7 @@ _GRAD_MODES = {
 def pack_options(
     options: MinimizeOptions, *, seed: int
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
-    """The core's option vectors (layout in ``_codes``)."""
+    """The core's option vectors (layout in ``codes``)."""
     fopt = np.empty(C.N_FOPT)
     fopt[C.F_GTOL] = options.gtol
     fopt[C.F_XTOL] = options.xtol
@@ -164,26 +158,28 @@ def minimize(
     trace = np.zeros((options.max_iter if record_steps else 0, 5))
     # A registered objective is bound at compile time (cached); others are passed in.
     fg = None if registered_for(objective) else objective
-    f, _, pg, code, nit, nfev, ngev, npass, nrest, nskip, elapsed = run_solver(
-        fg, None, data, x, lo, hi, h, fopt, iopt, policy.as_array(), log, trace, out_x, out_g
+    core = run_solver(
+        fg, data, x, h, lo, hi, fopt, iopt, policy.as_array(), log, trace, out_x, out_g
     )
-    pass_log = unpack_pass_log(log, npass)
+    pass_log = unpack_pass_log(log, core.passes)
     return MinimizeResult(
         x=out_x,
-        f=float(f),
-        projected_gradient_norm=float(pg),
-        termination=C.TERMINATIONS[int(code)],
+        f=float(core.f),
+        projected_gradient_norm=float(core.projected_gradient_norm),
+        termination=C.TERMINATIONS[int(core.code)],
         goal=pass_log[-1].goal,
-        iterations=int(nit),
-        function_evals=int(nfev),
-        gradient_evals=int(ngev),
-        passes=int(npass),
-        restarts=int(nrest),
-        skipped_updates=int(nskip),
+        iterations=int(core.iterations),
+        function_evals=int(core.function_evals),
+        gradient_evals=int(core.gradient_evals),
+        passes=int(core.passes),
+        restarts=int(core.restarts),
+        skipped_updates=int(core.skipped_updates),
         pass_log=pass_log,
-        elapsed_us=float(elapsed) * 1e6,
+        elapsed_us=float(core.elapsed_s) * 1e6,
         inverse_hessian=h,
-        steps=tuple(AcceptedStep(*(float(v) for v in row)) for row in trace[: int(nit)]),
+        steps=tuple(
+            AcceptedStep(*(float(v) for v in row)) for row in trace[: int(core.iterations)]
+        ),
     )
 
 

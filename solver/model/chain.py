@@ -1,27 +1,30 @@
-"""The kinematic model: links joined by joints into a tree, with effectors.
+"""A validated kinematic model: links joined by joints into a tree, with effectors.
 
-The article's model: every object (link) has a local frame relative to its parent,
-a pivot it rotates about, a joint of rotational (up to three axes, each with limits)
-or sliding kind, optional terminators, and end effectors. We add URDF-style
-revolute, continuous and prismatic joints about any unit axis.
-
-A ``Chain`` is validated once and then compiled into flat arrays (``CompiledChain``)
-that the numba kinematics walk. Frames are composed as
+``build_chain`` checks the joints and effectors (``joints``) once and compiles them
+into flat arrays (``CompiledChain``, layout in ``layout``) that the numba kinematics
+walk. Frames are composed as
 ``link = parent_link * origin * Tr(pivot) * motion(q) * Tr(-pivot)``; a rotational
 joint with axes "xz" has motion Rx(q0) Rz(q1) (intrinsic, in the declared order).
+
+To add a joint kind: a ``JointKind`` member (``joints``), its checks in
+``_check_joint``, and its nodes in ``_compile`` (each node is fixed, a rotation or a
+translation about a unit axis: ``layout.NODE_*``); a motion that is none of these
+needs a new node kind in ``forward.forward_kinematics`` and in the Jacobian columns
+of ``solver.ik.kinematics``.
 """
 
 from __future__ import annotations
 
-import enum
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidModel, InvalidProblem
-from .kinematics import (
+from ..arrays import Matrix, Vector
+from ..errors import InvalidModel, InvalidProblem
+from .joints import AXIS_VECTORS, Effector, EffectorMode, Joint, JointKind, finite_array
+from .layout import (
     ED_AIM,
     ED_TIP,
     ED_WIDTH,
@@ -39,235 +42,10 @@ from .kinematics import (
     NODE_ROTATION,
     NODE_TRANSLATION,
 )
-from .types import Matrix, Vector
 
 # Joints above this many degrees of freedom make a chain's dense BFGS matrix
 # (n x n) and its Jacobian walks too slow for a frame budget; the service caps lower.
 MAX_DOF_HARD = 2000
-
-
-class JointKind(enum.StrEnum):
-    """How a joint moves its child link."""
-
-    FIXED = "fixed"
-    ROTATIONAL = "rotational"  # the article's joint: 1-3 rotations about local x/y/z
-    REVOLUTE = "revolute"  # one rotation about any unit axis, with limits
-    CONTINUOUS = "continuous"  # revolute without limits
-    PRISMATIC = "prismatic"  # sliding along a unit axis, with limits
-
-
-class EffectorMode(enum.StrEnum):
-    """What an effector's target constrains."""
-
-    POSITION = "position"  # the tip point reaches the target position
-    POSE = "pose"  # position and full orientation
-    AIM = "aim"  # position (if weighted) and a local axis pointing along a direction
-
-
-def _finite(
-    values: Sequence[float] | Sequence[Sequence[float]] | Vector,
-    what: str,
-    *,
-    joint: str,
-    field: str,
-) -> Vector:
-    arr = np.asarray(values, dtype=np.float64)
-    if not np.isfinite(arr).all():
-        raise InvalidModel(f"{what} must be finite", joint=joint, field=field)
-    return arr
-
-
-@dataclass(frozen=True, slots=True)
-class Transform:
-    """A rigid transform: rotation (3x3, orthonormal, det +1) then translation [m]."""
-
-    translation: Vector = field(default_factory=lambda: np.zeros(3))
-    rotation: Matrix = field(default_factory=lambda: np.eye(3))
-
-    @classmethod
-    def identity(cls) -> Transform:
-        return cls()
-
-    @classmethod
-    def from_quaternion(
-        cls,
-        translation: Sequence[float],
-        w: float,
-        x: float,
-        y: float,
-        z: float,
-        *,
-        owner: str = "",
-        field_name: str = "rotation",
-    ) -> Transform:
-        """From a unit quaternion (w, x, y, z); |q| must be 1 within 1e-6."""
-        q = _finite([w, x, y, z], "quaternion", joint=owner, field=field_name)
-        norm = float(np.linalg.norm(q))
-        if abs(norm - 1.0) > 1e-6:
-            raise InvalidModel(
-                f"quaternion must have unit norm, got |q| = {norm:.9g}",
-                joint=owner,
-                field=field_name,
-            )
-        return cls(_translation(translation, owner), quaternion_to_matrix(q / norm))
-
-    @classmethod
-    def from_rpy(
-        cls, translation: Sequence[float], roll: float, pitch: float, yaw: float, *, owner: str = ""
-    ) -> Transform:
-        """From URDF roll-pitch-yaw [rad]: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-        r, p, y = _finite([roll, pitch, yaw], "rpy", joint=owner, field="rpy")
-        return cls(_translation(translation, owner), rpy_to_matrix(float(r), float(p), float(y)))
-
-    @classmethod
-    def from_matrix34(
-        cls, matrix: Sequence[Sequence[float]] | Matrix, *, owner: str = ""
-    ) -> Transform:
-        """From a 3x4 [R | t] matrix; R must be orthonormal with det +1 within 1e-6."""
-        m = _finite(matrix, "matrix", joint=owner, field="matrix")
-        if m.shape != (3, 4):
-            raise InvalidModel(f"matrix must be 3x4, got {m.shape}", joint=owner, field="matrix")
-        rot = m[:, :3]
-        if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0.0:
-            raise InvalidModel(
-                "matrix rotation part must be orthonormal with determinant +1",
-                joint=owner,
-                field="matrix",
-            )
-        return cls(m[:, 3].copy(), rot.copy())
-
-    def as_matrix34(self) -> Matrix:
-        out = np.empty((3, 4))
-        out[:, :3] = self.rotation
-        out[:, 3] = self.translation
-        return out
-
-
-def _translation(values: Sequence[float], owner: str) -> Vector:
-    t = _finite(values, "translation", joint=owner, field="translation")
-    if t.shape != (3,):
-        raise InvalidModel(
-            f"translation must have 3 components, got {t.shape}", joint=owner, field="translation"
-        )
-    return t
-
-
-def quaternion_to_matrix(q: Vector) -> Matrix:
-    """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = (float(v) for v in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def matrix_to_quaternion(r: Matrix) -> Vector:
-    """Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Shepperd's method)."""
-    tr = float(np.trace(r))
-    if tr > 0.0:
-        s = math.sqrt(tr + 1.0) * 2.0
-        q = np.array(
-            [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-        )
-    else:
-        i = int(np.argmax(np.diag(r)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = math.sqrt(max(1.0 + r[i, i] - r[j, j] - r[k, k], 0.0)) * 2.0
-        q = np.empty(4)
-        q[0] = (r[k, j] - r[j, k]) / s
-        q[1 + i] = 0.25 * s
-        q[1 + j] = (r[j, i] + r[i, j]) / s
-        q[1 + k] = (r[k, i] + r[i, k]) / s
-    if q[0] < 0.0:
-        q = -q
-    out: Vector = q / np.linalg.norm(q)
-    return out
-
-
-def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> Matrix:
-    """URDF's fixed-axis roll, pitch, yaw: R = Rz(yaw) @ Ry(pitch) @ Rx(roll)."""
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-_AXIS_VECTORS = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Joint:
-    """A joint from ``parent`` link to ``child`` link.
-
-    Attributes:
-        name: Unique joint name; single-DOF joints expose one variable of this name,
-            rotational joints one per axis named ``f"{name}.{axis}"``.
-        parent: Parent link name.
-        child: Child link name (each link has at most one parent joint: a tree).
-        kind: See ``JointKind``.
-        origin: Rest transform of the joint frame in the parent link frame.
-        pivot: Point the motion acts about, in the joint frame [m].
-        axis: Unit axis for revolute / continuous / prismatic joints.
-        axes: Active local axes of a rotational joint, in order, e.g. "zyx".
-        lower, upper: One limit per DOF [rad] or [m]; continuous joints use -inf/inf.
-        terminator: Joints above this one do not move for chains running through it.
-    """
-
-    name: str
-    parent: str
-    child: str
-    kind: JointKind
-    origin: Transform = field(default_factory=Transform)
-    pivot: Vector = field(default_factory=lambda: np.zeros(3))
-    axis: Vector = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
-    axes: str = ""
-    lower: tuple[float, ...] = ()
-    upper: tuple[float, ...] = ()
-    terminator: bool = False
-
-    @property
-    def dof_names(self) -> tuple[str, ...]:
-        if self.kind is JointKind.FIXED:
-            return ()
-        if self.kind is JointKind.ROTATIONAL:
-            return tuple(f"{self.name}.{a}" for a in self.axes)
-        return (self.name,)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Effector:
-    """A named point on a link that a target pulls on.
-
-    Attributes:
-        name: Unique effector name (targets refer to it).
-        link: Link carrying the effector.
-        tip_offset: Tip point in the link frame [m].
-        tip_rotation: Orientation of the tip frame in the link frame (pose targets
-            and the aim axis are expressed in the tip frame).
-        mode: What the target constrains.
-        aim_axis: For AIM: the tip-frame axis that must point along the target direction.
-        position_weight: Weight of squared position error [1/m^2 relative].
-        rotation_weight: Weight of squared orientation error [m^2/rad^2]; 0.1 m
-            lever arm by default, i.e. 1 mrad counts like 0.1 mm.
-    """
-
-    name: str
-    link: str
-    tip_offset: Vector = field(default_factory=lambda: np.zeros(3))
-    tip_rotation: Matrix = field(default_factory=lambda: np.eye(3))
-    mode: EffectorMode = EffectorMode.POSITION
-    aim_axis: Vector = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
-    position_weight: float = 1.0
-    rotation_weight: float = 0.01
 
 
 @dataclass(frozen=True, slots=True)
@@ -324,7 +102,7 @@ class Chain:
 
 @dataclass(frozen=True, slots=True)
 class CompiledChain:
-    """Flat arrays for the numba kinematics (layout in ``kinematics``' docstring).
+    """Flat arrays for the numba kinematics (layout in ``layout``).
 
     A joint becomes: a node carrying origin * Tr(pivot) and its first motion, one node
     per further axis, and a node carrying Tr(-pivot) when the pivot is non-zero.
@@ -351,7 +129,7 @@ MODE_CODES = {
 
 
 def _check_unit_axis(axis: Vector, joint: str, field: str) -> Vector:
-    a = _finite(axis, "axis", joint=joint, field=field)
+    a = finite_array(axis, "axis", joint=joint, field=field)
     if a.shape != (3,):
         raise InvalidModel(f"axis must have 3 components, got {a.shape}", joint=joint, field=field)
     norm = float(np.linalg.norm(a))
@@ -366,7 +144,7 @@ def _check_joint(j: Joint) -> Joint:
         raise InvalidModel("joint name must not be empty", field="name")
     if j.parent == j.child:
         raise InvalidModel("a joint cannot connect a link to itself", joint=j.name, field="child")
-    pivot = _finite(j.pivot, "pivot", joint=j.name, field="pivot")
+    pivot = finite_array(j.pivot, "pivot", joint=j.name, field="pivot")
     if pivot.shape != (3,):
         raise InvalidModel("pivot must have 3 components", joint=j.name, field="pivot")
     axis = j.axis
@@ -375,7 +153,7 @@ def _check_joint(j: Joint) -> Joint:
         axes = j.axes.lower()
         if (
             not 1 <= len(axes) <= 3
-            or any(a not in _AXIS_VECTORS for a in axes)
+            or any(a not in AXIS_VECTORS for a in axes)
             or len(set(axes)) != len(axes)
         ):
             raise InvalidModel(
@@ -431,10 +209,10 @@ def _check_effector(e: Effector, links: set[str]) -> Effector:
         raise InvalidModel("effector name must not be empty", field="name")
     if e.link not in links:
         raise InvalidModel(f"unknown link {e.link!r}", joint=e.name, field="link")
-    tip = _finite(e.tip_offset, "tip_offset", joint=e.name, field="tip_offset")
+    tip = finite_array(e.tip_offset, "tip_offset", joint=e.name, field="tip_offset")
     if tip.shape != (3,):
         raise InvalidModel("tip_offset must have 3 components", joint=e.name, field="tip_offset")
-    rot = _finite(e.tip_rotation, "tip_rotation", joint=e.name, field="tip_rotation")
+    rot = finite_array(e.tip_rotation, "tip_rotation", joint=e.name, field="tip_rotation")
     if (
         rot.shape != (3, 3)
         or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6)
@@ -594,7 +372,7 @@ def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> Comp
         elif j.kind is JointKind.ROTATIONAL:
             m = base
             for a in j.axes:
-                p = add(p, m, NODE_ROTATION, np.array(_AXIS_VECTORS[a]), next_dof, j.name)
+                p = add(p, m, NODE_ROTATION, np.array(AXIS_VECTORS[a]), next_dof, j.name)
                 first = p if first < 0 else first
                 next_dof += 1
                 m = _translation_only(np.zeros(3))

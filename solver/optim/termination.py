@@ -1,7 +1,7 @@
 """Termination codes of a pass and of a whole solve, and the analyzer's actions.
 
 The string values are the JSON contract of the service (stable, documented); the
-compiled core works with the small integers in ``solver._codes`` and the public
+compiled core works with the small integers in ``solver.optim.codes`` and the public
 API converts them back to these enums, so no magic int ever leaves ``solver``.
 """
 

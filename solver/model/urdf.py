@@ -43,17 +43,9 @@ import defusedxml
 import defusedxml.ElementTree as DET
 import numpy as np
 
-from .chain import (
-    MAX_DOF_HARD,
-    Chain,
-    Effector,
-    EffectorMode,
-    Joint,
-    JointKind,
-    Transform,
-    build_chain,
-)
-from .errors import InvalidModel
+from ..errors import InvalidModel
+from .chain import MAX_DOF_HARD, Chain, build_chain
+from .joints import Effector, EffectorMode, Joint, JointKind, Transform
 
 _KINDS = {
     "revolute": JointKind.REVOLUTE,

@@ -1,0 +1,225 @@
+"""The per-frame solve, compiled: one call validates the targets and the seed, runs the
+optimizer's core, reports the pose errors and takes the null-space step.
+
+One module because these functions call each other inside numba and share the layout
+of the output block (errors, final H, pass log) that ``result.IKResult`` reads.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .._jit import jit, jit_leaf
+from ..model.layout import (
+    ED_ERR_P,
+    ED_ERR_R,
+    ED_TDIR,
+    ED_TPOS,
+    ED_TROT,
+    ED_WP,
+    EI_ACTIVE,
+    EI_MODE,
+    MODE_AIM,
+    MODE_POSE,
+    MODE_POSITION,
+)
+from ..optim import codes as C
+from ..optim.loop import WORK_ROWS, run_solver_leaf
+from .kinematics import (
+    DD_HI,
+    DD_LO,
+    DD_QREF,
+    DD_REST,
+    MISC_GOAL,
+    effector_errors,
+    is_last_point,
+)
+from .metric import null_space_step
+
+SEED_NOT_FINITE = -2  # ``solve_frame``'s "bad" code for a seed with NaN or inf
+TARGETS_OK = -1  # ``solve_frame``'s "bad" code when targets and seed are valid
+# ``solve_frame``'s status codes: indexes of ``result.STATUSES``.
+STATUS_SOLVED = 0
+STATUS_NOT_REACHED = 1
+STATUS_BUDGET_EXHAUSTED = 2
+STATUS_NONFINITE = 3
+
+
+@jit_leaf
+def check_targets(data):  # type: ignore[no-untyped-def]
+    """-1 if the loaded targets are valid, else 3 * effector + problem (0 non-finite,
+    1 rotation not orthonormal with det +1, 2 zero direction); normalises directions.
+
+    Checked here, in compiled code, because the same checks in numpy cost ~25 us per
+    target (np.allclose, det), more than a 7-DOF solve.
+    """
+    ei = data[2]
+    ed = data[3]
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] == 0:
+            continue
+        for k in range(ED_TPOS, ED_TDIR + 3):
+            if not math.isfinite(ed[e, k]):
+                return 3 * e
+        if ei[e, EI_MODE] == MODE_POSE:
+            t = ED_TROT
+            worst = 0.0
+            for a in range(3):
+                for b in range(3):
+                    dot = 0.0
+                    for c in range(3):
+                        dot += ed[e, t + 3 * a + c] * ed[e, t + 3 * b + c]
+                    worst = max(worst, abs(dot - (1.0 if a == b else 0.0)))
+            r = ed[e, t : t + 9]
+            det = (
+                r[0] * (r[4] * r[8] - r[5] * r[7])
+                - r[1] * (r[3] * r[8] - r[5] * r[6])
+                + r[2] * (r[3] * r[7] - r[4] * r[6])
+            )
+            if worst > 1e-6 or det < 0.0:
+                return 3 * e + 1
+        elif ei[e, EI_MODE] == MODE_AIM:
+            d = ED_TDIR
+            norm = math.sqrt(ed[e, d] ** 2 + ed[e, d + 1] ** 2 + ed[e, d + 2] ** 2)
+            if norm < 1e-12:
+                return 3 * e + 2
+            for c in range(3):
+                ed[e, d + c] /= norm
+    return -1
+
+
+def scratch_size(n: int, m: int) -> int:
+    """Length of ``solve_frame``'s float scratch for n variables and m effectors."""
+    return WORK_ROWS * n + 3 * n + 3 * m + n * n
+
+
+@jit_leaf
+def solve_frame(  # type: ignore[no-untyped-def]
+    data, x0, h0, fopt, iopt, policy, out_x, out, null_space_step_rad, scratch, ints
+):
+    """One compiled call per frame: validate targets and seed, solve, report errors,
+    and (``null_space_step_rad`` > 0, solved frames only) take the null-space step
+    towards the rest pose (DD_REST).
+
+    One call and flat outputs because at ~20-40 us per solve, every Python-level
+    step around it showed up in bench/ik/: a numba dispatch type-checks each
+    array argument, and each returned array or nested tuple is boxed.
+
+    Writes the pose into ``out_x`` and, into ``out``: per-effector errors (m x 3:
+    position error, nan if not targeted; rotation error, nan if not constrained;
+    1.0 if targeted), the final inverse Hessian (n x n), then the pass log.
+    ``h0`` (the initial H) is read, never written.
+
+    ``scratch`` (float64[scratch_size(n, m)]) and ``ints`` (int64[3]) are work space,
+    the caller's: compiled without reference counting (``jit_leaf``), this function
+    and everything it calls allocate nothing.
+
+    Returns (bad_target, status, termination code, iterations, evaluations,
+    passes, restarts, solve seconds); status indexes ``result.STATUSES``.
+    """
+    bad = check_targets(data)
+    ei = data[2]
+    dd = data[4]
+    n = x0.shape[0]
+    m = ei.shape[0]
+    for i in range(n):
+        if not math.isfinite(x0[i]):
+            bad = SEED_NOT_FINITE
+    if bad != -1:
+        return bad, 0, 0, 0, 0, 0, 0, 0.0
+    for i in range(n):
+        dd[DD_QREF, i] = x0[i]  # the posture pull is towards the seed
+    errors = out[: 3 * m].reshape((m, 3))
+    h = out[3 * m : 3 * m + n * n].reshape((n, n))
+    log = out[3 * m + n * n :].reshape((-1, C.N_LOG))
+    for i in range(n):
+        for j in range(n):
+            h[i, j] = h0[i, j]
+    # The scratch, cut into its parts (views: nothing is allocated).
+    work = scratch[: WORK_ROWS * n].reshape((WORK_ROWS, n))
+    k = WORK_ROWS * n
+    out_g = scratch[k : k + n]
+    moved = scratch[k + n : k + 2 * n]
+    ns_g = scratch[k + 2 * n : k + 3 * n]
+    k += 3 * n
+    moved_errors = scratch[k : k + 3 * m].reshape((m, 3))
+    ns_h = scratch[k + 3 * m : k + 3 * m + n * n].reshape((n, n))
+    trace = scratch[:0].reshape((0, 5))  # records nothing
+    # fg=None: the core binds the objective registered for this data type (cacheable).
+    # The build without reference counting: the IK objective and metric allocate
+    # nothing (their scratch is DD's rows), see _jit.jit_leaf.
+    res = run_solver_leaf(
+        None, data, x0, h, dd[DD_LO], dd[DD_HI], fopt, iopt, policy, log, trace, out_x, out_g,
+        work, ints,
+    )  # fmt: skip
+    code = res.code
+    # The solve's answer is usually the point it evaluated last (ED holds its errors,
+    # MISC its goal measure): reuse that instead of one more FK.
+    if is_last_point(out_x, dd):
+        measure = data[5][MISC_GOAL]
+        _copy_errors(data, errors)
+    else:
+        measure = _report(data, out_x, errors)
+    if measure <= 1.0 and null_space_step_rad > 0.0:
+        if null_space_step(out_x, data, dd[DD_REST], null_space_step_rad, moved, ns_h, ns_g):
+            if _report(data, moved, moved_errors) <= 1.0:
+                # Loops, not slice assignment: that needs numba's runtime (a copy in case
+                # the two overlap), which this build does not have.
+                for i in range(n):
+                    out_x[i] = moved[i]
+                for e in range(m):
+                    for c in range(3):
+                        errors[e, c] = moved_errors[e, c]
+    if measure <= 1.0:
+        status = STATUS_SOLVED
+    elif code == C.NONFINITE or not math.isfinite(measure):
+        status = STATUS_NONFINITE
+    elif code == C.MAX_ITER or code == C.MAX_FEV or code == C.DEADLINE:
+        status = STATUS_BUDGET_EXHAUSTED
+    else:
+        status = STATUS_NOT_REACHED
+    return (
+        bad,
+        status,
+        code,
+        res.iterations,
+        res.function_evals,
+        res.passes,
+        res.restarts,
+        res.elapsed_s,
+    )
+
+
+@jit_leaf
+def _report(data, q, errors):  # type: ignore[no-untyped-def]
+    """Errors at q into ``errors`` (see ``solve_frame``); returns the goal measure."""
+    measure = effector_errors(q, data)
+    _copy_errors(data, errors)
+    return measure
+
+
+@jit_leaf
+def _copy_errors(data, errors):  # type: ignore[no-untyped-def]
+    """The errors in ED (those of the last q evaluated) into ``errors`` (m x 3)."""
+    ei = data[2]
+    ed = data[3]
+    for e in range(ei.shape[0]):
+        active = ei[e, EI_ACTIVE] != 0
+        errors[e, 0] = ed[e, ED_ERR_P] if active and ed[e, ED_WP] > 0.0 else math.nan
+        errors[e, 1] = ed[e, ED_ERR_R] if active and ei[e, EI_MODE] != MODE_POSITION else math.nan
+        errors[e, 2] = 1.0 if active else 0.0
+
+
+@jit
+def report_only(data, q, out):  # type: ignore[no-untyped-def]
+    """Validate targets and report errors at q into the head of ``out`` (the errors
+    block of ``solve_frame``'s layout) without solving."""
+    m = data[2].shape[0]
+    errors = out[: 3 * m].reshape((m, 3))
+    bad = check_targets(data)
+    for i in range(q.shape[0]):
+        if not math.isfinite(q[i]):
+            bad = SEED_NOT_FINITE
+    if bad != -1:
+        return bad, 0.0
+    return bad, _report(data, q, errors)

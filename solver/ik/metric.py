@@ -1,0 +1,350 @@
+"""The Gauss-Newton metric the IK hands the optimizer, and the null-space step.
+
+- ``ik_metric``: the inverse of the damped Gauss-Newton matrix (2 J^T W J + mu I)^-1
+  on the free variables, registered with the IK objective (``optim.objective``): the
+  optimizer re-seeds H from it (``IKOptions.metric_every``). Direct for small chains,
+  low-rank (Woodbury) while the task has at most n / 2 rows.
+- ``weighted_jacobian``: one effector's sqrt(W)-weighted Jacobian rows (also used by
+  the planner's kernels, ``solver.path.kernels``).
+- ``null_space_step``: after a solved stream frame, a step towards the rest pose
+  within the chain's self-motion.
+
+Compiled (numba) without reference counting: scratch is DD's rows (``kinematics``).
+"""
+
+from __future__ import annotations
+
+import math
+
+from .._jit import jit_inline, jit_leaf
+from ..model.forward import effector_frame
+from ..model.layout import (
+    ED_AIM,
+    ED_WP,
+    ED_WR,
+    EI_ACTIVE,
+    EI_MODE,
+    EI_NODE,
+    MODE_AIM,
+    MODE_POSE,
+    MODE_POSITION,
+    ND_T,
+    NI_DOF,
+    NI_KIND,
+    NI_PARENT,
+    NODE_ROTATION,
+)
+from .kinematics import (
+    DD_GSCRATCH,
+    DD_HI,
+    DD_J,
+    DD_LO,
+    DD_STACK,
+    DD_XLAST,
+    MISC_DAMPING,
+    MISC_DAMPING_SCALE,
+    MISC_LAST_F,
+    MISC_POSTURE,
+    effector_terms,
+    is_last_point,
+    world_axis,
+)
+
+# Above this many variables the direct Gauss-Newton metric (O(n^3)) costs more than it
+# saves; the low-rank form (at most n / 2 task rows, O(n^2 rows)) is used at any size in
+# the solve (the null-space step keeps this limit).
+METRIC_MAX_DOF = 64
+
+
+@jit_inline
+def _held(qi, gi, lo_i, hi_i):  # type: ignore[no-untyped-def]
+    """A variable is frozen, or sits on a bound with the gradient pushing outward
+    (scalars: see ``_rotate`` on arrays handed to per-joint helpers)."""
+    return lo_i == hi_i or (qi <= lo_i and gi > 0.0) or (qi >= hi_i and gi < 0.0)
+
+
+@jit_leaf
+def ik_metric(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
+    """The registered metric (see ``_metric``), damped with mu = scale x f + 1e-9."""
+    return _metric(q, g, lo, hi, data, h, -1.0)
+
+
+@jit_inline
+def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
+    """Inverse Hessian for the free variables from the exact Jacobian: (2 J^T W J + mu I)^-1.
+
+    BFGS from H = I takes dozens of iterations on a pose problem; seeding a pass (or
+    every step, ``metric_every``) with the damped Gauss-Newton metric (Levenberg-
+    Marquardt's matrix with mu = s f + 1e-9, s = MISC_DAMPING_SCALE, Sugihara 2011,
+    floored at MISC_DAMPING) gives Gauss-Newton steps
+    that BFGS can refine. Held variables (frozen, or on a bound with the gradient
+    pushing out) are left out of the coupling: the direction then uses the inverse of
+    the free block, as a projected Newton method must (Bertsekas 1982), instead of a
+    block of the full inverse, which crawled for 1000+ iterations with one joint on
+    its limit. Returns False (caller keeps H = I) when the direct O(n^3) form would be
+    needed for more than METRIC_MAX_DOF variables.
+    """
+    ni, nd, ei, ed, dd, misc = data
+    n = q.shape[0]
+    rows = 0
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] != 0:
+            rows += 3 if ei[e, EI_MODE] == MODE_POSITION else 6
+    if n > METRIC_MAX_DOF and 2 * rows > n:
+        return False
+    # The line search has usually just evaluated q: its frames are still in nd.
+    if is_last_point(q, dd):
+        f = misc[MISC_LAST_F]
+    else:
+        f = effector_terms(q, dd[DD_GSCRATCH], False, ni, nd, ei, ed)
+        # ND and ED's errors now describe q, not the point in DD_XLAST: mark it stale.
+        dd[DD_XLAST, 0] = math.nan
+    free = dd[DD_GSCRATCH]  # reused as a 0/1 mask of the free variables
+    for i in range(n):
+        free[i] = 0.0 if _held(q[i], g[i], lo[i], hi[i]) else 1.0
+    if mu_fixed < 0.0:
+        mu = max(misc[MISC_DAMPING_SCALE] * f + 1e-9, misc[MISC_DAMPING])
+    else:
+        mu = mu_fixed
+    c = mu + 2.0 * misc[MISC_POSTURE]
+    if 2 * rows <= n:
+        return _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h)
+    for i in range(n):
+        for j in range(n):
+            h[i, j] = 0.0
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] == 0:
+            continue
+        weighted_jacobian(e, ni, nd, ei, ed, dd)
+        for i in range(n):
+            if free[i] == 0.0:
+                continue
+            for j in range(i, n):
+                if free[j] == 0.0:
+                    continue
+                acc = 0.0
+                for r in range(6):
+                    acc += dd[DD_J + r, i] * dd[DD_J + r, j]
+                h[i, j] += 2.0 * acc
+                if j != i:
+                    h[j, i] += 2.0 * acc
+    for i in range(n):
+        h[i, i] += c
+    return _invert_spd_in_place(h)
+
+
+@jit_leaf
+def _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h):  # type: ignore[no-untyped-def]
+    """h <- (c I + 2 J^T J)^-1 through the rows x rows matrix M = c I + 2 J J^T, for
+    a task with at most half as many rows as variables (position-only arms, long
+    chains; at 6 rows for 7 variables the direct inverse measured as fast).
+
+    J holds sqrt(W)-weighted rows with the held variables' columns zeroed, so a held
+    variable gets 1/c on the diagonal and no coupling, as in the direct path. With
+    one targeted effector (the usual case) J stays in DD's Jacobian rows; several
+    effectors stack theirs in DD's rows from DD_STACK.
+    """
+    n = h.shape[0]
+    only = -1
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] != 0:
+            only = e if only == -1 else -2
+    if only >= 0:
+        weighted_jacobian(only, ni, nd, ei, ed, dd)
+        for r in range(rows):
+            for i in range(n):
+                dd[DD_J + r, i] *= free[i]
+        return _woodbury_inverse(dd[DD_J : DD_J + rows], c, h)
+    if dd.shape[0] < DD_STACK + rows:  # a DD block not sized by dd_rows(n)
+        return False
+    y = dd[DD_STACK : DD_STACK + rows]
+    r0 = 0
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] == 0:
+            continue
+        weighted_jacobian(e, ni, nd, ei, ed, dd)
+        k = 3 if ei[e, EI_MODE] == MODE_POSITION else 6
+        for r in range(k):
+            for i in range(n):
+                y[r0 + r, i] = dd[DD_J + r, i] * free[i]
+        r0 += k
+    return _woodbury_inverse(y, c, h)
+
+
+@jit_inline
+def cholesky_in_place(m, rows):  # type: ignore[no-untyped-def]
+    """m's leading rows x rows block (symmetric; its lower triangle is read) <- its
+    lower Cholesky factor L, in the lower triangle; False if not positive definite."""
+    for j in range(rows):
+        s = m[j, j]
+        for k in range(j):
+            s -= m[j, k] * m[j, k]
+        if not s > 0.0:
+            return False
+        d = math.sqrt(s)
+        m[j, j] = d
+        for i in range(j + 1, rows):
+            s = m[i, j]
+            for k in range(j):
+                s -= m[i, k] * m[j, k]
+            m[i, j] = s / d
+    return True
+
+
+@jit_leaf
+def _woodbury_inverse(y, c, h):  # type: ignore[no-untyped-def]
+    """h <- (c I + 2 Y^T Y)^-1 for Y (rows x n, rows <= n / 2); Y is overwritten.
+
+    Woodbury: (c I + 2 J^T J)^-1 = (I - 2 J^T M^-1 J) / c with M = c I + 2 J J^T,
+    and with M = L L^T, J^T M^-1 J = Y^T Y for Y = L^-1 J. Costs O(n^2 rows) instead
+    of O(n^3): the 40-DOF tail's 40x40 inverse becomes a 3x3 Cholesky and one n x n
+    product. L lives in h's top-left rows x rows block until the last loop, which
+    reads only Y.
+    """
+    rows, n = y.shape
+    low = h
+    for a in range(rows):
+        for b in range(a + 1):
+            acc = 0.0
+            for i in range(n):
+                acc += y[a, i] * y[b, i]
+            low[a, b] = 2.0 * acc + (c if a == b else 0.0)
+    if not cholesky_in_place(low, rows):
+        return False
+    # Y <- L^-1 J, column by column (forward substitution in place).
+    for i in range(n):
+        for a in range(rows):
+            s = y[a, i]
+            for k in range(a):
+                s -= low[a, k] * y[k, i]
+            y[a, i] = s / low[a, a]
+    inv_c = 1.0 / c
+    for i in range(n):
+        for j in range(i, n):
+            acc = 0.0
+            for a in range(rows):
+                acc += y[a, i] * y[a, j]
+            v = ((1.0 if i == j else 0.0) - 2.0 * acc) * inv_c
+            h[i, j] = v
+            h[j, i] = v
+    return True
+
+
+@jit_inline
+def weighted_jacobian(e, ni, nd, ei, ed, dd):  # type: ignore[no-untyped-def]
+    """sqrt(W)-weighted Jacobian of effector e into DD rows DD_J..DD_J+5: position
+    rows 0-2, orientation (pose) or aim-direction (aim) rows 3-5, zero for position
+    mode. The frames in ND must be those of the current q."""
+    n = dd.shape[1]
+    for r in range(6):
+        for i in range(n):
+            dd[DD_J + r, i] = 0.0
+    r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = effector_frame(e, ei, ed, nd)
+    mode = ei[e, EI_MODE]
+    sp = math.sqrt(ed[e, ED_WP])
+    sr = math.sqrt(ed[e, ED_WR]) if mode != MODE_POSITION else 0.0
+    a = ED_AIM
+    ax = r00 * ed[e, a] + r01 * ed[e, a + 1] + r02 * ed[e, a + 2]
+    ay = r10 * ed[e, a] + r11 * ed[e, a + 1] + r12 * ed[e, a + 2]
+    az = r20 * ed[e, a] + r21 * ed[e, a + 1] + r22 * ed[e, a + 2]
+    k = ei[e, EI_NODE]
+    while k >= 0:
+        d = ni[k, NI_DOF]
+        if d >= 0:
+            wx, wy, wz = world_axis(nd, k)
+            if ni[k, NI_KIND] == NODE_ROTATION:
+                lx = px - nd[k, ND_T]
+                ly = py - nd[k, ND_T + 1]
+                lz = pz - nd[k, ND_T + 2]
+                dd[DD_J, d] += sp * (wy * lz - wz * ly)
+                dd[DD_J + 1, d] += sp * (wz * lx - wx * lz)
+                dd[DD_J + 2, d] += sp * (wx * ly - wy * lx)
+                if mode == MODE_POSE:
+                    dd[DD_J + 3, d] += sr * wx
+                    dd[DD_J + 4, d] += sr * wy
+                    dd[DD_J + 5, d] += sr * wz
+                elif mode == MODE_AIM:
+                    # d a / dt = w x a
+                    dd[DD_J + 3, d] += sr * (wy * az - wz * ay)
+                    dd[DD_J + 4, d] += sr * (wz * ax - wx * az)
+                    dd[DD_J + 5, d] += sr * (wx * ay - wy * ax)
+            else:
+                dd[DD_J, d] += sp * wx
+                dd[DD_J + 1, d] += sp * wy
+                dd[DD_J + 2, d] += sp * wz
+        k = ni[k, NI_PARENT]
+
+
+@jit_inline
+def _invert_spd_in_place(m):  # type: ignore[no-untyped-def]
+    """m <- m^-1 for a symmetric positive definite m (Cholesky); False if not SPD.
+
+    Allocation-free, as LAPACK's potrf + potri: L goes into the lower triangle, is
+    inverted there, and inv(L)^T inv(L) is written column by column into the upper
+    triangle (each column's diagonal last: it is the only inv(L) entry that column
+    still reads), then mirrored. It runs once per solver iteration; an n x n
+    scratch allocation per call cost more than the arithmetic at 6-7 joints.
+    """
+    n = m.shape[0]
+    if not cholesky_in_place(m, n):
+        return False
+    # inv(L) in place (lower triangle).
+    for j in range(n):
+        m[j, j] = 1.0 / m[j, j]
+        for i in range(j + 1, n):
+            s = 0.0
+            for k in range(j, i):
+                s -= m[i, k] * m[k, j]
+            m[i, j] = s / m[i, i]
+    # (m^-1)[i, j] = sum_{k >= j} inv(L)[k, i] inv(L)[k, j] for i <= j, into the upper
+    # triangle; column j's diagonal overwrites inv(L)[j, j], which later columns do
+    # not read (they sum over rows k > j only).
+    for j in range(n):
+        for i in range(j + 1):
+            s = 0.0
+            for k in range(j, n):
+                s += m[k, i] * m[k, j]
+            m[i, j] = s
+    for j in range(n):
+        for i in range(j):
+            m[j, i] = m[i, j]
+    return True
+
+
+@jit_leaf
+def null_space_step(q, data, rest, max_step, out, h, g):  # type: ignore[no-untyped-def]
+    """A step towards ``rest`` that leaves the effectors where they are (to first order).
+
+    With A = 2 J^T W J over the targeted effectors, mu (A + mu I)^-1 is the projector
+    onto A's null space as mu -> 0 (task directions are shrunk by mu / (2 sigma^2 +
+    mu)). Applied to z = rest - q it moves a redundant chain through its self-motion
+    towards its rest pose: what keeps a stream of small target moves from drifting the
+    arm into its limits or a singularity over hundreds of frames (the classic
+    pseudo-inverse drift). The step is scaled so that no variable moves more than
+    max_step. Writes q + step (clipped to the limits) into out; False if impossible.
+    ``h`` (n x n) and ``g`` (n) are work space (the caller's: nothing is allocated).
+    """
+    ni, nd, ei, ed, dd, misc = data
+    n = q.shape[0]
+    if n > METRIC_MAX_DOF:
+        return False
+    lo = dd[DD_LO]
+    hi = dd[DD_HI]
+    for i in range(n):
+        g[i] = 0.0  # nothing is held by a gradient: only frozen variables stay out
+    mu = 1e-6
+    if not _metric(q, g, lo, hi, data, h, mu):
+        return False
+    big = 0.0
+    for i in range(n):
+        acc = 0.0
+        for j in range(n):
+            if lo[j] != hi[j]:
+                acc += h[i, j] * (rest[j] - q[j])
+        out[i] = mu * acc if lo[i] != hi[i] else 0.0
+        big = max(big, abs(out[i]))
+    scale = 1.0 if big <= max_step else max_step / big
+    for i in range(n):
+        v = q[i] + scale * out[i]
+        out[i] = min(hi[i], max(lo[i], v))
+    return True

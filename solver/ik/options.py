@@ -1,0 +1,173 @@
+"""Per-solve settings of the IK (``IKOptions``) and the defaults for streams."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ..errors import InvalidProblem
+from ..optim import AnalyzerPolicy, MinimizeOptions
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class IKOptions:
+    """Per-solve settings.
+
+    Attributes:
+        position_tolerance_m: Success needs every position error at or below this.
+        rotation_tolerance_rad: ... and every orientation / aim error at or below this.
+        time_budget_us: Wall-clock budget of one solve (None: no limit).
+        max_iter: Iterations over all passes and restarts.
+        max_restarts: Random restarts the analyzer may order.
+        restart_radius_rad: Restarts sample within this distance of the seed (per
+            variable); inf samples the whole range (TRAC-IK style, may jump).
+        max_step_rad: Cap on any variable's change per iteration (a step cap keeps a
+            cold solve from slamming several joints into their limits).
+        posture_weight: Pull towards the reference pose (rest or previous): w sum dq^2.
+        limit_weight: Penalty within ``limit_margin`` x range of a limit.
+        limit_margin: Width of that band as a fraction of the range.
+        stall_window: Multi-pass trigger (iterations); 0 for a single pass.
+        ftol: Relative improvement below which an iteration counts as stalled.
+        gtol: Projected-gradient tolerance (a stationary point ends the pass).
+        scale_initial_h: Nocedal-Wright initial scaling of H at each pass.
+        curvature: The article's curvature condition in the line search.
+        carry_hessian: ``track`` starts each frame from the last frame's H (the
+            metric is then also computed at each answer, for the next frame).
+        null_space_step_rad: After a solved ``track`` frame, move at most this far
+            (per variable) towards the rest pose through the chain's self-motion,
+            keeping the effectors within tolerance (0: off). Stops a redundant arm's
+            slow drift into its limits over a long stream.
+        global_fallback: When a ``track`` frame fails with local restarts, retry it with
+            restarts over the whole range inside the remaining budget: a stream stuck
+            on a branch that cannot follow the target jumps once instead of missing
+            every later frame.
+        damping: Floor of the Gauss-Newton damping mu (mu = damping_scale x f): damped least
+            squares near singularities takes small joint steps where pure Gauss-Newton
+            swings joints by radians for a millimetre (streams use 1e-3).
+        damping_redundant_only: Apply the ``damping`` floor only while the task is
+            redundant: more free joints (unlocked, lower < upper) than target rows (3
+            per position, 3 per orientation, 2 per aim direction; a part whose weight
+            is 0 adds none). Without a self-motion the floor has nothing to steady,
+            and near a singularity it only makes a tracked answer lag the target and
+            catch up later in one larger step (UR5 pose streams at 1e-5 m / 1e-4 rad:
+            33 of 40 within twice the reference's largest step with the floor, 39
+            without; at 1e-4 m / 1e-3 rad: 22 and 23).
+        damping_scale: mu = damping_scale x f (Levenberg-Marquardt's damping relative
+            to the current error, Sugihara 2011). 0.5 took 9-12 median iterations
+            against 10-15 with 1.0 (Chan's choice, as in ``ik_LM``) on 10,000 random
+            poses of each arm, at the same solve rate (bench/ik/); 0.1 needed more
+            restarts. Streams keep 1.0 (their step and jump figures were measured
+            with it).
+        metric_every: Re-seed H from the exact Gauss-Newton metric (2 J^T W J + mu I)^-1
+            every this many iterations (1: damped Gauss-Newton steps under the same
+            line search, multi-pass and analyzer; 0: the article's BFGS, with the
+            metric only at the start of each pass). 1 is the default because it
+            took ~10 iterations against ~37 on 7-DOF pose problems (bench/ik/).
+        metric_until: Re-seed only during a pass's first this many iterations, then
+            BFGS updates (0: always). Near a singularity damped Gauss-Newton crawls
+            (hundreds of iterations per frame, bench/ik/ part (c), iiwa); BFGS
+            learns the missing curvature in a few steps. Streams use 8.
+        policy: The analyzer's table.
+    """
+
+    position_tolerance_m: float = 1e-4
+    rotation_tolerance_rad: float = 1e-3
+    time_budget_us: float | None = 5000.0
+    max_iter: int = 5000
+    max_restarts: int = 50
+    restart_radius_rad: float = math.inf
+    max_step_rad: float = 0.5
+    posture_weight: float = 0.0
+    limit_weight: float = 0.0
+    limit_margin: float = 0.05
+    stall_window: int = 5
+    ftol: float = 1e-3
+    gtol: float = 1e-14
+    scale_initial_h: bool = True
+    curvature: bool = False
+    carry_hessian: bool = False
+    metric_every: int = 1
+    metric_until: int = 0
+    null_space_step_rad: float = 0.0
+    damping: float = 0.0
+    damping_redundant_only: bool = False
+    damping_scale: float = 0.5
+    global_fallback: bool = False
+    policy: AnalyzerPolicy = field(default_factory=AnalyzerPolicy.default)
+
+    def __post_init__(self) -> None:
+        for name in (
+            "position_tolerance_m",
+            "rotation_tolerance_rad",
+            "max_step_rad",
+            "restart_radius_rad",
+        ):
+            v = getattr(self, name)
+            if not v > 0.0 or math.isnan(v):
+                raise InvalidProblem(f"{name} must be > 0, got {v!r}")
+        for name in (
+            "posture_weight",
+            "limit_weight",
+            "ftol",
+            "gtol",
+            "damping",
+            "damping_scale",
+            "null_space_step_rad",
+        ):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise InvalidProblem(f"{name} must be finite and >= 0, got {v!r}")
+        if not 0.0 <= self.limit_margin < 0.5:
+            raise InvalidProblem(f"limit_margin must be in [0, 0.5), got {self.limit_margin!r}")
+        if self.time_budget_us is not None and not self.time_budget_us >= 0.0:
+            raise InvalidProblem(f"time_budget_us must be >= 0, got {self.time_budget_us!r}")
+        if self.metric_every < 0 or self.metric_until < 0:
+            raise InvalidProblem("metric_every and metric_until must be >= 0")
+        if self.max_iter < 1 or self.max_restarts < 0 or self.stall_window < 0:
+            raise InvalidProblem("max_iter must be >= 1, max_restarts and stall_window >= 0")
+
+    def minimize_options(self) -> MinimizeOptions:
+        budget = None if self.time_budget_us is None else self.time_budget_us * 1e-6
+        return MinimizeOptions(
+            gtol=self.gtol,
+            ftol=self.ftol,
+            stall_window=self.stall_window,
+            f_goal=1.0,  # the goal measure is max(error / tolerance)
+            max_step=self.max_step_rad,
+            curvature=self.curvature,
+            max_iter=self.max_iter,
+            max_fev=20 * self.max_iter + 100,
+            max_restarts=self.max_restarts,
+            restart_radius=self.restart_radius_rad,
+            time_budget_s=budget,
+            scale_initial_h=self.scale_initial_h,
+            max_passes=min(4 * (self.max_restarts + 1) + 8, 512),
+            metric_every=self.metric_every,
+            metric_until=self.metric_until,
+            final_metric=self.carry_hessian,
+        )
+
+
+# Stream defaults (the user can override every field): local restarts and a light pull
+# away from the limits, so a frame that misses usually recovers without a visible jump;
+# damped least squares near singularities and a null-space pull towards the rest pose
+# against drift; and, when all that fails, one global re-solve (a visible jump) rather
+# than a stream that misses every later frame (bench/ik/, iiwa stream 1: 306/599
+# frames without it, 598/599 with it and one 4.3 rad jump). metric_until=8: near a
+# singularity the damped Gauss-Newton steps crawled (p99 154 iterations per frame on
+# the iiwa streams, 3-5 frames out of time); BFGS after 8 steps: p99 15, none missed.
+# The damping floor only for redundant tasks: a 6-DOF arm's pose stream has no
+# self-motion for it to steady, and with it the answer lagged behind the target at
+# singularities (UR5 at 1e-5 m / 1e-4 rad: 33 of 40 streams within twice the
+# reference's largest step; 39 without; bench/ik/ --parts c --streams 40).
+STREAM_DEFAULTS = IKOptions(
+    restart_radius_rad=0.3,
+    limit_weight=1e-3,
+    limit_margin=0.02,
+    null_space_step_rad=0.005,
+    damping=1e-3,
+    damping_redundant_only=True,
+    global_fallback=True,
+    metric_until=8,
+    damping_scale=1.0,
+)

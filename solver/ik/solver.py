@@ -1,0 +1,468 @@
+"""The IK solver object: targets for a chain's effectors -> joint values, frame by frame.
+
+``IKSolver`` is built once per chain (it keeps preallocated arrays for the compiled
+core) and solves one frame per call: ``solve`` from a given seed, ``track`` from the
+previous answer (a stream). Success is judged from the pose errors against the
+tolerances, never from the optimizer's code alone: the core's goal measure is
+max(error / tolerance) over effectors, so "goal met" means "IK succeeded".
+
+Its documented surface for code built on it (the planner, ``solver.path``; benchmarks)
+is ``check_seed``, ``judge``, ``load_frame`` (the compiled data for a frame, which
+``kinematics.ik_objective`` and the planner's kernels read), ``free_mask``,
+``free_directions``, ``stream_state`` and ``restore``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import Any, NamedTuple, cast
+
+import numba
+import numpy as np
+
+from ..arrays import Matrix, Vector
+from ..errors import DimensionMismatch, InvalidProblem
+from ..model import Chain
+from ..optim import Termination, register_objective
+from ..optim import codes as C
+from ..optim.minimize import pack_options
+from .frame import (
+    SEED_NOT_FINITE,
+    TARGETS_OK,
+    check_targets,
+    report_only,
+    scratch_size,
+    solve_frame,
+)
+from .kinematics import (
+    DD_HI,
+    DD_LO,
+    DD_REST,
+    MISC_DAMPING,
+    MISC_DAMPING_SCALE,
+    MISC_LIMIT,
+    MISC_MARGIN,
+    MISC_POSTURE,
+    MISC_SIZE,
+    dd_rows,
+    ik_goal,
+    ik_objective,
+)
+from .metric import ik_metric
+from .options import IKOptions
+from .result import STATUSES, EffectorError, IKResult, IKStatus, ResultLayout
+from .targets import Target
+from .task import Task
+
+# The arrays a compiled solve reads: (NI, ND, EI, ED, DD, MISC), see ``kinematics``.
+IKData = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+class StreamState(NamedTuple):
+    """What ``track`` carries from frame to frame: the pose, and the BFGS matrix when
+    ``IKOptions.carry_hessian`` is on (else None)."""
+
+    q: Vector
+    inverse_hessian: Matrix | None
+
+
+_tuple_new = tuple.__new__
+
+
+class _Packed(NamedTuple):
+    """One IKOptions object as the core takes it, built once per solver and options."""
+
+    options: IKOptions
+    fopt: np.ndarray
+    iopt: np.ndarray  # iopt[I_SEED] carries this solver's restart generator along
+    policy: np.ndarray
+    out_size: int  # length of a frame's output block
+    layout: ResultLayout
+
+
+_F64 = np.dtype(np.float64)
+
+
+class IKSolver:
+    """Solves frames for one chain; holds the compiled core's preallocated arrays.
+
+    Not thread-safe: one solver per session, frames one at a time (the service
+    serialises a session's frames with a lock).
+    """
+
+    def __init__(
+        self, chain: Chain, options: IKOptions | None = None, *, seed: int | None = None
+    ) -> None:
+        """Args:
+        chain: The model.
+        options: Default options of every call.
+        seed: Seed of the solver's own restart generator (None: 0, reproducible);
+            give sessions their own if their random restarts should differ.
+        """
+        self.chain = chain
+        self.options = options or IKOptions()
+        cc = chain.compiled
+        n = chain.n_dof
+        self._n = n
+        ei = cc.ei.copy()
+        self._dd = np.zeros((dd_rows(n), n))
+        self._dd[DD_LO] = chain.lower
+        self._dd[DD_HI] = chain.upper
+        self._misc = np.zeros(MISC_SIZE)
+        self._data: IKData = (cc.ni, cc.nd.copy(), ei, cc.ed.copy(), self._dd, self._misc)
+        _register_once(self._data)
+        self._task = Task(chain, ei, self._data[3], self._dd)
+        self._effector_names = chain.effector_names
+        self._misc_for: IKOptions | None = None
+        self._mid = chain.mid_limits()
+        self._identity = np.eye(n)
+        self._shape = (n,)
+        self._packed: dict[int, _Packed] = {}
+        self._last_packed: _Packed | None = None
+        self._rng = np.random.default_rng(0 if seed is None else seed)
+        self.q = self._mid.copy()  # the stream's current pose
+        self._dd[DD_REST] = self._mid
+        self._h: Matrix | None = None
+        self._solve_call: Callable[..., tuple[Any, ...]] = solve_frame
+        # solve_frame's work space (it allocates nothing: see _jit.jit_leaf).
+        self._scratch = np.empty(scratch_size(n, ei.shape[0]))
+        self._ints = np.empty(3, dtype=np.int64)
+
+    # -- public API ------------------------------------------------------------
+    def solve(
+        self,
+        targets: Sequence[Target],
+        seed: Vector | None = None,
+        *,
+        options: IKOptions | None = None,
+        rng: np.random.Generator | None = None,
+        initial_inverse_hessian: Matrix | None = None,
+    ) -> IKResult:
+        """Solve one frame from ``seed`` (default: mid-limits).
+
+        Args:
+            targets: At most one per effector; effectors without one are not pulled.
+            seed: Start, shape (n_dof,); projected into the limits.
+            options: Overrides the solver's options for this call.
+            rng: Source of the restart seed; default the solver's own generator,
+                which carries on from call to call.
+            initial_inverse_hessian: Start H (shape (n_dof, n_dof)); default I.
+
+        Raises:
+            InvalidProblem: unknown effector, missing or malformed target fields.
+            DimensionMismatch: seed of the wrong length.
+        """
+        opts = options or self.options
+        q0 = self._mid if seed is None else self.check_seed(seed)
+        return self._frame(targets, q0, opts, rng, initial_inverse_hessian, 0.0)
+
+    def track(
+        self,
+        targets: Sequence[Target],
+        *,
+        options: IKOptions | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> IKResult:
+        """Solve the next frame of a stream, warm-started from the previous answer.
+
+        The pose (and, with ``carry_hessian``, the BFGS matrix) carries over; the
+        posture pull, if any, is towards the previous pose.
+        """
+        opts = options or self.options
+        h0 = self._h if opts.carry_hessian else None
+        started = time.perf_counter()
+        # float(): an int here would make numba compile another specialisation.
+        step = float(opts.null_space_step_rad)
+        # ``q`` is public: check it as a seed (length, dtype, layout) every frame.
+        q0 = self.check_seed(self.q)
+        result = self._frame(targets, q0, opts, rng, h0, step)
+        if not result.success and opts.global_fallback and math.isfinite(opts.restart_radius_rad):
+            budget = opts.time_budget_us
+            left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
+            if left is None or left > 0.0:
+                wide = replace(opts, restart_radius_rad=math.inf, time_budget_us=left)
+                retry = self._frame(targets, q0, wide, rng, None, step)
+                if retry.success:
+                    result = retry
+        self.q = result.q.copy()
+        # A copy: the result's block is the caller's to keep (and to write to).
+        self._h = result.inverse_hessian.copy() if opts.carry_hessian else None
+        return result
+
+    def set_pose(self, q: Vector) -> None:
+        """Set the stream's current pose and its rest pose (projected into the limits).
+
+        The rest pose is where ``null_space_step_rad`` steers a redundant chain's
+        self-motion; by default it is the middle of the limits.
+        """
+        self.q = np.clip(self.check_seed(q), self.chain.lower, self.chain.upper)
+        self._dd[DD_REST] = self.q
+        self._h = None
+
+    def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:
+        """Pose errors of q against targets with the solver's tolerances (no solving)."""
+        return self.judge(q, targets).effectors
+
+    def check_seed(self, seed: Vector) -> Vector:
+        """``seed`` as the compiled solve takes it: float64, C-contiguous, shape
+        (n_dof,); the array itself when it already is one (no copy).
+
+        Raises:
+            DimensionMismatch: a seed of the wrong length.
+        """
+        # ``carray`` (C-contiguous, aligned, writeable) matters: numba compiles a new
+        # specialisation, tens of seconds, for any other array layout. Finiteness is
+        # checked in compiled code.
+        if (
+            type(seed) is np.ndarray
+            and seed.dtype == _F64
+            and seed.shape == self._shape
+            and seed.flags.carray
+        ):
+            return seed
+        q = np.array(seed, dtype=np.float64).reshape(-1)
+        if q.shape != self._shape:
+            raise DimensionMismatch(f"seed must have {self._n} values, got {q.shape[0]}")
+        return q
+
+    def judge(
+        self,
+        q: Vector,
+        targets: Sequence[Target],
+        *,
+        options: IKOptions | None = None,
+        solve_us: float = 0.0,
+    ) -> IKResult:
+        """A result for q as it is (no solving): errors against the targets, SOLVED
+        (goal_reached) within the tolerances of ``options`` (default: the solver's),
+        else NOT_REACHED (gtol). ``solve_us`` is recorded as the result's time.
+
+        Raises:
+            InvalidProblem: as ``solve`` for bad targets or a non-finite q.
+        """
+        opts = options or self.options
+        self._task.load(targets, opts)
+        packed = self._packed_options(opts)
+        raw = np.full(packed.out_size, math.nan)
+        q = self.check_seed(q)
+        bad, measure = report_only(self._data, q, raw)
+        self._raise_bad_target(bad)
+        ok = measure <= 1.0
+        return IKResult(
+            q,
+            IKStatus.SOLVED if ok else IKStatus.NOT_REACHED,
+            Termination.GOAL_REACHED if ok else Termination.GTOL,
+            0,
+            0,
+            0,
+            0,
+            solve_us,
+            raw,
+            packed.layout,
+        )
+
+    def load_frame(
+        self, targets: Sequence[Target], q0: Vector, *, options: IKOptions | None = None
+    ) -> IKData:
+        """Load a frame's targets and its bounds as a solve from q0 does (variables
+        outside every targeted chain frozen at q0; aim directions normalised), and
+        return the compiled data the frame's solve would read. For compiled code
+        built on the IK (the planner's kernels; ``kinematics.ik_objective(q, g,
+        need_grad, data)`` in a benchmark). The arrays are the solver's own: valid
+        until its next call. Targets are not checked here (``judge`` checks them)."""
+        task = self._task
+        task.load(targets, options or self.options)
+        check_targets(self._data)
+        if not (task.bounds_are_limits and task.every_effector_moves_all and task.active):
+            task.set_free_bounds(q0)
+        return self._data
+
+    def free_mask(self) -> np.ndarray:
+        """For the targets loaded last: 1.0 for each variable they may move (unlocked,
+        in the chain of a targeted effector), else 0.0."""
+        return self._task.free_mask()
+
+    def free_directions(self) -> int:
+        """For the targets loaded last: free joints of the targeted effectors minus
+        their target rows (the self-motion's dimension; a 7-DOF arm under a pose: 1)."""
+        return self._task.free_directions()
+
+    def stream_state(self) -> StreamState:
+        """The pose and carried BFGS matrix the next ``track`` starts from."""
+        return StreamState(self.q, self._h)
+
+    def restore(self, state: StreamState) -> None:
+        """Continue a stream from ``state`` (the rest pose is kept: see ``set_pose``)."""
+        self.q = state.q
+        self._h = state.inverse_hessian
+
+    # -- internals -------------------------------------------------------------
+    def _packed_options(self, opts: IKOptions) -> _Packed:
+        """Option vectors, policy table and result layout, built once per IKOptions."""
+        last = self._last_packed
+        if last is not None and last.options is opts:
+            return last
+        hit = self._packed.get(id(opts))
+        if hit is None or hit.options is not opts:
+            mopts = opts.minimize_options()
+            seed = int(self._rng.integers(0, 2**31 - 1))
+            fopt, iopt = pack_options(mopts, seed=seed)
+            if len(self._packed) > 32:
+                self._packed.clear()
+            n = self._n
+            m = len(self._effector_names)
+            layout = ResultLayout(
+                self.chain.dof_names,
+                self._effector_names,
+                (opts.position_tolerance_m, opts.rotation_tolerance_rad),
+                n,
+                m,
+            )
+            out_size = 3 * m + n * n + mopts.max_passes * C.N_LOG
+            hit = _Packed(opts, fopt, iopt, opts.policy.as_array(), out_size, layout)
+            self._packed[id(opts)] = hit
+        self._last_packed = hit
+        return hit
+
+    def _frame(
+        self,
+        targets: Sequence[Target],
+        q0: Vector,
+        opts: IKOptions,
+        rng: np.random.Generator | None,
+        h0: Matrix | None,
+        null_space_step_rad: float,
+    ) -> IKResult:
+        task = self._task
+        task.load(targets, opts)
+        if self._misc_for is not opts:
+            self._misc[MISC_POSTURE] = opts.posture_weight
+            self._misc[MISC_LIMIT] = opts.limit_weight
+            self._misc[MISC_MARGIN] = opts.limit_margin
+            self._misc[MISC_DAMPING_SCALE] = opts.damping_scale
+            self._misc_for = opts
+        # Per frame: the target set (and with it the redundancy) can change under the
+        # same options.
+        self._misc[MISC_DAMPING] = (
+            opts.damping if task.redundant or not opts.damping_redundant_only else 0.0
+        )
+        if not (task.bounds_are_limits and task.every_effector_moves_all and task.active):
+            task.set_free_bounds(q0)
+        packed = self._last_packed
+        if packed is None or packed.options is not opts:
+            packed = self._packed_options(opts)
+        if rng is not None:
+            packed.iopt[C.I_SEED] = int(rng.integers(0, 2**31 - 1))
+        out = np.empty(packed.out_size)
+        if self._n == 0:
+            # An all-fixed chain: nothing to solve, only errors to report.
+            bad, measure = report_only(self._data, q0, out)
+            self._raise_bad_target(bad)
+            ok = measure <= 1.0
+            return IKResult(
+                q0.copy(),
+                IKStatus.SOLVED if ok else IKStatus.NOT_REACHED,
+                Termination.GOAL_REACHED if ok else Termination.GTOL,
+                0,
+                0,
+                0,
+                0,
+                0.0,
+                out,
+                packed.layout,
+            )
+        if h0 is None:
+            h0 = self._identity
+        elif not (type(h0) is np.ndarray and h0.dtype == _F64 and h0.flags.carray):
+            h0 = np.array(h0, dtype=np.float64, order="C")  # one layout: one compilation
+        if h0.shape != self._identity.shape:
+            raise DimensionMismatch(f"initial_inverse_hessian must be {self._n}x{self._n}")
+        out_x = np.empty(self._n)
+        args = (
+            self._data,
+            q0,
+            h0,
+            packed.fopt,
+            packed.iopt,
+            packed.policy,
+            out_x,
+            out,
+            null_space_step_rad,
+            self._scratch,
+            self._ints,
+        )
+        call = self._solve_call
+        bad, status, code, nit, nfev, npass, nrest, elapsed = call(*args)
+        if call is solve_frame:
+            self._solve_call = _compiled_entry(solve_frame, args)
+        if bad != TARGETS_OK:
+            self._raise_bad_target(bad)
+        # tuple.__new__ directly: the NamedTuple's generated __new__ is Python code.
+        return _tuple_new(
+            IKResult,
+            (
+                out_x,
+                STATUSES[status],
+                C.TERMINATIONS[code],
+                nit,
+                nfev,
+                npass,
+                nrest,
+                elapsed * 1e6,
+                out,
+                packed.layout,
+            ),
+        )
+
+    def _raise_bad_target(self, bad: int) -> None:
+        if bad == SEED_NOT_FINITE:
+            raise InvalidProblem("seed must be finite")
+        if bad >= 0:
+            name = self.chain.effectors[bad // 3].name
+            what = (
+                "numbers must be finite",
+                "rotation must be orthonormal with det +1",
+                "direction must not be zero",
+            )[bad % 3]
+            raise InvalidProblem(f"target for {name!r}: {what}")
+
+
+_REGISTERED = False
+
+
+def _compiled_entry(dispatcher: Any, args: tuple[Any, ...]) -> Callable[..., Any]:
+    """The compiled overload of ``dispatcher`` for these arguments' types, called
+    directly: skips the dispatcher's per-call type resolution (~0.3 us of a ~20 us
+    solve). Only for callers whose argument types never change, as an IKSolver's
+    (its arrays are its own; seeds and H pass ``check_seed`` / the H check, which
+    fix dtype, layout and writeability). The dispatcher itself if there is no such
+    overload (``NUMBA_DISABLE_JIT``).
+    """
+    overloads = getattr(dispatcher, "overloads", None)
+    if overloads is None:
+        return cast(Callable[..., Any], dispatcher)
+    compiled = overloads.get(tuple(numba.typeof(a) for a in args))
+    return cast(Callable[..., Any], dispatcher if compiled is None else compiled.entry_point)
+
+
+def _register_once(data: tuple[np.ndarray, ...]) -> None:
+    """Bind the IK objective to the IK data tuple's type (every chain shares it)."""
+    global _REGISTERED
+    if not _REGISTERED:
+        register_objective(ik_objective, ik_goal, data, ik_metric)
+        _REGISTERED = True
+
+
+def solve(
+    chain: Chain,
+    targets: Sequence[Target],
+    seed: Vector | None = None,
+    *,
+    options: IKOptions | None = None,
+    rng: np.random.Generator | None = None,
+) -> IKResult:
+    """One-shot IK (builds a throwaway ``IKSolver``; keep one per chain for streams)."""
+    return IKSolver(chain, options).solve(targets, seed, rng=rng)

@@ -1,0 +1,182 @@
+"""The targets loaded into a solver's compiled arrays, and what they leave free.
+
+A ``Task`` belongs to one ``IKSolver`` and writes into its arrays: the active flags
+(EI), the target rows and tolerances (ED) and the frame's bounds (DD). It keeps what
+the last frame loaded, so that a stream's usual frame (one target for the effector
+of the frame before) costs one row copy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..arrays import Vector
+from ..errors import InvalidProblem
+from ..model import Chain, EffectorMode
+from ..model.layout import ED_TDIR, ED_TOL_P, ED_TOL_R, ED_TPOS, ED_WP, ED_WR, EI_ACTIVE
+from .kinematics import DD_HI, DD_LO
+from .options import IKOptions
+from .targets import (
+    GIVEN_DIRECTION,
+    GIVEN_POSITION,
+    GIVEN_ROTATION,
+    TARGET_PLACEHOLDER_ROW,
+    TARGET_ROW,
+    Target,
+)
+
+# What a target must give for each effector mode.
+NEEDS = {
+    EffectorMode.POSITION: GIVEN_POSITION,
+    EffectorMode.POSE: GIVEN_ROTATION,
+    EffectorMode.AIM: GIVEN_DIRECTION,
+}
+# Task rows a mode adds to a targeted position's three (an aim fixes a direction: two).
+MODE_ROWS = {EffectorMode.POSITION: 0, EffectorMode.POSE: 3, EffectorMode.AIM: 2}
+
+
+class Task:
+    """Loads targets into ``ei``, ``ed`` and bounds into ``dd`` (one solver's arrays).
+
+    Attributes read by the solver on every frame: ``active`` (effector indexes with a
+    target), ``redundant`` (more free joints than target rows), ``bounds_are_limits``
+    and ``every_effector_moves_all`` (when both hold, the bounds need no update).
+    """
+
+    def __init__(self, chain: Chain, ei: np.ndarray, ed: np.ndarray, dd: np.ndarray) -> None:
+        cc = chain.compiled
+        n = chain.n_dof
+        self.chain = chain
+        self._n = n
+        self._ei = ei
+        self._ed = ed
+        self._dd = dd
+        self._chain_dofs = cc.eff_dofs
+        # One row per effector: what a Target's ``packed`` row is copied into.
+        self._target_rows = ed[:, ED_TPOS : ED_TDIR + 3]
+        assert self._target_rows.shape[1] == TARGET_ROW
+        self._target_rows[:] = TARGET_PLACEHOLDER_ROW
+        assert np.shares_memory(self._target_rows, ed)
+        self._effector_names = chain.effector_names
+        self._effector_slot = {name: i for i, name in enumerate(self._effector_names)}
+        self._needs = tuple(NEEDS[e.mode] for e in chain.effectors)
+        # Target rows each effector adds, for the redundancy test: a part whose weight is
+        # zero in the model constrains nothing.
+        static = cc.ed
+        self._position_rows = tuple(
+            3 if static[i, ED_WP] > 0.0 else 0 for i in range(len(self._needs))
+        )
+        self._mode_rows = tuple(
+            MODE_ROWS[e.mode] if static[i, ED_WR] > 0.0 else 0
+            for i, e in enumerate(chain.effectors)
+        )
+        self._movable = chain.lower < chain.upper  # a joint with lower == upper is locked
+        self.redundant = True  # more free joints than target rows (set per target set)
+        self._static_weights = static[:, ED_WP].copy()
+        self.active: list[int] = []
+        self._zeroed: list[int] = []
+        self._tol_for: IKOptions | None = None
+        self.bounds_are_limits = True
+        self.every_effector_moves_all = all(d.shape[0] == n for d in cc.eff_dofs)
+
+    def load(self, targets: Sequence[Target], opts: IKOptions) -> None:
+        """Copy targets into the compiled arrays (shapes were checked by Target, values
+        are checked in compiled code)."""
+        if self._tol_for is not opts:
+            self._ed[:, ED_TOL_P] = opts.position_tolerance_m
+            self._ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
+            self._tol_for = opts
+        active = self.active
+        if len(targets) == 1 and len(active) == 1 and not self._zeroed:
+            # A stream's usual frame: one target for the effector of the last frame.
+            t = targets[0]
+            i = active[0]
+            need = self._needs[i]
+            if (
+                t.effector == self._effector_names[i]
+                and t.given & need == need
+                and t.given & GIVEN_POSITION
+            ):
+                self._target_rows[i] = t.packed
+                return
+        ei = self._ei
+        ed = self._ed
+        for i in active:
+            ei[i, EI_ACTIVE] = 0
+        for i in self._zeroed:
+            ed[i, ED_WP] = self._static_weights[i]
+        self.active = active = []
+        self._zeroed = []
+        try:
+            for t in targets:
+                i = self._effector_slot.get(t.effector, -1)
+                if i < 0:
+                    self.chain.effector_index(t.effector)  # raises with the list of names
+                if ei[i, EI_ACTIVE]:
+                    raise InvalidProblem(f"two targets for effector {t.effector!r}")
+                need = self._needs[i]
+                if t.given & need != need:
+                    part = {GIVEN_POSITION: "a position", GIVEN_ROTATION: "a rotation"}.get(
+                        need, "a direction"
+                    )
+                    mode = self.chain.effectors[i].mode.value
+                    raise InvalidProblem(f"target for {t.effector!r} ({mode}) needs {part}")
+                if not t.given & GIVEN_POSITION:
+                    ed[i, ED_WP] = 0.0
+                    self._zeroed.append(i)
+                self._target_rows[i] = t.packed
+                ei[i, EI_ACTIVE] = 1
+                active.append(i)
+        finally:
+            # Also when a target is rejected: the effectors loaded before it stay active,
+            # and the next frame's fast path keeps this answer.
+            self.redundant = self.free_directions() > 0
+
+    def free_mask(self) -> np.ndarray:
+        """1.0 for each variable the loaded targets may move: unlocked, and in the
+        chain of a targeted effector; else 0.0."""
+        if self.every_effector_moves_all or not self.active:
+            reach = self._movable
+        else:
+            reach = np.zeros(self._n, dtype=bool)
+            for i in self.active:
+                reach[self._chain_dofs[i]] = True
+            reach &= self._movable
+        return reach.astype(np.float64)
+
+    def free_directions(self) -> int:
+        """Free (unlocked) joints of the targeted effectors minus their target rows: the
+        dimension of the self-motion where the Jacobian has full rank (a 7-DOF arm
+        under a 6-D pose: 1; <= 0: no self-motion)."""
+        active = self.active
+        rows = sum(
+            self._mode_rows[i] + (0 if i in self._zeroed else self._position_rows[i])
+            for i in active
+        )
+        if self.every_effector_moves_all or not active:
+            free = int(self._movable.sum())
+        else:
+            dofs = np.unique(np.concatenate([self._chain_dofs[i] for i in active]))
+            free = int(self._movable[dofs].sum())
+        return free - rows
+
+    def set_free_bounds(self, q0: Vector) -> None:
+        """Limits for this frame (DD rows): variables outside every targeted chain are
+        frozen at q0."""
+        lo = self.chain.lower
+        hi = self.chain.upper
+        if self.every_effector_moves_all and self.active:
+            if not self.bounds_are_limits:
+                self._dd[DD_LO] = lo
+                self._dd[DD_HI] = hi
+                self.bounds_are_limits = True
+            return
+        free = np.zeros(self._n, dtype=bool)
+        for i in self.active:
+            free[self._chain_dofs[i]] = True
+        q = np.clip(q0, lo, hi)
+        self._dd[DD_LO] = np.where(free, lo, q)
+        self._dd[DD_HI] = np.where(free, hi, q)
+        self.bounds_are_limits = False

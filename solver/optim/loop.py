@@ -1,0 +1,477 @@
+"""The compiled core: multi-pass projected BFGS under the analyzer, the whole solve in
+one call.
+
+A solve is a sequence of passes. A pass iterates ``check_termination`` (the stopping
+tests) / ``search_step`` (direction, step cap, line search) / the H update (BFGS, or
+the objective's own metric) until a test fires; then ``analyzer.decide`` turns the
+pass's termination code into the next action (accept, reset H, random restart, stop)
+and the pass is logged. The helpers are inlined into ``solve_passes`` (numba IR
+inlining), so the split costs nothing at run time.
+
+Everything here runs inside numba (one implementation; with ``NUMBA_DISABLE_JIT=1``
+the same code runs as plain Python for debugging and coverage). The objective is a
+compiled function ``fg(x, g, need_grad, data) -> f``, either passed as an argument
+or registered for the type of ``data`` (see ``objective``: only the registered
+route keeps the IK core in numba's on-disk cache).
+
+References:
+    Dennis & Schnabel (1996), Numerical Methods for Unconstrained Optimization and
+    Nonlinear Equations, SIAM: A6.3.1 (backtracking), A6.3.1mod (with the
+    curvature condition), A9.4.2 (BFGS inverse update).
+    Nocedal & Wright (2006), Numerical Optimization, 2nd ed.: eq. 6.17 (inverse
+    BFGS update), eq. 6.20 (initial scaling), section 16.7 (projected methods).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from .._clock import now_s
+from .._jit import jit, jit_inline, jit_leaf
+from . import codes as C
+from .analyzer import decide
+from .bfgs import bfgs_update, descent_direction, scale_initial_h, set_identity
+from .evaluate import all_finite, evaluate, project, projected_gradient_norm
+from .line_search import line_search
+from .objective import call_goal, call_metric
+from .restart import random_point
+
+# What the core returns (a named tuple: numba builds and returns it like any tuple).
+CoreResult = namedtuple(
+    "CoreResult",
+    [
+        "f",  # f at the best point
+        "goal_measure",  # the goal measure there (f itself without a registered goal)
+        "projected_gradient_norm",
+        "code",  # the last pass's termination (codes.* int)
+        "iterations",
+        "function_evals",
+        "gradient_evals",
+        "passes",
+        "restarts",
+        "skipped_updates",
+        "elapsed_s",
+    ],
+)
+
+# Rows of the work block the core's vectors live in (x, g, trial point and gradient,
+# direction, s, y, ...; the last two: the curvature search's kept point).
+WORK_ROWS = 12
+
+
+@jit
+def run_solver(  # type: ignore[no-untyped-def]
+    fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g
+):
+    """The core for any objective (``minimize``: user objectives, MGH); see
+    ``solve_passes``. Allocates its work arrays, so the objective may allocate too."""
+    vectors = np.empty((WORK_ROWS, x0.shape[0]))
+    ints = np.empty(3, dtype=np.int64)
+    return solve_passes(
+        fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
+    )
+
+
+@jit_leaf
+def run_solver_leaf(  # type: ignore[no-untyped-def]
+    fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
+):
+    """The same core compiled without reference counting (``jit_leaf``), for the IK
+    objective, which allocates nothing: ~2.4x faster per iteration, same iterates.
+    ``vectors`` is float64[WORK_ROWS, n] and ``ints`` int64[3], both the caller's."""
+    return solve_passes(
+        fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
+    )
+
+
+@jit_inline
+def check_termination(  # type: ignore[no-untyped-def]
+    f, m, x, g, lo, hi, nit, nfev, has_goal, f_goal, gtol, max_iter, max_fev, deadline
+):
+    """The stopping tests at the top of every iteration: a termination code, or
+    RUNNING to go on. Order matters: a non-finite point is never judged further, and
+    a met goal wins over the budgets. Options come as scalars the caller read once."""
+    if not (math.isfinite(f) and all_finite(g)):
+        return C.NONFINITE
+    if has_goal and m <= f_goal:
+        return C.GOAL_REACHED
+    if projected_gradient_norm(x, g, lo, hi) <= gtol:
+        return C.GTOL
+    if nit >= max_iter:
+        return C.MAX_ITER
+    if nfev >= max_fev:
+        return C.MAX_FEV
+    if now_s() >= deadline:
+        return C.DEADLINE
+    return C.RUNNING
+
+
+@jit_inline
+def search_step(  # type: ignore[no-untyped-def]
+    fg, data, x, f, g, lo, hi, h, fopt, iopt, trial, counters, max_step, grad_at_trial
+):
+    """One iteration's move from x: the projected descent direction (steepest descent
+    if H has lost positive definiteness), capped to ``max_step`` per variable, and the
+    line search along it. Returns (line-search status, f at x+, lambda, whether H was
+    reset to I); x+ and its gradient are left in ``trial``'s x_new and g_new.
+
+    ``trial`` is (x_new, g_new, d, gm, work, keep), rows of the work block cut once
+    per solve; ``grad_at_trial``: the search evaluates f only (finite differences
+    without the curvature phase), so x+ needs its gradient here.
+    """
+    n = x.shape[0]
+    x_new, g_new, d, gm, work, keep = trial
+    reset = False
+    slope = descent_direction(h, g, x, lo, hi, d, gm)
+    if not (slope < 0.0):
+        # H lost positive definiteness numerically: fall back to steepest descent.
+        set_identity(h)
+        reset = True
+        slope = descent_direction(h, g, x, lo, hi, d, gm)
+    big = 0.0
+    for i in range(n):
+        if abs(d[i]) > big:
+            big = abs(d[i])
+    if big > max_step:
+        # Step cap (inf-norm: per variable, e.g. radians per joint).
+        scale = max_step / big
+        for i in range(n):
+            d[i] *= scale
+    status, f_trial, lam = line_search(
+        fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters, keep
+    )
+    if status == C.LS_ACCEPTED and grad_at_trial:
+        grad_mode = iopt[C.I_GRAD_MODE]
+        f_trial = evaluate(fg, data, x_new, g_new, True, grad_mode, lo, hi, work, counters)
+    return status, f_trial, lam, reset
+
+
+@jit_inline
+def record_step(trace, row, f, f_trial, lam, g, x, x_new, lo, hi):  # type: ignore[no-untyped-def]
+    """Row ``row`` of the step trace (``minimize(record_steps=True)``), while rows last."""
+    if row >= trace.shape[0]:
+        return
+    slack = math.inf
+    dec = 0.0
+    for i in range(x.shape[0]):
+        dec += g[i] * (x_new[i] - x[i])
+        slack = min(slack, x_new[i] - lo[i], hi[i] - x_new[i])
+    trace[row, 0] = f
+    trace[row, 1] = f_trial
+    trace[row, 2] = dec
+    trace[row, 3] = lam
+    trace[row, 4] = slack
+
+
+@jit_inline
+def step_vectors(x, x_new, g, g_new, s, y):  # type: ignore[no-untyped-def]
+    """s = x+ - x and y = g+ - g for the H update; returns the step's largest
+    component relative to max(|x+_i|, 1) (the xtol test)."""
+    step_rel = 0.0
+    for i in range(x.shape[0]):
+        s[i] = x_new[i] - x[i]
+        y[i] = g_new[i] - g[i]
+        r = abs(s[i]) / max(abs(x_new[i]), 1.0)
+        if r > step_rel:
+            step_rel = r
+    return step_rel
+
+
+@jit_inline
+def metric_due(every, until, final_metric, pass_iters, goal_met):  # type: ignore[no-untyped-def]
+    """Whether this iteration re-seeds H from the objective's metric (if it has one)
+    instead of the BFGS update: every ``every`` iterations of a pass, during its first
+    ``until`` (0: always). Not at a point that meets the goal: the pass ends there,
+    and a metric for a step never taken would be wasted (a third of a warm-started
+    stream frame's work) unless the caller carries this H to its next solve
+    (``final_metric``)."""
+    return (
+        every > 0
+        and pass_iters % every == 0
+        and (until == 0 or pass_iters < until)
+        and (final_metric or not goal_met)
+    )
+
+
+@jit_inline
+def better(f, m, f_best, m_best, has_goal, f_goal):  # type: ignore[no-untyped-def]
+    """Order of points: meeting the goal first, then lower f."""
+    if has_goal:
+        met = m <= f_goal
+        met_best = m_best <= f_goal
+        if met != met_best:
+            return met
+    return f < f_best
+
+
+@jit_inline
+def copy_point(x, g, out_x, out_g):  # type: ignore[no-untyped-def]
+    for i in range(x.shape[0]):
+        out_x[i] = x[i]
+        out_g[i] = g[i]
+
+
+@jit_inline
+def is_identity(h):  # type: ignore[no-untyped-def]
+    n = h.shape[0]
+    for i in range(n):
+        for j in range(n):
+            if h[i, j] != (1.0 if i == j else 0.0):
+                return False
+    return True
+
+
+@jit_inline
+def pass_goal(code, has_goal, m_best, f_goal):  # type: ignore[no-untyped-def]
+    """The goal status a pass ended with (NO_GOAL, MET or MISSED). NONFINITE can only
+    come from the current point, so the best point decides."""
+    if code == C.GOAL_REACHED or (has_goal and m_best <= f_goal):
+        return C.MET
+    if has_goal:
+        return C.MISSED
+    return C.NO_GOAL
+
+
+@jit_inline
+def log_pass(log, row, start_kind, iterations, code, f_start, f_end, goal, action, nfev):  # type: ignore[no-untyped-def]
+    """Row ``row`` of the pass log (columns ``codes.L_*``), while rows last."""
+    if row >= log.shape[0]:
+        return
+    entry = log[row]
+    entry[C.L_START] = start_kind
+    entry[C.L_ITERS] = iterations
+    entry[C.L_CODE] = code
+    entry[C.L_F_START] = f_start
+    entry[C.L_F_END] = f_end
+    entry[C.L_GOAL] = goal
+    entry[C.L_ACTION] = action
+    entry[C.L_NFEV] = nfev
+
+
+@jit_inline
+def solve_passes(  # type: ignore[no-untyped-def]
+    fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
+):
+    """Multi-pass projected BFGS under the analyzer; the whole solve in one call.
+
+    Args:
+        fg: Compiled objective ``fg(x, g, need_grad, data) -> f``, or None to use
+            the objective registered for the type of ``data`` (``objective``). With
+            fg None the goal measure registered with the objective, m(f, x, data),
+            decides "goal met" (m <= f_goal); else f does. The IK registers its
+            normalised pose error, so "goal met" means "IK succeeded" even when f
+            carries posture terms.
+        data: Passed through to ``fg`` untouched.
+        x0: Start, shape (n,); projected into the box here.
+        h: Inverse-Hessian approximation, shape (n, n): the initial H on entry
+            (identity or the caller's), the final H on return.
+        lo, hi: Bounds, shape (n,) each; +-inf allowed; lo <= hi checked by the
+            caller.
+        fopt, iopt, policy: The option vectors laid out as in ``codes`` (F_*, I_*;
+            iopt[I_SEED] is written on return: the restart generator's state, as a
+            seed) and the analyzer table int64[n_codes, 3].
+        log, trace: The pass log float64[max_passes, N_LOG], filled row by row, and
+            float64[rows, 5]: for each accepted step (while rows last) f before, f
+            after, g.(x+ - x), lambda, and the smallest distance of x+ to a bound
+            (negative would mean it left the box). Shape (0, 5) records nothing.
+        out_x, out_g: Receive the best x and its gradient.
+        vectors, ints: Work blocks float64[WORK_ROWS, n] and int64[3] (contents
+            ignored): the caller's, so that this body allocates nothing.
+
+    Returns:
+        A ``CoreResult``.
+    """
+    t_start = now_s()
+    max_iter = iopt[C.I_MAX_ITER]
+    max_fev = iopt[C.I_MAX_FEV]
+    stall_window = iopt[C.I_STALL_WINDOW]
+    grad_mode = iopt[C.I_GRAD_MODE]
+    max_restarts = iopt[C.I_MAX_RESTARTS]
+    has_goal = iopt[C.I_HAS_GOAL] != 0
+    scale_h0 = iopt[C.I_SCALE_H0] != 0
+    max_passes = min(iopt[C.I_MAX_PASSES], log.shape[0])
+    metric_every = iopt[C.I_METRIC_EVERY]
+    metric_until = iopt[C.I_METRIC_UNTIL]
+    final_metric = iopt[C.I_FINAL_METRIC] != 0
+    grad_at_trial = grad_mode != C.GRAD_ANALYTIC and iopt[C.I_CURVATURE] == 0
+    gtol = fopt[C.F_GTOL]
+    max_step = fopt[C.F_MAX_STEP]
+    xtol = fopt[C.F_XTOL]
+    ftol = fopt[C.F_FTOL]
+    f_goal = fopt[C.F_F_GOAL]
+    # The clock starts inside the compiled code, so a first call that compiles (or
+    # loads the cache) does not eat the caller's budget.
+    deadline = t_start + fopt[C.F_BUDGET]
+    eps_curv = fopt[C.F_CURVATURE_EPS]
+    # One block for the work vectors and one for the integer state, from the caller:
+    # an allocation costs about as much as a solver iteration's bookkeeping, and the
+    # reference-count-free build (run_solver_leaf) cannot allocate at all.
+    ints[0] = 0
+    ints[1] = 0
+    counters = ints[0:2]  # nfev, ngev
+    rng_state = ints[2:3]
+    rng_state[0] = iopt[C.I_SEED] % 2147483646 + 1
+    x = vectors[0]
+    g = vectors[1]
+    x_new = vectors[2]
+    g_new = vectors[3]
+    s = vectors[6]
+    y = vectors[7]
+    hy = vectors[8]
+    scratch = vectors[9]
+    trial = (x_new, g_new, vectors[4], vectors[5], scratch, vectors[10:12])
+
+    project(x0, lo, hi, x)
+    f = evaluate(fg, data, x, g, True, grad_mode, lo, hi, scratch, counters)
+    f_best = f
+    m = call_goal(fg, f, x, data) if has_goal else f
+    m_best = m
+    copy_point(x, g, out_x, out_g)
+
+    nit = 0
+    n_passes = 0
+    n_restarts = 0
+    n_skipped = 0
+    final_code = C.NONFINITE
+    start_kind = C.START_INITIAL
+    h_is_identity = is_identity(h)
+    # "Fresh": H = I or the objective's own metric, i.e. no curvature learnt yet
+    # (a caller's H carried from a previous solve is not fresh).
+    h_fresh = h_is_identity
+    if h_is_identity and call_metric(fg, x, g, lo, hi, data, h):
+        h_is_identity = False
+
+    while True:
+        # ---- one pass -------------------------------------------------------
+        pass_iters = 0
+        f_pass_start = f
+        nfev_pass_start = counters[0]
+        began_fresh = h_fresh
+        stall_count = 0
+        while True:
+            code = check_termination(
+                f, m, x, g, lo, hi, nit, counters[0], has_goal, f_goal, gtol, max_iter, max_fev,
+                deadline,
+            )  # fmt: skip
+            if code != C.RUNNING:
+                break
+            status, f_trial, lam, h_reset = search_step(
+                fg, data, x, f, g, lo, hi, h, fopt, iopt, trial, counters, max_step, grad_at_trial
+            )
+            if h_reset:
+                h_is_identity = True
+            if status == C.LS_BUDGET_SPENT:
+                code = C.MAX_FEV
+                break
+            if status != C.LS_ACCEPTED:
+                code = C.LINE_SEARCH_FAILED
+                break
+            record_step(trace, nit, f, f_trial, lam, g, x, x_new, lo, hi)
+            nit += 1
+            pass_iters += 1
+            step_rel = step_vectors(x, x_new, g, g_new, s, y)
+            if pass_iters == 1 and scale_h0 and h_is_identity:
+                scale_initial_h(h, s, y)
+            # The goal at the new point first: it decides whether a metric is due.
+            m_new = call_goal(fg, f_trial, x_new, data) if has_goal else f_trial
+            goal_met = has_goal and m_new <= f_goal
+            if metric_due(
+                metric_every, metric_until, final_metric, pass_iters, goal_met
+            ) and call_metric(fg, x_new, g_new, lo, hi, data, h):
+                # Re-seed H from the objective's metric (every step: damped Gauss-Newton).
+                h_is_identity = False
+            elif bfgs_update(h, s, y, hy, eps_curv):
+                h_is_identity = False
+                h_fresh = False
+            else:
+                n_skipped += 1
+            improvement = f - f_trial
+            f = f_trial
+            copy_point(x_new, g_new, x, g)
+            m = m_new
+            if better(f, m, f_best, m_best, has_goal, f_goal):
+                f_best = f
+                m_best = m
+                copy_point(x, g, out_x, out_g)
+            if step_rel <= xtol:
+                code = C.STEP_SMALL
+                break
+            if stall_window > 0:
+                if improvement <= ftol * max(abs(f), 1e-300):
+                    stall_count += 1
+                    if stall_count >= stall_window:
+                        code = C.STALLED
+                        break
+                else:
+                    stall_count = 0
+        # ---- the analyzer ---------------------------------------------------
+        goal = pass_goal(code, has_goal, m_best, f_goal)
+        budget_left = nit < max_iter and counters[0] < max_fev and now_s() < deadline
+        action = decide(
+            policy,
+            code,
+            goal,
+            max_restarts - n_restarts,
+            budget_left and n_passes + 1 < max_passes,
+            began_fresh,
+            f < f_pass_start,
+            start_kind == C.START_RESET_H,
+        )
+        log_pass(
+            log,
+            n_passes,
+            start_kind,
+            pass_iters,
+            code,
+            f_pass_start,
+            f,
+            goal,
+            action,
+            counters[0] - nfev_pass_start,
+        )
+        n_passes += 1
+        final_code = code
+        if action == C.ACCEPT or action == C.STOP:
+            break
+        if action == C.RESET_H:
+            # Continue from where the pass ended (its best point: f never rises in a pass).
+            start_kind = C.START_RESET_H
+        else:  # RESTART_RANDOM
+            start_kind = C.START_RESTART
+            n_restarts += 1
+            random_point(x0, lo, hi, fopt[C.F_RESTART_RADIUS], rng_state, x)
+            f = evaluate(fg, data, x, g, True, grad_mode, lo, hi, scratch, counters)
+            if has_goal:
+                m = call_goal(fg, f, x, data)
+            if better(f, m, f_best, m_best, has_goal, f_goal):
+                f_best = f
+                m_best = m
+                copy_point(x, g, out_x, out_g)
+        h_fresh = True
+        if call_metric(fg, x, g, lo, hi, data, h):
+            h_is_identity = False
+        else:
+            set_identity(h)
+            h_is_identity = True
+
+    pg = projected_gradient_norm(out_x, out_g, lo, hi)
+    elapsed = now_s() - t_start
+    # Hand the generator's state back: a caller that keeps iopt (IKSolver does, per
+    # options) continues the same stream on its next call with no new seed to draw.
+    iopt[C.I_SEED] = rng_state[0] - 1
+    return CoreResult(
+        f_best,
+        m_best,
+        pg,
+        final_code,
+        nit,
+        counters[0],
+        counters[1],
+        n_passes,
+        n_restarts,
+        n_skipped,
+        elapsed,
+    )

@@ -1,0 +1,85 @@
+"""Chains and streams shared by the solver's test modules."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from solver.model import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from solver.model.examples import humanoid_arm, panda_arm, tail, two_arm_torso
+
+
+def slider_arm():  # type: ignore[no-untyped-def]
+    """A prismatic base, a revolute with an off-axis pivot, and an aim effector."""
+    joints = [
+        Joint(
+            name="slide",
+            parent="world",
+            child="carriage",
+            kind=JointKind.PRISMATIC,
+            axis=np.array([1.0, 1.0, 0.0]),
+            lower=(-0.5,),
+            upper=(0.5,),
+        ),
+        Joint(
+            name="turn",
+            parent="carriage",
+            child="arm",
+            kind=JointKind.REVOLUTE,
+            axis=np.array([0.0, 0.0, 1.0]),
+            pivot=np.array([0.1, 0.0, 0.0]),
+            origin=Transform.from_rpy([0.0, 0.0, 0.2], 0.1, 0.2, 0.3),
+            lower=(-2.0,),
+            upper=(2.0,),
+        ),
+        Joint(
+            name="tilt",
+            parent="arm",
+            child="head",
+            kind=JointKind.ROTATIONAL,
+            axes="yx",
+            origin=Transform(np.array([0.4, 0.0, 0.0])),
+            lower=(-1.0, -1.0),
+            upper=(1.0, 1.0),
+        ),
+    ]
+    return build_chain(
+        joints,
+        [
+            Effector(
+                name="eye",
+                link="head",
+                tip_offset=np.array([0.05, 0.0, 0.0]),
+                mode=EffectorMode.AIM,
+                aim_axis=np.array([1.0, 0.0, 0.0]),
+                position_weight=0.5,
+                rotation_weight=0.2,
+            ),
+        ],
+    )
+
+
+CHAINS = {
+    "panda-pose": lambda: panda_arm(),
+    "panda-position": lambda: panda_arm(EffectorMode.POSITION),
+    "humanoid-pose": lambda: humanoid_arm(),
+    "humanoid-aim": lambda: humanoid_arm(EffectorMode.AIM),
+    "two-arms": two_arm_torso,
+    "slider-aim": slider_arm,
+    "tail": lambda: tail(8),
+}
+
+
+def joint_stream(chain, seed: int, frames: int) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """bench/ik/'s reference paths: q(t) = c + A sin(2 pi f t + phi) at 60 Hz."""
+    rng = np.random.default_rng(seed)
+    lo, hi = chain.lower, chain.upper
+    n = chain.n_dof
+    c = lo + (hi - lo) * rng.uniform(0.25, 0.75, n)
+    amp = np.minimum(0.6, 0.8 * np.minimum(c - lo, hi - c))
+    f = rng.uniform(0.05, 0.3, n)
+    phi = rng.uniform(0.0, 2 * math.pi, n)
+    t = np.arange(frames)[:, None] / 60.0
+    q: np.ndarray = c + amp * np.sin(2 * math.pi * f * t + phi)
+    return q
