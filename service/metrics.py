@@ -32,7 +32,7 @@ from solver.optim import Termination
 from .convert import SolvedFrame
 
 # 10 us .. ~0.33 s, x2 steps: solves take microseconds to the frame's budget.
-_BUCKETS = tuple(10e-6 * 2**k for k in range(16))
+DURATION_BUCKETS_S = tuple(10e-6 * 2**k for k in range(16))
 
 
 def _loop_tasks() -> float:
@@ -51,18 +51,18 @@ class _Histogram:
     __slots__ = ("counts", "total")
 
     def __init__(self) -> None:
-        self.counts = [0] * (len(_BUCKETS) + 1)
+        self.counts = [0] * (len(DURATION_BUCKETS_S) + 1)
         self.total = 0.0
 
     def observe(self, value: float) -> None:
         # bisect_left: the first bound >= value, i.e. Prometheus' "le" bucket.
-        self.counts[bisect_left(_BUCKETS, value)] += 1
+        self.counts[bisect_left(DURATION_BUCKETS_S, value)] += 1
         self.total += value
 
     def buckets(self) -> list[tuple[str, float]]:
         out = []
         running = 0
-        for bound, n in zip((*_BUCKETS, float("inf")), self.counts, strict=True):
+        for bound, n in zip((*DURATION_BUCKETS_S, float("inf")), self.counts, strict=True):
             running += n
             out.append((floatToGoString(bound), float(running)))
         return out

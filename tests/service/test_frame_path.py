@@ -19,7 +19,7 @@ from starlette.testclient import TestClient
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from service.config import Settings
-from service.metrics import _BUCKETS, Metrics
+from service.metrics import DURATION_BUCKETS_S, Metrics
 from service.routes import health, http, ws
 
 from .helpers import create, hand_frame
@@ -109,9 +109,9 @@ def test_ws_stuck_send_after_quiet_time_is_dropped(
 def test_frame_histograms_match_prometheus_client(rng: np.random.Generator) -> None:
     """The hand-kept histograms expose the same buckets, count and sum as
     prometheus_client's Histogram fed the same values (bucket bounds included)."""
-    values = [*rng.exponential(1e-3, size=300), *_BUCKETS, 0.0, 10.0]
+    values = [*rng.exponential(1e-3, size=300), *DURATION_BUCKETS_S, 0.0, 10.0]
     reference = CollectorRegistry()
-    h = Histogram("ik_solve_duration_seconds", "x", buckets=_BUCKETS, registry=reference)
+    h = Histogram("ik_solve_duration_seconds", "x", buckets=DURATION_BUCKETS_S, registry=reference)
     ours = Metrics(lambda: 0)
     for v in values:
         h.observe(v)
