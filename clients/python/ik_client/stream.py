@@ -51,14 +51,15 @@ OPEN_TIMEOUT_S = 30.0
 class Reconnect:
     """How hard a stream tries to get its connection back: ``attempts`` connections,
     waiting ``initial_delay_s`` before the first and doubling up to ``max_delay_s``.
-    ``attempts=0`` turns reconnecting off."""
+    ``attempts=0`` turns reconnecting off. The count starts again at each answer: a
+    server that accepts and then closes (1013) is not retried for ever."""
 
     attempts: int = 6
     initial_delay_s: float = 0.05
     max_delay_s: float = 2.0
 
-    def delays(self) -> list[float]:
-        return [min(self.initial_delay_s * 2**i, self.max_delay_s) for i in range(self.attempts)]
+    def delay_s(self, attempt: int) -> float:
+        return float(min(self.initial_delay_s * 2**attempt, self.max_delay_s))
 
 
 @dataclass(slots=True)
@@ -73,7 +74,8 @@ class _Pipeline:
 
     def __init__(self, encoding: Encoding) -> None:
         self.encoding = encoding
-        self._next_id = 0
+        self._next_id = 0  # the caller's ids
+        self._next_wire_id = 0  # ids on the wire: one counter over every connection
         self._waiting: OrderedDict[int, _Message] = OrderedDict()  # by wire id
 
     @property
@@ -82,8 +84,9 @@ class _Pipeline:
 
     def add(self, body: dict[str, Any]) -> tuple[int, str | bytes]:
         """Number a new message; returns its id and its encoding."""
-        message = _Message(self._next_id, self._next_id, body)
+        message = _Message(self._next_id, self._next_wire_id, body)
         self._next_id += 1
+        self._next_wire_id += 1
         self._waiting[message.wire_id] = message
         return message.id, self._encode(message)
 
@@ -92,8 +95,8 @@ class _Pipeline:
         waiting = list(self._waiting.values())
         self._waiting.clear()
         for message in waiting:
-            message.wire_id = self._next_id
-            self._next_id += 1
+            message.wire_id = self._next_wire_id
+            self._next_wire_id += 1
             self._waiting[message.wire_id] = message
         return [self._encode(m) for m in waiting]
 
@@ -184,6 +187,7 @@ class AsyncStream:
         self._reconnect = reconnect
         self._connection: AsyncConnection | None = None
         self._lock = asyncio.Lock()  # one sender or one reconnect at a time
+        self._tries = 0  # reconnects since the last answer
 
     @property
     def connection(self) -> AsyncConnection:
@@ -225,6 +229,7 @@ class AsyncStream:
             except ConnectionClosed as exc:
                 await self._recover(connection, exc)
                 continue
+            self._tries = 0
             return self._pipeline.answer(data)
 
     async def frame(self, targets: list[Target]) -> FrameResult:
@@ -270,8 +275,9 @@ class AsyncStream:
         async with self._lock:
             if self._connection is not failed:
                 return  # another task has reconnected already
-            for delay in self._reconnect.delays():
-                await asyncio.sleep(delay)
+            while self._tries < self._reconnect.attempts:
+                await asyncio.sleep(self._reconnect.delay_s(self._tries))
+                self._tries += 1
                 try:
                     connection = await self._open()
                     for data in self._pipeline.renumber():
@@ -310,6 +316,7 @@ class Stream:
         self._pipeline = _Pipeline(encoding)
         self._reconnect = reconnect
         self._connection: SyncConnection | None = None
+        self._tries = 0  # reconnects since the last answer
 
     @property
     def connection(self) -> SyncConnection:
@@ -349,6 +356,7 @@ class Stream:
             except ConnectionClosed as exc:
                 self._recover(exc)
                 continue
+            self._tries = 0
             return self._pipeline.answer(data)
 
     def frame(self, targets: list[Target]) -> FrameResult:
@@ -366,12 +374,15 @@ class Stream:
         return answer
 
     def _open(self) -> SyncConnection:
-        return sync_connect(
+        connection = sync_connect(
             self.url,
             additional_headers=self._headers,
             open_timeout=OPEN_TIMEOUT_S,
             max_size=MAX_ANSWER_BYTES,
         )
+        # websockets 17.1 warns about a connection not entered as a context manager;
+        # this one lives as long as the stream, which closes it (its exit is close()).
+        return connection.__enter__()
 
     def _send(self, body: dict[str, Any]) -> int:
         message_id, data = self._pipeline.add(body)
@@ -385,8 +396,9 @@ class Stream:
         code, reason = _close_of(exc)
         if code not in RECONNECTABLE:
             raise stream_closed(code, reason) from exc
-        for delay in self._reconnect.delays():
-            time.sleep(delay)
+        while self._tries < self._reconnect.attempts:
+            time.sleep(self._reconnect.delay_s(self._tries))
+            self._tries += 1
             try:
                 connection = self._open()
                 for data in self._pipeline.renumber():
