@@ -17,6 +17,7 @@ from ik_client import (
     AuthError,
     Client,
     ClipAnswer,
+    ConnectionLost,
     Encoding,
     ErrorCode,
     FrameAnswer,
@@ -263,6 +264,15 @@ def test_stream_reconnects_mid_pipeline(ik: Client, session: Session, encoding: 
     assert received == sent == list(range(40))
     # The server solved every frame at least once; those in flight at the cut may twice.
     assert 40 <= frames_on_the_server(ik, session) <= 40 + in_flight
+
+
+def test_stream_without_reconnects_raises_the_drop(ik: Client, session: Session) -> None:
+    with ik.stream(session, reconnect=Reconnect(attempts=0)) as stream:
+        stream.send_frame([tool(0.1)])
+        stream.connection.socket.shutdown(socket.SHUT_RDWR)
+        with pytest.raises(ConnectionLost) as caught:
+            stream.receive()
+    assert caught.value.close_code == 1006 and "dropped" in caught.value.meaning
 
 
 def test_async_stream_reconnects_mid_pipeline(server: Server, session: Session) -> None:

@@ -13,6 +13,7 @@ import { WebSocket as NodeWebSocket } from "ws";
 import {
   AuthError,
   Client,
+  ConnectionLost,
   ErrorCode,
   InvalidRequest,
   NotFound,
@@ -391,6 +392,17 @@ describe("stream", () => {
     const missing = await gone.ping().catch((e: unknown) => e);
     assert.ok(missing instanceof SessionGone);
     assert.equal(missing.closeCode, 4404);
+  });
+
+  test("without reconnects, a drop rejects what is in flight", async () => {
+    const session = await ik.createSession(PANDA);
+    const stream = await ik.stream(session, { reconnect: { attempts: 0 } });
+    stream.sendFrame([tool(0.1)]);
+    (stream.socket as unknown as NodeWebSocket).terminate();
+    const lost = await stream.receive().catch((e: unknown) => e);
+    assert.ok(lost instanceof ConnectionLost);
+    assert.equal(lost.closeCode, 1006);
+    assert.throws(() => stream.sendPing(), ConnectionLost);
   });
 
   for (const encoding of ENCODINGS) {
