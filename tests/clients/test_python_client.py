@@ -221,12 +221,13 @@ def test_stream_close_codes(ik: Client, session: Session) -> None:
     with ik.stream(stranger) as stream, pytest.raises(StreamAuthError) as auth:
         stream.ping()
     assert auth.value.close_code == 4403 and "token" in auth.value.meaning
+    assert auth.value.reason == ErrorCode.FORBIDDEN
 
     gone = ik.create_session(PANDA)
     ik.delete_session(gone)
     with ik.stream(gone) as stream, pytest.raises(SessionGone) as missing:
         stream.ping()
-    assert missing.value.close_code == 4404
+    assert missing.value.close_code == 4404 and missing.value.reason == ErrorCode.NOT_FOUND
 
 
 def test_too_many_websockets_after_bounded_retries(start_server: Callable[..., Server]) -> None:

@@ -21,8 +21,10 @@ class ErrorCode(enum.StrEnum):
     ID_REUSE = "id_reuse"
     UNAUTHORIZED = "unauthorized"
     FORBIDDEN = "forbidden"
+    FORBIDDEN_ORIGIN = "forbidden_origin"
     NOT_FOUND = "not_found"
     METHOD_NOT_ALLOWED = "method_not_allowed"
+    HTTP_ERROR = "http_error"
     PAYLOAD_TOO_LARGE = "payload_too_large"
     TOO_MANY_SESSIONS = "too_many_sessions"
     KEY_SESSION_LIMIT = "key_session_limit"
@@ -31,6 +33,10 @@ class ErrorCode(enum.StrEnum):
     WARMUP_FAILED = "warmup_failed"
     PLANS_BUSY = "plans_busy"
     TOO_MANY_PLANS = "too_many_plans"
+    # Reasons of WebSocket closes (a close's reason is its error code).
+    TOO_MANY_WEBSOCKETS = "too_many_websockets"
+    SLOW_READER = "slow_reader"
+    SHUTTING_DOWN = "shutting_down"
     INTERNAL_ERROR = "internal_error"
 
 
@@ -107,12 +113,13 @@ class ServiceError(IKClientError):
 
 
 class InvalidRequest(ServiceError):
-    """invalid_format, invalid_problem, id_reuse, payload_too_large, method_not_allowed:
-    the request is wrong; ``field`` says where."""
+    """invalid_format, invalid_problem, id_reuse, payload_too_large, method_not_allowed,
+    http_error: the request is wrong; ``field`` says where."""
 
 
 class AuthError(ServiceError):
-    """unauthorized, forbidden: no or wrong token or API key."""
+    """unauthorized, forbidden, forbidden_origin: no or wrong token or API key, or a
+    browser origin the server does not allow."""
 
 
 class NotFound(ServiceError):
@@ -121,11 +128,12 @@ class NotFound(ServiceError):
 
 class RetryLater(ServiceError):
     """rate_limited, not_ready, plans_busy, too_many_plans, too_many_sessions,
-    key_session_limit, warmup_failed: try again (after ``retry_after_s`` when given)."""
+    key_session_limit, warmup_failed, too_many_websockets, shutting_down: try again
+    (after ``retry_after_s`` when given)."""
 
 
 class ServerFault(ServiceError):
-    """internal_error, or a code this client does not know."""
+    """internal_error, slow_reader, or a code this client does not know."""
 
 
 _ERROR_CLASSES: dict[str, type[ServiceError]] = {
@@ -134,8 +142,10 @@ _ERROR_CLASSES: dict[str, type[ServiceError]] = {
     ErrorCode.ID_REUSE: InvalidRequest,
     ErrorCode.PAYLOAD_TOO_LARGE: InvalidRequest,
     ErrorCode.METHOD_NOT_ALLOWED: InvalidRequest,
+    ErrorCode.HTTP_ERROR: InvalidRequest,
     ErrorCode.UNAUTHORIZED: AuthError,
     ErrorCode.FORBIDDEN: AuthError,
+    ErrorCode.FORBIDDEN_ORIGIN: AuthError,
     ErrorCode.NOT_FOUND: NotFound,
     ErrorCode.TOO_MANY_SESSIONS: RetryLater,
     ErrorCode.KEY_SESSION_LIMIT: RetryLater,
@@ -144,6 +154,8 @@ _ERROR_CLASSES: dict[str, type[ServiceError]] = {
     ErrorCode.WARMUP_FAILED: RetryLater,
     ErrorCode.PLANS_BUSY: RetryLater,
     ErrorCode.TOO_MANY_PLANS: RetryLater,
+    ErrorCode.TOO_MANY_WEBSOCKETS: RetryLater,
+    ErrorCode.SHUTTING_DOWN: RetryLater,
 }
 
 
@@ -166,7 +178,8 @@ class StreamClosed(IKClientError):
 
     Attributes:
         close_code: The WebSocket close code (1006 when the connection dropped).
-        reason: The server's close reason (e.g. ``not_found``), possibly empty.
+        reason: The server's close reason, its error code (e.g. ``not_found``); empty
+            when none was sent.
         meaning: What the code means, from the server's table.
     """
 

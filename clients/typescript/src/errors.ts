@@ -15,8 +15,10 @@ export const ErrorCode = {
   IdReuse: "id_reuse",
   Unauthorized: "unauthorized",
   Forbidden: "forbidden",
+  ForbiddenOrigin: "forbidden_origin",
   NotFound: "not_found",
   MethodNotAllowed: "method_not_allowed",
+  HttpError: "http_error",
   PayloadTooLarge: "payload_too_large",
   TooManySessions: "too_many_sessions",
   KeySessionLimit: "key_session_limit",
@@ -25,6 +27,10 @@ export const ErrorCode = {
   WarmupFailed: "warmup_failed",
   PlansBusy: "plans_busy",
   TooManyPlans: "too_many_plans",
+  // Close reasons (a WebSocket close's reason is its error code).
+  TooManyWebSockets: "too_many_websockets",
+  SlowReader: "slow_reader",
+  ShuttingDown: "shutting_down",
   InternalError: "internal_error",
 } as const;
 export type ErrorCode = (typeof ErrorCode)[keyof typeof ErrorCode];
@@ -100,11 +106,11 @@ export class ServiceError extends IKClientError {
   }
 }
 
-/** invalid_format, invalid_problem, id_reuse, payload_too_large, method_not_allowed. */
+/** invalid_format, invalid_problem, id_reuse, payload_too_large, method_not_allowed, http_error. */
 export class InvalidRequest extends ServiceError {
   override name = "InvalidRequest";
 }
-/** unauthorized, forbidden: no or wrong token or API key. */
+/** unauthorized, forbidden, forbidden_origin: no or wrong token or API key, or a browser origin not allowed. */
 export class AuthError extends ServiceError {
   override name = "AuthError";
 }
@@ -112,11 +118,12 @@ export class AuthError extends ServiceError {
 export class NotFound extends ServiceError {
   override name = "NotFound";
 }
-/** rate_limited, not_ready, plans_busy, too_many_plans, too_many_sessions, ...: wait. */
+/** rate_limited, not_ready, plans_busy, too_many_plans, too_many_sessions, key_session_limit,
+ * warmup_failed, too_many_websockets, shutting_down: wait (`retryAfterS` when given). */
 export class RetryLater extends ServiceError {
   override name = "RetryLater";
 }
-/** internal_error, or a code this client does not know. */
+/** internal_error, slow_reader, or a code this client does not know. */
 export class ServerFault extends ServiceError {
   override name = "ServerFault";
 }
@@ -127,8 +134,10 @@ const ERROR_CLASSES: Record<string, typeof ServiceError> = {
   id_reuse: InvalidRequest,
   payload_too_large: InvalidRequest,
   method_not_allowed: InvalidRequest,
+  http_error: InvalidRequest,
   unauthorized: AuthError,
   forbidden: AuthError,
+  forbidden_origin: AuthError,
   not_found: NotFound,
   too_many_sessions: RetryLater,
   key_session_limit: RetryLater,
@@ -137,6 +146,8 @@ const ERROR_CLASSES: Record<string, typeof ServiceError> = {
   warmup_failed: RetryLater,
   plans_busy: RetryLater,
   too_many_plans: RetryLater,
+  too_many_websockets: RetryLater,
+  shutting_down: RetryLater,
 };
 
 /** The `ServiceError` subclass for `code`. */
@@ -145,7 +156,7 @@ export function serviceError(code: string, message: string, init: ServiceErrorIn
   return new Class(code, message, init);
 }
 
-/** The WebSocket closed and the stream cannot go on. */
+/** The WebSocket closed and the stream cannot go on; `reason` is the server's error code. */
 export class StreamClosed extends IKClientError {
   override name = "StreamClosed";
   readonly meaning: string;

@@ -386,12 +386,14 @@ describe("stream", () => {
     assert.ok(auth instanceof StreamAuthError);
     assert.equal(auth.closeCode, 4403);
     assert.match(auth.meaning, /token/);
+    assert.equal(auth.reason, ErrorCode.Forbidden);
 
     await ik.deleteSession(session);
     const gone = await ik.stream(session);
     const missing = await gone.ping().catch((e: unknown) => e);
     assert.ok(missing instanceof SessionGone);
     assert.equal(missing.closeCode, 4404);
+    assert.equal(missing.reason, ErrorCode.NotFound);
   });
 
   test("without reconnects, a drop rejects what is in flight", async () => {
