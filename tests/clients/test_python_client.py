@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import httpx
+import ik_client
 import pytest
 from ik_client import (
     AsyncClient,
@@ -64,6 +65,46 @@ def assert_solved(result: FrameResult) -> None:
     assert result.success, result
     assert result.status is Status.SOLVED
     assert result.termination is Termination.GOAL_REACHED
+
+
+# --- the types against the schema -------------------------------------------------------
+def fields_of(cls: type) -> set[str]:
+    if dataclasses.is_dataclass(cls):
+        return {f.name for f in dataclasses.fields(cls)}
+    return set(cls.__required_keys__ | cls.__optional_keys__)  # type: ignore[attr-defined]
+
+
+# Each client type and the schema components it mirrors (FrameResult holds both kinds).
+MIRRORS: list[tuple[type, tuple[str, ...]]] = [
+    (ik_client.Vec3, ("Vec3",)),
+    (ik_client.Quaternion, ("Quaternion",)),
+    (ik_client.Target, ("Target",)),
+    (ik_client.Frame, ("Frame",)),
+    (ik_client.PoseIn, ("PoseIn",)),
+    (ik_client.SolverOptionsPatch, ("OptionsPatch",)),
+    (ik_client.EffectorError, ("EffectorErrorOut",)),
+    (ik_client.FrameResult, ("FrameResult", "CompactFrameResult")),
+    (ik_client.PlanSummary, ("PlanSummary",)),
+    (ik_client.ClipResult, ("FrameResults", "CompactFrameResults")),
+    (ik_client.Pose, ("Pose",)),
+    (ik_client.Dof, ("DofInfo",)),
+    (ik_client.Effector, ("EffectorInfo",)),
+    (ik_client.SolverOptions, ("SolverOptions",)),
+    (ik_client.SessionCounters, ("SessionCounters",)),
+    (ik_client.Session, ("SessionCreated",)),
+    (ik_client.SessionInfo, ("SessionInfo",)),
+]
+
+
+def test_types_mirror_the_live_openapi_schema(server: Server) -> None:
+    components = httpx.get(f"{server.base}/openapi.json", timeout=30.0).json()["components"]
+    schemas = components["schemas"]
+    for cls, names in MIRRORS:
+        properties = set().union(*(schemas[name]["properties"] for name in names))
+        assert fields_of(cls) == properties, (cls.__name__, names)
+    result = schemas["FrameResult"]["properties"]
+    assert {t.value for t in Termination} == set(result["termination"]["enum"])
+    assert {s.value for s in Status} == set(result["status"]["enum"])
 
 
 # --- HTTP --------------------------------------------------------------------------------
