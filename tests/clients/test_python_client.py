@@ -310,9 +310,10 @@ def test_stream_reconnects_mid_pipeline(ik: Client, session: Session, encoding: 
 
 def test_stream_without_reconnects_raises_the_drop(ik: Client, session: Session) -> None:
     with ik.stream(session, reconnect=Reconnect(attempts=0)) as stream:
-        stream.send_frame([tool(0.1)])
+        # Cut first: an answer the client had already read would be delivered.
         stream.connection.socket.shutdown(socket.SHUT_RDWR)
         with pytest.raises(ConnectionLost) as caught:
+            stream.send_frame([tool(0.1)])  # raises here or at the next read
             stream.receive()
     assert caught.value.close_code == 1006 and "dropped" in caught.value.meaning
 

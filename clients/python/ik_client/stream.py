@@ -164,6 +164,12 @@ def _expect_frame(answer: Answer) -> FrameResult:
     return answer.result
 
 
+def _expect_pong(answer: Answer) -> Pong:
+    if not isinstance(answer, Pong):
+        raise IKClientError(f"expected a pong, got {answer!r}")
+    return answer
+
+
 def _expect_clip(answer: Answer) -> ClipResult:
     if not isinstance(answer, ClipAnswer):
         raise IKClientError(f"expected a clip result, got {answer!r}")
@@ -242,9 +248,7 @@ class AsyncStream:
 
     async def ping(self) -> Pong:
         await self.send_ping()
-        answer = await self.receive()
-        assert isinstance(answer, Pong), answer
-        return answer
+        return _expect_pong(await self.receive())
 
     async def _open(self) -> AsyncConnection:
         return await async_connect(
@@ -369,9 +373,7 @@ class Stream:
 
     def ping(self) -> Pong:
         self.send_ping()
-        answer = self.receive()
-        assert isinstance(answer, Pong), answer
-        return answer
+        return _expect_pong(self.receive())
 
     def _open(self) -> SyncConnection:
         connection = sync_connect(
