@@ -1,0 +1,182 @@
+"""The HTTP calls, described once: method, path, body and how to read the answer. The
+sync and async clients only send them (httpx's own split: one request model, two
+transports)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Generic, Protocol, TypeVar
+
+import httpx
+
+from .errors import service_error
+from .types import (
+    Chain,
+    ClipResult,
+    Frame,
+    FrameResult,
+    Pose,
+    PoseIn,
+    Session,
+    SessionInfo,
+    SolverOptionsPatch,
+    Target,
+)
+
+T = TypeVar("T")
+
+
+class SessionRef(Protocol):
+    """What a call on a session needs: a ``Session`` or anything with ``id`` and ``token``."""
+
+    @property
+    def id(self) -> str: ...
+
+    @property
+    def token(self) -> str: ...
+
+
+@dataclass(frozen=True, slots=True)
+class Call(Generic[T]):
+    """One HTTP request and the parser of its successful answer."""
+
+    method: str
+    path: str
+    parse: Callable[[httpx.Response], T]
+    json: Any = None
+    params: dict[str, str] = field(default_factory=dict)
+    headers: dict[str, str] = field(default_factory=dict)
+
+    def result(self, response: httpx.Response) -> T:
+        raise_for_error(response)
+        return self.parse(response)
+
+
+def raise_for_error(response: httpx.Response) -> None:
+    """Raise the ``ServiceError`` subclass of an error answer ``{"detail", "code", "field"}``."""
+    if response.is_success:
+        return
+    try:
+        body = response.json()
+    except ValueError:
+        body = None
+    if not isinstance(body, dict):
+        body = {"detail": response.text}
+    detail = body.get("detail", "")
+    # invalid_format's detail is pydantic's list of {loc, msg, type}: the first says most.
+    if isinstance(detail, list) and detail and isinstance(detail[0], dict):
+        message = str(detail[0].get("msg", ""))
+    else:
+        message = str(detail)
+    retry_after = response.headers.get("Retry-After")
+    raise service_error(
+        body.get("code", f"http_{response.status_code}"),
+        message,
+        field=body.get("field"),
+        retry_after_s=float(retry_after) if retry_after and retry_after.isdigit() else None,
+        status_code=response.status_code,
+        detail=detail,
+    )
+
+
+def _auth(session: SessionRef) -> dict[str, str]:
+    return {"Authorization": f"Bearer {session.token}"}
+
+
+def _results(compact: bool) -> dict[str, str]:
+    return {"results": "compact"} if compact else {}
+
+
+def _without_none(**values: Any) -> dict[str, Any]:
+    return {k: v for k, v in values.items() if v is not None}
+
+
+def create_session(
+    chain: Chain, options: SolverOptionsPatch | None, initial_pose: PoseIn | None
+) -> Call[Session]:
+    body = _without_none(chain=chain, options=options, initial_pose=initial_pose)
+    return Call("POST", "/v1/sessions", lambda r: Session.from_json(r.json()), json=body)
+
+
+def get_session(session: SessionRef) -> Call[SessionInfo]:
+    return Call(
+        "GET",
+        f"/v1/sessions/{session.id}",
+        lambda r: SessionInfo.from_json(r.json()),
+        headers=_auth(session),
+    )
+
+
+def patch_session(session: SessionRef, options: SolverOptionsPatch) -> Call[SessionInfo]:
+    return Call(
+        "PATCH",
+        f"/v1/sessions/{session.id}",
+        lambda r: SessionInfo.from_json(r.json()),
+        json=options,
+        headers=_auth(session),
+    )
+
+
+def set_pose(session: SessionRef, pose: PoseIn) -> Call[Pose]:
+    return Call(
+        "PUT",
+        f"/v1/sessions/{session.id}/pose",
+        lambda r: Pose.from_json(r.json()),
+        json=pose,
+        headers=_auth(session),
+    )
+
+
+def delete_session(session: SessionRef) -> Call[None]:
+    return Call("DELETE", f"/v1/sessions/{session.id}", lambda r: None, headers=_auth(session))
+
+
+def frame(
+    session: SessionRef, targets: list[Target], id: int | None, compact: bool
+) -> Call[FrameResult]:
+    return Call(
+        "POST",
+        f"/v1/sessions/{session.id}/frames",
+        lambda r: FrameResult.from_json(r.json()["results"][0]),
+        json=_without_none(id=id, targets=targets),
+        params=_results(compact),
+        headers=_auth(session),
+    )
+
+
+def clip(session: SessionRef, frames: list[Frame], plan: bool, compact: bool) -> Call[ClipResult]:
+    return Call(
+        "POST",
+        f"/v1/sessions/{session.id}/frames",
+        lambda r: ClipResult.from_json(r.json()),
+        json={"frames": frames, "plan": plan},
+        params=_results(compact),
+        headers=_auth(session),
+    )
+
+
+def solve(
+    chain: Chain,
+    targets: list[Target],
+    seed: PoseIn | None,
+    options: SolverOptionsPatch | None,
+    id: int | None,
+) -> Call[FrameResult]:
+    body = _without_none(chain=chain, targets=targets, seed=seed, options=options, id=id)
+    return Call("POST", "/v1/solve", lambda r: FrameResult.from_json(r.json()), json=body)
+
+
+def pose_in(q: list[float] | None, joints: dict[str, float] | None) -> PoseIn:
+    """``PoseIn`` from exactly one of ``q`` and ``joints`` (the server also checks)."""
+    if (q is None) == (joints is None):
+        raise ValueError("give exactly one of q and joints")
+    return {"q": q} if q is not None else {"joints": joints}  # type: ignore[typeddict-item]
+
+
+def ws_url(base_url: str, session: SessionRef, compact: bool) -> str:
+    """The session's WebSocket URL (``http`` -> ``ws``, ``https`` -> ``wss``)."""
+    url = httpx.URL(base_url)
+    scheme = "wss" if url.scheme == "https" else "ws"
+    ws = url.copy_with(scheme=scheme, path=url.path.rstrip("/") + f"/v1/sessions/{session.id}/ws")
+    return str(ws.copy_merge_params(_results(compact)))

@@ -1,0 +1,418 @@
+"""A session's WebSocket as a stream of frames: ids, pipelining, encodings, reconnects.
+
+The stream numbers its messages itself (0, 1, 2, ...), so a caller can send many and match
+the answers by the id each ``send_*`` returned; the server answers in order. When the
+connection drops (or the server closes 1011, 1012 or 1013), the stream reconnects with a
+bounded backoff and sends again, in order, every message that had no answer yet, under
+new ids on the new connection (each connection wants increasing ids; the stream keeps one
+counter, so an id is never used twice). Answers are reported under the id the caller got,
+and each message gets exactly one. A message the server had solved but whose answer was
+lost in the drop is solved once more on the new connection, from the session's pose.
+
+``_Pipeline`` holds all of that without I/O; ``AsyncStream`` (websockets' asyncio client)
+and ``Stream`` (its threading client) only move bytes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+from websockets.asyncio.client import ClientConnection as AsyncConnection
+from websockets.asyncio.client import connect as async_connect
+from websockets.exceptions import ConnectionClosed, InvalidHandshake
+from websockets.sync.client import ClientConnection as SyncConnection
+from websockets.sync.client import connect as sync_connect
+
+from .errors import RECONNECTABLE, IKClientError, service_error, stream_closed
+from .types import (
+    Answer,
+    ClipAnswer,
+    ClipResult,
+    Encoding,
+    Frame,
+    FrameAnswer,
+    FrameResult,
+    Pong,
+    Target,
+)
+
+# Answers of long clips of big chains can be large; the server bounds what it sends.
+MAX_ANSWER_BYTES = 64 * 2**20
+OPEN_TIMEOUT_S = 30.0
+
+
+@dataclass(frozen=True, slots=True)
+class Reconnect:
+    """How hard a stream tries to get its connection back: ``attempts`` connections,
+    waiting ``initial_delay_s`` before the first and doubling up to ``max_delay_s``.
+    ``attempts=0`` turns reconnecting off. The count starts again at each answer: a
+    server that accepts and then closes (1013) is not retried for ever."""
+
+    attempts: int = 6
+    initial_delay_s: float = 0.05
+    max_delay_s: float = 2.0
+
+    def delay_s(self, attempt: int) -> float:
+        return float(min(self.initial_delay_s * 2**attempt, self.max_delay_s))
+
+
+@dataclass(slots=True)
+class _Message:
+    id: int  # the id the caller was given
+    wire_id: int  # the id it carries on the current connection
+    body: dict[str, Any]  # without "id"
+
+
+class _Pipeline:
+    """Ids, encoding, and the messages still waiting for an answer, in order."""
+
+    def __init__(self, encoding: Encoding) -> None:
+        self.encoding = encoding
+        self._next_id = 0  # the caller's ids
+        self._next_wire_id = 0  # ids on the wire: one counter over every connection
+        self._waiting: OrderedDict[int, _Message] = OrderedDict()  # by wire id
+
+    @property
+    def in_flight(self) -> int:
+        return len(self._waiting)
+
+    def add(self, body: dict[str, Any]) -> tuple[int, str | bytes]:
+        """Number a new message; returns its id and its encoding."""
+        message = _Message(self._next_id, self._next_wire_id, body)
+        self._next_id += 1
+        self._next_wire_id += 1
+        self._waiting[message.wire_id] = message
+        return message.id, self._encode(message)
+
+    def renumber(self) -> list[str | bytes]:
+        """Every waiting message under a new id, in order: what a new connection gets."""
+        waiting = list(self._waiting.values())
+        self._waiting.clear()
+        for message in waiting:
+            message.wire_id = self._next_wire_id
+            self._next_wire_id += 1
+            self._waiting[message.wire_id] = message
+        return [self._encode(m) for m in waiting]
+
+    def answer(self, data: str | bytes) -> Answer:
+        """The answer ``data`` carries, under its message's caller id.
+
+        Raises:
+            ServiceError: The message was answered with an error (its subclass by code).
+        """
+        if isinstance(data, bytes):
+            envelope = msgpack.unpackb(data, raw=False)
+        else:
+            envelope = json.loads(data)
+        wire_id = envelope.get("id")
+        if wire_id is None and self._waiting:  # the server could not read the id: in order
+            wire_id = next(iter(self._waiting))
+        message = self._waiting.pop(wire_id, None)
+        if message is None:
+            raise IKClientError(f"an answer to id {wire_id!r}, which is not waiting: {envelope}")
+        kind = envelope.get("type")
+        if "error" in envelope:
+            error = envelope["error"]
+            raise service_error(
+                error.get("code"),
+                error.get("message", ""),
+                field=error.get("field"),
+                retry_after_s=error.get("retry_after_s"),
+                id=message.id,
+            )
+        if kind == "result":
+            result = envelope["result"]
+            return FrameAnswer(message.id, FrameResult.from_json({**result, "id": message.id}))
+        if kind == "clip_result":
+            return ClipAnswer(message.id, ClipResult.from_json(envelope))
+        if kind == "pong":
+            return Pong(message.id)
+        raise IKClientError(f"unknown answer type {kind!r}: {envelope}")
+
+    def _encode(self, message: _Message) -> str | bytes:
+        payload = {**message.body, "id": message.wire_id}
+        if self.encoding is Encoding.MSGPACK:
+            return bytes(msgpack.packb(payload))
+        # The server refuses NaN and infinity; refuse them here, where the caller is.
+        return json.dumps(payload, separators=(",", ":"), allow_nan=False)
+
+
+def _frame(targets: list[Target]) -> dict[str, Any]:
+    return {"type": "frame", "targets": targets}
+
+
+def _clip(frames: list[Frame], plan: bool) -> dict[str, Any]:
+    return {"type": "clip", "frames": frames, "plan": plan}
+
+
+def _close_of(exc: ConnectionClosed) -> tuple[int, str]:
+    """The close code and reason the server sent; 1006 when none came."""
+    if exc.rcvd is not None:
+        return exc.rcvd.code, exc.rcvd.reason
+    return 1006, ""
+
+
+def _expect_frame(answer: Answer) -> FrameResult:
+    if not isinstance(answer, FrameAnswer):
+        raise IKClientError(f"expected a frame result, got {answer!r}")
+    return answer.result
+
+
+def _expect_pong(answer: Answer) -> Pong:
+    if not isinstance(answer, Pong):
+        raise IKClientError(f"expected a pong, got {answer!r}")
+    return answer
+
+
+def _expect_clip(answer: Answer) -> ClipResult:
+    if not isinstance(answer, ClipAnswer):
+        raise IKClientError(f"expected a clip result, got {answer!r}")
+    return answer.clip
+
+
+class AsyncStream:
+    """A session's WebSocket (asyncio). Use as ``async with client.stream(session) as s``.
+
+    ``send_frame`` / ``send_clip`` / ``send_ping`` return the message's id; ``receive``
+    returns the next answer (in the order sent) or raises its ``ServiceError``. ``frame``,
+    ``clip`` and ``ping`` send one message and wait for its answer. Sends may come from
+    several tasks; answers are read by one task at a time.
+    """
+
+    def __init__(self, url: str, token: str, *, encoding: Encoding, reconnect: Reconnect) -> None:
+        self.url = url
+        self.reconnects = 0  # connections made after the first
+        self._headers = {"Authorization": f"Bearer {token}"}
+        self._pipeline = _Pipeline(encoding)
+        self._reconnect = reconnect
+        self._connection: AsyncConnection | None = None
+        self._lock = asyncio.Lock()  # one sender or one reconnect at a time
+        self._tries = 0  # reconnects since the last answer
+
+    @property
+    def connection(self) -> AsyncConnection:
+        """The current websockets connection (a test drops it with ``transport.abort()``)."""
+        if self._connection is None:
+            raise IKClientError("the stream is not open")
+        return self._connection
+
+    @property
+    def in_flight(self) -> int:
+        """Messages sent that have no answer yet."""
+        return self._pipeline.in_flight
+
+    async def __aenter__(self) -> AsyncStream:
+        self._connection = await self._open()
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.close()
+
+    async def close(self) -> None:
+        if self._connection is not None:
+            await self._connection.close()
+
+    async def send_frame(self, targets: list[Target]) -> int:
+        return await self._send(_frame(targets))
+
+    async def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
+        return await self._send(_clip(frames, plan))
+
+    async def send_ping(self) -> int:
+        return await self._send({"type": "ping"})
+
+    async def receive(self) -> Answer:
+        while True:
+            connection = self.connection
+            try:
+                data = await connection.recv()
+            except ConnectionClosed as exc:
+                await self._recover(connection, exc)
+                continue
+            self._tries = 0
+            return self._pipeline.answer(data)
+
+    async def frame(self, targets: list[Target]) -> FrameResult:
+        await self.send_frame(targets)
+        return _expect_frame(await self.receive())
+
+    async def clip(self, frames: list[Frame], *, plan: bool = False) -> ClipResult:
+        await self.send_clip(frames, plan=plan)
+        return _expect_clip(await self.receive())
+
+    async def ping(self) -> Pong:
+        await self.send_ping()
+        return _expect_pong(await self.receive())
+
+    async def _open(self) -> AsyncConnection:
+        return await async_connect(
+            self.url,
+            additional_headers=self._headers,
+            open_timeout=OPEN_TIMEOUT_S,
+            max_size=MAX_ANSWER_BYTES,
+        )
+
+    async def _send(self, body: dict[str, Any]) -> int:
+        async with self._lock:
+            # Waiting before it is sent: a send that fails is sent again after reconnecting.
+            message_id, data = self._pipeline.add(body)
+            connection = self.connection
+            try:
+                await connection.send(data)
+                return message_id
+            except ConnectionClosed as exc:
+                failure = exc
+        await self._recover(connection, failure)
+        return message_id
+
+    async def _recover(self, failed: AsyncConnection, exc: ConnectionClosed) -> None:
+        """Reconnect and resend what is waiting, or raise the close as a ``StreamClosed``."""
+        code, reason = _close_of(exc)
+        if code not in RECONNECTABLE:
+            raise stream_closed(code, reason) from exc
+        async with self._lock:
+            if self._connection is not failed:
+                return  # another task has reconnected already
+            while self._tries < self._reconnect.attempts:
+                await asyncio.sleep(self._reconnect.delay_s(self._tries))
+                self._tries += 1
+                try:
+                    connection = await self._open()
+                    for data in self._pipeline.renumber():
+                        await connection.send(data)
+                except ConnectionClosed as again:
+                    code, reason = _close_of(again)
+                    if code not in RECONNECTABLE:
+                        raise stream_closed(code, reason) from again
+                    continue
+                except (OSError, InvalidHandshake, TimeoutError):
+                    continue
+                self._connection = connection
+                self.reconnects += 1
+                return
+            raise stream_closed(code, reason) from exc
+
+
+class Stream:
+    """A session's WebSocket (blocking; one thread at a time). Use as
+    ``with client.stream(session) as s``; the same calls as ``AsyncStream``.
+    ``receive`` waits at most ``timeout_s`` (``TimeoutError``)."""
+
+    def __init__(
+        self,
+        url: str,
+        token: str,
+        *,
+        encoding: Encoding,
+        reconnect: Reconnect,
+        timeout_s: float | None = 30.0,
+    ) -> None:
+        self.url = url
+        self.reconnects = 0
+        self.timeout_s = timeout_s
+        self._headers = {"Authorization": f"Bearer {token}"}
+        self._pipeline = _Pipeline(encoding)
+        self._reconnect = reconnect
+        self._connection: SyncConnection | None = None
+        self._tries = 0  # reconnects since the last answer
+
+    @property
+    def connection(self) -> SyncConnection:
+        """The current websockets connection (a test drops it with ``socket.shutdown``)."""
+        if self._connection is None:
+            raise IKClientError("the stream is not open")
+        return self._connection
+
+    @property
+    def in_flight(self) -> int:
+        return self._pipeline.in_flight
+
+    def __enter__(self) -> Stream:
+        self._connection = self._open()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._connection is not None:
+            self._connection.close()
+
+    def send_frame(self, targets: list[Target]) -> int:
+        return self._send(_frame(targets))
+
+    def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
+        return self._send(_clip(frames, plan))
+
+    def send_ping(self) -> int:
+        return self._send({"type": "ping"})
+
+    def receive(self) -> Answer:
+        while True:
+            try:
+                data = self.connection.recv(timeout=self.timeout_s)
+            except ConnectionClosed as exc:
+                self._recover(exc)
+                continue
+            self._tries = 0
+            return self._pipeline.answer(data)
+
+    def frame(self, targets: list[Target]) -> FrameResult:
+        self.send_frame(targets)
+        return _expect_frame(self.receive())
+
+    def clip(self, frames: list[Frame], *, plan: bool = False) -> ClipResult:
+        self.send_clip(frames, plan=plan)
+        return _expect_clip(self.receive())
+
+    def ping(self) -> Pong:
+        self.send_ping()
+        return _expect_pong(self.receive())
+
+    def _open(self) -> SyncConnection:
+        connection = sync_connect(
+            self.url,
+            additional_headers=self._headers,
+            open_timeout=OPEN_TIMEOUT_S,
+            max_size=MAX_ANSWER_BYTES,
+        )
+        # websockets 17.1 warns about a connection not entered as a context manager;
+        # this one lives as long as the stream, which closes it (its exit is close()).
+        return connection.__enter__()
+
+    def _send(self, body: dict[str, Any]) -> int:
+        message_id, data = self._pipeline.add(body)
+        try:
+            self.connection.send(data)
+        except ConnectionClosed as exc:
+            self._recover(exc)
+        return message_id
+
+    def _recover(self, exc: ConnectionClosed) -> None:
+        code, reason = _close_of(exc)
+        if code not in RECONNECTABLE:
+            raise stream_closed(code, reason) from exc
+        while self._tries < self._reconnect.attempts:
+            time.sleep(self._reconnect.delay_s(self._tries))
+            self._tries += 1
+            try:
+                connection = self._open()
+                for data in self._pipeline.renumber():
+                    connection.send(data)
+            except ConnectionClosed as again:
+                code, reason = _close_of(again)
+                if code not in RECONNECTABLE:
+                    raise stream_closed(code, reason) from again
+                continue
+            except (OSError, InvalidHandshake, TimeoutError):
+                continue
+            self._connection = connection
+            self.reconnects += 1
+            return
+        raise stream_closed(code, reason) from exc

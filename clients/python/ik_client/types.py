@@ -1,0 +1,366 @@
+"""What the service takes and gives, typed: requests as TypedDicts (plain dicts that a
+type checker can check), answers as frozen dataclasses built from the JSON.
+
+The field names are those of the service's OpenAPI schema (``/openapi.json``; the
+component each class mirrors is named in its docstring, and a live test compares them).
+Answers ignore fields they do not know, so a newer server does not break an older client.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import Any, Literal, NotRequired, TypedDict
+
+
+class Termination(enum.StrEnum):
+    """How the optimizer's last pass ended (docs/api.md, Termination codes)."""
+
+    GOAL_REACHED = "goal_reached"
+    GTOL = "gtol"
+    STEP_SMALL = "step_small"
+    STALLED = "stalled"
+    LINE_SEARCH_FAILED = "line_search_failed"
+    MAX_ITER = "max_iter"
+    MAX_FEV = "max_fev"
+    DEADLINE = "deadline"
+    NONFINITE = "nonfinite"
+
+
+class Status(enum.StrEnum):
+    """Whether a frame reached its targets, and if not, why."""
+
+    SOLVED = "solved"
+    NOT_REACHED = "not_reached"
+    BUDGET_EXHAUSTED = "budget_exhausted"
+    NONFINITE = "nonfinite"
+
+
+class EffectorMode(enum.StrEnum):
+    POSITION = "position"
+    POSE = "pose"
+    AIM = "aim"
+
+
+class Encoding(enum.StrEnum):
+    """How a stream's messages travel: JSON text or MessagePack binary messages."""
+
+    JSON = "json"
+    MSGPACK = "msgpack"
+
+
+# --- requests ---------------------------------------------------------------------------
+class Vec3(TypedDict):
+    x: float
+    y: float
+    z: float
+
+
+class Quaternion(TypedDict):
+    """A unit quaternion; w is the scalar part."""
+
+    w: float
+    x: float
+    y: float
+    z: float
+
+
+class Target(TypedDict):
+    """What one effector should reach (schema ``Target``)."""
+
+    effector: str
+    position: NotRequired[Vec3]
+    orientation: NotRequired[Quaternion]
+    direction: NotRequired[Vec3]
+
+
+class Frame(TypedDict):
+    """One frame of a clip (schema ``Frame``); ``id`` is echoed in its result."""
+
+    targets: list[Target]
+    id: NotRequired[int]
+
+
+class PoseIn(TypedDict, total=False):
+    """A pose (schema ``PoseIn``): exactly one of ``q`` (every DOF, in order) or
+    ``joints`` (some DOFs by name) [rad] or [m]."""
+
+    q: list[float]
+    joints: dict[str, float]
+
+
+class SolverOptionsPatch(TypedDict, total=False):
+    """Solver options to change (schema ``OptionsPatch``); left out: unchanged."""
+
+    position_tolerance_m: float
+    rotation_tolerance_rad: float
+    time_budget_us: float
+    max_iter: int
+    max_restarts: int
+    restart_radius_rad: float
+    max_step_rad: float
+    posture_weight: float
+    limit_weight: float
+    limit_margin: float
+
+
+# A chain is one of the schema's three formats (HierarchyChain, UrdfChain, ExampleChain),
+# e.g. {"format": "example", "name": "panda_arm"}; the server validates it and names the
+# field at fault, so the client passes it through as given.
+Chain = dict[str, Any]
+
+
+# --- answers ----------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class EffectorError:
+    """Schema ``EffectorErrorOut``: the pose error of one targeted effector."""
+
+    name: str
+    position_error_m: float | None
+    rotation_error_rad: float | None
+    within_tolerance: bool
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> EffectorError:
+        return cls(d["name"], d["position_error_m"], d["rotation_error_rad"], d["within_tolerance"])
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FrameResult:
+    """Schemas ``FrameResult`` and ``CompactFrameResult``: the answer to one frame.
+
+    ``joints`` and ``effectors`` are None in compact results (``compact=True``). A frame
+    that did not reach its targets is a result with ``success`` False, not an error.
+    """
+
+    id: int | None
+    success: bool
+    status: Status
+    termination: Termination
+    q: list[float]
+    joints: dict[str, float] | None
+    effectors: list[EffectorError] | None
+    iterations: int
+    function_evals: int
+    passes: int
+    restarts: int
+    solve_us: float
+    server_us: float
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> FrameResult:
+        effectors = d.get("effectors")
+        return cls(
+            id=d["id"],
+            success=d["success"],
+            status=Status(d["status"]),
+            termination=Termination(d["termination"]),
+            q=d["q"],
+            joints=d.get("joints"),
+            effectors=None
+            if effectors is None
+            else [EffectorError.from_json(e) for e in effectors],
+            iterations=d["iterations"],
+            function_evals=d["function_evals"],
+            passes=d["passes"],
+            restarts=d["restarts"],
+            solve_us=d["solve_us"],
+            server_us=d["server_us"],
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PlanSummary:
+    """Schema ``PlanSummary``: what planning a clip achieved."""
+
+    largest_step_rad: float
+    tracked_largest_step_rad: float
+    candidates: int
+    plan_us: float
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> PlanSummary:
+        return cls(
+            largest_step_rad=d["largest_step_rad"],
+            tracked_largest_step_rad=d["tracked_largest_step_rad"],
+            candidates=d["candidates"],
+            plan_us=d["plan_us"],
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class ClipResult:
+    """Schema ``FrameResults``: one result per frame, in order; ``plan`` when planned."""
+
+    results: list[FrameResult]
+    plan: PlanSummary | None
+
+    @property
+    def success(self) -> bool:
+        return all(r.success for r in self.results)
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> ClipResult:
+        plan = d.get("plan")
+        return cls(
+            [FrameResult.from_json(r) for r in d["results"]],
+            None if plan is None else PlanSummary.from_json(plan),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Pose:
+    """Schema ``Pose``: joint values in DOF order and by name [rad] or [m]."""
+
+    q: list[float]
+    joints: dict[str, float]
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> Pose:
+        return cls(d["q"], d["joints"])
+
+
+@dataclass(frozen=True, slots=True)
+class Dof:
+    """Schema ``DofInfo``: one degree of freedom and its limits (None: unbounded)."""
+
+    name: str
+    lower: float | None
+    upper: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class Effector:
+    """Schema ``EffectorInfo``."""
+
+    name: str
+    mode: EffectorMode
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SolverOptions:
+    """Schema ``SolverOptions``: the effective options of a session."""
+
+    position_tolerance_m: float
+    rotation_tolerance_rad: float
+    time_budget_us: float
+    max_iter: int
+    max_restarts: int
+    restart_radius_rad: float
+    max_step_rad: float
+    posture_weight: float
+    limit_weight: float
+    limit_margin: float
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> SolverOptions:
+        return cls(**{name: d[name] for name in cls.__dataclass_fields__})
+
+
+@dataclass(frozen=True, slots=True)
+class SessionCounters:
+    """Schema ``SessionCounters``."""
+
+    frames: int
+    solved: int
+    not_solved: int
+
+
+def _dofs(d: dict[str, Any]) -> list[Dof]:
+    return [Dof(x["name"], x["lower"], x["upper"]) for x in d["dof"]]
+
+
+def _effectors(d: dict[str, Any]) -> list[Effector]:
+    return [Effector(x["name"], EffectorMode(x["mode"])) for x in d["effectors"]]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Session:
+    """Schema ``SessionCreated``: a new session. ``token`` is shown only once; every call
+    on the session takes this object (or any object with ``id`` and ``token``)."""
+
+    id: str
+    token: str
+    n_dof: int
+    dof: list[Dof]
+    effectors: list[Effector]
+    options: SolverOptions
+    pose: Pose
+    idle_ttl_s: float
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> Session:
+        return cls(
+            id=d["id"],
+            token=d["token"],
+            n_dof=d["n_dof"],
+            dof=_dofs(d),
+            effectors=_effectors(d),
+            options=SolverOptions.from_json(d["options"]),
+            pose=Pose.from_json(d["pose"]),
+            idle_ttl_s=d["idle_ttl_s"],
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SessionInfo:
+    """Schema ``SessionInfo``: a session's chain summary, options, pose and counters."""
+
+    id: str
+    n_dof: int
+    dof: list[Dof]
+    effectors: list[Effector]
+    options: SolverOptions
+    pose: Pose
+    counters: SessionCounters
+    created_at: float
+    idle_s: float
+    idle_ttl_s: float
+    websockets: int
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> SessionInfo:
+        c = d["counters"]
+        return cls(
+            id=d["id"],
+            n_dof=d["n_dof"],
+            dof=_dofs(d),
+            effectors=_effectors(d),
+            options=SolverOptions.from_json(d["options"]),
+            pose=Pose.from_json(d["pose"]),
+            counters=SessionCounters(c["frames"], c["solved"], c["not_solved"]),
+            created_at=d["created_at"],
+            idle_s=d["idle_s"],
+            idle_ttl_s=d["idle_ttl_s"],
+            websockets=d["websockets"],
+        )
+
+
+# --- stream answers -----------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class FrameAnswer:
+    """A ``result`` message: the answer to the stream's frame ``id``."""
+
+    id: int
+    result: FrameResult
+    type: Literal["result"] = "result"
+
+
+@dataclass(frozen=True, slots=True)
+class ClipAnswer:
+    """A ``clip_result`` message: the answer to the stream's clip ``id``."""
+
+    id: int
+    clip: ClipResult
+    type: Literal["clip_result"] = "clip_result"
+
+
+@dataclass(frozen=True, slots=True)
+class Pong:
+    """A ``pong`` message: the answer to the stream's ping ``id``."""
+
+    id: int
+    type: Literal["pong"] = "pong"
+
+
+Answer = FrameAnswer | ClipAnswer | Pong

@@ -1,0 +1,175 @@
+/**
+ * `Client`: the IK service over HTTP (the platform's `fetch`), and `stream()` for a
+ * session's WebSocket. Every call resolves to a typed answer or rejects with a
+ * `ServiceError` subclass carrying the server's `code`, `field` and `retryAfterS`.
+ */
+
+import { serviceError } from "./errors.js";
+import { Stream, type StreamOptions } from "./stream.js";
+import type {
+  Chain,
+  CompactFrameResult,
+  Frame,
+  FrameResult,
+  FrameResults,
+  OptionsPatch,
+  Pose,
+  PoseIn,
+  SessionCreated,
+  SessionInfo,
+  SessionRef,
+  Target,
+} from "./types.js";
+
+export interface ClientOptions {
+  /** Sent as `X-API-Key` when the server has API keys (`IK_API_KEYS`). */
+  apiKey?: string;
+  /** Per-request timeout [ms]. */
+  timeoutMs?: number;
+}
+
+export interface CreateSessionOptions {
+  options?: OptionsPatch;
+  initialPose?: PoseIn;
+}
+
+export interface SolveOptions {
+  seed?: PoseIn;
+  options?: OptionsPatch;
+  id?: number;
+}
+
+type Json = Record<string, unknown>;
+
+/** `?results=compact` on a call picks the compact result type. */
+type Result<C extends boolean> = C extends true ? CompactFrameResult : FrameResult;
+
+function withoutUndefined(values: Json): Json {
+  return Object.fromEntries(Object.entries(values).filter(([, v]) => v !== undefined));
+}
+
+/** Raise the `ServiceError` subclass of an error answer `{detail, code, field}`. */
+async function raiseForError(response: Response): Promise<void> {
+  if (response.ok) return;
+  const text = await response.text();
+  let body: Json = { detail: text };
+  try {
+    const parsed: unknown = JSON.parse(text);
+    if (parsed !== null && typeof parsed === "object") body = parsed as Json;
+  } catch {
+    // not JSON: keep the text as the detail
+  }
+  const detail = body["detail"];
+  // invalid_format's detail is pydantic's list of {loc, msg, type}: the first says most.
+  const first = Array.isArray(detail) ? (detail[0] as Json | undefined) : undefined;
+  const message = first !== undefined ? String(first["msg"] ?? "") : String(detail ?? "");
+  const retryAfter = Number(response.headers.get("Retry-After") ?? Number.NaN);
+  throw serviceError(String(body["code"] ?? `http_${response.status}`), message, {
+    field: (body["field"] as string | undefined) ?? null,
+    retryAfterS: Number.isFinite(retryAfter) ? retryAfter : null,
+    status: response.status,
+    detail,
+  });
+}
+
+export class Client {
+  readonly baseUrl: string;
+  private readonly apiKey: string | undefined;
+  private readonly timeoutMs: number;
+
+  /** @param baseUrl The service, e.g. `http://127.0.0.1:8000`. */
+  constructor(baseUrl: string, options: ClientOptions = {}) {
+    this.baseUrl = baseUrl.replace(/\/+$/, "");
+    this.apiKey = options.apiKey;
+    this.timeoutMs = options.timeoutMs ?? 30_000;
+  }
+
+  /** A new session on `chain` (e.g. `{format: "example", name: "panda_arm"}`). */
+  createSession(chain: Chain, options: CreateSessionOptions = {}): Promise<SessionCreated> {
+    const body = withoutUndefined({ chain, options: options.options, initial_pose: options.initialPose });
+    return this.request("POST", "/v1/sessions", { body });
+  }
+
+  getSession(session: SessionRef): Promise<SessionInfo> {
+    return this.request("GET", `/v1/sessions/${session.id}`, { session });
+  }
+
+  /** Change solver options; the options left out keep their value. */
+  patchSession(session: SessionRef, options: OptionsPatch): Promise<SessionInfo> {
+    return this.request("PATCH", `/v1/sessions/${session.id}`, { session, body: options as Json });
+  }
+
+  /** Set the pose the next frame starts from: `{q}` (every DOF) or `{joints}` (some, by name). */
+  setPose(session: SessionRef, pose: PoseIn): Promise<Pose> {
+    return this.request("PUT", `/v1/sessions/${session.id}/pose`, { session, body: pose as Json });
+  }
+
+  async deleteSession(session: SessionRef): Promise<void> {
+    await this.request("DELETE", `/v1/sessions/${session.id}`, { session });
+  }
+
+  /** Solve one frame from the session's pose (`compact`: no joints by name, no effector errors). */
+  async frame<C extends boolean = false>(
+    session: SessionRef,
+    targets: Target[],
+    options: { id?: number; compact?: C } = {},
+  ): Promise<Result<C>> {
+    const out: FrameResults<Result<C>> = await this.request("POST", `/v1/sessions/${session.id}/frames`, {
+      session,
+      body: withoutUndefined({ id: options.id, targets }),
+      compact: options.compact ?? false,
+    });
+    return out.results[0] as Result<C>;
+  }
+
+  /** Solve frames in order, each from the previous answer, or with `plan` as a whole. */
+  async clip<C extends boolean = false>(
+    session: SessionRef,
+    frames: Frame[],
+    options: { plan?: boolean; compact?: C } = {},
+  ): Promise<FrameResults<Result<C>>> {
+    const out: FrameResults<Result<C>> = await this.request("POST", `/v1/sessions/${session.id}/frames`, {
+      session,
+      body: { frames, plan: options.plan ?? false },
+      compact: options.compact ?? false,
+    });
+    return { results: out.results, plan: out.plan ?? null }; // no `plan` key when not planned
+  }
+
+  /** A stateless one-shot solve (no session). */
+  solve(chain: Chain, targets: Target[], options: SolveOptions = {}): Promise<FrameResult> {
+    const body = withoutUndefined({ chain, targets, seed: options.seed, options: options.options, id: options.id });
+    return this.request("POST", "/v1/solve", { body });
+  }
+
+  /** The session's WebSocket, open (see `Stream`). */
+  stream<C extends boolean = false>(
+    session: SessionRef,
+    options: StreamOptions & { compact?: C } = {},
+  ): Promise<Stream<Result<C>>> {
+    const url = new URL(`${this.baseUrl}/v1/sessions/${session.id}/ws`);
+    url.protocol = url.protocol === "https:" ? "wss:" : "ws:";
+    if (options.compact) url.searchParams.set("results", "compact");
+    return Stream.open<Result<C>>(url.toString(), session.token, options);
+  }
+
+  private async request<T>(
+    method: string,
+    path: string,
+    init: { session?: SessionRef; body?: Json; compact?: boolean },
+  ): Promise<T> {
+    const headers: Record<string, string> = {};
+    if (this.apiKey !== undefined) headers["X-API-Key"] = this.apiKey;
+    if (init.session !== undefined) headers["Authorization"] = `Bearer ${init.session.token}`;
+    if (init.body !== undefined) headers["Content-Type"] = "application/json";
+    const query = init.compact ? "?results=compact" : "";
+    const response = await fetch(`${this.baseUrl}${path}${query}`, {
+      method,
+      headers,
+      body: init.body === undefined ? null : JSON.stringify(init.body),
+      signal: AbortSignal.timeout(this.timeoutMs),
+    });
+    await raiseForError(response);
+    return (response.status === 204 ? undefined : await response.json()) as T;
+  }
+}

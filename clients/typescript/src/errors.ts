@@ -1,0 +1,219 @@
+/**
+ * Errors the service reports, as exceptions: one class per kind of reaction.
+ *
+ * `ServiceError` is an HTTP error body `{detail, code, field}` or a WebSocket error answer
+ * `{code, message, field, retry_after_s}`; its subclass says what a caller can do (fix the
+ * request, the token, make a new session, wait). A WebSocket that closes for good rejects
+ * with a `StreamClosed` subclass chosen by the close code, whose `meaning` is the server's
+ * (service/errors.py, WS_CLOSE_CODES).
+ */
+
+/** The service's stable error codes (docs/api.md and docs/websocket.md, Errors). */
+export const ErrorCode = {
+  InvalidFormat: "invalid_format",
+  InvalidProblem: "invalid_problem",
+  IdReuse: "id_reuse",
+  Unauthorized: "unauthorized",
+  Forbidden: "forbidden",
+  ForbiddenOrigin: "forbidden_origin",
+  NotFound: "not_found",
+  MethodNotAllowed: "method_not_allowed",
+  HttpError: "http_error",
+  PayloadTooLarge: "payload_too_large",
+  TooManySessions: "too_many_sessions",
+  KeySessionLimit: "key_session_limit",
+  RateLimited: "rate_limited",
+  NotReady: "not_ready",
+  WarmupFailed: "warmup_failed",
+  PlansBusy: "plans_busy",
+  TooManyPlans: "too_many_plans",
+  // Close reasons (a WebSocket close's reason is its error code).
+  TooManyWebSockets: "too_many_websockets",
+  SlowReader: "slow_reader",
+  ShuttingDown: "shutting_down",
+  InternalError: "internal_error",
+} as const;
+export type ErrorCode = (typeof ErrorCode)[keyof typeof ErrorCode];
+
+/** The close codes of the service's WebSocket (docs/websocket.md, Close codes). */
+export const CloseCode = {
+  Normal: 1000,
+  Abnormal: 1006, // no close frame: the connection dropped (never sent by the server)
+  SlowReader: 1008,
+  MessageTooBig: 1009,
+  InternalError: 1011,
+  ServiceRestart: 1012,
+  TryAgainLater: 1013,
+  Unauthorized: 4401,
+  Forbidden: 4403,
+  NotFound: 4404,
+} as const;
+export type CloseCode = (typeof CloseCode)[keyof typeof CloseCode];
+
+/** The server's explanations (service/errors.py, WS_CLOSE_CODES), plus 1006. */
+export const CLOSE_CODE_MEANINGS: Readonly<Record<number, string>> = {
+  1000: "normal closure",
+  1006: "the connection dropped without a close frame",
+  1008: "the client did not read its answers (IK_WS_SEND_TIMEOUT_S), or the handshake's query was invalid",
+  1009: "message larger than IK_WS_MAX_MESSAGE_BYTES",
+  1011: "unexpected server error (logged)",
+  1012: "the server is shutting down; reconnect",
+  1013: "too many open WebSockets; retry later",
+  4401: "no token (Authorization: Bearer, the ik.token subprotocol or ?token=)",
+  4403: "wrong token for this session, or a browser Origin not allowed",
+  4404: "no such session (never existed, expired or deleted)",
+};
+
+/** Closes after which reconnecting and resending can succeed. */
+export const RECONNECTABLE: ReadonlySet<number> = new Set([1006, 1011, 1012, 1013]);
+
+/** Base of every error this client raises. */
+export class IKClientError extends Error {
+  override name = "IKClientError";
+}
+
+export interface ServiceErrorInit {
+  field?: string | null | undefined;
+  retryAfterS?: number | null | undefined;
+  /** The HTTP status (undefined for a WebSocket answer). */
+  status?: number | undefined;
+  /** The stream message id the error answers (undefined over HTTP). */
+  id?: number | undefined;
+  /** The HTTP body's `detail` as sent (a list for `invalid_format`). */
+  detail?: unknown;
+}
+
+/** An error the service answered with: `code`, `field`, `retryAfterS`. */
+export class ServiceError extends IKClientError {
+  override name = "ServiceError";
+  readonly field: string | null;
+  readonly retryAfterS: number | null;
+  readonly status: number | undefined;
+  readonly id: number | undefined;
+  readonly detail: unknown;
+
+  constructor(
+    readonly code: ErrorCode | string,
+    readonly serverMessage: string,
+    init: ServiceErrorInit = {},
+  ) {
+    super(`${code}: ${serverMessage}`);
+    this.field = init.field ?? null;
+    this.retryAfterS = init.retryAfterS ?? null;
+    this.status = init.status;
+    this.id = init.id;
+    this.detail = init.detail;
+  }
+}
+
+/** invalid_format, invalid_problem, id_reuse, payload_too_large, method_not_allowed, http_error. */
+export class InvalidRequest extends ServiceError {
+  override name = "InvalidRequest";
+}
+/** unauthorized, forbidden, forbidden_origin: no or wrong token or API key, or a browser origin not allowed. */
+export class AuthError extends ServiceError {
+  override name = "AuthError";
+}
+/** not_found: the session never existed, expired or was deleted. */
+export class NotFound extends ServiceError {
+  override name = "NotFound";
+}
+/** rate_limited, not_ready, plans_busy, too_many_plans, too_many_sessions, key_session_limit,
+ * warmup_failed, too_many_websockets, shutting_down: wait (`retryAfterS` when given). */
+export class RetryLater extends ServiceError {
+  override name = "RetryLater";
+}
+/** internal_error, slow_reader, or a code this client does not know. */
+export class ServerFault extends ServiceError {
+  override name = "ServerFault";
+}
+
+const ERROR_CLASSES: Record<string, typeof ServiceError> = {
+  invalid_format: InvalidRequest,
+  invalid_problem: InvalidRequest,
+  id_reuse: InvalidRequest,
+  payload_too_large: InvalidRequest,
+  method_not_allowed: InvalidRequest,
+  http_error: InvalidRequest,
+  unauthorized: AuthError,
+  forbidden: AuthError,
+  forbidden_origin: AuthError,
+  not_found: NotFound,
+  too_many_sessions: RetryLater,
+  key_session_limit: RetryLater,
+  rate_limited: RetryLater,
+  not_ready: RetryLater,
+  warmup_failed: RetryLater,
+  plans_busy: RetryLater,
+  too_many_plans: RetryLater,
+  too_many_websockets: RetryLater,
+  shutting_down: RetryLater,
+};
+
+/** The `ServiceError` subclass for `code`. */
+export function serviceError(code: string, message: string, init: ServiceErrorInit = {}): ServiceError {
+  const Class = ERROR_CLASSES[code] ?? ServerFault;
+  return new Class(code, message, init);
+}
+
+/** The WebSocket closed and the stream cannot go on; `reason` is the server's error code. */
+export class StreamClosed extends IKClientError {
+  override name = "StreamClosed";
+  readonly meaning: string;
+
+  constructor(
+    readonly closeCode: number,
+    readonly reason = "",
+  ) {
+    const meaning = CLOSE_CODE_MEANINGS[closeCode] ?? "unknown close code";
+    super(`WebSocket closed ${closeCode} (${meaning})${reason ? `: ${reason}` : ""}`);
+    this.meaning = meaning;
+  }
+}
+
+/** 4401 / 4403: no token, or the wrong one. */
+export class StreamAuthError extends StreamClosed {
+  override name = "StreamAuthError";
+}
+/** 4404: the session does not exist (any more); create a new one. */
+export class SessionGone extends StreamClosed {
+  override name = "SessionGone";
+}
+/** 1009: a message was larger than the server accepts. */
+export class MessageTooBig extends StreamClosed {
+  override name = "MessageTooBig";
+}
+/** 1008: the client did not read its answers in time (or a bad handshake query). */
+export class SlowReader extends StreamClosed {
+  override name = "SlowReader";
+}
+/** 1012: the server shut down; only when reconnecting did not succeed. */
+export class ServerRestarting extends StreamClosed {
+  override name = "ServerRestarting";
+}
+/** 1013: the server holds its maximum of WebSockets. */
+export class TooManyWebSockets extends StreamClosed {
+  override name = "TooManyWebSockets";
+}
+/** 1006 / 1011: the connection dropped or the server failed; reconnecting did not help. */
+export class ConnectionLost extends StreamClosed {
+  override name = "ConnectionLost";
+}
+
+const CLOSE_CLASSES: Record<number, typeof StreamClosed> = {
+  4401: StreamAuthError,
+  4403: StreamAuthError,
+  4404: SessionGone,
+  1009: MessageTooBig,
+  1008: SlowReader,
+  1012: ServerRestarting,
+  1013: TooManyWebSockets,
+  1006: ConnectionLost,
+  1011: ConnectionLost,
+};
+
+/** The `StreamClosed` subclass for `closeCode`. */
+export function streamClosed(closeCode: number, reason = ""): StreamClosed {
+  const Class = CLOSE_CLASSES[closeCode] ?? StreamClosed;
+  return new Class(closeCode, reason);
+}

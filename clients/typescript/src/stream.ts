@@ -1,0 +1,288 @@
+/**
+ * A session's WebSocket as a stream of frames: ids, pipelining, encodings, reconnects.
+ *
+ * The stream numbers its messages itself (0, 1, 2, ...): `sendFrame` / `sendClip` /
+ * `sendPing` return the id, `receive()` resolves to the next answer in the order sent
+ * (the server answers in order), `frame` / `clip` / `ping` send one message and resolve
+ * to its answer. When the connection drops (or the server closes 1011, 1012 or 1013),
+ * the stream reconnects with a bounded backoff and sends again, in order, every message
+ * that had no answer, under new ids on the new connection (one counter over every
+ * connection, so no id is used twice). Answers carry the id the caller got, and each
+ * message gets exactly one. A message the server had solved but whose answer was lost in
+ * the drop is solved once more, from the session's pose.
+ *
+ * In a browser the stream uses the global WebSocket and sends the token as the
+ * `ik.token.<token>` subprotocol (browsers cannot set headers); in Node 20, which has no
+ * stable global WebSocket, it uses the `ws` package and an `Authorization` header.
+ */
+
+import { decode, encode } from "@msgpack/msgpack";
+
+import { IKClientError, RECONNECTABLE, StreamClosed, serviceError, streamClosed } from "./errors.js";
+import type { Answer, ClipAnswer, Encoding, Frame, FrameResult, FrameResults, Pong, Target } from "./types.js";
+
+/** How hard a stream tries to get its connection back: `attempts` connections, waiting
+ * `initialDelayMs` before the first and doubling up to `maxDelayMs`; the count starts
+ * again at each answer. `attempts: 0` turns reconnecting off. */
+export interface Reconnect {
+  attempts: number;
+  initialDelayMs: number;
+  maxDelayMs: number;
+}
+
+export const DEFAULT_RECONNECT: Reconnect = { attempts: 6, initialDelayMs: 50, maxDelayMs: 2000 };
+
+/** The part of a WebSocket (browser's or `ws`'s) the stream uses. */
+export interface Socket {
+  binaryType: string;
+  readonly readyState: number;
+  readonly protocol: string;
+  onopen: ((event: unknown) => void) | null;
+  onmessage: ((event: { data: unknown }) => void) | null;
+  onclose: ((event: { code: number; reason: string }) => void) | null;
+  onerror: ((event: unknown) => void) | null;
+  send(data: string | Uint8Array): void;
+  close(code?: number, reason?: string): void;
+}
+
+export type SocketClass = new (
+  url: string,
+  protocols?: string | string[],
+  options?: { headers?: Record<string, string> },
+) => unknown;
+
+export interface StreamOptions {
+  /** `json` (text messages, the default) or `msgpack` (binary messages). */
+  encoding?: Encoding;
+  reconnect?: Partial<Reconnect>;
+  /** Where the token goes: `header` (`ws` only) or `subprotocol` (what browsers can do).
+   * Default: `header` with `ws`, `subprotocol` with a global WebSocket. */
+  auth?: "header" | "subprotocol";
+  /** A WebSocket class to use instead of the global one (or `ws` when there is none). */
+  WebSocket?: SocketClass;
+}
+
+const OPEN = 1;
+const SUBPROTOCOL = "ik.v1";
+const TOKEN_SUBPROTOCOL_PREFIX = "ik.token.";
+
+interface Message<R> {
+  id: number; // the id the caller was given
+  wireId: number; // the id it carries on the current connection
+  body: Record<string, unknown>; // without "id"
+  resolve: (answer: Answer<R>) => void;
+  reject: (error: Error) => void;
+  answer: Promise<Answer<R>>;
+}
+
+type Envelope = Record<string, unknown>;
+
+async function platformWebSocket(options: StreamOptions): Promise<[SocketClass, boolean]> {
+  if (options.WebSocket !== undefined) return [options.WebSocket, false];
+  if (typeof globalThis.WebSocket === "function") return [globalThis.WebSocket as SocketClass, true];
+  const ws = await import("ws");
+  return [ws.WebSocket as unknown as SocketClass, false];
+}
+
+export class Stream<R = FrameResult> {
+  /** Connections made after the first. */
+  reconnects = 0;
+  private socketNow: Socket;
+  private nextId = 0;
+  private nextWireId = 0;
+  private waiting = new Map<number, Message<R>>(); // by wire id, in the order sent
+  private unread: Message<R>[] = []; // what receive() has not returned yet
+  private tries = 0; // reconnects since the last answer
+  private failure: StreamClosed | null = null;
+  private closing = false;
+
+  private constructor(
+    readonly url: string,
+    private readonly connect: () => Socket,
+    private readonly encoding: Encoding,
+    private readonly reconnect: Reconnect,
+    first: Socket,
+  ) {
+    this.socketNow = first;
+    this.watch(first);
+  }
+
+  /** Open a stream on `url` (see `Client.stream`). */
+  static async open<R = FrameResult>(url: string, token: string, options: StreamOptions = {}): Promise<Stream<R>> {
+    const [SocketImpl, global] = await platformWebSocket(options);
+    const auth = options.auth ?? (global ? "subprotocol" : "header");
+    if (auth === "header" && global) throw new IKClientError("a global WebSocket cannot send headers");
+    const connect = (): Socket => {
+      const socket =
+        auth === "subprotocol"
+          ? new SocketImpl(url, [SUBPROTOCOL, TOKEN_SUBPROTOCOL_PREFIX + token])
+          : new SocketImpl(url, [SUBPROTOCOL], { headers: { Authorization: `Bearer ${token}` } });
+      (socket as Socket).binaryType = "arraybuffer";
+      return socket as Socket;
+    };
+    const first = connect();
+    await opened(first);
+    return new Stream<R>(url, connect, options.encoding ?? "json", { ...DEFAULT_RECONNECT, ...options.reconnect }, first);
+  }
+
+  /** The current socket (a test drops it: `ws`'s `terminate()`). */
+  get socket(): Socket {
+    return this.socketNow;
+  }
+
+  /** Messages sent that have no answer yet. */
+  get inFlight(): number {
+    return this.waiting.size;
+  }
+
+  sendFrame(targets: Target[]): number {
+    return this.send({ type: "frame", targets }).id;
+  }
+
+  sendClip(frames: Frame[], options: { plan?: boolean } = {}): number {
+    return this.send({ type: "clip", frames, plan: options.plan ?? false }).id;
+  }
+
+  sendPing(): number {
+    return this.send({ type: "ping" }).id;
+  }
+
+  /** The next answer, in the order sent; rejects with the message's `ServiceError`. */
+  receive(): Promise<Answer<R>> {
+    const next = this.unread.shift();
+    if (next === undefined) return Promise.reject(new IKClientError("no message is waiting for an answer"));
+    return next.answer;
+  }
+
+  async frame(targets: Target[]): Promise<R> {
+    const answer = await this.answerOf(this.send({ type: "frame", targets }));
+    if (answer.type !== "result") throw new IKClientError(`expected a frame result, got ${answer.type}`);
+    return answer.result;
+  }
+
+  async clip(frames: Frame[], options: { plan?: boolean } = {}): Promise<FrameResults<R>> {
+    const answer = await this.answerOf(this.send({ type: "clip", frames, plan: options.plan ?? false }));
+    if (answer.type !== "clip_result") throw new IKClientError(`expected a clip result, got ${answer.type}`);
+    return { results: (answer as ClipAnswer<R>).results, plan: (answer as ClipAnswer<R>).plan };
+  }
+
+  async ping(): Promise<Pong> {
+    const answer = await this.answerOf(this.send({ type: "ping" }));
+    if (answer.type !== "pong") throw new IKClientError(`expected a pong, got ${answer.type}`);
+    return answer;
+  }
+
+  close(): void {
+    this.closing = true;
+    this.socketNow.close(1000);
+  }
+
+  private answerOf(message: Message<R>): Promise<Answer<R>> {
+    this.unread.splice(this.unread.indexOf(message), 1);
+    return message.answer;
+  }
+
+  private send(body: Record<string, unknown>): Message<R> {
+    if (this.failure !== null) throw this.failure;
+    let resolve!: (answer: Answer<R>) => void;
+    let reject!: (error: Error) => void;
+    const answer = new Promise<Answer<R>>((res, rej) => {
+      resolve = res;
+      reject = rej;
+    });
+    answer.catch(() => {}); // an answer nobody awaits must not be an unhandled rejection
+    const message: Message<R> = { id: this.nextId++, wireId: this.nextWireId++, body, resolve, reject, answer };
+    this.waiting.set(message.wireId, message);
+    this.unread.push(message);
+    // While reconnecting it waits: the new connection gets it with the others.
+    if (this.socketNow.readyState === OPEN) this.socketNow.send(this.encode(message));
+    return message;
+  }
+
+  private encode(message: Message<R>): string | Uint8Array {
+    const payload = { ...message.body, id: message.wireId };
+    return this.encoding === "msgpack" ? encode(payload) : JSON.stringify(payload);
+  }
+
+  private decode(data: unknown): Envelope {
+    if (typeof data === "string") return JSON.parse(data) as Envelope;
+    return decode(data as ArrayBuffer) as Envelope;
+  }
+
+  private watch(socket: Socket): void {
+    socket.onerror = () => {}; // the close that follows says why (and ws throws without a listener)
+    socket.onmessage = (event) => {
+      if (socket === this.socketNow) this.answered(this.decode(event.data));
+    };
+    socket.onclose = (event) => {
+      if (socket === this.socketNow) this.closed(event.code, event.reason);
+    };
+  }
+
+  private answered(envelope: Envelope): void {
+    let wireId = envelope["id"] as number | null | undefined;
+    if (wireId === null || wireId === undefined) wireId = this.waiting.keys().next().value; // in order
+    const message = wireId === undefined ? undefined : this.waiting.get(wireId);
+    if (message === undefined) return; // not one of ours: nothing waits for it
+    this.waiting.delete(message.wireId);
+    this.tries = 0;
+    const id = message.id;
+    const error = envelope["error"] as Record<string, unknown> | undefined;
+    if (error !== undefined) {
+      message.reject(
+        serviceError(String(error["code"]), String(error["message"] ?? ""), {
+          field: error["field"] as string | null | undefined,
+          retryAfterS: error["retry_after_s"] as number | null | undefined,
+          id,
+        }),
+      );
+    } else if (envelope["type"] === "result") {
+      message.resolve({ type: "result", id, result: { ...(envelope["result"] as R), id } });
+    } else if (envelope["type"] === "clip_result") {
+      const clip = envelope as unknown as ClipAnswer<R>;
+      message.resolve({ type: "clip_result", id, success: clip.success, results: clip.results, plan: clip.plan ?? null });
+    } else if (envelope["type"] === "pong") {
+      message.resolve({ type: "pong", id });
+    } else {
+      message.reject(new IKClientError(`unknown answer type ${String(envelope["type"])}`));
+    }
+  }
+
+  private closed(code: number, reason: string): void {
+    if (!this.closing && RECONNECTABLE.has(code) && this.tries < this.reconnect.attempts) {
+      const delay = Math.min(this.reconnect.initialDelayMs * 2 ** this.tries, this.reconnect.maxDelayMs);
+      this.tries += 1;
+      setTimeout(() => this.reopen(), delay);
+      return;
+    }
+    this.failure = streamClosed(code, reason);
+    for (const message of this.waiting.values()) message.reject(this.failure);
+    this.waiting.clear();
+  }
+
+  private reopen(): void {
+    const socket = this.connect();
+    this.socketNow = socket;
+    this.watch(socket);
+    socket.onopen = () => {
+      this.reconnects += 1;
+      // Every waiting message, in order, under a new id on this connection.
+      const waiting = [...this.waiting.values()];
+      this.waiting.clear();
+      for (const message of waiting) {
+        message.wireId = this.nextWireId++;
+        this.waiting.set(message.wireId, message);
+        socket.send(this.encode(message));
+      }
+    };
+  }
+}
+
+/** Resolves when `socket` opens; rejects with its close if it closes first. */
+function opened(socket: Socket): Promise<void> {
+  return new Promise((resolve, reject) => {
+    socket.onopen = () => resolve();
+    socket.onerror = () => {}; // the close that follows says why
+    socket.onclose = (event) => reject(streamClosed(event.code, event.reason));
+  });
+}

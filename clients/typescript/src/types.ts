@@ -1,0 +1,311 @@
+/**
+ * What the service takes and gives, typed after its OpenAPI schema (`/openapi.json`):
+ * each interface carries the name of the schema component it mirrors, and
+ * test/schema.test.ts checks their property names against a live server's schema.
+ */
+
+/** How the optimizer's last pass ended (docs/api.md, Termination codes). */
+export const Termination = {
+  GoalReached: "goal_reached",
+  Gtol: "gtol",
+  StepSmall: "step_small",
+  Stalled: "stalled",
+  LineSearchFailed: "line_search_failed",
+  MaxIter: "max_iter",
+  MaxFev: "max_fev",
+  Deadline: "deadline",
+  Nonfinite: "nonfinite",
+} as const;
+export type Termination = (typeof Termination)[keyof typeof Termination];
+
+/** Whether a frame reached its targets, and if not, why. */
+export const Status = {
+  Solved: "solved",
+  NotReached: "not_reached",
+  BudgetExhausted: "budget_exhausted",
+  Nonfinite: "nonfinite",
+} as const;
+export type Status = (typeof Status)[keyof typeof Status];
+
+export type EffectorMode = "position" | "pose" | "aim";
+
+/** How a stream's messages travel: JSON text or MessagePack binary messages. */
+export const Encoding = { Json: "json", MessagePack: "msgpack" } as const;
+export type Encoding = (typeof Encoding)[keyof typeof Encoding];
+
+// --- requests ------------------------------------------------------------------------------
+/** Schema `Vec3`: a point [m] or a direction. */
+export interface Vec3 {
+  x: number;
+  y: number;
+  z: number;
+}
+
+/** Schema `Quaternion`: a unit quaternion, w the scalar part. */
+export interface Quaternion {
+  w: number;
+  x: number;
+  y: number;
+  z: number;
+}
+
+/** Schema `Target`: what one effector should reach. */
+export interface Target {
+  effector: string;
+  position?: Vec3 | null;
+  orientation?: Quaternion | null;
+  direction?: Vec3 | null;
+}
+
+/** Schema `Frame`: one frame of a clip; `id` is echoed in its result. */
+export interface Frame {
+  id?: number | null;
+  targets: Target[];
+}
+
+/** Schema `PoseIn`: exactly one of `q` (every DOF, in order) or `joints` (some, by name). */
+export type PoseIn =
+  | { q: number[]; joints?: null }
+  | { joints: Record<string, number>; q?: null };
+
+/** Schema `OptionsPatch`: solver options to change; left out: unchanged. */
+export interface OptionsPatch {
+  position_tolerance_m?: number | null;
+  rotation_tolerance_rad?: number | null;
+  time_budget_us?: number | null;
+  max_iter?: number | null;
+  max_restarts?: number | null;
+  restart_radius_rad?: number | null;
+  max_step_rad?: number | null;
+  posture_weight?: number | null;
+  limit_weight?: number | null;
+  limit_margin?: number | null;
+}
+
+/** Schema `OriginSpec`. */
+export interface OriginSpec {
+  translation?: Vec3;
+  rotation?: Quaternion;
+}
+
+/** Schema `JointSpec`. */
+export interface JointSpec {
+  name: string;
+  parent: string;
+  child: string;
+  kind: "fixed" | "rotational" | "revolute" | "continuous" | "prismatic";
+  origin?: OriginSpec;
+  pivot?: Vec3;
+  axis?: Vec3;
+  axes?: string;
+  lower?: number[];
+  upper?: number[];
+  terminator?: boolean;
+}
+
+/** Schema `EffectorSpec`. */
+export interface EffectorSpec {
+  name: string;
+  link: string;
+  tip_offset?: Vec3;
+  tip_rotation?: Quaternion;
+  mode?: EffectorMode;
+  aim_axis?: Vec3;
+  position_weight?: number;
+  rotation_weight?: number;
+}
+
+/** Schema `HierarchyChain`: joints and effectors as JSON. */
+export interface HierarchyChain {
+  format: "hierarchy";
+  joints: JointSpec[];
+  effectors: EffectorSpec[];
+}
+
+/** Schema `UrdfChain`: URDF text, from `base_link` to each of `tip_links`. */
+export interface UrdfChain {
+  format: "urdf";
+  urdf: string;
+  base_link: string;
+  tip_links: string[];
+  mode?: EffectorMode;
+}
+
+/** Schema `ExampleChain`: a chain built into the server. */
+export interface ExampleChain {
+  format: "example";
+  name: "panda_arm" | "humanoid_arm" | "tail" | "two_arm_torso";
+}
+
+export type Chain = HierarchyChain | UrdfChain | ExampleChain;
+
+/** Schema `SessionCreate`. */
+export interface SessionCreate {
+  chain: Chain;
+  options?: OptionsPatch | null;
+  initial_pose?: PoseIn | null;
+}
+
+/** Schema `ClipRequest`. */
+export interface ClipRequest {
+  frames: Frame[];
+  plan?: boolean;
+}
+
+/** Schema `SolveRequest`: a stateless one-shot solve. */
+export interface SolveRequest {
+  chain: Chain;
+  targets: Target[];
+  seed?: PoseIn | null;
+  options?: OptionsPatch | null;
+  id?: number | null;
+}
+
+// --- answers -------------------------------------------------------------------------------
+/** Schema `EffectorErrorOut`: the pose error of one targeted effector. */
+export interface EffectorErrorOut {
+  name: string;
+  position_error_m: number | null;
+  rotation_error_rad: number | null;
+  within_tolerance: boolean;
+}
+
+/** Schema `CompactFrameResult`: a result without joints by name or per-effector errors. */
+export interface CompactFrameResult {
+  id: number | null;
+  success: boolean;
+  status: Status;
+  termination: Termination;
+  q: number[];
+  iterations: number;
+  function_evals: number;
+  passes: number;
+  restarts: number;
+  solve_us: number;
+  server_us: number;
+}
+
+/** Schema `FrameResult`: the answer to one frame (not reaching it is `success: false`). */
+export interface FrameResult extends CompactFrameResult {
+  joints: Record<string, number>;
+  effectors: EffectorErrorOut[];
+}
+
+/** Schema `PlanSummary`: what planning a clip achieved. */
+export interface PlanSummary {
+  largest_step_rad: number;
+  tracked_largest_step_rad: number;
+  candidates: number;
+  plan_us: number;
+}
+
+/** Schemas `FrameResults` / `CompactFrameResults`: one result per frame, in order. */
+export interface FrameResults<R = FrameResult> {
+  results: R[];
+  plan: PlanSummary | null;
+}
+
+/** Schema `Pose`. */
+export interface Pose {
+  q: number[];
+  joints: Record<string, number>;
+}
+
+/** Schema `DofInfo`: one degree of freedom; null limits are unbounded. */
+export interface DofInfo {
+  name: string;
+  lower: number | null;
+  upper: number | null;
+}
+
+/** Schema `EffectorInfo`. */
+export interface EffectorInfo {
+  name: string;
+  mode: EffectorMode;
+}
+
+/** Schema `SolverOptions`: the effective options of a session. */
+export interface SolverOptions {
+  position_tolerance_m: number;
+  rotation_tolerance_rad: number;
+  time_budget_us: number;
+  max_iter: number;
+  max_restarts: number;
+  restart_radius_rad: number;
+  max_step_rad: number;
+  posture_weight: number;
+  limit_weight: number;
+  limit_margin: number;
+}
+
+/** Schema `SessionCreated`: `token` is shown only here. */
+export interface SessionCreated {
+  id: string;
+  token: string;
+  n_dof: number;
+  dof: DofInfo[];
+  effectors: EffectorInfo[];
+  options: SolverOptions;
+  pose: Pose;
+  idle_ttl_s: number;
+}
+
+/** Schema `SessionCounters`. */
+export interface SessionCounters {
+  frames: number;
+  solved: number;
+  not_solved: number;
+}
+
+/** Schema `SessionInfo`. */
+export interface SessionInfo {
+  id: string;
+  n_dof: number;
+  dof: DofInfo[];
+  effectors: EffectorInfo[];
+  options: SolverOptions;
+  pose: Pose;
+  counters: SessionCounters;
+  created_at: number;
+  idle_s: number;
+  idle_ttl_s: number;
+  websockets: number;
+}
+
+/** Schema `ErrorBody`: every HTTP error. */
+export interface ErrorBody {
+  detail: string | Array<Record<string, unknown>>;
+  code: string;
+  field?: string | null;
+}
+
+/** What a call on a session needs: a `SessionCreated`, or any object with `id` and `token`. */
+export interface SessionRef {
+  id: string;
+  token: string;
+}
+
+// --- stream answers (docs/websocket.md) -------------------------------------------------------
+/** A `result` message: the answer to the stream's frame `id`. */
+export interface FrameAnswer<R = FrameResult> {
+  type: "result";
+  id: number;
+  result: R;
+}
+
+/** A `clip_result` message: the answer to the stream's clip `id`. */
+export interface ClipAnswer<R = FrameResult> {
+  type: "clip_result";
+  id: number;
+  success: boolean;
+  results: R[];
+  plan: PlanSummary | null;
+}
+
+/** A `pong` message: the answer to the stream's ping `id`. */
+export interface Pong {
+  type: "pong";
+  id: number;
+}
+
+export type Answer<R = FrameResult> = FrameAnswer<R> | ClipAnswer<R> | Pong;

@@ -1,0 +1,435 @@
+/**
+ * The TypeScript client against a real `python -m service` (test/server.ts): its types
+ * against the live OpenAPI schema, every HTTP call, the stream in both encodings and with
+ * the browser's token subprotocol, errors with code and field, close codes, and a socket
+ * cut mid-pipeline with every frame answered exactly once, in order.
+ */
+
+import assert from "node:assert/strict";
+import { after, before, describe, test } from "node:test";
+
+import { WebSocket as NodeWebSocket } from "ws";
+
+import {
+  AuthError,
+  Client,
+  ConnectionLost,
+  ErrorCode,
+  InvalidRequest,
+  NotFound,
+  SessionGone,
+  Status,
+  StreamAuthError,
+  Termination,
+  type ClipRequest,
+  type CompactFrameResult,
+  type DofInfo,
+  type EffectorErrorOut,
+  type EffectorInfo,
+  type EffectorSpec,
+  type Encoding,
+  type ErrorBody,
+  type ExampleChain,
+  type Frame,
+  type FrameResult,
+  type FrameResults,
+  type HierarchyChain,
+  type JointSpec,
+  type OptionsPatch,
+  type OriginSpec,
+  type PlanSummary,
+  type Pose,
+  type PoseIn,
+  type Quaternion,
+  type SessionCounters,
+  type SessionCreate,
+  type SessionCreated,
+  type SessionInfo,
+  type SolveRequest,
+  type SolverOptions,
+  type Target,
+  type UrdfChain,
+  type Vec3,
+} from "../src/index.js";
+import { serverUrl, stopServer } from "./server.js";
+
+const PANDA: ExampleChain = { format: "example", name: "panda_arm" };
+const DOWN: Quaternion = { w: 0, x: 1, y: 0, z: 0 };
+const ENCODINGS: Encoding[] = ["json", "msgpack"];
+
+function tool(y: number): Target {
+  return { effector: "tool", position: { x: 0.4, y, z: 0.5 }, orientation: DOWN };
+}
+
+function assertSolved(result: CompactFrameResult): void {
+  assert.equal(result.success, true, JSON.stringify(result));
+  assert.equal(result.status, Status.Solved);
+  assert.equal(result.termination, Termination.GoalReached);
+}
+
+let base: string;
+let ik: Client;
+
+before(async () => {
+  base = await serverUrl();
+  ik = new Client(base);
+});
+after(stopServer);
+
+// --- the types against the schema ----------------------------------------------------------
+/** Every property of T, listed: the compiler rejects a missing or an extra one. */
+type Keys<T> = { [K in keyof Required<T>]: true };
+const k = <T>(keys: Keys<T>): string[] => Object.keys(keys);
+
+const DECLARED: Record<string, string[]> = {
+  Vec3: k<Vec3>({ x: true, y: true, z: true }),
+  Quaternion: k<Quaternion>({ w: true, x: true, y: true, z: true }),
+  Target: k<Target>({ effector: true, position: true, orientation: true, direction: true }),
+  Frame: k<Frame>({ id: true, targets: true }),
+  PoseIn: k<PoseIn>({ q: true, joints: true }),
+  OptionsPatch: k<OptionsPatch>({
+    position_tolerance_m: true,
+    rotation_tolerance_rad: true,
+    time_budget_us: true,
+    max_iter: true,
+    max_restarts: true,
+    restart_radius_rad: true,
+    max_step_rad: true,
+    posture_weight: true,
+    limit_weight: true,
+    limit_margin: true,
+  }),
+  SolverOptions: k<SolverOptions>({
+    position_tolerance_m: true,
+    rotation_tolerance_rad: true,
+    time_budget_us: true,
+    max_iter: true,
+    max_restarts: true,
+    restart_radius_rad: true,
+    max_step_rad: true,
+    posture_weight: true,
+    limit_weight: true,
+    limit_margin: true,
+  }),
+  OriginSpec: k<OriginSpec>({ translation: true, rotation: true }),
+  JointSpec: k<JointSpec>({
+    name: true,
+    parent: true,
+    child: true,
+    kind: true,
+    origin: true,
+    pivot: true,
+    axis: true,
+    axes: true,
+    lower: true,
+    upper: true,
+    terminator: true,
+  }),
+  EffectorSpec: k<EffectorSpec>({
+    name: true,
+    link: true,
+    tip_offset: true,
+    tip_rotation: true,
+    mode: true,
+    aim_axis: true,
+    position_weight: true,
+    rotation_weight: true,
+  }),
+  HierarchyChain: k<HierarchyChain>({ format: true, joints: true, effectors: true }),
+  UrdfChain: k<UrdfChain>({ format: true, urdf: true, base_link: true, tip_links: true, mode: true }),
+  ExampleChain: k<ExampleChain>({ format: true, name: true }),
+  SessionCreate: k<SessionCreate>({ chain: true, options: true, initial_pose: true }),
+  ClipRequest: k<ClipRequest>({ frames: true, plan: true }),
+  SolveRequest: k<SolveRequest>({ chain: true, targets: true, seed: true, options: true, id: true }),
+  EffectorErrorOut: k<EffectorErrorOut>({
+    name: true,
+    position_error_m: true,
+    rotation_error_rad: true,
+    within_tolerance: true,
+  }),
+  CompactFrameResult: k<CompactFrameResult>({
+    id: true,
+    success: true,
+    status: true,
+    termination: true,
+    q: true,
+    iterations: true,
+    function_evals: true,
+    passes: true,
+    restarts: true,
+    solve_us: true,
+    server_us: true,
+  }),
+  FrameResult: k<FrameResult>({
+    id: true,
+    success: true,
+    status: true,
+    termination: true,
+    joints: true,
+    q: true,
+    effectors: true,
+    iterations: true,
+    function_evals: true,
+    passes: true,
+    restarts: true,
+    solve_us: true,
+    server_us: true,
+  }),
+  PlanSummary: k<PlanSummary>({ largest_step_rad: true, tracked_largest_step_rad: true, candidates: true, plan_us: true }),
+  FrameResults: k<FrameResults>({ results: true, plan: true }),
+  CompactFrameResults: k<FrameResults<CompactFrameResult>>({ results: true, plan: true }),
+  Pose: k<Pose>({ q: true, joints: true }),
+  DofInfo: k<DofInfo>({ name: true, lower: true, upper: true }),
+  EffectorInfo: k<EffectorInfo>({ name: true, mode: true }),
+  SessionCreated: k<SessionCreated>({
+    id: true,
+    token: true,
+    n_dof: true,
+    dof: true,
+    effectors: true,
+    options: true,
+    pose: true,
+    idle_ttl_s: true,
+  }),
+  SessionCounters: k<SessionCounters>({ frames: true, solved: true, not_solved: true }),
+  SessionInfo: k<SessionInfo>({
+    id: true,
+    n_dof: true,
+    dof: true,
+    effectors: true,
+    options: true,
+    pose: true,
+    counters: true,
+    created_at: true,
+    idle_s: true,
+    idle_ttl_s: true,
+    websockets: true,
+  }),
+  ErrorBody: k<ErrorBody>({ detail: true, code: true, field: true }),
+};
+
+describe("types", () => {
+  test("declare exactly the properties of the live OpenAPI schema", async () => {
+    const schema = (await (await fetch(`${base}/openapi.json`)).json()) as {
+      components: { schemas: Record<string, { properties?: Record<string, { enum?: string[] }> }> };
+    };
+    const components = schema.components.schemas;
+    for (const [name, keys] of Object.entries(DECLARED)) {
+      const properties = components[name]?.properties;
+      assert.ok(properties, `no schema component ${name}`);
+      assert.deepEqual([...keys].sort(), Object.keys(properties).sort(), name);
+    }
+    const result = components["FrameResult"]?.properties ?? {};
+    assert.deepEqual(Object.values(Termination).sort(), [...(result["termination"]?.enum ?? [])].sort());
+    assert.deepEqual(Object.values(Status).sort(), [...(result["status"]?.enum ?? [])].sort());
+  });
+});
+
+// --- HTTP ------------------------------------------------------------------------------------
+describe("http", () => {
+  test("session calls", async () => {
+    const session = await ik.createSession(PANDA, { options: { time_budget_us: 5000 } });
+    assert.equal(session.n_dof, 7);
+    assert.deepEqual(
+      session.effectors.map((e) => e.name),
+      ["tool"],
+    );
+    assert.equal(session.options.time_budget_us, 5000);
+
+    const info = await ik.patchSession(session, { max_restarts: 3 });
+    assert.equal(info.options.max_restarts, 3);
+    assert.equal(info.options.time_budget_us, 5000); // left out: unchanged
+
+    const first = session.dof[0]!.name;
+    assert.ok(Math.abs((await ik.setPose(session, { joints: { [first]: 0.25 } })).joints[first]! - 0.25) < 1e-12);
+    const inside = session.dof.map((d) => 0.3 * d.lower! + 0.7 * d.upper!);
+    const pose = await ik.setPose(session, { q: inside });
+    pose.q.forEach((v, i) => assert.ok(Math.abs(v - inside[i]!) < 1e-12));
+    assert.deepEqual((await ik.getSession(session)).pose.q, pose.q);
+
+    await ik.deleteSession(session);
+    const missing = await ik.getSession(session).catch((e: unknown) => e);
+    assert.ok(missing instanceof NotFound);
+    assert.equal(missing.code, ErrorCode.NotFound);
+    assert.equal(missing.status, 404);
+  });
+
+  test("frames, clips and planned clips", async () => {
+    const session = await ik.createSession(PANDA);
+    const full = await ik.frame(session, [tool(0.1)], { id: 7 });
+    assertSolved(full);
+    assert.equal(full.id, 7);
+    assert.deepEqual(
+      Object.keys(full.joints),
+      session.dof.map((d) => d.name),
+    );
+    assert.equal(full.effectors[0]!.within_tolerance, true);
+
+    const compact = await ik.frame(session, [tool(0.12)], { compact: true });
+    assertSolved(compact);
+    assert.equal(compact.id, null);
+    assert.equal("joints" in compact, false);
+
+    const frames: Frame[] = [0, 1, 2, 3].map((i) => ({ id: i, targets: [tool(0.1 + 0.01 * i)] }));
+    const clip = await ik.clip(session, frames);
+    assert.equal(clip.plan, null);
+    assert.deepEqual(
+      clip.results.map((r) => r.id),
+      [0, 1, 2, 3],
+    );
+    clip.results.forEach(assertSolved);
+
+    const planned = await ik.clip(session, frames, { plan: true, compact: true });
+    assert.ok(planned.plan !== null && planned.plan.candidates > 0);
+    assert.ok(planned.plan.largest_step_rad <= planned.plan.tracked_largest_step_rad + 1e-9);
+    assert.equal((await ik.getSession(session)).counters.frames, 2 + 4 + 4);
+  });
+
+  test("one-shot solve", async () => {
+    const result = await ik.solve(PANDA, [tool(0.1)], { seed: { q: [0, 0, 0, -1.5, 0, 1.5, 0] }, id: 3 });
+    assertSolved(result);
+    assert.equal(result.id, 3);
+    assert.equal(result.q.length, 7);
+  });
+
+  test("errors carry code and field", async () => {
+    const bad = { format: "example", name: "no_such_arm" } as unknown as ExampleChain;
+    const schema = await ik.createSession(bad).catch((e: unknown) => e);
+    assert.ok(schema instanceof InvalidRequest);
+    assert.equal(schema.code, ErrorCode.InvalidFormat);
+    assert.equal(schema.field, "chain.example.name");
+    assert.equal(schema.status, 422);
+
+    const session = await ik.createSession(PANDA);
+    const claw: Target = { effector: "claw", position: { x: 0.4, y: 0.1, z: 0.5 } };
+    const problem = await ik.frame(session, [claw]).catch((e: unknown) => e);
+    assert.ok(problem instanceof InvalidRequest);
+    assert.equal(problem.code, ErrorCode.InvalidProblem);
+    assert.equal(problem.field, "targets[0].effector");
+
+    const auth = await ik.getSession({ id: session.id, token: "not-the-token" }).catch((e: unknown) => e);
+    assert.ok(auth instanceof AuthError);
+    assert.equal(auth.code, ErrorCode.Forbidden);
+    assert.equal(auth.status, 403);
+  });
+});
+
+// --- the stream ------------------------------------------------------------------------------
+describe("stream", () => {
+  for (const encoding of ENCODINGS) {
+    test(`pipelines in order (${encoding})`, async () => {
+      const session = await ik.createSession(PANDA);
+      const stream = await ik.stream(session, { encoding });
+      try {
+        const ids = Array.from({ length: 20 }, (_, i) => stream.sendFrame([tool(0.1 + 0.002 * i)]));
+        assert.deepEqual(ids, [...Array(20).keys()]);
+        const answers = await Promise.all(ids.map(() => stream.receive()));
+        assert.deepEqual(
+          answers.map((a) => a.id),
+          ids,
+        );
+        const solved = answers.filter((a) => a.type === "result" && a.result.id === a.id && a.result.success);
+        assert.ok(solved.length >= 19);
+
+        const clipId = stream.sendClip([{ id: 5, targets: [tool(0.12)] }], { plan: true });
+        const pingId = stream.sendPing();
+        const clip = await stream.receive();
+        const pong = await stream.receive();
+        assert.ok(clip.type === "clip_result" && clip.id === clipId && clipId === 20);
+        assert.ok(clip.plan !== null && clip.results[0]!.id === 5);
+        assert.ok(pong.type === "pong" && pong.id === pingId && pingId === 21);
+        assert.equal(stream.inFlight, 0);
+      } finally {
+        stream.close();
+      }
+    });
+
+    test(`error answer, then the next frame (${encoding})`, async () => {
+      const session = await ik.createSession(PANDA);
+      const stream = await ik.stream(session, { encoding, compact: true });
+      try {
+        const claw: Target = { effector: "claw", position: { x: 0.4, y: 0.1, z: 0.5 } };
+        const problem = await stream.frame([claw]).catch((e: unknown) => e);
+        assert.ok(problem instanceof InvalidRequest);
+        assert.equal(problem.code, ErrorCode.InvalidProblem);
+        assert.equal(problem.field, "targets[0].effector");
+        assert.equal(problem.id, 0);
+        const schema = await stream.frame([{ effector: "tool" }]).catch((e: unknown) => e);
+        assert.ok(schema instanceof InvalidRequest);
+        assert.equal(schema.code, ErrorCode.InvalidFormat);
+        assert.equal(schema.field, "frame.targets.0");
+        const result = await stream.frame([tool(0.1)]);
+        assertSolved(result);
+        assert.equal(result.id, 2);
+        assert.equal("joints" in result, false); // compact
+      } finally {
+        stream.close();
+      }
+    });
+  }
+
+  test("the browser's way: token as a subprotocol", async () => {
+    const session = await ik.createSession(PANDA);
+    const stream = await ik.stream(session, { auth: "subprotocol", WebSocket: NodeWebSocket });
+    try {
+      assert.equal(stream.socket.protocol, "ik.v1"); // the token is never echoed
+      assertSolved(await stream.frame([tool(0.1)]));
+    } finally {
+      stream.close();
+    }
+  });
+
+  test("close codes: wrong token 4403, deleted session 4404", async () => {
+    const session = await ik.createSession(PANDA);
+    const stranger = await ik.stream({ id: session.id, token: "not-the-token" });
+    const auth = await stranger.ping().catch((e: unknown) => e);
+    assert.ok(auth instanceof StreamAuthError);
+    assert.equal(auth.closeCode, 4403);
+    assert.match(auth.meaning, /token/);
+    assert.equal(auth.reason, ErrorCode.Forbidden);
+
+    await ik.deleteSession(session);
+    const gone = await ik.stream(session);
+    const missing = await gone.ping().catch((e: unknown) => e);
+    assert.ok(missing instanceof SessionGone);
+    assert.equal(missing.closeCode, 4404);
+    assert.equal(missing.reason, ErrorCode.NotFound);
+  });
+
+  test("without reconnects, a drop rejects what is in flight", async () => {
+    const session = await ik.createSession(PANDA);
+    const stream = await ik.stream(session, { reconnect: { attempts: 0 } });
+    stream.sendFrame([tool(0.1)]);
+    (stream.socket as unknown as NodeWebSocket).terminate();
+    const lost = await stream.receive().catch((e: unknown) => e);
+    assert.ok(lost instanceof ConnectionLost);
+    assert.equal(lost.closeCode, 1006);
+    assert.throws(() => stream.sendPing(), ConnectionLost);
+  });
+
+  for (const encoding of ENCODINGS) {
+    test(`reconnects mid-pipeline: every frame answered once, in order (${encoding})`, async () => {
+      const session = await ik.createSession(PANDA);
+      const stream = await ik.stream(session, { encoding });
+      try {
+        const sent = Array.from({ length: 30 }, (_, i) => stream.sendFrame([tool(0.1 + 0.001 * i)]));
+        const received: number[] = [];
+        for (let i = 0; i < 5; i++) received.push((await stream.receive()).id);
+        const inFlight = stream.inFlight;
+        (stream.socket as unknown as NodeWebSocket).terminate(); // abrupt: no close frame
+        for (let i = 0; i < 10; i++) sent.push(stream.sendFrame([tool(0.13)]));
+        while (received.length < sent.length) received.push((await stream.receive()).id);
+        assert.equal(inFlight, 25);
+        assert.deepEqual(received, sent);
+        assert.deepEqual(sent, [...Array(40).keys()]);
+        assert.equal(stream.inFlight, 0);
+        assert.equal(stream.reconnects, 1);
+        // Every frame solved at least once; those in flight at the cut perhaps twice.
+        const frames = (await ik.getSession(session)).counters.frames;
+        assert.ok(frames >= 40 && frames <= 40 + inFlight, String(frames));
+      } finally {
+        stream.close();
+      }
+    });
+  }
+});

@@ -1,0 +1,66 @@
+/**
+ * The service the tests talk to: `IK_BASE_URL` when set (the pytest wrapper,
+ * tests/clients/test_typescript_client.py, passes its live server's), else a
+ * `python -m service` started here from the repository root on a free 127.0.0.1 port,
+ * polled on /readyz (bounded) and stopped when the tests end.
+ */
+
+import { spawn, type ChildProcess } from "node:child_process";
+import { createServer } from "node:net";
+import { fileURLToPath } from "node:url";
+
+const READY_TIMEOUT_MS = 240_000;
+const REPO_ROOT = fileURLToPath(new URL("../../../../", import.meta.url)); // from dist/test/
+
+function freePort(): Promise<number> {
+  return new Promise((resolve, reject) => {
+    const probe = createServer();
+    probe.once("error", reject);
+    probe.listen(0, "127.0.0.1", () => {
+      const address = probe.address();
+      probe.close(() => (typeof address === "object" && address ? resolve(address.port) : reject(new Error("no port"))));
+    });
+  });
+}
+
+async function waitReady(base: string, child: ChildProcess): Promise<void> {
+  const deadline = Date.now() + READY_TIMEOUT_MS;
+  while (Date.now() < deadline) {
+    if (child.exitCode !== null) throw new Error(`python -m service exited with ${child.exitCode}`);
+    try {
+      if ((await fetch(`${base}/readyz`, { signal: AbortSignal.timeout(2000) })).ok) return;
+    } catch {
+      // not listening yet
+    }
+    await new Promise((r) => setTimeout(r, 200));
+  }
+  throw new Error(`python -m service not ready in ${READY_TIMEOUT_MS} ms`);
+}
+
+let started: Promise<string> | undefined;
+let child: ChildProcess | undefined;
+
+/** Stop the server started here, if any (the test file's `after` hook). */
+export function stopServer(): void {
+  child?.kill("SIGTERM");
+}
+
+/** The base URL, e.g. `http://127.0.0.1:8123`. */
+export function serverUrl(): Promise<string> {
+  const given = process.env["IK_BASE_URL"];
+  if (given) return Promise.resolve(given);
+  started ??= (async () => {
+    const port = await freePort();
+    child = spawn(process.env["PYTHON"] ?? "python3", ["-m", "service"], {
+      cwd: REPO_ROOT,
+      env: { ...process.env, IK_HOST: "127.0.0.1", IK_PORT: String(port) },
+      stdio: ["ignore", "inherit", "inherit"],
+    });
+    const server = child;
+    process.on("exit", () => server.kill("SIGTERM")); // also when a test throws
+    const base = `http://127.0.0.1:${port}`;
+    await waitReady(base, server);
+    return base;
+  })();
+  return started;
+}

@@ -1,0 +1,351 @@
+"""ik_client against a real `python -m service`: every HTTP call (sync and async), the
+stream in both encodings, errors with their code and field, close codes, and a
+connection dropped mid-pipeline with no answer lost or repeated."""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import socket
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import httpx
+import ik_client
+import pytest
+from ik_client import (
+    AsyncClient,
+    AuthError,
+    Client,
+    ClipAnswer,
+    ConnectionLost,
+    Encoding,
+    ErrorCode,
+    FrameAnswer,
+    FrameResult,
+    InvalidRequest,
+    NotFound,
+    Pong,
+    Quaternion,
+    Reconnect,
+    RetryLater,
+    Session,
+    SessionGone,
+    Status,
+    StreamAuthError,
+    Target,
+    Termination,
+    TooManyWebSockets,
+)
+
+from .conftest import Server
+
+pytestmark = pytest.mark.live
+
+PANDA = {"format": "example", "name": "panda_arm"}
+DOWN: Quaternion = {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0}
+
+
+def tool(y: float) -> Target:
+    return {"effector": "tool", "position": {"x": 0.4, "y": y, "z": 0.5}, "orientation": DOWN}
+
+
+@pytest.fixture
+def ik(server: Server) -> Iterator[Client]:
+    with Client(server.base) as client:
+        yield client
+
+
+@pytest.fixture
+def session(ik: Client) -> Session:
+    return ik.create_session(PANDA)
+
+
+def assert_solved(result: FrameResult) -> None:
+    assert result.success, result
+    assert result.status is Status.SOLVED
+    assert result.termination is Termination.GOAL_REACHED
+
+
+# --- the types against the schema -------------------------------------------------------
+def fields_of(cls: type) -> set[str]:
+    if dataclasses.is_dataclass(cls):
+        return {f.name for f in dataclasses.fields(cls)}
+    return set(cls.__required_keys__ | cls.__optional_keys__)  # type: ignore[attr-defined]
+
+
+# Each client type and the schema components it mirrors (FrameResult holds both kinds).
+MIRRORS: list[tuple[type, tuple[str, ...]]] = [
+    (ik_client.Vec3, ("Vec3",)),
+    (ik_client.Quaternion, ("Quaternion",)),
+    (ik_client.Target, ("Target",)),
+    (ik_client.Frame, ("Frame",)),
+    (ik_client.PoseIn, ("PoseIn",)),
+    (ik_client.SolverOptionsPatch, ("OptionsPatch",)),
+    (ik_client.EffectorError, ("EffectorErrorOut",)),
+    (ik_client.FrameResult, ("FrameResult", "CompactFrameResult")),
+    (ik_client.PlanSummary, ("PlanSummary",)),
+    (ik_client.ClipResult, ("FrameResults", "CompactFrameResults")),
+    (ik_client.Pose, ("Pose",)),
+    (ik_client.Dof, ("DofInfo",)),
+    (ik_client.Effector, ("EffectorInfo",)),
+    (ik_client.SolverOptions, ("SolverOptions",)),
+    (ik_client.SessionCounters, ("SessionCounters",)),
+    (ik_client.Session, ("SessionCreated",)),
+    (ik_client.SessionInfo, ("SessionInfo",)),
+]
+
+
+def test_types_mirror_the_live_openapi_schema(server: Server) -> None:
+    components = httpx.get(f"{server.base}/openapi.json", timeout=30.0).json()["components"]
+    schemas = components["schemas"]
+    for cls, names in MIRRORS:
+        properties = set().union(*(schemas[name]["properties"] for name in names))
+        assert fields_of(cls) == properties, (cls.__name__, names)
+    result = schemas["FrameResult"]["properties"]
+    assert {t.value for t in Termination} == set(result["termination"]["enum"])
+    assert {s.value for s in Status} == set(result["status"]["enum"])
+
+
+# --- HTTP --------------------------------------------------------------------------------
+def test_session_calls(ik: Client) -> None:
+    session = ik.create_session(PANDA, options={"time_budget_us": 5000.0})
+    assert session.n_dof == 7 == len(session.dof) == len(session.pose.q)
+    assert [e.name for e in session.effectors] == ["tool"]
+    assert session.options.time_budget_us == 5000.0
+
+    info = ik.patch_session(session, {"max_restarts": 3})
+    assert info.options.max_restarts == 3
+    assert info.options.time_budget_us == 5000.0  # left out: unchanged
+
+    first = session.dof[0].name
+    pose = ik.set_pose(session, joints={first: 0.25})
+    assert pose.joints[first] == pytest.approx(0.25)
+    inside = [0.3 * d.lower + 0.7 * d.upper for d in session.dof if d.lower and d.upper]
+    assert len(inside) == 7
+    pose = ik.set_pose(session, q=inside)
+    assert pose.q == pytest.approx(inside, rel=0, abs=1e-12)
+    assert ik.get_session(session).pose.q == pytest.approx(inside, rel=0, abs=1e-12)
+
+    ik.delete_session(session)
+    with pytest.raises(NotFound) as caught:
+        ik.get_session(session)
+    assert caught.value.code is ErrorCode.NOT_FOUND
+    assert caught.value.status_code == 404
+
+
+def test_frames_clips_and_planned_clips(ik: Client, session: Session) -> None:
+    full = ik.frame(session, [tool(0.1)], id=7)
+    assert_solved(full)
+    assert full.id == 7
+    assert full.joints is not None and list(full.joints) == [d.name for d in session.dof]
+    assert full.effectors is not None and full.effectors[0].within_tolerance
+
+    compact = ik.frame(session, [tool(0.12)], compact=True)
+    assert_solved(compact)
+    assert compact.id is None and compact.joints is None and compact.effectors is None
+
+    frames: list[Any] = [{"id": i, "targets": [tool(0.1 + 0.01 * i)]} for i in range(4)]
+    clip = ik.clip(session, frames)
+    assert clip.success and clip.plan is None
+    assert [r.id for r in clip.results] == [0, 1, 2, 3]
+
+    planned = ik.clip(session, frames, plan=True, compact=True)
+    assert planned.success and planned.plan is not None
+    assert planned.plan.candidates > 0
+    assert planned.plan.largest_step_rad <= planned.plan.tracked_largest_step_rad + 1e-9
+    assert ik.get_session(session).counters.frames == 2 + 4 + 4
+
+
+def test_one_shot_solve(ik: Client) -> None:
+    result = ik.solve(PANDA, [tool(0.1)], seed={"q": [0.0] * 7}, id=3)
+    assert_solved(result)
+    assert result.id == 3 and len(result.q) == 7
+
+
+def test_errors_carry_code_and_field(ik: Client, session: Session) -> None:
+    with pytest.raises(InvalidRequest) as schema:
+        ik.create_session({"format": "example", "name": "no_such_arm"})
+    assert schema.value.code is ErrorCode.INVALID_FORMAT
+    assert schema.value.field == "chain.example.name"
+    assert schema.value.status_code == 422
+
+    with pytest.raises(InvalidRequest) as problem:
+        ik.frame(session, [{"effector": "claw", "position": {"x": 0.4, "y": 0.1, "z": 0.5}}])
+    assert problem.value.code is ErrorCode.INVALID_PROBLEM
+    assert problem.value.field == "targets[0].effector"
+
+    stranger = dataclasses.replace(session, token="not-the-token")
+    with pytest.raises(AuthError) as auth:
+        ik.get_session(stranger)
+    assert auth.value.code is ErrorCode.FORBIDDEN and auth.value.status_code == 403
+
+
+def test_retry_after_from_a_rate_limit(start_server: Callable[..., Server]) -> None:
+    # A burst of 3 frames (the clip limit), then 1 frame per second.
+    limited = start_server(IK_MAX_FRAMES_PER_S="1", IK_MAX_FRAMES_PER_REQUEST="3")
+    with Client(limited.base) as ik:
+        session = ik.create_session(PANDA)
+        frames: list[Any] = [{"targets": [tool(0.1)]}] * 3
+        ik.clip(session, frames)
+        with pytest.raises(RetryLater) as caught:
+            ik.clip(session, frames)
+        with ik.stream(session) as stream, pytest.raises(RetryLater) as over_ws:
+            stream.frame([tool(0.1)])
+    assert caught.value.code is ErrorCode.RATE_LIMITED and caught.value.status_code == 429
+    assert caught.value.retry_after_s is not None and caught.value.retry_after_s >= 1
+    assert over_ws.value.code is ErrorCode.RATE_LIMITED and over_ws.value.id == 0
+    assert over_ws.value.retry_after_s is not None and over_ws.value.retry_after_s > 0
+
+
+def test_async_client_calls(server: Server) -> None:
+    async def run() -> None:
+        async with AsyncClient(server.base) as ik:
+            session = await ik.create_session(PANDA)
+            assert (await ik.patch_session(session, {"max_iter": 50})).options.max_iter == 50
+            first = session.dof[0].name
+            assert (await ik.set_pose(session, joints={first: 0.0})).joints[first] == 0.0
+            assert_solved(await ik.frame(session, [tool(0.1)]))
+            frames: list[Any] = [{"targets": [tool(0.1)]}, {"targets": [tool(0.11)]}]
+            assert (await ik.clip(session, frames, plan=True)).plan is not None
+            assert_solved(await ik.solve(PANDA, [tool(0.1)]))
+            assert (await ik.get_session(session)).counters.frames == 3
+            await ik.delete_session(session)
+            with pytest.raises(NotFound):
+                await ik.get_session(session)
+
+    asyncio.run(run())
+
+
+# --- the stream ---------------------------------------------------------------------------
+@pytest.mark.parametrize("encoding", list(Encoding))
+def test_stream_pipelines_in_order(ik: Client, session: Session, encoding: Encoding) -> None:
+    with ik.stream(session, encoding=encoding) as stream:
+        ids = [stream.send_frame([tool(0.1 + 0.002 * i)]) for i in range(20)]
+        assert ids == list(range(20))
+        answers = [stream.receive() for _ in ids]
+        assert [a.id for a in answers] == ids
+        assert all(isinstance(a, FrameAnswer) and a.result.id == a.id for a in answers)
+        assert sum(a.result.success for a in answers if isinstance(a, FrameAnswer)) >= 19
+
+        clip_id = stream.send_clip([{"id": 5, "targets": [tool(0.12)]}], plan=True)
+        ping_id = stream.send_ping()
+        clip, pong = stream.receive(), stream.receive()
+        assert isinstance(clip, ClipAnswer) and clip.id == clip_id == 20
+        assert clip.clip.plan is not None and clip.clip.results[0].id == 5
+        assert isinstance(pong, Pong) and pong.id == ping_id == 21
+        assert stream.in_flight == 0
+
+
+@pytest.mark.parametrize("encoding", list(Encoding))
+def test_stream_error_answer_then_next_frame(
+    ik: Client, session: Session, encoding: Encoding
+) -> None:
+    with ik.stream(session, encoding=encoding, compact=True) as stream:
+        stream.send_frame([{"effector": "claw", "position": {"x": 0.4, "y": 0.1, "z": 0.5}}])
+        stream.send_frame([{"effector": "tool"}])  # type: ignore[typeddict-item]
+        with pytest.raises(InvalidRequest) as problem:
+            stream.receive()
+        assert problem.value.code is ErrorCode.INVALID_PROBLEM
+        assert problem.value.field == "targets[0].effector" and problem.value.id == 0
+        with pytest.raises(InvalidRequest) as schema:
+            stream.receive()
+        assert schema.value.code is ErrorCode.INVALID_FORMAT and schema.value.id == 1
+        assert schema.value.field == "frame.targets.0"
+        result = stream.frame([tool(0.1)])
+        assert_solved(result)
+        assert result.id == 2 and result.joints is None  # compact
+
+
+def test_stream_close_codes(ik: Client, session: Session) -> None:
+    stranger = dataclasses.replace(session, token="not-the-token")
+    with ik.stream(stranger) as stream, pytest.raises(StreamAuthError) as auth:
+        stream.ping()
+    assert auth.value.close_code == 4403 and "token" in auth.value.meaning
+    assert auth.value.reason == ErrorCode.FORBIDDEN
+
+    gone = ik.create_session(PANDA)
+    ik.delete_session(gone)
+    with ik.stream(gone) as stream, pytest.raises(SessionGone) as missing:
+        stream.ping()
+    assert missing.value.close_code == 4404 and missing.value.reason == ErrorCode.NOT_FOUND
+
+
+def test_too_many_websockets_after_bounded_retries(start_server: Callable[..., Server]) -> None:
+    small = start_server(IK_MAX_WEBSOCKETS="1")
+    with Client(small.base) as ik:
+        session = ik.create_session(PANDA)
+        retry = Reconnect(attempts=2, initial_delay_s=0.01)
+        with ik.stream(session) as first, ik.stream(session, reconnect=retry) as second:
+            assert isinstance(first.ping(), Pong)
+            with pytest.raises(TooManyWebSockets) as caught:
+                second.ping()
+            assert caught.value.close_code == 1013
+            # Each retry is accepted and closed again (at the resend or at the next read):
+            # no more than the two allowed.
+            assert second.reconnects <= 2
+
+
+def frames_on_the_server(ik: Client, session: Session) -> int:
+    return ik.get_session(session).counters.frames
+
+
+@pytest.mark.parametrize("encoding", list(Encoding))
+def test_stream_reconnects_mid_pipeline(ik: Client, session: Session, encoding: Encoding) -> None:
+    """The socket is cut while answers are in flight: every frame gets one answer."""
+    with ik.stream(session, encoding=encoding) as stream:
+        sent = [stream.send_frame([tool(0.1 + 0.001 * i)]) for i in range(30)]
+        received = [stream.receive().id for _ in range(5)]
+        in_flight = stream.in_flight
+        stream.connection.socket.shutdown(socket.SHUT_RDWR)  # abrupt: no close frame
+        sent += [stream.send_frame([tool(0.13)]) for _ in range(10)]
+        received += [stream.receive().id for _ in range(len(sent) - 5)]
+        assert stream.in_flight == 0
+        assert stream.reconnects == 1
+    assert in_flight == 25
+    assert received == sent == list(range(40))
+    # The server solved every frame at least once; those in flight at the cut may twice.
+    assert 40 <= frames_on_the_server(ik, session) <= 40 + in_flight
+
+
+def test_stream_without_reconnects_raises_the_drop(ik: Client, session: Session) -> None:
+    with ik.stream(session, reconnect=Reconnect(attempts=0)) as stream:
+        # Cut first: an answer the client had already read would be delivered.
+        stream.connection.socket.shutdown(socket.SHUT_RDWR)
+        with pytest.raises(ConnectionLost) as caught:
+            stream.send_frame([tool(0.1)])  # raises here or at the next read
+            stream.receive()
+    assert caught.value.close_code == 1006 and "dropped" in caught.value.meaning
+
+
+def test_async_stream_reconnects_mid_pipeline(server: Server, session: Session) -> None:
+    async def run() -> tuple[list[int], list[int], int, int]:
+        async with AsyncClient(server.base) as ik:
+            async with ik.stream(session, encoding=Encoding.MSGPACK) as stream:
+                sent = [await stream.send_frame([tool(0.1 + 0.001 * i)]) for i in range(30)]
+
+                async def receive_all() -> list[int]:
+                    return [(await stream.receive()).id for _ in range(40)]
+
+                # A reader task and a sender that cuts the socket while answers arrive.
+                reader = asyncio.create_task(receive_all())
+                await asyncio.sleep(0)
+                in_flight = stream.in_flight
+                stream.connection.transport.abort()
+                sent += [await stream.send_frame([tool(0.13)]) for _ in range(10)]
+                received = await asyncio.wait_for(reader, 60.0)
+                return sent, received, stream.reconnects, in_flight
+
+    sent, received, reconnects, in_flight = asyncio.run(run())
+    assert in_flight > 0
+    assert received == sent == list(range(40))
+    assert reconnects == 1
+
+
+def test_stream_url_and_token_from_session(server: Server, session: Session) -> None:
+    with Client(server.base + "/") as ik:
+        url = ik.stream(session, compact=True).url
+    assert url == f"ws://127.0.0.1:{server.port}/v1/sessions/{session.id}/ws?results=compact"
+    # The token travels in a header, never in the URL (proxies log URLs).
+    assert session.token not in url
+    assert httpx.URL(url).params.get("token") is None
