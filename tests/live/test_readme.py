@@ -63,7 +63,8 @@ def test_python_websocket_client(server: Server, tmp_path: Path) -> None:
     script.write_text(code)
     out = subprocess.run(
         [sys.executable, str(script)],
-        env={**os.environ, "IK": server.base},
+        # As after `pip install ./clients/python`: the client from the source tree.
+        env={**os.environ, "IK": server.base, "PYTHONPATH": str(ROOT / "clients" / "python")},
         capture_output=True,
         text=True,
         timeout=120,

@@ -1,0 +1,25 @@
+"""Both clients know exactly the service's error codes (``schemas.ErrorCode``): a code
+added to the service and not to a client would reach that client's users untyped."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import ik_client
+
+import schemas
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_python_client_codes_are_the_services() -> None:
+    assert {c.value for c in ik_client.ErrorCode} == {c.value for c in schemas.ErrorCode}
+
+
+def test_typescript_client_codes_are_the_services() -> None:
+    source = (ROOT / "clients/typescript/src/errors.ts").read_text()
+    block = re.search(r"export const ErrorCode = \{(.*?)\}", source, re.DOTALL)
+    assert block is not None, "clients/typescript/src/errors.ts has no ErrorCode object"
+    values = set(re.findall(r':\s*"([a-z_]+)"', block.group(1)))
+    assert values == {c.value for c in schemas.ErrorCode}
