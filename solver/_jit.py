@@ -14,7 +14,9 @@ a caller in ik/frame.py keeps its cached machine code, with the old callee compi
 in, after ik/kinematics.py changes. That is how an upgrade would silently run old
 code. So every function compiled through ``jit`` is stamped with a hash of all of
 solver/'s sources, its subpackages' included, plus its own file: any change anywhere
-in the package recompiles everything.
+in the package recompiles everything, except in the files of ``_NOT_COMPILED``
+(pure-Python modules no compiled code reads: the importers, the example chains,
+precompile.py).
 
 One gap the stamp cannot close: an objective registered from outside solver/
 (``solver.optim.register_objective``, e.g. the tests' MGH problems) is compiled into
@@ -39,9 +41,25 @@ _MARK = "__ik_solver_cache__"
 _SOLVER_DIR = Path(__file__).resolve().parent
 
 
-# Files that hold no compiled function and that no compiled function reads: editing
-# them must not throw the whole compiled package away.
-_NOT_COMPILED = frozenset({"precompile.py"})
+# Files left out of the stamp: they define no compiled function (no jit, jit_leaf or
+# jit_inline) and no compiled module imports them, so no compiled code can read their
+# constants (numba freezes a global's value into the machine code that reads it, which
+# is why model/layout.py's columns stay in). Editing one of them, the importers and the
+# example chains (pure Python that only *calls* compiled code), must not throw away
+# minutes of compilation. tests/solver/test_jit_stamp.py checks both conditions.
+_NOT_COMPILED = frozenset(
+    {
+        "precompile.py",
+        "model/bones.py",
+        "model/bvh.py",
+        "model/examples.py",
+        "model/gltf.py",
+        "model/gltf_container.py",
+        "model/skeleton.py",
+        "model/skeleton_settings.py",
+        "model/urdf.py",
+    }
+)
 
 
 def _package_digest() -> bytes:

@@ -9,9 +9,12 @@ Where things are:
     rotations.py  quaternion / matrix / roll-pitch-yaw conversions
     urdf.py       ``chain_from_urdf``
     gltf.py       ``read_gltf``: a glTF 2.0 skin's joints as a ``Skeleton``
+    gltf_container.py  the GLB / JSON container and its buffer checks
     bvh.py        ``read_bvh``: a BVH hierarchy (and its motion) as a ``Skeleton``
+    bones.py      ``Skeleton``, ``Bone``, ``Channel``, ``Motion``: what the importers give
     skeleton.py   ``chain_from_skeleton``: a skeleton and per-bone settings as a chain,
                   with bone rotations and transforms for a game engine
+    skeleton_settings.py  ``SkeletonSettings``, ``BoneSettings``, ``FreeRoot``
     examples.py   the built-in example chains (``EXAMPLES``)
 """
 

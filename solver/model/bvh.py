@@ -47,7 +47,7 @@ import numpy as np
 
 from solver.errors import InvalidModel
 from solver.model import Transform
-from solver.model.skeleton import MAX_BONES, MAX_NAME_LENGTH, Bone, Channel, Motion, Skeleton
+from solver.model.bones import MAX_BONES, MAX_NAME_LENGTH, Bone, Channel, Motion, Skeleton
 
 MAX_BYTES = 64_000_000  # ten minutes of 100 channels at 120 fps is about 60 MB
 MAX_DEPTH = 256

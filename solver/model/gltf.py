@@ -6,8 +6,9 @@ animations. pygltflib (1.16) would bring dataclasses-json, marshmallow and
 typing-inspect into the service's runtime, decodes every part of the document into
 objects, checks no size, count or depth, and leaves graph checks (cycles, a node with
 two parents, indices out of range) to the caller; we would write all of the hardening
-below anyway, around a library that does not help with it. This module is the GLB
-header and chunk walk (glTF 2.0 spec, section 4.4), ``json.loads`` and the checks.
+below anyway, around a library that does not help with it. ``gltf_container`` is the
+GLB header and chunk walk (glTF 2.0 spec, section 4.4), ``json.loads`` and the buffer
+checks; this module is the node graph, the skins and their checks.
 
 What is read:
   - GLB: 12-byte header (magic "glTF", version 2, total length equal to the input's
@@ -44,10 +45,6 @@ Errors are ``InvalidModel``. ``joint`` names the part: ``glb``, ``json``, ``asse
 
 from __future__ import annotations
 
-import base64
-import binascii
-import json
-import struct
 from dataclasses import dataclass
 from typing import Any
 
@@ -56,28 +53,35 @@ import numpy as np
 from solver.arrays import Matrix, Vector
 from solver.errors import InvalidModel
 from solver.model import Transform, quaternion_to_matrix
-from solver.model.skeleton import Bone, Skeleton
+from solver.model.bones import Bone, Skeleton
+from solver.model.gltf_container import (
+    MAX_BUFFERS,
+    MAX_BYTES,
+    MAX_JSON_BYTES,
+    json_array,
+    read_document,
+)
 
-MAX_BYTES = 32_000_000  # a whole .glb or .gltf
-MAX_JSON_BYTES = 8_000_000  # a GLB's JSON chunk (a .gltf is all JSON: MAX_BYTES)
+# The container's caps live in gltf_container.py; they stay importable from here.
+__all__ = [
+    "MATRIX_TOLERANCE",
+    "MAX_BUFFERS",
+    "MAX_BYTES",
+    "MAX_DEPTH",
+    "MAX_JSON_BYTES",
+    "MAX_NODES",
+    "MAX_SKINS",
+    "ROTATION_TOLERANCE",
+    "SCALE_TOLERANCE",
+    "read_gltf",
+]
+
 MAX_NODES = 4096
 MAX_DEPTH = 256  # node tree depth
 MAX_SKINS = 1024
-MAX_BUFFERS = 1024
 SCALE_TOLERANCE = 1e-4  # relative spread of scale components still called uniform
 ROTATION_TOLERANCE = 1e-3  # |q| - 1 accepted (and normalised) for float32 exports
 MATRIX_TOLERANCE = 1e-4  # orthogonality of a node matrix's columns after scale
-
-_GLB_MAGIC = b"glTF"
-_CHUNK_JSON = 0x4E4F534A
-_CHUNK_BIN = 0x004E4942
-
-
-@dataclass(frozen=True, slots=True)
-class _Container:
-    document: dict[str, Any]
-    bin_length: int | None  # None: no BIN chunk (or not a GLB)
-    is_glb: bool
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,11 +118,8 @@ def read_gltf(
     Raises:
         InvalidModel: anything in the module docstring; the message names the part.
     """
-    container = _container(data, max_bytes=max_bytes, max_json_bytes=max_json_bytes)
-    doc = container.document
-    _check_asset(doc)
-    _check_buffers(doc, container)
-    nodes = _list(doc, "nodes", "json", max_len=max_nodes, what="nodes")
+    doc = read_document(data, max_bytes=max_bytes, max_json_bytes=max_json_bytes)
+    nodes = json_array(doc, "nodes", "json", max_len=max_nodes, what="nodes")
     for i, node in enumerate(nodes):
         if not isinstance(node, dict):
             raise InvalidModel("a node must be a JSON object", joint=f"nodes[{i}]")
@@ -127,184 +128,6 @@ def read_gltf(
     skin_index, skin_doc = _choose_skin(doc, skin)
     joints = _skin_joints(skin_doc, skin_index, len(nodes))
     return _skeleton(nodes, parent, depth, joints, _skin_name(skin_doc, skin_index))
-
-
-# -- container -----------------------------------------------------------------
-
-
-def _container(data: bytes | str, *, max_bytes: int, max_json_bytes: int) -> _Container:
-    if isinstance(data, bytearray | memoryview):
-        data = bytes(data)
-    if not isinstance(data, bytes | str):
-        raise InvalidModel(f"glTF must be bytes or str, got {type(data).__name__}", joint="glb")
-    if len(data) > max_bytes:
-        raise InvalidModel(f"the file is larger than {max_bytes} bytes", joint="glb")
-    if isinstance(data, bytes) and data[:4] == _GLB_MAGIC:
-        json_bytes, bin_length = _glb_chunks(data, max_json_bytes)
-        return _Container(_parse_json(json_bytes), bin_length, is_glb=True)
-    if isinstance(data, str):
-        try:
-            data = data.encode("utf-8")
-        except UnicodeEncodeError:
-            raise InvalidModel("the JSON is not valid Unicode", joint="json") from None
-        if len(data) > max_bytes:
-            raise InvalidModel(f"the file is larger than {max_bytes} bytes", joint="glb")
-    return _Container(_parse_json(data), None, is_glb=False)
-
-
-def _glb_chunks(data: bytes, max_json_bytes: int) -> tuple[bytes, int | None]:
-    """The JSON chunk's bytes and the BIN chunk's length (glTF 2.0 spec 4.4)."""
-    size = len(data)
-    if size < 12:
-        raise InvalidModel(f"truncated: {size} bytes, the GLB header alone has 12", joint="glb")
-    _, version, length = struct.unpack_from("<4sII", data, 0)
-    if version != 2:
-        raise InvalidModel(f"GLB version {version} is not supported (2 is)", joint="glb")
-    if length > size:
-        raise InvalidModel(
-            f"truncated: the header declares {length} bytes, the file has {size}",
-            joint="glb",
-            field="length",
-        )
-    if length < size:
-        raise InvalidModel(
-            f"the header declares {length} bytes but the file has {size}",
-            joint="glb",
-            field="length",
-        )
-    json_bytes: bytes | None = None
-    bin_length: int | None = None
-    offset, index = 12, 0
-    while offset < length:
-        if length - offset < 8:
-            raise InvalidModel(
-                f"truncated: chunk {index} header needs 8 bytes, {length - offset} remain",
-                joint="glb",
-                field=f"chunks[{index}]",
-            )
-        chunk_length, chunk_type = struct.unpack_from("<II", data, offset)
-        start = offset + 8
-        if chunk_length > length - start:
-            raise InvalidModel(
-                f"truncated: chunk {index} declares {chunk_length} bytes, {length - start} remain",
-                joint="glb",
-                field=f"chunks[{index}]",
-            )
-        if index == 0:
-            if chunk_type != _CHUNK_JSON:
-                raise InvalidModel("the first chunk must be JSON", joint="glb", field="chunks[0]")
-            if chunk_length > max_json_bytes:
-                raise InvalidModel(
-                    f"the JSON chunk is larger than {max_json_bytes} bytes",
-                    joint="glb",
-                    field="chunks[0]",
-                )
-            json_bytes = data[start : start + chunk_length]
-        elif chunk_type == _CHUNK_JSON:
-            raise InvalidModel("a second JSON chunk", joint="glb", field=f"chunks[{index}]")
-        elif chunk_type == _CHUNK_BIN:
-            if index != 1:
-                raise InvalidModel(
-                    "the BIN chunk must be the second chunk", joint="glb", field=f"chunks[{index}]"
-                )
-            bin_length = chunk_length
-        offset = start + chunk_length
-        index += 1
-    if json_bytes is None:
-        raise InvalidModel("truncated: no JSON chunk", joint="glb", field="chunks[0]")
-    return json_bytes, bin_length
-
-
-def _reject_constant(name: str) -> None:
-    raise ValueError(f"{name} is not JSON")
-
-
-def _parse_json(raw: bytes) -> dict[str, Any]:
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        raise InvalidModel(f"the JSON is not UTF-8 ({e.reason})", joint="json") from None
-    try:
-        doc = json.loads(text, parse_constant=_reject_constant)
-    except RecursionError:
-        raise InvalidModel("the JSON is nested too deeply", joint="json") from None
-    except ValueError as e:  # JSONDecodeError, NaN/Infinity, integers over 4300 digits
-        raise InvalidModel(f"the JSON is not valid: {e}", joint="json") from None
-    if not isinstance(doc, dict):
-        raise InvalidModel("the JSON document must be an object", joint="json")
-    return doc
-
-
-def _check_asset(doc: dict[str, Any]) -> None:
-    asset = doc.get("asset")
-    version = asset.get("version") if isinstance(asset, dict) else None
-    if not isinstance(version, str):
-        raise InvalidModel("asset.version is missing", joint="asset", field="version")
-    if not version.startswith("2."):
-        raise InvalidModel(
-            f"glTF {version} is not supported (2.x is)", joint="asset", field="version"
-        )
-
-
-def _check_buffers(doc: dict[str, Any], container: _Container) -> None:
-    buffers = _list(doc, "buffers", "json", max_len=MAX_BUFFERS, what="buffers")
-    for i, buf in enumerate(buffers):
-        part = f"buffers[{i}]"
-        if not isinstance(buf, dict):
-            raise InvalidModel("a buffer must be a JSON object", joint=part)
-        declared = buf.get("byteLength")
-        if type(declared) is not int or declared < 1:
-            raise InvalidModel(
-                f"byteLength must be an integer >= 1, got {declared!r}",
-                joint=part,
-                field="byteLength",
-            )
-        uri = buf.get("uri")
-        if uri is None:
-            if not container.is_glb or i != 0:
-                raise InvalidModel(
-                    "only the first buffer of a .glb may omit uri (it is the BIN chunk)",
-                    joint=part,
-                    field="uri",
-                )
-            available = container.bin_length
-            if available is None or declared > available:
-                raise InvalidModel(
-                    f"declares {declared} bytes, the BIN chunk holds {available or 0}",
-                    joint=part,
-                    field="byteLength",
-                )
-        elif not isinstance(uri, str):
-            raise InvalidModel("uri must be a string", joint=part, field="uri")
-        elif uri.startswith("data:"):
-            held = _data_uri_length(uri, part)
-            if declared > held:
-                raise InvalidModel(
-                    f"declares {declared} bytes, its data URI holds {held}",
-                    joint=part,
-                    field="byteLength",
-                )
-
-
-def _data_uri_length(uri: str, part: str) -> int:
-    header, sep, payload = uri.partition(",")
-    if not sep or not header.endswith(";base64"):
-        raise InvalidModel(
-            "a data URI must be base64 (data:...;base64,...)", joint=part, field="uri"
-        )
-    try:
-        return len(base64.b64decode(payload, validate=True))
-    except (binascii.Error, ValueError):
-        raise InvalidModel("the data URI is not valid base64", joint=part, field="uri") from None
-
-
-def _list(doc: dict[str, Any], key: str, part: str, *, max_len: int, what: str) -> list[Any]:
-    value = doc.get(key, [])
-    if not isinstance(value, list):
-        raise InvalidModel(f"{key} must be an array", joint=part, field=key)
-    if len(value) > max_len:
-        raise InvalidModel(f"too many {what}: {len(value)} > {max_len}", joint=part, field=key)
-    return value
 
 
 # -- node graph ----------------------------------------------------------------
@@ -388,7 +211,7 @@ def _depths(nodes: list[Any], parent: list[int], max_depth: int) -> list[int]:
 
 
 def _choose_skin(doc: dict[str, Any], skin: int | str | None) -> tuple[int, dict[str, Any]]:
-    skins = _list(doc, "skins", "json", max_len=MAX_SKINS, what="skins")
+    skins = json_array(doc, "skins", "json", max_len=MAX_SKINS, what="skins")
     if not skins:
         raise InvalidModel("the document has no skin", joint="skin")
     for i, s in enumerate(skins):

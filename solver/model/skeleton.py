@@ -6,6 +6,10 @@ it into a ``Chain`` the IK solves, following per-bone settings, and returns a
 ``SkeletonChain`` that also maps joint vectors back to what a game engine applies: each
 moving bone's local rotation quaternion and the world transforms of bones.
 
+The types live in ``bones`` (``Skeleton``, ``Bone``, ``Channel``, ``Motion``) and
+``skeleton_settings`` (``SkeletonSettings``, ``BoneSettings``, ``FreeRoot``); this module
+re-exports them.
+
 Frames. A bone's frame is its node frame in the source file (glTF node, BVH joint):
 ``bone = parent_bone * offset * rest * motion(q)``, where ``offset`` is fixed (identity
 for BVH; for glTF, non-joint nodes between the bone and its parent bone, or above a root
@@ -40,10 +44,7 @@ Errors are ``InvalidModel`` naming the bone (``joint``) and the setting (``field
 
 from __future__ import annotations
 
-import difflib
-import enum
-import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -51,22 +52,50 @@ import numpy as np
 from solver.arrays import Matrix, Vector
 from solver.errors import InvalidModel, InvalidProblem
 from solver.model import (
-    MAX_DOF_HARD,
     Chain,
-    Effector,
     Joint,
     JointKind,
     Transform,
     build_chain,
     matrix_to_quaternion,
 )
+from solver.model.bones import (
+    MAX_BONES,
+    MAX_NAME_LENGTH,
+    Bone,
+    Channel,
+    Motion,
+    Skeleton,
+    unknown_bone,
+)
 from solver.model.forward import forward_kinematics
 from solver.model.layout import ND_R, ND_T
+from solver.model.skeleton_settings import (
+    DEFAULT_AXES,
+    BoneSettings,
+    FreeRoot,
+    SkeletonSettings,
+    default_limits,
+)
 
-# Bones beyond this make chain building and per-frame output slow for nothing: the
-# largest game rigs (faces and fingers included) have a few hundred.
-MAX_BONES = 4096
-MAX_NAME_LENGTH = 256
+# The skeleton's types live in bones.py, the settings in skeleton_settings.py; both
+# stay importable from here.
+__all__ = [
+    "DEFAULT_AXES",
+    "MAX_BONES",
+    "MAX_NAME_LENGTH",
+    "Bone",
+    "BoneSettings",
+    "Channel",
+    "FreeRoot",
+    "Motion",
+    "Skeleton",
+    "SkeletonChain",
+    "SkeletonSettings",
+    "chain_from_skeleton",
+    "default_limits",
+    "unknown_bone",
+]
 
 _AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 # q (x) e for a basis vector e, as q's components (w, x, y, z) permuted and signed:
@@ -76,192 +105,6 @@ _TIMES_BASIS = {
     "y": ((2, 3, 0, 1), (-1.0, -1.0, 1.0, 1.0)),
     "z": ((3, 2, 1, 0), (-1.0, 1.0, -1.0, 1.0)),
 }
-DEFAULT_AXES = "xyz"
-
-
-class Channel(enum.StrEnum):
-    """A BVH channel: a translation or rotation about one axis of the parent frame."""
-
-    X_POSITION = "Xposition"
-    Y_POSITION = "Yposition"
-    Z_POSITION = "Zposition"
-    X_ROTATION = "Xrotation"
-    Y_ROTATION = "Yrotation"
-    Z_ROTATION = "Zrotation"
-
-    @property
-    def axis(self) -> str:
-        return self.value[0].lower()
-
-    @property
-    def is_rotation(self) -> bool:
-        return self.value.endswith("rotation")
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Bone:
-    """One bone of a skeleton.
-
-    Attributes:
-        name: Unique name (a glTF node's name, ``node_<index>`` when it has none).
-        parent: Parent bone's name; None for a root bone.
-        rest: Rest transform in the bone's parent node frame [m].
-        offset: Fixed transform from the parent bone's frame (the skeleton's world
-            frame for a root bone) to the bone's parent node frame.
-        channels: BVH channels in file order (empty for glTF and End Sites).
-        rotation_order: The axes the source rotates this bone about, in order: the
-            BVH rotation channels; None when the source does not say (glTF).
-    """
-
-    name: str
-    parent: str | None
-    rest: Transform = field(default_factory=Transform)
-    offset: Transform = field(default_factory=Transform)
-    channels: tuple[Channel, ...] = ()
-    rotation_order: str | None = None
-
-    @property
-    def can_rotate(self) -> bool:
-        """Whether the source lets this bone rotate (see the module's decisions)."""
-        return self.rotation_order != ""
-
-
-@dataclass(frozen=True, slots=True)
-class Skeleton:
-    """Bones in topological order (parents before children).
-
-    Raises:
-        InvalidModel: no bone, too many, an empty, over-long or duplicate name, a
-            parent that is unknown or comes later.
-    """
-
-    name: str
-    bones: tuple[Bone, ...]
-
-    def __post_init__(self) -> None:
-        if not self.bones:
-            raise InvalidModel("a skeleton needs at least one bone", field="bones")
-        if len(self.bones) > MAX_BONES:
-            raise InvalidModel(f"too many bones: {len(self.bones)} > {MAX_BONES}", field="bones")
-        seen: set[str] = set()
-        for bone in self.bones:
-            if not bone.name or len(bone.name) > MAX_NAME_LENGTH:
-                raise InvalidModel(
-                    f"bone names must have 1-{MAX_NAME_LENGTH} characters",
-                    joint=bone.name[:MAX_NAME_LENGTH],
-                    field="name",
-                )
-            if bone.name in seen:
-                raise InvalidModel("duplicate bone name", joint=bone.name, field="name")
-            if bone.parent is not None and bone.parent not in seen:
-                raise InvalidModel(
-                    f"parent {bone.parent!r} is unknown or comes after its child",
-                    joint=bone.name,
-                    field="parent",
-                )
-            seen.add(bone.name)
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(b.name for b in self.bones)
-
-    @property
-    def roots(self) -> tuple[Bone, ...]:
-        return tuple(b for b in self.bones if b.parent is None)
-
-    def bone(self, name: str) -> Bone:
-        for b in self.bones:
-            if b.name == name:
-                return b
-        raise unknown_bone(name, self.names, field="bones")
-
-    def by_name(self) -> dict[str, Bone]:
-        return {b.name: b for b in self.bones}
-
-
-@dataclass(frozen=True, slots=True)
-class Motion:
-    """A clip in SI units, one row per frame.
-
-    Attributes:
-        frame_time_s: Time between frames [s].
-        values: Shape (n_frames, n_channels): rotations [rad], positions [m]
-            (absolute local positions: they replace the bone's rest translation on
-            their axes).
-        channels: (bone name, channel) of each column, in file order.
-    """
-
-    frame_time_s: float
-    values: Matrix
-    channels: tuple[tuple[str, Channel], ...]
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.values.shape[0])
-
-
-def unknown_bone(name: str, names: Iterable[str], *, field: str) -> InvalidModel:
-    """The error for a bone name that is not in the skeleton, with close names."""
-    close = difflib.get_close_matches(name, list(names), n=5, cutoff=0.5)
-    hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
-    return InvalidModel(f"unknown bone {name!r}{hint}", joint=name, field=field)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class BoneSettings:
-    """How one moving bone's joint is built.
-
-    Attributes:
-        axes: Rotation axes in order (1-3 distinct letters of "xyz"); None for the
-            default (see the module's decisions).
-        lower, upper: One limit per axis [rad]; None for the default ball ranges.
-        terminator: Bones above this one do not move for effectors below it.
-    """
-
-    axes: str | None = None
-    lower: tuple[float, ...] | None = None
-    upper: tuple[float, ...] | None = None
-    terminator: bool = False
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class FreeRoot:
-    """A root that translates: limits relative to its rest position [m], per x, y, z."""
-
-    lower_m: tuple[float, float, float] = (-10.0, -10.0, -10.0)
-    upper_m: tuple[float, float, float] = (10.0, 10.0, 10.0)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class SkeletonSettings:
-    """What ``chain_from_skeleton`` builds.
-
-    Attributes:
-        effectors: At least one; each ``link`` is a bone name (tip offset [m] and
-            rotation in that bone's frame; a glTF bone's own scale does not apply).
-        moving: Names of the bones that move; None for the default (see the module's
-            decisions). The others are fixed at their rest transform.
-        bones: Per-bone settings, keyed by bone name (moving bones only, except
-            ``terminator``, which any bone may carry).
-        default_axes: Axes of a moving bone whose source gives no rotation order.
-        free_root: Makes the (single) root bone translate; None keeps it in place.
-        root_link: Name of the chain's base link (the file's world frame).
-        max_dof: Upper bound on the chain's variables.
-    """
-
-    effectors: Sequence[Effector]
-    moving: Sequence[str] | None = None
-    bones: Mapping[str, BoneSettings] = field(default_factory=dict)
-    default_axes: str = DEFAULT_AXES
-    free_root: FreeRoot | None = None
-    root_link: str = "world"
-    max_dof: int = MAX_DOF_HARD
-
-
-def default_limits(axes: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """The default ball joint's limits [rad] for these axes (see the module's decisions)."""
-    half = tuple(math.pi / 2 if len(axes) == 3 and i == 1 else math.pi for i in range(len(axes)))
-    return tuple(-h for h in half), half
 
 
 @dataclass(frozen=True, slots=True)
