@@ -342,3 +342,53 @@ EXAMPLE_ARM: dict[str, Any] = {
     ],
     "effectors": [{"name": "hand", "link": "hand", "mode": "position"}],
 }
+
+# A glTF leg for the /docs examples: hip 1 m up, knee and ankle 0.45 m below each other
+# (Y up); the ankle reaches points within 0.9 m of the hip.
+EXAMPLE_GLTF_LEG: dict[str, Any] = {
+    "format": "gltf",
+    "gltf": {
+        "asset": {"version": "2.0"},
+        "nodes": [
+            {"name": "hip", "translation": [0.0, 1.0, 0.0], "children": [1]},
+            {"name": "knee", "translation": [0.0, -0.45, 0.0], "children": [2]},
+            {"name": "ankle", "translation": [0.0, -0.45, 0.0]},
+        ],
+        "skins": [{"name": "leg", "joints": [0, 1, 2]}],
+    },
+    "moving": ["hip", "knee"],
+    "bones": {"knee": {"axes": "x", "lower": [0.0], "upper": [2.6]}},
+    "effectors": [{"bone": "ankle", "name": "foot", "mode": "position"}],
+}
+
+# The same leg as BVH text in centimetres (unit_m 0.01), its root at the origin.
+EXAMPLE_BVH_LEG: dict[str, Any] = {
+    "format": "bvh",
+    "bvh": "\n".join(
+        [
+            "HIERARCHY",
+            "ROOT Hips",
+            "{",
+            "  OFFSET 0 0 0",
+            "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+            "  JOINT LeftUpLeg",
+            "  {",
+            "    OFFSET 10 0 0",
+            "    CHANNELS 3 Zrotation Xrotation Yrotation",
+            "    JOINT LeftLeg",
+            "    {",
+            "      OFFSET 0 -45 0",
+            "      CHANNELS 3 Zrotation Xrotation Yrotation",
+            "      End Site",
+            "      {",
+            "        OFFSET 0 -45 0",
+            "      }",
+            "    }",
+            "  }",
+            "}",
+        ]
+    ),
+    "unit_m": 0.01,
+    "moving": ["LeftUpLeg", "LeftLeg"],
+    "effectors": [{"bone": "LeftLeg_end", "name": "left_foot"}],
+}

@@ -102,7 +102,7 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
         try:
             return read_bvh(spec.bvh, unit_m=spec.unit_m, max_bytes=cap).skeleton
         except InvalidModel as e:
-            raise invalid_problem(str(e), "chain.bvh") from None
+            raise _file_problem(e, "chain.bvh") from None
     if spec.glb_base64 is not None:
         try:
             data: bytes | str = base64.b64decode(spec.glb_base64, validate=True)
@@ -120,7 +120,13 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
     try:
         return read_gltf(data, skin=spec.skin, max_bytes=cap)
     except InvalidModel as e:
-        raise invalid_problem(str(e), _gltf_field(where, e)) from None
+        raise _file_problem(e, _gltf_field(where, e)) from None
+
+
+def _file_problem(e: InvalidModel, field: str) -> ServiceError:
+    """``invalid_problem`` at ``field``; the reader's message already names the part
+    of the file (``nodes[1](knee).scale: ...``, ``LeftLeg.line 9: ...``)."""
+    return ServiceError(ErrorCode.INVALID_PROBLEM, str(e), status_code=422, field=field)
 
 
 def _gltf_field(where: str, e: InvalidModel) -> str:
@@ -128,8 +134,8 @@ def _gltf_field(where: str, e: InvalidModel) -> str:
     if part == "skin":
         return "chain.skin"
     if where == "chain.gltf" and part not in ("", "glb", "json"):
-        # "nodes[3] ('hip')" -> chain.gltf.nodes[3].<field>
-        path = part.split(" ", 1)[0]
+        # "nodes[3](hip)" -> chain.gltf.nodes[3].<field>
+        path = part.split("(", 1)[0].strip()
         return f"{where}.{path}.{e.field}" if e.field else f"{where}.{path}"
     return where
 

@@ -15,7 +15,7 @@ from starlette import status
 
 import schemas as S
 from schemas import ErrorCode
-from schemas.chain import EXAMPLE_ARM
+from schemas.chain import EXAMPLE_ARM, EXAMPLE_BVH_LEG, EXAMPLE_GLTF_LEG
 
 from .. import convert
 from ..dependencies import OwnerDep, ServicesDep, SessionDep
@@ -90,6 +90,18 @@ _CREATE_EXAMPLES = {
             }
         },
     },
+}
+_CREATE_EXAMPLES["gltf"] = {
+    "summary": "A glTF skin (the .gltf JSON) for a Unity client, with bone rotations",
+    "value": {
+        "chain": EXAMPLE_GLTF_LEG,
+        "conventions": {"preset": "unity"},
+        "bones": {"local_rotations": True, "world": ["ankle"]},
+    },
+}
+_CREATE_EXAMPLES["bvh"] = {
+    "summary": "A BVH skeleton in centimetres for an Unreal client",
+    "value": {"chain": EXAMPLE_BVH_LEG, "conventions": {"preset": "unreal"}},
 }
 _FRAMES_EXAMPLES = {
     "frame": {

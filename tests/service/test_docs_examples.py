@@ -19,7 +19,7 @@ def _examples(client: TestClient, path: str, method: str) -> dict[str, Any]:
 
 def test_create_session_examples(client: TestClient) -> None:
     examples = _examples(client, "/v1/sessions", "post")
-    assert set(examples) == {"hierarchy", "example", "urdf"}
+    assert set(examples) == {"hierarchy", "example", "urdf", "gltf", "bvh"}
     for name, body in examples.items():
         r = client.post("/v1/sessions", json=body)
         assert r.status_code == 201, (name, r.text)
