@@ -10,7 +10,7 @@ import schemas as S
 from solver.chain import matrix_to_quaternion
 from solver.types import Vector
 
-from ..errors import invalid_problem
+from ..errors import ServiceError, invalid_problem
 from .chains import ChainView, check_bone_output
 from .poses import pose_vector
 from .results import SolvedFrame
@@ -71,16 +71,23 @@ def fk_dict(
     field: str,
 ) -> dict[str, Any]:
     """An ``FkResult``: the pose (``q`` or ``joints`` over ``current``, clipped into the
-    limits; neither: ``current``) and its bone data.
+    limits; neither: ``current``) and its bone data. ``field`` prefixes the error
+    fields (``body`` over HTTP; empty for a WebSocket message).
 
     Raises:
         ServiceError: ``invalid_problem``: both ``q`` and ``joints``, a wrong length or
             DOF name, a chain without bones, an unknown bone.
     """
     if q is not None and joints is not None:
-        raise invalid_problem("give at most one of 'q' and 'joints'", field)
+        raise invalid_problem("give at most one of 'q' and 'joints'", field or None)
     check_bone_output(output, view.skeleton, f"{field}.bones" if field else "bones")
     pose = current
     if q is not None or joints is not None:
-        pose = pose_vector(S.PoseIn(q=q, joints=joints), view, current, field)
+        try:
+            pose = pose_vector(S.PoseIn(q=q, joints=joints), view, current, field or "_")
+        except ServiceError as e:
+            if not field and e.field is not None:  # a WebSocket message: "q", not "_.q"
+                e.field = e.field.removeprefix("_.")
+                e.detail = e.detail.removeprefix("_.")
+            raise
     return {"q": pose.tolist(), "bones": bones_dict(view, pose, output)}
