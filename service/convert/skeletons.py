@@ -83,7 +83,14 @@ def skeleton_chain(spec: SkeletonSpec, settings: Settings) -> SkeletonChain:
     try:
         return chain_from_skeleton(skeleton, skeleton_settings)
     except InvalidModel as e:
-        raise invalid_problem(str(e), _settings_field(spec, e)) from None
+        raise invalid_problem(_without_location(e), _settings_field(spec, e)) from None
+
+
+def _without_location(e: InvalidModel) -> str:
+    """The message without its ``<bone>.<setting>: `` prefix (the field says where;
+    the message still names the bone)."""
+    where = ".".join(p for p in (e.joint, e.field) if p)
+    return str(e).removeprefix(f"{where}: ") if where else str(e)
 
 
 def _root_link(skeleton: Skeleton) -> str:

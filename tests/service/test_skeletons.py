@@ -172,6 +172,13 @@ def _glb_with(edit: Any) -> str:
 
 
 def _cycle(doc: dict[str, Any]) -> None:
+    # Node 2 (the skeleton's root joint) moves from its parent (node 21) under its own
+    # child, node 3: 2 -> 3 -> 2, each node with one parent.
+    doc["nodes"][21]["children"].remove(2)
+    doc["nodes"][3]["children"] = [*doc["nodes"][3].get("children", []), 2]
+
+
+def _two_parents(doc: dict[str, Any]) -> None:
     doc["nodes"][3]["children"] = [*doc["nodes"][3].get("children", []), 2]
 
 
@@ -184,18 +191,17 @@ def _long_buffer(doc: dict[str, Any]) -> None:
 
 
 @pytest.mark.parametrize(
-    ("glb", "field", "words"),
+    ("glb", "words"),
     [
-        (lambda: base64.b64encode(asset_bytes("RiggedFigure.glb")[:4000]).decode(), "", "glb"),
-        (lambda: _glb_with(_long_buffer), "", "buffers[0]"),
-        (lambda: _glb_with(_cycle), "", "nodes["),
-        (lambda: _glb_with(_missing_joint), "", "skins[0]"),
+        (lambda: base64.b64encode(asset_bytes("RiggedFigure.glb")[:4000]).decode(), "truncated"),
+        (lambda: _glb_with(_long_buffer), "buffers[0].byteLength"),
+        (lambda: _glb_with(_cycle), "cycle"),
+        (lambda: _glb_with(_two_parents), "already has parent"),
+        (lambda: _glb_with(_missing_joint), "skins[0].joints"),
     ],
-    ids=["truncated", "buffer-longer-than-file", "cycle", "skin-joint-missing"],
+    ids=["truncated", "buffer-longer-than-file", "cycle", "two-parents", "skin-joint-missing"],
 )
-def test_bad_glb_files_are_422_naming_the_part(
-    client: TestClient, glb: Any, field: str, words: str
-) -> None:
+def test_bad_glb_files_are_422_naming_the_part(client: TestClient, glb: Any, words: str) -> None:
     chain = {"format": "gltf", "glb_base64": glb(), "effectors": [{"bone": "node_18"}]}
     body = error(client, chain)
     assert body["code"] == "invalid_problem"
