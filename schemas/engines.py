@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from .chain import Name
 from .common import StrictModel
@@ -54,7 +54,15 @@ class BoneOutput(StrictModel):
     )
 
 
-class QuaternionOut(StrictModel):
+class _Answer(BaseModel):
+    """Base of the answer-only models: not StrictModel subclasses, so that the request
+    hints (``service/hints.py``), which read field names off StrictModel's subclasses,
+    still know ``position`` as a Vec3 and ``rotation`` as a Quaternion."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+class QuaternionOut(_Answer):
     """A unit quaternion (w is the scalar part)."""
 
     w: float
@@ -63,7 +71,7 @@ class QuaternionOut(StrictModel):
     z: float
 
 
-class Vec3Out(StrictModel):
+class Vec3Out(_Answer):
     """A position in the session's conventions."""
 
     x: float
@@ -71,14 +79,14 @@ class Vec3Out(StrictModel):
     z: float
 
 
-class BoneTransformOut(StrictModel):
+class BoneTransformOut(_Answer):
     """A bone's world transform in the session's conventions."""
 
     position: Vec3Out
     rotation: QuaternionOut
 
 
-class BonesOut(StrictModel):
+class BonesOut(_Answer):
     """Bone data of a pose."""
 
     local: dict[str, QuaternionOut] | None = Field(
