@@ -268,3 +268,18 @@ def test_a_skeleton_over_the_body_limit_is_413(make_client: Any) -> None:
     small = make_client(Settings(max_body_bytes=100_000))
     r = small.post("/v1/sessions", json={"chain": glb_chain("CesiumMan.glb")})
     assert r.status_code == 413 and r.json()["code"] == "payload_too_large"
+
+
+def test_a_gltf_document_with_an_embedded_buffer_and_a_skin_by_name(client: TestClient) -> None:
+    doc, bin_chunk = split_glb(asset_bytes("RiggedSimple.glb"))
+    doc["buffers"][0]["uri"] = (
+        "data:application/octet-stream;base64," + base64.b64encode(bin_chunk).decode()
+    )
+    chain = {"format": "gltf", "gltf": doc, "skin": "Armature", "effectors": [{"bone": "node_3"}]}
+    s = create(client, chain)
+    assert [d["name"] for d in s.body["dof"]][:3] == ["node_2.x", "node_2.y", "node_2.z"]
+    body = error(client, {**chain, "skin": "Armature.001"})
+    assert body["field"] == "chain.skin", body
+    doc["buffers"][0]["byteLength"] += 100  # longer than its data
+    body = error(client, {**chain, "gltf": doc})
+    assert body["field"].startswith("chain.gltf.buffers[0]"), body
