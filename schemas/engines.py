@@ -39,6 +39,15 @@ class Conventions(StrictModel):
     unit: LengthUnit | None = Field(default=None, description="Length unit of positions")
 
 
+class ConventionsOut(StrictModel):
+    """The conventions a session speaks (its ``conventions`` resolved: the preset, the
+    fields given, the chain's own for the rest)."""
+
+    up: UpAxis
+    handedness: Handedness
+    unit_m: float = Field(description="Metres per length unit of positions (0.01: cm)")
+
+
 class BoneOutput(StrictModel):
     """Which bone data a result carries (skeleton chains: gltf, bvh)."""
 

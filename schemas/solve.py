@@ -8,7 +8,7 @@ from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
 
 from .chain import EXAMPLE_ARM, ChainSpec, EffectorModeName, Name
 from .common import FiniteFloat, Quaternion, StrictModel, Vec3
-from .engines import BoneOutput, Conventions
+from .engines import BoneOutput, Conventions, ConventionsOut
 
 # Frame ids: non-negative integers that a JavaScript client can hold exactly.
 MAX_FRAME_ID = 2**53 - 1
@@ -284,6 +284,7 @@ class SessionCreated(StrictModel):
     n_dof: int
     dof: list[DofInfo] = Field(description="The joint order of q, with limits")
     effectors: list[EffectorInfo]
+    conventions: ConventionsOut
     options: SolverOptions
     pose: Pose
     idle_ttl_s: float = Field(description="The session expires after this long without use [s]")
@@ -304,6 +305,7 @@ class SessionInfo(StrictModel):
     n_dof: int
     dof: list[DofInfo]
     effectors: list[EffectorInfo]
+    conventions: ConventionsOut
     options: SolverOptions
     pose: Pose
     counters: SessionCounters

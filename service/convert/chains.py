@@ -119,7 +119,14 @@ def chain_from_spec(
         check_bone_output(bone_output, skeleton, "bones")
     convention = Convention.between(frame_of(conventions, native), native)
     view = ChainView.of(chain)
-    return replace(view, skeleton=skeleton, convention=convention, bone_output=bone_output)
+    client = convention.client
+    summary = {
+        **view.summary,
+        "conventions": {"up": client.up, "handedness": client.handedness, "unit_m": client.unit_m},
+    }
+    return replace(
+        view, summary=summary, skeleton=skeleton, convention=convention, bone_output=bone_output
+    )
 
 
 def check_bone_output(output: S.BoneOutput, skeleton: SkeletonChain | None, where: str) -> None:

@@ -169,3 +169,17 @@ def test_unknown_presets_are_invalid_format(client: TestClient) -> None:
         "/v1/sessions", json={"chain": EXAMPLE_ARM, "conventions": {"preset": "cryengine"}}
     )
     assert r.status_code == 422 and r.json()["field"] == "conventions.preset"
+
+
+def test_sessions_say_which_conventions_they_speak(client: TestClient) -> None:
+    assert create(client, EXAMPLE_ARM).body["conventions"] == {
+        "up": "z",
+        "handedness": "right",
+        "unit_m": 1.0,
+    }
+    leg = create(client, _pose_leg(), conventions={"preset": "unreal"})
+    expected = {"up": "z", "handedness": "left", "unit_m": 0.01}
+    assert leg.body["conventions"] == expected
+    info = client.get(f"/v1/sessions/{leg.id}", headers=leg.headers).json()
+    assert info["conventions"] == expected
+    assert create(client, _pose_leg()).body["conventions"]["up"] == "y"  # glTF's own
