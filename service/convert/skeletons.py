@@ -13,7 +13,10 @@ import base64
 import binascii
 import json
 
+import numpy as np
+
 import schemas as S
+from schemas.common import MAX_COORDINATE
 from schemas.errors import ErrorCode
 from solver.chain import Effector, EffectorMode
 from solver.errors import InvalidModel
@@ -44,6 +47,7 @@ def skeleton_chain(spec: SkeletonSpec, settings: Settings) -> SkeletonChain:
             ``invalid_problem`` for anything else, naming the field.
     """
     skeleton = _read(spec, settings)
+    _check_lengths(skeleton, "chain.bvh" if isinstance(spec, S.BvhChain) else _source(spec))
     for name, bone in spec.bones.items():
         check_radians(bone.lower, bone.upper, f"bone {name!r}", f"chain.bones.{name}")
     effectors = [
@@ -91,6 +95,27 @@ def _without_location(e: InvalidModel) -> str:
     the message still names the bone)."""
     where = ".".join(p for p in (e.joint, e.field) if p)
     return str(e).removeprefix(f"{where}: ") if where else str(e)
+
+
+def _source(spec: S.GltfChain) -> str:
+    return "chain.glb_base64" if spec.glb_base64 is not None else "chain.gltf"
+
+
+def _check_lengths(skeleton: Skeleton, field: str) -> None:
+    """Refuse bone offsets beyond ``MAX_COORDINATE`` (1000 km), as JSON chains do: JSON
+    numbers have no bound, and 1e300 would overflow the kinematics.
+
+    Raises:
+        ServiceError: ``invalid_problem`` at ``field``, naming the bone.
+    """
+    for bone in skeleton.bones:
+        for part in (bone.rest, bone.offset):
+            if not np.all(np.abs(part.translation) <= MAX_COORDINATE):
+                raise invalid_problem(
+                    f"bone {bone.name!r}: a translation beyond {MAX_COORDINATE:g} m "
+                    f"({part.translation.tolist()}); check the file's units (unit_m)",
+                    field,
+                )
 
 
 def _root_link(skeleton: Skeleton) -> str:

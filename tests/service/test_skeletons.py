@@ -283,3 +283,13 @@ def test_a_gltf_document_with_an_embedded_buffer_and_a_skin_by_name(client: Test
     doc["buffers"][0]["byteLength"] += 100  # longer than its data
     body = error(client, {**chain, "gltf": doc})
     assert body["field"].startswith("chain.gltf.buffers[0]"), body
+
+
+def test_translations_beyond_a_thousand_km_are_refused(client: TestClient) -> None:
+    bvh = EXAMPLE_BVH_LEG["bvh"].replace("OFFSET 10 0 0", "OFFSET 1e300 0 0")
+    body = error(client, {**EXAMPLE_BVH_LEG, "bvh": bvh})
+    assert body["field"] == "chain.bvh" and "LeftUpLeg" in body["detail"], body
+    chain = copy.deepcopy(EXAMPLE_GLTF_LEG)
+    chain["gltf"]["nodes"][1]["translation"] = [0.0, -1e7, 0.0]
+    body = error(client, chain)
+    assert body["field"] == "chain.gltf" and "knee" in body["detail"], body
