@@ -16,15 +16,31 @@ are part of the contract).
 """
 
 from .chain import (
+    BoneEffectorSpec,
+    BoneSettingsSpec,
+    BvhChain,
     ChainSpec,
     EffectorSpec,
     ExampleChain,
+    FreeRootSpec,
+    GltfChain,
     HierarchyChain,
     JointSpec,
     OriginSpec,
     UrdfChain,
 )
 from .common import ErrorBody, FiniteFloat, Quaternion, StrictModel, Vec3
+from .engines import (
+    BoneOutput,
+    BonesOut,
+    BoneTransformOut,
+    Conventions,
+    ConventionsOut,
+    FkRequest,
+    FkResult,
+    QuaternionOut,
+    Vec3Out,
+)
 from .errors import ERROR_CODE_DESCRIPTIONS, ErrorCode
 from .health import NotReadyBody, StartupPhase, StartupProgress
 from .results import (
@@ -62,6 +78,8 @@ from .ws import (
     ClipResultMessage,
     ErrorMessage,
     ErrorPayload,
+    FkMessage,
+    FkResultMessage,
     FrameMessage,
     PingMessage,
     PongMessage,
@@ -70,6 +88,22 @@ from .ws import (
 )
 
 __all__ = [
+    "BoneEffectorSpec",
+    "BoneOutput",
+    "BoneSettingsSpec",
+    "BoneTransformOut",
+    "BonesOut",
+    "BvhChain",
+    "Conventions",
+    "ConventionsOut",
+    "FkMessage",
+    "FkRequest",
+    "FkResultMessage",
+    "FkResult",
+    "FreeRootSpec",
+    "GltfChain",
+    "QuaternionOut",
+    "Vec3Out",
     "CLIENT_MESSAGE_TYPES",
     "ChainSpec",
     "ClientMessage",

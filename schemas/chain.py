@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import ConfigDict, Field
+from pydantic import ConfigDict, Field, model_validator
 
 from .common import (
     IDENTITY,
@@ -175,9 +175,136 @@ class ExampleChain(StrictModel):
     )
 
 
+# --- skeletons (glTF, BVH) -------------------------------------------------------------
+# Static caps before the server's own (IK_MAX_SKELETON_BYTES, IK_MAX_JOINTS, ...).
+HARD_MAX_SKELETON_CHARS = 48_000_000
+HARD_MAX_BONE_SETTINGS = 4096
+BoneAxes = Annotated[str, Field(pattern=r"^[xyz]{1,3}$")]
+
+
+class BoneSettingsSpec(StrictModel):
+    """How one bone's joint is built (a bone named in ``moving``, or by default every
+    bone the file lets rotate). Defaults: the BVH channels' rotation order, else
+    ``default_axes``; limits of a ball joint (every axis +-pi, the middle of three
+    +-pi/2)."""
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"axes": "x", "lower": [0.0], "upper": [2.6]}]}
+    )
+
+    axes: BoneAxes | None = Field(
+        default=None,
+        description='Rotation axes of the bone\'s own frame, in order (intrinsic): "zyx" is '
+        "Rz(q0) Ry(q1) Rx(q2)",
+    )
+    lower: list[Coordinate] | None = Field(
+        default=None, min_length=1, max_length=3, description="One lower limit per axis [rad]"
+    )
+    upper: list[Coordinate] | None = Field(
+        default=None, min_length=1, max_length=3, description="One upper limit per axis [rad]"
+    )
+    terminator: bool = Field(
+        default=False,
+        description="Bones above this one do not move for effectors below it",
+    )
+
+
+class BoneEffectorSpec(StrictModel):
+    """An effector on a bone (by the bone's name)."""
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"bone": "LeftHand", "mode": "position"}]}
+    )
+
+    bone: Name = Field(description="Bone carrying the effector")
+    name: Name | None = Field(default=None, description="Effector name; default: the bone's")
+    tip_offset: Vec3 = Field(
+        default=ZERO3, description="Tip point in the bone's frame [m, the file's frame]"
+    )
+    tip_rotation: Quaternion = Field(
+        default=IDENTITY, description="Orientation of the tip frame in the bone's frame"
+    )
+    mode: EffectorModeName = Field(default="position", description="As in hierarchy chains")
+    aim_axis: Vec3 = Field(
+        default=Vec3(x=0.0, y=0.0, z=1.0), description="Aim mode: tip-frame axis to point"
+    )
+    position_weight: FiniteFloat = Field(default=1.0, ge=0.0, le=MAX_COORDINATE)
+    rotation_weight: FiniteFloat = Field(default=0.01, ge=0.0, le=MAX_COORDINATE)
+
+
+class FreeRootSpec(StrictModel):
+    """A root bone that translates (hips that move): limits relative to its rest
+    position along x, y, z of the root's parent frame [m]."""
+
+    lower: Vec3 = Field(default=Vec3(x=-10.0, y=-10.0, z=-10.0), description="[m]")
+    upper: Vec3 = Field(default=Vec3(x=10.0, y=10.0, z=10.0), description="[m]")
+
+
+class _SkeletonChainBase(StrictModel):
+    effectors: list[BoneEffectorSpec] = Field(
+        min_length=1, max_length=HARD_MAX_EFFECTORS, description="Effectors on bones"
+    )
+    moving: list[Name] | None = Field(
+        default=None,
+        max_length=HARD_MAX_BONE_SETTINGS,
+        description="Bones that move (the others stay at rest); default: every bone the "
+        "file lets rotate (every glTF skin joint, every BVH joint with rotation channels)",
+    )
+    bones: dict[Name, BoneSettingsSpec] = Field(
+        default_factory=dict,
+        max_length=HARD_MAX_BONE_SETTINGS,
+        description="Per-bone axes, limits and terminators, keyed by bone name",
+    )
+    default_axes: BoneAxes = Field(
+        default="xyz", description="Axes of a moving bone whose file gives no rotation order"
+    )
+    free_root: FreeRootSpec | None = Field(
+        default=None, description="Let the (single) root bone translate; default: fixed"
+    )
+
+
+class GltfChain(_SkeletonChainBase):
+    """A skin of a glTF 2.0 file: its joint nodes become bones (rest TRS = rest
+    transforms). Give the ``.glb`` as ``glb_base64``, or the ``.gltf`` JSON document
+    (buffers embedded or absent: no buffer data is read) as ``gltf``. Native frame:
+    Y up, right-handed, metres. Bones without a node name are ``node_<index>``."""
+
+    format: Literal["gltf"] = Field(description="Selects this chain format")
+    glb_base64: str | None = Field(
+        default=None,
+        max_length=HARD_MAX_SKELETON_CHARS,
+        description="The .glb file, base64 (standard alphabet, padded)",
+    )
+    gltf: dict[str, Any] | None = Field(default=None, description="The .gltf JSON document")
+    skin: int | Name | None = Field(
+        default=None, description="Skin index or name; default: the first"
+    )
+
+    @model_validator(mode="after")
+    def _one_source(self) -> GltfChain:
+        if (self.glb_base64 is None) == (self.gltf is None):
+            raise ValueError("give exactly one of glb_base64 and gltf")
+        return self
+
+
+class BvhChain(_SkeletonChainBase):
+    """A BVH (motion capture) skeleton: every ROOT and JOINT a bone (moving about its
+    CHANNELS rotation axes, in their order), every End Site a fixed bone
+    ``<parent>_end``. Native frame: Y up, right-handed, file units x ``unit_m``."""
+
+    format: Literal["bvh"] = Field(description="Selects this chain format")
+    bvh: str = Field(max_length=HARD_MAX_SKELETON_CHARS, description="The BVH text")
+    unit_m: FiniteFloat = Field(
+        default=1.0,
+        gt=0.0,
+        le=MAX_COORDINATE,
+        description="Metres per file length unit (0.01 for a file in centimetres)",
+    )
+
+
 ChainSpec = Annotated[
-    HierarchyChain | UrdfChain | ExampleChain,
-    Field(discriminator="format", description="The chain, in one of three formats"),
+    HierarchyChain | UrdfChain | ExampleChain | GltfChain | BvhChain,
+    Field(discriminator="format", description="The chain, in one of five formats"),
 ]
 
 # The hierarchy used by the /docs examples and the README: a 3-DOF arm whose hand
@@ -214,4 +341,54 @@ EXAMPLE_ARM: dict[str, Any] = {
         },
     ],
     "effectors": [{"name": "hand", "link": "hand", "mode": "position"}],
+}
+
+# A glTF leg for the /docs examples: hip 1 m up, knee and ankle 0.45 m below each other
+# (Y up); the ankle reaches points within 0.9 m of the hip.
+EXAMPLE_GLTF_LEG: dict[str, Any] = {
+    "format": "gltf",
+    "gltf": {
+        "asset": {"version": "2.0"},
+        "nodes": [
+            {"name": "hip", "translation": [0.0, 1.0, 0.0], "children": [1]},
+            {"name": "knee", "translation": [0.0, -0.45, 0.0], "children": [2]},
+            {"name": "ankle", "translation": [0.0, -0.45, 0.0]},
+        ],
+        "skins": [{"name": "leg", "joints": [0, 1, 2]}],
+    },
+    "moving": ["hip", "knee"],
+    "bones": {"knee": {"axes": "x", "lower": [0.0], "upper": [2.6]}},
+    "effectors": [{"bone": "ankle", "name": "foot", "mode": "position"}],
+}
+
+# The same leg as BVH text in centimetres (unit_m 0.01), its root at the origin.
+EXAMPLE_BVH_LEG: dict[str, Any] = {
+    "format": "bvh",
+    "bvh": "\n".join(
+        [
+            "HIERARCHY",
+            "ROOT Hips",
+            "{",
+            "  OFFSET 0 0 0",
+            "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+            "  JOINT LeftUpLeg",
+            "  {",
+            "    OFFSET 10 0 0",
+            "    CHANNELS 3 Zrotation Xrotation Yrotation",
+            "    JOINT LeftLeg",
+            "    {",
+            "      OFFSET 0 -45 0",
+            "      CHANNELS 3 Zrotation Xrotation Yrotation",
+            "      End Site",
+            "      {",
+            "        OFFSET 0 -45 0",
+            "      }",
+            "    }",
+            "  }",
+            "}",
+        ]
+    ),
+    "unit_m": 0.01,
+    "moving": ["LeftUpLeg", "LeftLeg"],
+    "effectors": [{"bone": "LeftLeg_end", "name": "left_foot"}],
 }

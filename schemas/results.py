@@ -10,6 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from solver.optim.termination import Termination
 
 from .common import StrictModel
+from .engines import BonesOut
 
 IKStatusName = Literal["solved", "not_reached", "budget_exhausted", "nonfinite"]
 TerminationName = Literal[
@@ -90,6 +91,10 @@ class FrameResult(StrictModel):
     server_us: float = Field(
         description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
     )
+    bones: BonesOut | None = Field(
+        default=None,
+        description="Bone rotations and transforms, when asked for (skeleton chains)",
+    )
 
 
 class PlanSummary(StrictModel):
@@ -159,6 +164,10 @@ class CompactFrameResult(StrictModel):
     solve_us: float = Field(description="Time in the compiled solver [us]")
     server_us: float = Field(
         description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
+    )
+    bones: BonesOut | None = Field(
+        default=None,
+        description="Bone rotations and transforms, when asked for (skeleton chains)",
     )
 
 

@@ -8,6 +8,7 @@ from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
 
 from .chain import EXAMPLE_ARM, ChainSpec, EffectorModeName, Name
 from .common import FiniteFloat, Quaternion, StrictModel, Vec3
+from .engines import BoneOutput, Conventions, ConventionsOut
 
 # Frame ids: non-negative integers that a JavaScript client can hold exactly.
 MAX_FRAME_ID = 2**53 - 1
@@ -159,6 +160,9 @@ class Frame(StrictModel):
 
     id: FrameId | None = Field(default=None, description="Client's frame id, echoed in the result")
     targets: list[Target] = Field(min_length=1, max_length=HARD_MAX_TARGETS)
+    bones: BoneOutput | None = Field(
+        default=None, description="Bone output for this frame (default: the session's)"
+    )
 
 
 # POST /v1/sessions/{id}/frames takes one frame, or {"frames": [...]} (a clip).
@@ -262,6 +266,13 @@ class SessionCreate(StrictModel):
     chain: ChainSpec
     options: OptionsPatch | None = None
     initial_pose: PoseIn | None = None
+    conventions: Conventions | None = Field(
+        default=None,
+        description="The client's up axis, handedness and unit (default: the chain's own)",
+    )
+    bones: BoneOutput | None = Field(
+        default=None, description="Bone output of every result (skeleton chains)"
+    )
 
 
 class SessionCreated(StrictModel):
@@ -273,6 +284,7 @@ class SessionCreated(StrictModel):
     n_dof: int
     dof: list[DofInfo] = Field(description="The joint order of q, with limits")
     effectors: list[EffectorInfo]
+    conventions: ConventionsOut
     options: SolverOptions
     pose: Pose
     idle_ttl_s: float = Field(description="The session expires after this long without use [s]")
@@ -293,6 +305,7 @@ class SessionInfo(StrictModel):
     n_dof: int
     dof: list[DofInfo]
     effectors: list[EffectorInfo]
+    conventions: ConventionsOut
     options: SolverOptions
     pose: Pose
     counters: SessionCounters
@@ -324,3 +337,10 @@ class SolveRequest(StrictModel):
     )
     options: OptionsPatch | None = None
     id: FrameId | None = Field(default=None, description="Echoed in the result")
+    conventions: Conventions | None = Field(
+        default=None,
+        description="The client's up axis, handedness and unit (default: the chain's own)",
+    )
+    bones: BoneOutput | None = Field(
+        default=None, description="Bone output of the result (skeleton chains)"
+    )

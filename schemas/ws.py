@@ -12,6 +12,7 @@ from typing import Annotated, Literal, get_args
 from pydantic import Field
 
 from .common import StrictModel
+from .engines import BoneOutput, BonesOut, FkRequest
 from .errors import ErrorCode
 from .results import CompactFrameResult, FrameResult, PlanSummary
 from .solve import (
@@ -30,6 +31,9 @@ class FrameMessage(StrictModel):
     type: Literal["frame"]
     id: FrameId = Field(description="Frame id; must be greater than the previous message's id")
     targets: list[Target] = Field(min_length=1, max_length=HARD_MAX_TARGETS)
+    bones: BoneOutput | None = Field(
+        default=None, description="Bone output for this frame (default: the session's)"
+    )
 
 
 class ClipMessage(StrictModel):
@@ -44,6 +48,14 @@ class ClipMessage(StrictModel):
     plan: bool = Field(default=False, description=ClipRequest.model_fields["plan"].description)
 
 
+class FkMessage(FkRequest):
+    """Client -> server: forward kinematics of a pose (``q`` or ``joints``; neither: the
+    session's current pose), answered by an ``fk_result``; the pose is not changed."""
+
+    type: Literal["fk"]
+    id: FrameId
+
+
 class PingMessage(StrictModel):
     """Client -> server: ask for a ``pong`` (keep-alive, round-trip time)."""
 
@@ -51,7 +63,9 @@ class PingMessage(StrictModel):
     id: FrameId
 
 
-ClientMessage = Annotated[FrameMessage | ClipMessage | PingMessage, Field(discriminator="type")]
+ClientMessage = Annotated[
+    FrameMessage | ClipMessage | FkMessage | PingMessage, Field(discriminator="type")
+]
 
 
 def _message_types() -> tuple[str, ...]:
@@ -63,7 +77,7 @@ def _message_types() -> tuple[str, ...]:
 
 
 CLIENT_MESSAGE_TYPES: tuple[str, ...] = _message_types()
-"""The ``type`` values a client may send: ``("frame", "clip", "ping")``."""
+"""The ``type`` values a client may send: ``("frame", "clip", "fk", "ping")``."""
 
 
 class ResultMessage(StrictModel):
@@ -117,6 +131,15 @@ class ErrorMessage(StrictModel):
     error: ErrorPayload
 
 
+class FkResultMessage(StrictModel):
+    """Server -> client: the answer to an ``fk`` message."""
+
+    id: int
+    type: Literal["fk_result"]
+    q: list[float]
+    bones: BonesOut
+
+
 class PongMessage(StrictModel):
     """Server -> client: the answer to a ping."""
 
@@ -124,4 +147,4 @@ class PongMessage(StrictModel):
     type: Literal["pong"]
 
 
-ServerMessage = ResultMessage | ClipResultMessage | ErrorMessage | PongMessage
+ServerMessage = ResultMessage | ClipResultMessage | FkResultMessage | ErrorMessage | PongMessage

@@ -3,7 +3,10 @@ become answers.
 
 One module per concern:
 
-- ``chains``: chain specs (JSON joints, URDF, examples) -> ``ChainView``;
+- ``chains``: chain specs (JSON joints, URDF, examples, glTF / BVH skeletons via
+  ``skeletons``) -> ``ChainView``;
+- ``conventions``: the client's up axis, handedness and unit <-> the chain's frame;
+- ``bones``: joint vectors -> bone local rotations and world transforms;
 - ``options``: the server's default ``IKOptions`` and a request's patch on them;
 - ``frames``: a request's frames and targets -> solver targets (the pydantic path);
 - ``fast_path``: the WebSocket's per-frame fast path (decoded message -> targets);
@@ -16,7 +19,8 @@ Every solver exception raised while turning a request into solver objects become
 Routes call these through the package (``convert.targets(...)``).
 """
 
-from .chains import ChainView, chain_from_spec
+from .bones import add_bones, bones_dict, fk_dict, wants_bones
+from .chains import ChainView, chain_from_spec, check_bone_output
 from .fast_path import FastFrame, fast_frame
 from .frames import FrameJob, clip_jobs, targets
 from .options import apply_options, oneshot_defaults, options_dict, session_defaults
@@ -32,6 +36,11 @@ from .results import (
 )
 
 __all__ = [
+    "add_bones",
+    "bones_dict",
+    "check_bone_output",
+    "fk_dict",
+    "wants_bones",
     "ChainView",
     "FastFrame",
     "FrameJob",

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import schemas as S
@@ -25,11 +25,15 @@ from solver.model import (
     build_chain,
 )
 from solver.model.examples import EXAMPLES
+from solver.model.skeleton import SkeletonChain, unknown_bone
 from solver.model.urdf import chain_from_urdf
 
 from ..config import Settings
-from ..errors import invalid_problem
+from ..errors import ServiceError, invalid_problem
+from .conventions import NATIVE, Y_UP_METRES, Z_UP_METRES, Convention, frame_of
 from .geometry import rotation_matrix, vec3
+from .limits import check_radians
+from .skeletons import skeleton_chain
 
 _EFFECTOR_FIELDS = frozenset(
     {"link", "tip_offset", "tip_rotation", "aim_axis", "position_weight", "rotation_weight", "mode"}
@@ -48,6 +52,12 @@ class ChainView:
     mid_limits: Vector  # the default seed: middle of each range, 0 if unbounded
     # The effectors a target may name (a valid Name) -> mode: the fast path's lookup.
     fast_modes: dict[str, EffectorMode]
+    # Skeleton chains (gltf, bvh): the maps from q to bone rotations and transforms.
+    skeleton: SkeletonChain | None = None
+    # The client's coordinate conventions -> the chain's frame (identity by default).
+    convention: Convention = NATIVE
+    # What every result carries unless a frame asks otherwise (skeleton chains).
+    bone_output: S.BoneOutput | None = None
 
     @classmethod
     def of(cls, chain: Chain) -> ChainView:
@@ -72,20 +82,31 @@ def _finite_or_none(v: float) -> float | None:
 
 
 def chain_from_spec(
-    spec: S.HierarchyChain | S.UrdfChain | S.ExampleChain, settings: Settings
+    spec: S.HierarchyChain | S.UrdfChain | S.ExampleChain | S.GltfChain | S.BvhChain,
+    settings: Settings,
+    conventions: S.Conventions | None = None,
+    bone_output: S.BoneOutput | None = None,
 ) -> ChainView:
-    """Build and validate the chain a request describes, within the server's limits.
+    """Build and validate the chain a request describes, within the server's limits,
+    with the client's conventions and default bone output.
 
     Raises:
         ServiceError: ``invalid_problem`` naming the field (``chain.joints[i].<field>``).
     """
-    if isinstance(spec, S.ExampleChain):
+    skeleton = None
+    if isinstance(spec, S.GltfChain | S.BvhChain):
+        skeleton = skeleton_chain(spec, settings)
+        chain = skeleton.chain
+        native = Y_UP_METRES
+    elif isinstance(spec, S.ExampleChain):
         factory = cast(Callable[[], Chain], EXAMPLES[spec.name])
         chain = factory()
     elif isinstance(spec, S.UrdfChain):
         chain = _urdf_chain(spec, settings)
     else:
         chain = _hierarchy_chain(spec, settings)
+    if skeleton is None:
+        native = Z_UP_METRES
     if chain.n_dof > settings.max_dof:
         raise invalid_problem(
             f"too many degrees of freedom: {chain.n_dof} > {settings.max_dof}", "chain"
@@ -94,7 +115,35 @@ def chain_from_spec(
         raise invalid_problem(
             f"too many joints: {len(chain.joints)} > {settings.max_joints}", "chain"
         )
-    return ChainView.of(chain)
+    if bone_output is not None:
+        check_bone_output(bone_output, skeleton, "bones")
+    convention = Convention.between(frame_of(conventions, native), native)
+    view = ChainView.of(chain)
+    client = convention.client
+    summary = {
+        **view.summary,
+        "conventions": {"up": client.up, "handedness": client.handedness, "unit_m": client.unit_m},
+    }
+    return replace(
+        view, summary=summary, skeleton=skeleton, convention=convention, bone_output=bone_output
+    )
+
+
+def check_bone_output(output: S.BoneOutput, skeleton: SkeletonChain | None, where: str) -> None:
+    """Refuse bone output on a chain without bones, and unknown bone names.
+
+    Raises:
+        ServiceError: ``invalid_problem`` naming ``<where>`` or ``<where>.world[i]``.
+    """
+    if not (output.local_rotations or output.world):
+        return
+    if skeleton is None:
+        raise invalid_problem("bone output needs a skeleton chain (format gltf or bvh)", where)
+    known = set(skeleton.skeleton.names)
+    for i, name in enumerate(output.world):
+        if name not in known:
+            e = unknown_bone(name, skeleton.skeleton.names, field="world")
+            raise invalid_problem(str(e), f"{where}.world[{i}]")
 
 
 def _urdf_chain(spec: S.UrdfChain, settings: Settings) -> Chain:
@@ -164,34 +213,18 @@ def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
         raise invalid_problem(str(e), _hierarchy_field(spec, e)) from None
 
 
-# The largest rotation limit a JSON chain may give [rad]: a full turn, plus room for a
-# rounded 2*pi (6.2832). Beyond it the number is almost surely degrees (an elbow's
-# "upper": [150]), which would otherwise be taken as 24 turns and leave the joint
-# practically unlimited. URDF files are not checked: the format is radians by
-# definition, and real files give unlimited joints limits such as +-1e16 or 2*pi + eps.
-MAX_ROTATION_LIMIT_RAD = 2 * math.pi + 1e-3
 _ROTATION_KINDS = frozenset({JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.ROTATIONAL})
 
 
 def _check_radians(j: S.JointSpec, where: str) -> None:
-    """Refuse a rotation limit beyond a full turn, saying that limits are radians.
-
-    Raises:
-        ServiceError: ``invalid_problem`` naming ``<where>.lower`` or ``<where>.upper``.
-    """
+    """Refuse a rotation limit beyond a full turn (prismatic limits are metres)."""
     if JointKind(j.kind) not in _ROTATION_KINDS:
-        return  # prismatic limits are metres; fixed joints have none
-    for side, limits in (("lower", j.lower), ("upper", j.upper)):
-        for value in limits:
-            if abs(value) <= MAX_ROTATION_LIMIT_RAD:
-                continue
-            message = (
-                f"joint {j.name!r}: {side} limit {value:g} is beyond 2*pi: limits are in radians"
-            )
-            if abs(value) <= 360:
-                message += f"; {value:g} degrees is {math.radians(value):.4f}"
-            message += '; for unlimited rotation use kind "continuous" with no limits'
-            raise invalid_problem(message, f"{where}.{side}")
+        return
+    try:
+        check_radians(j.lower, j.upper, f"joint {j.name!r}", where)
+    except ServiceError as e:
+        e.detail += '; for unlimited rotation use kind "continuous" with no limits'
+        raise
 
 
 def _hierarchy_field(spec: S.HierarchyChain, e: InvalidModel) -> str:

@@ -36,7 +36,10 @@ def fast_frame(raw: object, view: ChainView) -> FastFrame | None:
     schema and ``frames.targets`` accept, else None (then validate the message with
     pydantic for the error)."""
     try:
-        return _fast_frame(raw, view.fast_modes)
+        frame = _fast_frame(raw, view.fast_modes)
+        if frame is None or view.convention.identity:
+            return frame
+        return frame[0], view.convention.targets_in(frame[1])
     except Exception:  # never expected; the pydantic path gives the answer
         return None
 

@@ -105,7 +105,7 @@ def targets(ts: Sequence[S.Target], view: ChainView, field: str) -> list[SolverT
                 direction=direction,
             )
         )
-    return out
+    return view.convention.targets_in(out)
 
 
 def _require(ok: bool, message: str, where: str, name: str) -> None:

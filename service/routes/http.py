@@ -15,7 +15,7 @@ from starlette import status
 
 import schemas as S
 from schemas import ErrorCode
-from schemas.chain import EXAMPLE_ARM
+from schemas.chain import EXAMPLE_ARM, EXAMPLE_BVH_LEG, EXAMPLE_GLTF_LEG
 
 from .. import convert
 from ..dependencies import OwnerDep, ServicesDep, SessionDep
@@ -90,6 +90,18 @@ _CREATE_EXAMPLES = {
             }
         },
     },
+}
+_CREATE_EXAMPLES["gltf"] = {
+    "summary": "A glTF skin (the .gltf JSON) for a Unity client, with bone rotations",
+    "value": {
+        "chain": EXAMPLE_GLTF_LEG,
+        "conventions": {"preset": "unity"},
+        "bones": {"local_rotations": True, "world": ["ankle"]},
+    },
+}
+_CREATE_EXAMPLES["bvh"] = {
+    "summary": "A BVH skeleton in centimetres for an Unreal client",
+    "value": {"chain": EXAMPLE_BVH_LEG, "conventions": {"preset": "unreal"}},
 }
 _FRAMES_EXAMPLES = {
     "frame": {
@@ -184,7 +196,9 @@ async def create_session(
     """Create a session: a chain, solver options and an optional initial pose."""
     svc.runner.check_ready()
     settings = svc.settings
-    view = await svc.runner.in_pool(convert.chain_from_spec, body.chain, settings)
+    view = await svc.runner.in_pool(
+        convert.chain_from_spec, body.chain, settings, body.conventions, body.bones
+    )
     options = convert.apply_options(body.options, convert.session_defaults(settings), settings)
     solver = await svc.runner.in_pool(make_solver, view, options)
     if body.initial_pose is not None:
@@ -300,17 +314,42 @@ async def post_frames(
     one result per frame."""
     t0 = received_at(request)
     plan = isinstance(body, S.ClipRequest) and body.plan
+    view = session.view
     if isinstance(body, S.ClipRequest):
-        jobs = convert.clip_jobs(body.frames, session.view, svc.settings.max_frames_per_request)
+        jobs = convert.clip_jobs(body.frames, view, svc.settings.max_frames_per_request)
+        outputs = [f.bones for f in body.frames]
+        fields = [f"frames[{i}].bones" for i in range(len(body.frames))]
     else:
-        jobs = [(body.id, convert.targets(body.targets, session.view, "targets"))]
+        jobs = [(body.id, convert.targets(body.targets, view, "targets"))]
+        outputs, fields = [body.bones], ["bones"]
+    for output, where in zip(outputs, fields, strict=True):
+        if output is not None:
+            convert.check_bone_output(output, view.skeleton, where)
     build = convert.result_builder(query.results)
     if plan:
         solved, planned = await svc.runner.session_plan(session, svc.store, jobs, t0, "http")
-        results = convert.render_frames(solved, build)
+        results = convert.add_bones(convert.render_frames(solved, build), solved, view, outputs)
         return ORJSONResponse({"results": results, "plan": convert.plan_summary(planned)})
     solved = await svc.runner.session_frames(session, svc.store, jobs, t0, "http")
-    return ORJSONResponse({"results": convert.render_frames(solved, build)})
+    results = convert.add_bones(convert.render_frames(solved, build), solved, view, outputs)
+    return ORJSONResponse({"results": results})
+
+
+@router.post(
+    "/sessions/{session_id}/fk",
+    response_model=S.FkResult,
+    responses={**_AUTH_ERRORS, **_422},
+    tags=["sessions"],
+)
+async def post_fk(
+    body: Annotated[S.FkRequest, Body()], session: SessionDep, svc: ServicesDep
+) -> Response:
+    """Forward kinematics (skeleton chains): a pose in (``q`` or ``joints``; neither:
+    the current pose), bone local rotations and world transforms out, in the session's
+    conventions. The session's pose does not change."""
+    svc.store.touch(session)
+    out = convert.fk_dict(session.view, session.solver.q, body.q, body.joints, body.bones, "body")
+    return ORJSONResponse(out)
 
 
 @router.post(
@@ -326,7 +365,9 @@ async def solve(
     t0 = received_at(request)
     svc.runner.check_ready()
     settings = svc.settings
-    view = await svc.runner.in_pool(convert.chain_from_spec, body.chain, settings)
+    view = await svc.runner.in_pool(
+        convert.chain_from_spec, body.chain, settings, body.conventions, body.bones
+    )
     options = convert.apply_options(body.options, convert.oneshot_defaults(settings), settings)
     targets = convert.targets(body.targets, view, "targets")
     seed = None
@@ -334,4 +375,6 @@ async def solve(
         seed = convert.pose_vector(body.seed, view, view.mid_limits, "seed")
     solved = await svc.runner.in_pool(solve_once, view, targets, seed, options, body.id, t0)
     svc.metrics.frame(solved.result, solved.server_us * 1e-6, "http")
-    return ORJSONResponse(convert.result_dict(solved.result, solved.frame_id, solved.server_us))
+    result = convert.result_dict(solved.result, solved.frame_id, solved.server_us)
+    (result,) = convert.add_bones([result], [solved], view, [None])
+    return ORJSONResponse(result)

@@ -52,12 +52,18 @@ from ..errors import (
     validation_errors,
 )
 from ..sessions import Session
-from .ws_messages import clip_result_message, error_message, pong_message, result_message
+from .ws_messages import (
+    clip_result_message,
+    error_message,
+    fk_result_message,
+    pong_message,
+    result_message,
+)
 
 log = logging.getLogger("service")
 router = APIRouter(prefix="/v1")
 
-ClientMessage = S.FrameMessage | S.ClipMessage | S.PingMessage
+ClientMessage = S.FrameMessage | S.ClipMessage | S.FkMessage | S.PingMessage
 _CLIENT_MESSAGE: TypeAdapter[ClientMessage] = TypeAdapter(S.ClientMessage)
 # pydantic's error types, at the message's top level, for a message whose ``type`` is
 # missing or unknown, or that is not an object at all: answered with the types there are
@@ -247,29 +253,53 @@ class _Connection:
             if isinstance(msg, tuple):  # the fast path's (id, targets)
                 reply = await self.frame(msg_id, msg[1], t0)
             elif isinstance(msg, S.FrameMessage):
-                targets = convert.targets(msg.targets, self.session.view, "targets")
-                reply = await self.frame(msg_id, targets, t0)
+                view = self.session.view
+                targets = convert.targets(msg.targets, view, "targets")
+                if msg.bones is not None:
+                    convert.check_bone_output(msg.bones, view.skeleton, "bones")
+                reply = await self.frame(msg_id, targets, t0, msg.bones)
             elif isinstance(msg, S.ClipMessage):
                 reply = await self.clip(msg, t0)
+            elif isinstance(msg, S.FkMessage):
+                out = convert.fk_dict(
+                    self.session.view, self.session.solver.q, msg.q, msg.joints, msg.bones, ""
+                )
+                reply = fk_result_message(msg_id, out)
             else:
                 reply = pong_message(msg_id)
         except (ServiceError, IKError) as e:
             reply = self.exception_reply(msg_id, e)
         await self.send(reply, binary)
 
-    async def frame(self, msg_id: int, targets: list[SolverTarget], t0: float) -> dict[str, Any]:
+    async def frame(
+        self,
+        msg_id: int,
+        targets: list[SolverTarget],
+        t0: float,
+        bones: S.BoneOutput | None = None,
+    ) -> dict[str, Any]:
         """Solve one valid frame (from the fast path, or validated by pydantic)."""
         (solved,) = await self.svc.runner.session_frames(
             self.session, self.svc.store, [(msg_id, targets)], t0, "ws"
         )
-        return result_message(msg_id, self.build(solved.result, msg_id, solved.server_us))
+        result = self.build(solved.result, msg_id, solved.server_us)
+        view = self.session.view
+        chosen = view.bone_output if bones is None else bones
+        if chosen is not None and convert.wants_bones(chosen):
+            result["bones"] = convert.bones_dict(view, solved.result.q, chosen)
+        return result_message(msg_id, result)
 
     async def clip(self, msg: S.ClipMessage, t0: float) -> dict[str, Any]:
         """Solve a clip (in order, or planned as a whole); as ``POST .../frames`` with
         ``{"frames": [...]}``."""
         runner = self.svc.runner
         limit = self.svc.settings.max_frames_per_request
-        jobs = convert.clip_jobs(msg.frames, self.session.view, limit)
+        view = self.session.view
+        jobs = convert.clip_jobs(msg.frames, view, limit)
+        outputs = [f.bones for f in msg.frames]
+        for i, output in enumerate(outputs):
+            if output is not None:
+                convert.check_bone_output(output, view.skeleton, f"frames[{i}].bones")
         plan = None
         if msg.plan:
             solved, planned = await runner.session_plan(
@@ -278,7 +308,10 @@ class _Connection:
             plan = convert.plan_summary(planned)
         else:
             solved = await runner.session_frames(self.session, self.svc.store, jobs, t0, "ws")
-        return clip_result_message(msg.id, convert.render_frames(solved, self.build), plan)
+        results = convert.add_bones(
+            convert.render_frames(solved, self.build), solved, view, outputs
+        )
+        return clip_result_message(msg.id, results, plan)
 
 
 @router.websocket("/sessions/{session_id}/ws")

@@ -32,6 +32,11 @@ def clip_result_message(
     }
 
 
+def fk_result_message(msg_id: int, fk: dict[str, Any]) -> dict[str, Any]:
+    """The answer to an ``fk``: the pose used and its bone data."""
+    return {"id": msg_id, "type": "fk_result", **fk}
+
+
 def pong_message(msg_id: int) -> dict[str, Any]:
     """The answer to a ``ping``."""
     return {"id": msg_id, "type": "pong"}

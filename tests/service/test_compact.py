@@ -16,8 +16,9 @@ import schemas as S
 
 from .helpers import Created, create, hand_frame
 
-COMPACT_KEYS = set(S.CompactFrameResult.model_fields)
-FULL_KEYS = set(S.FrameResult.model_fields)
+# Without "bones": results carry it only when a session or frame asks (test_bones.py).
+COMPACT_KEYS = set(S.CompactFrameResult.model_fields) - {"bones"}
+FULL_KEYS = set(S.FrameResult.model_fields) - {"bones"}
 SERVER_MESSAGE: TypeAdapter[Any] = TypeAdapter(S.ServerMessage)
 
 

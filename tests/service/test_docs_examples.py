@@ -19,7 +19,7 @@ def _examples(client: TestClient, path: str, method: str) -> dict[str, Any]:
 
 def test_create_session_examples(client: TestClient) -> None:
     examples = _examples(client, "/v1/sessions", "post")
-    assert set(examples) == {"hierarchy", "example", "urdf"}
+    assert set(examples) == {"hierarchy", "example", "urdf", "gltf", "bvh"}
     for name, body in examples.items():
         r = client.post("/v1/sessions", json=body)
         assert r.status_code == 201, (name, r.text)
@@ -69,3 +69,42 @@ def test_chains_page_hierarchy_example_creates_a_session(client: TestClient) -> 
         headers=s.headers,
     )
     assert r.json()["results"][0]["success"] is True
+
+
+def test_engines_page_session_and_frames_work_in_every_preset(client: TestClient) -> None:
+    import json
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "engines.md").read_text()
+
+    def block(name: str) -> str:
+        m = re.search(rf"<!-- {name}:start -->\s*```json\n(.*?)```", page, re.DOTALL)
+        assert m is not None, name
+        return m.group(1)
+
+    session = json.loads(block("engines-session"))
+    frames = [json.loads(line) for line in block("engines-frames").splitlines() if line]
+    assert {f["preset"] for f in frames} == {"unity", "unreal", "godot", "threejs"}
+    q = []
+    for example in frames:
+        # No deadline: the poses are compared across sessions (busy shared test cores).
+        body = {
+            **session,
+            "conventions": {"preset": example["preset"]},
+            "options": {"time_budget_us": 50_000},
+        }
+        s = client.post("/v1/sessions", json=body)
+        assert s.status_code == 201, s.text
+        url, headers = (
+            f"/v1/sessions/{s.json()['id']}/ws",
+            {"Authorization": f"Bearer {s.json()['token']}"},
+        )
+        with client.websocket_connect(url, headers=headers) as ws:
+            ws.send_json(example["frame"])
+            answer = ws.receive_json()
+        assert answer["success"] is True, (example, answer)
+        assert set(answer["result"]["bones"]["local"]) == {"hip", "knee"}
+        q.append(answer["result"]["q"])
+    # The same physical point in every convention: the same pose.
+    assert all(abs(a - b) < 1e-6 for row in q for a, b in zip(row, q[0], strict=True))

@@ -9,6 +9,7 @@ without it must give the same answers to the same messages.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from collections.abc import Iterator
 from typing import Any
@@ -23,6 +24,7 @@ from starlette.testclient import TestClient
 
 import schemas as S
 from service import convert
+from service.convert.conventions import Z_UP_METRES, Convention, frame_of
 from service.errors import ServiceError
 from solver.ik import Target
 from solver.model import EffectorMode
@@ -32,12 +34,22 @@ from .helpers import Created, create
 
 CLIENT_MESSAGE: TypeAdapter[Any] = TypeAdapter(S.ClientMessage)
 
+
+def _in_convention(view: convert.ChainView, preset: str) -> convert.ChainView:
+    """The view of a session whose client speaks ``preset``'s conventions."""
+    client = frame_of(S.Conventions(preset=preset), Z_UP_METRES)  # type: ignore[arg-type]
+    return dataclasses.replace(view, convention=Convention.between(client, Z_UP_METRES))
+
+
 VIEWS = {
     "position": convert.ChainView.of(panda_arm(EffectorMode.POSITION)),
     "pose": convert.ChainView.of(panda_arm(EffectorMode.POSE)),
     "aim": convert.ChainView.of(panda_arm(EffectorMode.AIM)),
     "two": convert.ChainView.of(two_arm_torso()),
 }
+# Sessions in another convention: both paths must convert targets the same way.
+VIEWS["pose_unreal"] = _in_convention(VIEWS["pose"], "unreal")
+VIEWS["aim_unity"] = _in_convention(VIEWS["aim"], "unity")
 P = {"x": 0.4, "y": 0.1, "z": 0.5}
 Q = {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0}
 GOOD: dict[str, list[dict[str, Any]]] = {
@@ -56,6 +68,8 @@ GOOD: dict[str, list[dict[str, Any]]] = {
         {"effector": "right_hand", "position": {"x": -0.3, "y": 1, "z": 0}},
     ],
 }
+GOOD["pose_unreal"] = GOOD["pose"]
+GOOD["aim_unity"] = GOOD["aim"]
 # Leaf replacements: wrong types, bounds, non-finite numbers, ints for floats.
 ODD_VALUES: list[Any] = [
     None, True, False, 0, 1, -1, 2, 1.0, 0.5, -0.0, "0.3", "NaN", "", "tool", [], {},

@@ -1,0 +1,193 @@
+"""Skeleton chain specs (glTF, BVH) -> a ``SkeletonChain``, errors naming the request field.
+
+The readers (``solver.model.gltf``, ``solver.model.bvh``) name the part of the file at
+fault (``nodes[3]``, ``skins[0]``, a BVH line); this module says which request field
+holds it (``chain.glb_base64``, ``chain.gltf.nodes[3].rotation``, ``chain.bvh``) and
+maps per-bone settings to the solver's (``chain.bones.LeftLeg.lower``,
+``chain.effectors[1].bone``, ``chain.moving[4]``).
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+
+import numpy as np
+
+import schemas as S
+from schemas.common import MAX_COORDINATE
+from schemas.errors import ErrorCode
+from solver.errors import InvalidModel
+from solver.model import Effector, EffectorMode
+from solver.model.bvh import read_bvh
+from solver.model.gltf import read_gltf
+from solver.model.skeleton import (
+    BoneSettings,
+    FreeRoot,
+    Skeleton,
+    SkeletonChain,
+    SkeletonSettings,
+    chain_from_skeleton,
+)
+
+from ..config import Settings
+from ..errors import ServiceError, invalid_problem
+from .geometry import rotation_matrix, vec3
+from .limits import check_radians
+
+SkeletonSpec = S.GltfChain | S.BvhChain
+
+
+def skeleton_chain(spec: SkeletonSpec, settings: Settings) -> SkeletonChain:
+    """Read the file, then build the chain its settings describe.
+
+    Raises:
+        ServiceError: ``invalid_format`` for base64 that does not decode;
+            ``invalid_problem`` for anything else, naming the field.
+    """
+    skeleton = _read(spec, settings)
+    _check_lengths(skeleton, "chain.bvh" if isinstance(spec, S.BvhChain) else _source(spec))
+    for name, bone in spec.bones.items():
+        check_radians(bone.lower, bone.upper, f"bone {name!r}", f"chain.bones.{name}")
+    effectors = [
+        Effector(
+            name=e.name if e.name is not None else e.bone,
+            link=e.bone,
+            tip_offset=vec3(e.tip_offset),
+            tip_rotation=rotation_matrix(e.tip_rotation),
+            mode=EffectorMode(e.mode),
+            aim_axis=vec3(e.aim_axis),
+            position_weight=e.position_weight,
+            rotation_weight=e.rotation_weight,
+        )
+        for e in spec.effectors
+    ]
+    free_root = None
+    if spec.free_root is not None:
+        lo, hi = spec.free_root.lower, spec.free_root.upper
+        free_root = FreeRoot(lower_m=(lo.x, lo.y, lo.z), upper_m=(hi.x, hi.y, hi.z))
+    skeleton_settings = SkeletonSettings(
+        effectors=effectors,
+        moving=spec.moving,
+        bones={
+            name: BoneSettings(
+                axes=b.axes,
+                lower=None if b.lower is None else tuple(b.lower),
+                upper=None if b.upper is None else tuple(b.upper),
+                terminator=b.terminator,
+            )
+            for name, b in spec.bones.items()
+        },
+        default_axes=spec.default_axes,
+        free_root=free_root,
+        root_link=_root_link(skeleton),
+        max_dof=settings.max_dof,
+    )
+    try:
+        return chain_from_skeleton(skeleton, skeleton_settings)
+    except InvalidModel as e:
+        raise invalid_problem(_without_location(e), _settings_field(spec, e)) from None
+
+
+def _without_location(e: InvalidModel) -> str:
+    """The message without its ``<bone>.<setting>: `` prefix (the field says where;
+    the message still names the bone)."""
+    where = ".".join(p for p in (e.joint, e.field) if p)
+    return str(e).removeprefix(f"{where}: ") if where else str(e)
+
+
+def _source(spec: S.GltfChain) -> str:
+    return "chain.glb_base64" if spec.glb_base64 is not None else "chain.gltf"
+
+
+def _check_lengths(skeleton: Skeleton, field: str) -> None:
+    """Refuse bone offsets beyond ``MAX_COORDINATE`` (1000 km), as JSON chains do: JSON
+    numbers have no bound, and 1e300 would overflow the kinematics.
+
+    Raises:
+        ServiceError: ``invalid_problem`` at ``field``, naming the bone.
+    """
+    for bone in skeleton.bones:
+        for part in (bone.rest, bone.offset):
+            if not np.all(np.abs(part.translation) <= MAX_COORDINATE):
+                raise invalid_problem(
+                    f"bone {bone.name!r}: a translation beyond {MAX_COORDINATE:g} m "
+                    f"({part.translation.tolist()}); check the file's units (unit_m)",
+                    field,
+                )
+
+
+def _root_link(skeleton: Skeleton) -> str:
+    """The base link's name: ``world``, unless a bone has that name."""
+    names = set(skeleton.names)
+    name = "world"
+    while name in names:
+        name = f"_{name}"
+    return name
+
+
+def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
+    # A decoded file cannot be larger than the body that carried it.
+    cap = settings.max_body_bytes
+    if isinstance(spec, S.BvhChain):
+        try:
+            return read_bvh(spec.bvh, unit_m=spec.unit_m, max_bytes=cap).skeleton
+        except InvalidModel as e:
+            raise _file_problem(e, "chain.bvh") from None
+    if spec.glb_base64 is not None:
+        try:
+            data: bytes | str = base64.b64decode(spec.glb_base64, validate=True)
+        except (binascii.Error, ValueError) as e:
+            raise ServiceError(
+                ErrorCode.INVALID_FORMAT,
+                f"glb_base64 is not valid base64 (standard alphabet, padded): {e}",
+                status_code=422,
+                field="chain.glb_base64",
+            ) from None
+        where = "chain.glb_base64"
+    else:
+        data = json.dumps(spec.gltf, allow_nan=False)
+        where = "chain.gltf"
+    try:
+        return read_gltf(data, skin=spec.skin, max_bytes=cap)
+    except InvalidModel as e:
+        raise _file_problem(e, _gltf_field(where, e)) from None
+
+
+def _file_problem(e: InvalidModel, field: str) -> ServiceError:
+    """``invalid_problem`` at ``field``; the reader's message already names the part
+    of the file (``nodes[1](knee).scale: ...``, ``LeftLeg.line 9: ...``)."""
+    return ServiceError(ErrorCode.INVALID_PROBLEM, str(e), status_code=422, field=field)
+
+
+def _gltf_field(where: str, e: InvalidModel) -> str:
+    part = e.joint or ""
+    if part == "skin":
+        return "chain.skin"
+    if where == "chain.gltf" and part not in ("", "glb", "json"):
+        # "nodes[3](hip)" -> chain.gltf.nodes[3].<field>
+        path = part.split("(", 1)[0].strip()
+        return f"{where}.{path}.{e.field}" if e.field else f"{where}.{path}"
+    return where
+
+
+def _settings_field(spec: SkeletonSpec, e: InvalidModel) -> str:
+    field, bone = e.field or "", e.joint
+    if field == "moving" and spec.moving is not None and bone in spec.moving:
+        return f"chain.moving[{spec.moving.index(bone)}]"
+    if field == "effectors":
+        for i, eff in enumerate(spec.effectors):
+            if eff.bone == bone:
+                return f"chain.effectors[{i}].bone"
+    if field in ("axes", "lower", "upper") and bone is not None:
+        if bone in spec.bones:
+            return f"chain.bones.{bone}.{field}"
+        return "chain.default_axes" if field == "axes" else "chain.bones"
+    if field == "bones" and bone in spec.bones:
+        return f"chain.bones.{bone}"
+    if field in ("moving", "bones", "free_root", "effectors"):
+        return f"chain.{field}"
+    if bone is not None and any((e.name or e.bone) == bone for e in spec.effectors):
+        return "chain.effectors"
+    return "chain"

@@ -1,0 +1,295 @@
+"""glTF and BVH skeleton chains through the API: import, per-bone settings, bad input.
+
+The shared assets (tests/solver/skeleton_refs.py finds them) are real files; the bad
+inputs are edits of them or small synthetic documents.
+"""
+
+from __future__ import annotations
+
+import base64
+import copy
+from typing import Any
+
+import numpy as np
+import pytest
+from starlette.testclient import TestClient
+
+from schemas.chain import EXAMPLE_BVH_LEG, EXAMPLE_GLTF_LEG
+from tests.solver.skeleton_refs import (
+    GLB_FILES,
+    WALK_UNIT_M,
+    asset_bytes,
+    make_glb,
+    split_glb,
+    walk_text,
+)
+
+from .helpers import create
+
+# A hand and a foot of each asset (RiggedSimple has two bones: its tip bone).
+# RiggedFigure / CesiumMan: node 18 arm_joint_L_3, node 10 leg_joint_L_5
+# (shared/assets/README.md); the 2017 files have no node names.
+HAND_FOOT = {
+    "RiggedSimple.glb": ["node_3"],
+    "RiggedFigure.glb": ["node_18", "node_10"],
+    "CesiumMan.glb": ["node_18", "node_10"],
+    "walk.bvh": ["LeftHand", "RightFoot"],
+}
+
+
+def glb_chain(name: str, **settings: Any) -> dict[str, Any]:
+    bones = settings.pop("effector_bones", HAND_FOOT[name])
+    return {
+        "format": "gltf",
+        "glb_base64": base64.b64encode(asset_bytes(name)).decode(),
+        "effectors": [{"bone": b} for b in bones],
+        **settings,
+    }
+
+
+def walk_chain(**settings: Any) -> dict[str, Any]:
+    return {
+        "format": "bvh",
+        "bvh": walk_text(),
+        "unit_m": WALK_UNIT_M,
+        "effectors": [{"bone": b} for b in HAND_FOOT["walk.bvh"]],
+        **settings,
+    }
+
+
+def error(client: TestClient, chain: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    r = client.post("/v1/sessions", json={"chain": chain, **extra})
+    assert r.status_code == 422, r.text
+    body: dict[str, Any] = r.json()
+    return body
+
+
+# --- every asset imports ----------------------------------------------------------------
+@pytest.mark.parametrize("name", GLB_FILES)
+def test_every_glb_asset_imports_and_its_hand_reaches_a_target(
+    client: TestClient, name: str
+) -> None:
+    # The largest time budget: this checks reach, not speed (shared, busy test cores).
+    s = create(client, glb_chain(name), options={"time_budget_us": 50_000})
+    assert [e["name"] for e in s.body["effectors"]] == HAND_FOOT[name]
+    fk = client.post(
+        f"/v1/sessions/{s.id}/fk", json={"bones": {"world": HAND_FOOT[name]}}, headers=s.headers
+    )
+    assert fk.status_code == 200, fk.text
+    # A target placed by FK of another pose of the character: within reach.
+    q = np.array(fk.json()["q"]) + 0.2
+    moved = client.post(
+        f"/v1/sessions/{s.id}/fk",
+        json={"q": q.tolist(), "bones": {"world": HAND_FOOT[name]}},
+        headers=s.headers,
+    ).json()["bones"]["world"]
+    targets = [{"effector": b, "position": moved[b]["position"]} for b in HAND_FOOT[name]]
+    r = client.post(f"/v1/sessions/{s.id}/frames", json={"targets": targets}, headers=s.headers)
+    assert r.json()["results"][0]["success"] is True, r.text
+
+
+def test_walk_bvh_imports_with_a_free_root(client: TestClient) -> None:
+    s = create(client, walk_chain(free_root={}))
+    names = [d["name"] for d in s.body["dof"]]
+    assert names[:3] == ["Hips.tx", "Hips.ty", "Hips.tz"]
+    assert "LeftUpLeg.z" in names and "LeftHand_end.x" not in names  # End Sites stay fixed
+
+
+def test_gltf_json_document_imports_like_its_glb(client: TestClient) -> None:
+    doc, _ = split_glb(asset_bytes("RiggedFigure.glb"))
+    del doc["buffers"]  # no buffer data is read; the accessors that use it are unused
+    for key in ("bufferViews", "accessors", "meshes", "animations", "images", "textures"):
+        doc.pop(key, None)
+    for node in doc["nodes"]:
+        node.pop("mesh", None)
+    doc["skins"][0].pop("inverseBindMatrices", None)
+    chain = {"format": "gltf", "gltf": doc, "effectors": [{"bone": "node_18"}]}
+    from_json = create(client, chain)
+    from_glb = create(client, glb_chain("RiggedFigure.glb", effector_bones=["node_18"]))
+    assert from_json.body["dof"] == from_glb.body["dof"]
+
+
+def test_one_shot_solve_takes_a_skeleton(client: TestClient) -> None:
+    r = client.post(
+        "/v1/solve",
+        json={
+            "chain": EXAMPLE_GLTF_LEG,
+            "targets": [{"effector": "foot", "position": {"x": 0.1, "y": 0.3, "z": 0.2}}],
+            "bones": {"local_rotations": True, "world": ["ankle"]},
+        },
+    )
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["success"] is True
+    ankle = body["bones"]["world"]["ankle"]["position"]
+    assert np.allclose([ankle["x"], ankle["y"], ankle["z"]], [0.1, 0.3, 0.2], atol=1e-3)
+    assert set(body["bones"]["local"]) == {"hip", "knee"}
+
+
+# --- per-bone settings -------------------------------------------------------------------
+def test_moving_axes_limits_and_tip_offset_shape_the_chain(client: TestClient) -> None:
+    chain = {
+        **EXAMPLE_BVH_LEG,
+        "moving": ["LeftUpLeg", "LeftLeg"],
+        "bones": {
+            "LeftUpLeg": {"axes": "zx"},
+            "LeftLeg": {"axes": "x", "lower": [-2.5], "upper": [0.0]},
+        },
+        "effectors": [
+            {"bone": "LeftLeg", "name": "heel", "tip_offset": {"x": 0.0, "y": -0.45, "z": -0.05}}
+        ],
+    }
+    s = create(client, chain)
+    dof = {d["name"]: (d["lower"], d["upper"]) for d in s.body["dof"]}
+    assert list(dof) == ["LeftUpLeg.z", "LeftUpLeg.x", "LeftLeg.x"]
+    assert dof["LeftLeg.x"] == (-2.5, 0.0)
+    assert dof["LeftUpLeg.z"] == (-np.pi, np.pi)  # the default ball range
+    fk = client.post(
+        f"/v1/sessions/{s.id}/fk",
+        json={"q": [0.0, 0.0, 0.0], "bones": {"world": ["LeftLeg"]}},
+        headers=s.headers,
+    )
+    knee = fk.json()["bones"]["world"]["LeftLeg"]["position"]
+    assert np.allclose([knee["x"], knee["y"], knee["z"]], [0.1, -0.45, 0.0])
+
+
+def test_a_terminator_keeps_the_bones_above_it_still(client: TestClient) -> None:
+    chain = {**EXAMPLE_GLTF_LEG, "bones": {"knee": {"axes": "x", "terminator": True}}}
+    s = create(client, chain)
+    r = client.post(
+        f"/v1/sessions/{s.id}/frames",
+        json={"targets": [{"effector": "foot", "position": {"x": 0.0, "y": 0.2, "z": 0.3}}]},
+        headers=s.headers,
+    )
+    joints = r.json()["results"][0]["joints"]
+    assert all(joints[f"hip.{a}"] == s.body["pose"]["joints"][f"hip.{a}"] for a in "xyz")
+
+
+# --- bad input: a 422 naming the part ----------------------------------------------------
+def _glb_with(edit: Any) -> str:
+    doc, bin_chunk = split_glb(asset_bytes("RiggedFigure.glb"))
+    edit(doc)
+    return base64.b64encode(make_glb(doc, bin_chunk)).decode()
+
+
+def _cycle(doc: dict[str, Any]) -> None:
+    # Node 2 (the skeleton's root joint) moves from its parent (node 21) under its own
+    # child, node 3: 2 -> 3 -> 2, each node with one parent.
+    doc["nodes"][21]["children"].remove(2)
+    doc["nodes"][3]["children"] = [*doc["nodes"][3].get("children", []), 2]
+
+
+def _two_parents(doc: dict[str, Any]) -> None:
+    doc["nodes"][3]["children"] = [*doc["nodes"][3].get("children", []), 2]
+
+
+def _missing_joint(doc: dict[str, Any]) -> None:
+    doc["skins"][0]["joints"][4] = 999
+
+
+def _long_buffer(doc: dict[str, Any]) -> None:
+    doc["buffers"][0]["byteLength"] += 1_000
+
+
+@pytest.mark.parametrize(
+    ("glb", "words"),
+    [
+        (lambda: base64.b64encode(asset_bytes("RiggedFigure.glb")[:4000]).decode(), "truncated"),
+        (lambda: _glb_with(_long_buffer), "buffers[0].byteLength"),
+        (lambda: _glb_with(_cycle), "cycle"),
+        (lambda: _glb_with(_two_parents), "already has parent"),
+        (lambda: _glb_with(_missing_joint), "skins[0].joints"),
+    ],
+    ids=["truncated", "buffer-longer-than-file", "cycle", "two-parents", "skin-joint-missing"],
+)
+def test_bad_glb_files_are_422_naming_the_part(client: TestClient, glb: Any, words: str) -> None:
+    chain = {"format": "gltf", "glb_base64": glb(), "effectors": [{"bone": "node_18"}]}
+    body = error(client, chain)
+    assert body["code"] == "invalid_problem"
+    assert body["field"] == "chain.glb_base64"
+    assert words in body["detail"], body
+
+
+def test_a_10000_node_document_is_refused(client: TestClient) -> None:
+    nodes = [{"children": [i + 1]} for i in range(9_999)] + [{}]
+    doc = {"asset": {"version": "2.0"}, "nodes": nodes, "skins": [{"joints": [0, 1]}]}
+    body = error(client, {"format": "gltf", "gltf": doc, "effectors": [{"bone": "node_1"}]})
+    assert body["code"] == "invalid_problem" and body["field"].startswith("chain.gltf")
+    assert "4096" in body["detail"], body
+
+
+def test_gltf_json_errors_name_the_node_field(client: TestClient) -> None:
+    chain = copy.deepcopy(EXAMPLE_GLTF_LEG)
+    chain["gltf"]["nodes"][1]["scale"] = [1.0, 2.0, 1.0]
+    body = error(client, chain)
+    assert body["field"] == "chain.gltf.nodes[1].scale", body
+
+
+def test_bad_base64_is_invalid_format(client: TestClient) -> None:
+    body = error(client, {"format": "gltf", "glb_base64": "gl!TF", "effectors": [{"bone": "a"}]})
+    assert (body["code"], body["field"]) == ("invalid_format", "chain.glb_base64")
+
+
+def test_unknown_bone_names_say_which_setting_and_suggest(client: TestClient) -> None:
+    body = error(client, walk_chain(effectors=[{"bone": "LeftHnd"}]))
+    assert body["field"] == "chain.effectors[0].bone"
+    assert "LeftHand" in body["detail"]
+    body = error(client, walk_chain(moving=["Hips", "Spine9"]))
+    assert body["field"] == "chain.moving[1]"
+    body = error(client, walk_chain(bones={"Nek": {"axes": "x"}}))
+    assert body["field"] == "chain.bones.Nek"
+    body = error(client, walk_chain(), bones={"world": ["Hed"]})
+    assert body["field"] == "bones.world[0]" and "Head" in body["detail"]
+
+
+def test_limits_in_degrees_and_bad_settings_are_named(client: TestClient) -> None:
+    body = error(client, walk_chain(bones={"LeftLeg": {"lower": [-150.0], "upper": [0.0]}}))
+    assert body["field"] == "chain.bones.LeftLeg.lower" and "radians" in body["detail"]
+    body = error(client, walk_chain(bones={"LeftLeg": {"axes": "zy", "lower": [0.0]}}))
+    assert body["field"].startswith("chain.bones.LeftLeg"), body
+    body = error(client, walk_chain(bones={"LeftLeg": {"axes": "zz"}}))
+    assert body["field"] == "chain.bones.LeftLeg.axes", body
+
+
+def test_bad_bvh_names_the_line(client: TestClient) -> None:
+    text = EXAMPLE_BVH_LEG["bvh"].replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation", 1)
+    body = error(client, {**EXAMPLE_BVH_LEG, "bvh": text})
+    assert body["field"] == "chain.bvh" and "line 9" in body["detail"], body
+
+
+def test_bone_output_on_a_chain_without_bones_is_refused(client: TestClient) -> None:
+    body = error(client, {"format": "example", "name": "panda_arm"}, bones={"world": ["x"]})
+    assert body["field"] == "bones" and "gltf or bvh" in body["detail"]
+
+
+def test_a_skeleton_over_the_body_limit_is_413(make_client: Any) -> None:
+    from service.config import Settings
+
+    small = make_client(Settings(max_body_bytes=100_000))
+    r = small.post("/v1/sessions", json={"chain": glb_chain("CesiumMan.glb")})
+    assert r.status_code == 413 and r.json()["code"] == "payload_too_large"
+
+
+def test_a_gltf_document_with_an_embedded_buffer_and_a_skin_by_name(client: TestClient) -> None:
+    doc, bin_chunk = split_glb(asset_bytes("RiggedSimple.glb"))
+    doc["buffers"][0]["uri"] = (
+        "data:application/octet-stream;base64," + base64.b64encode(bin_chunk).decode()
+    )
+    chain = {"format": "gltf", "gltf": doc, "skin": "Armature", "effectors": [{"bone": "node_3"}]}
+    s = create(client, chain)
+    assert [d["name"] for d in s.body["dof"]][:3] == ["node_2.x", "node_2.y", "node_2.z"]
+    body = error(client, {**chain, "skin": "Armature.001"})
+    assert body["field"] == "chain.skin", body
+    doc["buffers"][0]["byteLength"] += 100  # longer than its data
+    body = error(client, {**chain, "gltf": doc})
+    assert body["field"].startswith("chain.gltf.buffers[0]"), body
+
+
+def test_translations_beyond_a_thousand_km_are_refused(client: TestClient) -> None:
+    bvh = EXAMPLE_BVH_LEG["bvh"].replace("OFFSET 10 0 0", "OFFSET 1e300 0 0")
+    body = error(client, {**EXAMPLE_BVH_LEG, "bvh": bvh})
+    assert body["field"] == "chain.bvh" and "LeftUpLeg" in body["detail"], body
+    chain = copy.deepcopy(EXAMPLE_GLTF_LEG)
+    chain["gltf"]["nodes"][1]["translation"] = [0.0, -1e7, 0.0]
+    body = error(client, chain)
+    assert body["field"] == "chain.gltf" and "knee" in body["detail"], body
