@@ -1,12 +1,19 @@
 """The compiled core: multi-pass projected BFGS under the analyzer, the whole solve in
 one call.
 
-A solve is a sequence of passes. A pass iterates ``check_termination`` (the stopping
-tests) / ``search_step`` (direction, step cap, line search) / the H update (BFGS, or
-the objective's own metric) until a test fires; then ``analyzer.decide`` turns the
-pass's termination code into the next action (accept, reset H, random restart, stop)
-and the pass is logged. The helpers are inlined into ``solve_passes`` (numba IR
-inlining), so the split costs nothing at run time.
+A solve is a sequence of passes. A pass iterates the stopping tests / the step
+(direction, step cap, ``line_search``) / the H update (BFGS, or the objective's own
+metric) until a test fires; then ``analyzer.decide`` turns the pass's termination code
+into the next action (accept, reset H, random restart, stop) and the pass is logged.
+The small helpers are inlined into ``solve_passes`` (numba IR inlining).
+
+The stopping tests and the step stay written out in the loop, not in helpers: as
+inlined helpers (a ``check_termination`` returning a code from six exits, a
+``search_step`` taking a tuple of six work rows and returning four values) they made
+LLVM allocate the loop's registers differently (more stack traffic in
+``run_solver_leaf``, the only function whose machine code differed from the commit
+before the layers; objective, kinematics and metric were byte for byte the same),
+and a tracking frame (~2.5 us) took ~3-4% longer in ``bench.ab_core``.
 
 Everything here runs inside numba (one implementation; with ``NUMBA_DISABLE_JIT=1``
 the same code runs as plain Python for debugging and coverage). The objective is a
@@ -85,68 +92,6 @@ def run_solver_leaf(  # type: ignore[no-untyped-def]
     return solve_passes(
         fg, data, x0, h, lo, hi, fopt, iopt, policy, log, trace, out_x, out_g, vectors, ints
     )
-
-
-@jit_inline
-def check_termination(  # type: ignore[no-untyped-def]
-    f, m, x, g, lo, hi, nit, nfev, has_goal, f_goal, gtol, max_iter, max_fev, deadline
-):
-    """The stopping tests at the top of every iteration: a termination code, or
-    RUNNING to go on. Order matters: a non-finite point is never judged further, and
-    a met goal wins over the budgets. Options come as scalars the caller read once."""
-    if not (math.isfinite(f) and all_finite(g)):
-        return C.NONFINITE
-    if has_goal and m <= f_goal:
-        return C.GOAL_REACHED
-    if projected_gradient_norm(x, g, lo, hi) <= gtol:
-        return C.GTOL
-    if nit >= max_iter:
-        return C.MAX_ITER
-    if nfev >= max_fev:
-        return C.MAX_FEV
-    if now_s() >= deadline:
-        return C.DEADLINE
-    return C.RUNNING
-
-
-@jit_inline
-def search_step(  # type: ignore[no-untyped-def]
-    fg, data, x, f, g, lo, hi, h, fopt, iopt, trial, counters, max_step, grad_at_trial
-):
-    """One iteration's move from x: the projected descent direction (steepest descent
-    if H has lost positive definiteness), capped to ``max_step`` per variable, and the
-    line search along it. Returns (line-search status, f at x+, lambda, whether H was
-    reset to I); x+ and its gradient are left in ``trial``'s x_new and g_new.
-
-    ``trial`` is (x_new, g_new, d, gm, work, keep), rows of the work block cut once
-    per solve; ``grad_at_trial``: the search evaluates f only (finite differences
-    without the curvature phase), so x+ needs its gradient here.
-    """
-    n = x.shape[0]
-    x_new, g_new, d, gm, work, keep = trial
-    reset = False
-    slope = descent_direction(h, g, x, lo, hi, d, gm)
-    if not (slope < 0.0):
-        # H lost positive definiteness numerically: fall back to steepest descent.
-        set_identity(h)
-        reset = True
-        slope = descent_direction(h, g, x, lo, hi, d, gm)
-    big = 0.0
-    for i in range(n):
-        if abs(d[i]) > big:
-            big = abs(d[i])
-    if big > max_step:
-        # Step cap (inf-norm: per variable, e.g. radians per joint).
-        scale = max_step / big
-        for i in range(n):
-            d[i] *= scale
-    status, f_trial, lam = line_search(
-        fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, work, counters, keep
-    )
-    if status == C.LS_ACCEPTED and grad_at_trial:
-        grad_mode = iopt[C.I_GRAD_MODE]
-        f_trial = evaluate(fg, data, x_new, g_new, True, grad_mode, lo, hi, work, counters)
-    return status, f_trial, lam, reset
 
 
 @jit_inline
@@ -296,7 +241,6 @@ def solve_passes(  # type: ignore[no-untyped-def]
     metric_every = iopt[C.I_METRIC_EVERY]
     metric_until = iopt[C.I_METRIC_UNTIL]
     final_metric = iopt[C.I_FINAL_METRIC] != 0
-    grad_at_trial = grad_mode != C.GRAD_ANALYTIC and iopt[C.I_CURVATURE] == 0
     gtol = fopt[C.F_GTOL]
     max_step = fopt[C.F_MAX_STEP]
     xtol = fopt[C.F_XTOL]
@@ -322,7 +266,10 @@ def solve_passes(  # type: ignore[no-untyped-def]
     y = vectors[7]
     hy = vectors[8]
     scratch = vectors[9]
-    trial = (x_new, g_new, vectors[4], vectors[5], scratch, vectors[10:12])
+    d = vectors[4]  # the search direction
+    gm = vectors[5]  # the gradient with held variables zeroed
+    keep = vectors[10:12]  # the curvature phase's kept point and gradient
+    n = x0.shape[0]
 
     project(x0, lo, hi, x)
     f = evaluate(fg, data, x, g, True, grad_mode, lo, hi, scratch, counters)
@@ -351,24 +298,59 @@ def solve_passes(  # type: ignore[no-untyped-def]
         nfev_pass_start = counters[0]
         began_fresh = h_fresh
         stall_count = 0
-        while True:
-            code = check_termination(
-                f, m, x, g, lo, hi, nit, counters[0], has_goal, f_goal, gtol, max_iter, max_fev,
-                deadline,
-            )  # fmt: skip
-            if code != C.RUNNING:
+        code = C.RUNNING
+        while code == C.RUNNING:
+            # The stopping tests. Order matters: a non-finite point is never judged
+            # further, and a met goal wins over the budgets.
+            if not (math.isfinite(f) and all_finite(g)):
+                code = C.NONFINITE
                 break
-            status, f_trial, lam, h_reset = search_step(
-                fg, data, x, f, g, lo, hi, h, fopt, iopt, trial, counters, max_step, grad_at_trial
-            )
-            if h_reset:
+            if has_goal and m <= f_goal:
+                code = C.GOAL_REACHED
+                break
+            if projected_gradient_norm(x, g, lo, hi) <= gtol:
+                code = C.GTOL
+                break
+            if nit >= max_iter:
+                code = C.MAX_ITER
+                break
+            if counters[0] >= max_fev:
+                code = C.MAX_FEV
+                break
+            if now_s() >= deadline:
+                code = C.DEADLINE
+                break
+            # The step: the projected descent direction, capped, and the line search.
+            slope = descent_direction(h, g, x, lo, hi, d, gm)
+            if not (slope < 0.0):
+                # H lost positive definiteness numerically: fall back to steepest descent.
+                set_identity(h)
                 h_is_identity = True
+                slope = descent_direction(h, g, x, lo, hi, d, gm)
+            big = 0.0
+            for i in range(n):
+                if abs(d[i]) > big:
+                    big = abs(d[i])
+            if big > max_step:
+                # Step cap (inf-norm: per variable, e.g. radians per joint).
+                scale = max_step / big
+                for i in range(n):
+                    d[i] *= scale
+            status, f_trial, lam = line_search(
+                fg, data, x, f, g, d, lo, hi, fopt, iopt, x_new, g_new, scratch, counters, keep
+            )
             if status == C.LS_BUDGET_SPENT:
                 code = C.MAX_FEV
                 break
             if status != C.LS_ACCEPTED:
                 code = C.LINE_SEARCH_FAILED
                 break
+            if grad_mode != C.GRAD_ANALYTIC and iopt[C.I_CURVATURE] == 0:
+                # The search evaluated f only (finite differences without the
+                # curvature phase): x+ needs its gradient.
+                f_trial = evaluate(
+                    fg, data, x_new, g_new, True, grad_mode, lo, hi, scratch, counters
+                )
             record_step(trace, nit, f, f_trial, lam, g, x, x_new, lo, hi)
             nit += 1
             pass_iters += 1
