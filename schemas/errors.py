@@ -36,6 +36,8 @@ class ErrorCode(enum.StrEnum):
     WARMUP_FAILED = "warmup_failed"
     PLANS_BUSY = "plans_busy"
     TOO_MANY_PLANS = "too_many_plans"
+    SERVER_BUSY = "server_busy"
+    TOO_MUCH_WORK = "too_much_work"
     TOO_MANY_WEBSOCKETS = "too_many_websockets"
     SLOW_READER = "slow_reader"
     SHUTTING_DOWN = "shutting_down"
@@ -87,6 +89,11 @@ ERROR_CODE_DESCRIPTIONS: dict[ErrorCode, str] = {
     "planned clips are already queued or running",
     ErrorCode.TOO_MANY_PLANS: "429 + Retry-After / WebSocket error message: this client holds "
     "half of IK_MAX_QUEUED_PLANS",
+    ErrorCode.SERVER_BUSY: "503 + Retry-After / WebSocket error message: IK_MAX_QUEUED_JOBS "
+    "jobs of this kind (chain builds, one-shot solves or pooled frames) are already queued "
+    "or running",
+    ErrorCode.TOO_MUCH_WORK: "429 + Retry-After / WebSocket error message: this client "
+    "(API key, else address) already has IK_MAX_CLIENT_WORK_S of pooled solving in flight",
     ErrorCode.TOO_MANY_WEBSOCKETS: "close 1013: IK_MAX_WEBSOCKETS are open; retry later",
     ErrorCode.SLOW_READER: "close 1008: the client did not read an answer for IK_WS_SEND_TIMEOUT_S",
     ErrorCode.SHUTTING_DOWN: "close 1012: the server is shutting down; reconnect",

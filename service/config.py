@@ -79,7 +79,31 @@ class Settings(BaseSettings):
         description="Solve inline on the event loop when frames x time_budget_us <= this [us]; "
         "otherwise in the solver thread pool",
     )
-    solver_threads: int = Field(default=2, ge=1, description="Solver thread-pool size")
+    solver_threads: int = Field(
+        default=2, ge=1, description="Threads for a session's frames too long to solve inline"
+    )
+    build_threads: int = Field(
+        default=1, ge=1, description="Threads for chain builds (POST /v1/sessions, /v1/solve)"
+    )
+    oneshot_threads: int = Field(default=1, ge=1, description="Threads for one-shot solves")
+    max_queued_jobs: int = Field(
+        default=64,
+        ge=1,
+        description="Jobs of one kind (chain builds, one-shot solves, pooled frames) queued "
+        "or running at once; more get 503 server_busy",
+    )
+    max_request_work_s: float = Field(
+        default=2.0,
+        gt=0,
+        description="Largest worst case of one request, frames x time_budget_us, "
+        "solved in order (422 invalid_problem, field frames) [s]",
+    )
+    max_client_work_s: float = Field(
+        default=4.0,
+        gt=0,
+        description="Worst case of pooled frames one client (API key, else address) may "
+        "have queued or running (429 too_much_work) [s]",
+    )
     compile_processes: int = Field(
         default=2,
         ge=1,

@@ -22,6 +22,8 @@ not_ready            503    error message (solver still warming up) (+ Retry-Aft
 warmup_failed        503    -- (/readyz only)
 plans_busy           503    error message (IK_MAX_QUEUED_PLANS planned clips already queued)
 too_many_plans       429    error message (this client holds half of IK_MAX_QUEUED_PLANS)
+server_busy          503    error message (IK_MAX_QUEUED_JOBS of one kind of work queued)
+too_much_work        429    error message (this client's IK_MAX_CLIENT_WORK_S in flight)
 too_many_websockets  --     close 1013 (try again later)
 slow_reader          --     close 1008 (the client stopped reading its answers)
 shutting_down        --     close 1012 (the server is shutting down)

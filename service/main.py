@@ -79,6 +79,11 @@ def create_app(
             max_frames_per_s=settings.max_frames_per_s,
             max_frames_per_request=settings.max_frames_per_request,
             max_queued_plans=settings.max_queued_plans,
+            build_threads=settings.build_threads,
+            oneshot_threads=settings.oneshot_threads,
+            max_queued_jobs=settings.max_queued_jobs,
+            max_request_work_s=settings.max_request_work_s,
+            max_client_work_s=settings.max_client_work_s,
         )
         app.state.ik = Services(
             settings=settings,

@@ -23,7 +23,8 @@ from ..errors import ServiceError, not_found
 from ..middleware import received_at
 from ..responses import ORJSONResponse
 from ..sessions import OwnerFull, Session, SessionStore, StoreFull, new_session
-from ..solving import make_solver, solve_once
+from ..solving import make_solver, session_client, solve_once
+from ..work import WorkClass
 
 router = APIRouter(prefix="/v1")
 
@@ -184,9 +185,9 @@ async def create_session(
     """Create a session: a chain, solver options and an optional initial pose."""
     svc.runner.check_ready()
     settings = svc.settings
-    view = await svc.runner.in_pool(convert.chain_from_spec, body.chain, settings)
+    view = await svc.runner.run(WorkClass.BUILD, convert.chain_from_spec, body.chain, settings)
     options = convert.apply_options(body.options, convert.session_defaults(settings), settings)
-    solver = await svc.runner.in_pool(make_solver, view, options)
+    solver = await svc.runner.run(WorkClass.BUILD, make_solver, view, options)
     if body.initial_pose is not None:
         solver.set_pose(convert.pose_vector(body.initial_pose, view, solver.q, "initial_pose"))
     session, token = new_session(view, solver, options, now=svc.store.clock(), owner=owner)
@@ -309,7 +310,9 @@ async def post_frames(
         solved, planned = await svc.runner.session_plan(session, svc.store, jobs, t0, "http")
         results = convert.render_frames(solved, build)
         return ORJSONResponse({"results": results, "plan": convert.plan_summary(planned)})
-    solved = await svc.runner.session_frames(session, svc.store, jobs, t0, "http")
+    peer = request.client.host if request.client else None
+    client = session_client(session, peer)
+    solved = await svc.runner.session_frames(session, svc.store, jobs, t0, "http", client)
     return ORJSONResponse({"results": convert.render_frames(solved, build)})
 
 
@@ -326,12 +329,14 @@ async def solve(
     t0 = received_at(request)
     svc.runner.check_ready()
     settings = svc.settings
-    view = await svc.runner.in_pool(convert.chain_from_spec, body.chain, settings)
+    view = await svc.runner.run(WorkClass.BUILD, convert.chain_from_spec, body.chain, settings)
     options = convert.apply_options(body.options, convert.oneshot_defaults(settings), settings)
     targets = convert.targets(body.targets, view, "targets")
     seed = None
     if body.seed is not None:
         seed = convert.pose_vector(body.seed, view, view.mid_limits, "seed")
-    solved = await svc.runner.in_pool(solve_once, view, targets, seed, options, body.id, t0)
+    solved = await svc.runner.run(
+        WorkClass.SOLVE, solve_once, view, targets, seed, options, body.id, t0
+    )
     svc.metrics.frame(solved.result, solved.server_us * 1e-6, "http")
     return ORJSONResponse(convert.result_dict(solved.result, solved.frame_id, solved.server_us))

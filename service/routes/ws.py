@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import time
 from typing import Annotated, Any
@@ -52,6 +53,7 @@ from ..errors import (
     validation_errors,
 )
 from ..sessions import Session
+from ..solving import session_client
 from .ws_messages import clip_result_message, error_message, pong_message, result_message
 
 log = logging.getLogger("service")
@@ -116,6 +118,12 @@ class _Connection:
         self._sending_since: float | None = None  # loop.time() when a send started
         self._timed_out = False
         self._watch: asyncio.TimerHandle | None = None
+
+    @functools.cached_property
+    def client(self) -> str:
+        """Whom this socket's pooled work counts against (service/work.py)."""
+        peer = self.ws.client.host if self.ws.client else None
+        return session_client(self.session, peer)
 
     def start_watch(self) -> None:
         """Arm the send watchdog: one timer per connection, not one per send."""
@@ -260,7 +268,7 @@ class _Connection:
     async def frame(self, msg_id: int, targets: list[SolverTarget], t0: float) -> dict[str, Any]:
         """Solve one valid frame (from the fast path, or validated by pydantic)."""
         (solved,) = await self.svc.runner.session_frames(
-            self.session, self.svc.store, [(msg_id, targets)], t0, "ws"
+            self.session, self.svc.store, [(msg_id, targets)], t0, "ws", self.client
         )
         return result_message(msg_id, self.build(solved.result, msg_id, solved.server_us))
 
@@ -277,7 +285,9 @@ class _Connection:
             )
             plan = convert.plan_summary(planned)
         else:
-            solved = await runner.session_frames(self.session, self.svc.store, jobs, t0, "ws")
+            solved = await runner.session_frames(
+                self.session, self.svc.store, jobs, t0, "ws", self.client
+            )
         return clip_result_message(msg.id, convert.render_frames(solved, self.build), plan)
 
 

@@ -42,7 +42,7 @@ def test_frames_run_inline_or_in_the_pool(
     r = client.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(1), headers=s.headers)
     assert r.status_code == 200
     (name,) = threads
-    assert name.startswith("ik-solve") is not inline
+    assert name.startswith("ik-frames") is not inline
 
 
 def test_inline_rule_is_frames_times_budget() -> None:
