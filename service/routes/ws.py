@@ -52,6 +52,7 @@ from ..errors import (
     solver_error,
     validation_errors,
 )
+from ..responses import dumps_message, packb_message
 from ..sessions import Session
 from ..solving import session_client
 from .ws_messages import clip_result_message, error_message, pong_message, result_message
@@ -165,9 +166,9 @@ class _Connection:
         self._sending_since = self._loop.time()
         try:
             if binary:
-                await self.ws.send_bytes(msgpack.packb(payload))
+                await self.ws.send_bytes(packb_message(payload))
             else:
-                await self.ws.send_text(orjson.dumps(payload).decode())
+                await self.ws.send_text(dumps_message(payload))
         except asyncio.CancelledError:
             task = self._task
             if self._timed_out and task is not None and task.uncancel() == 0:
