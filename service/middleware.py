@@ -51,18 +51,27 @@ class TimingAndLimits:
                     return
         seen = 0
         started = False
+        refused = False
 
         async def limited_receive() -> Message:
-            nonlocal seen
+            nonlocal seen, refused
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
                 if seen > limit:
+                    # A chunked body (no Content-Length) is over the limit only once
+                    # read: answer 413 here. The app turns the exception below into a
+                    # 422 of its own ("error parsing the body"), which is dropped.
+                    if not started and not refused:
+                        refused = True
+                        await _too_large(send, limit)
                     raise _BodyTooLarge
             return message
 
         async def tracking_send(message: Message) -> None:
             nonlocal started
+            if refused:
+                return
             if message["type"] == "http.response.start":
                 started = True
             await send(message)
@@ -70,7 +79,7 @@ class TimingAndLimits:
         try:
             await self.app(scope, limited_receive, tracking_send)
         except _BodyTooLarge:
-            if not started:
+            if not started and not refused:
                 await _too_large(send, limit)
 
 

@@ -296,12 +296,19 @@ class _Connection:
 async def session_ws(
     ws: WebSocket,
     session_id: str,
-    results: Annotated[S.ResultView, Query()] = S.ResultView.FULL,
+    results: Annotated[str, Query()] = S.ResultView.FULL.value,
 ) -> None:
     """Frames over a WebSocket (protocol in docs/websocket.md); ``?results=compact`` answers
-    with CompactFrameResults. A bad ``results`` value closes 1008 (FastAPI's check)."""
+    with CompactFrameResults. A bad ``results`` value closes 1008 ``invalid_format``:
+    checked here, after the handshake, because FastAPI's own check refuses the handshake
+    (HTTP 403), which browsers report as a bare network error."""
     svc = services(ws)
     await ws.accept(subprotocol=websocket_subprotocol(ws))
+    try:
+        view = S.ResultView(results)
+    except ValueError:
+        await _close(ws, svc, status.WS_1008_POLICY_VIOLATION, ErrorCode.INVALID_FORMAT)
+        return
     if not origin_allowed(ws, svc.settings.cors_origin_list()):
         await _close(ws, svc, WS_FORBIDDEN, ErrorCode.FORBIDDEN_ORIGIN)
         return
@@ -323,7 +330,7 @@ async def session_ws(
     svc.metrics.websockets.inc()
     session.websockets += 1
     try:
-        frame_loop = _serve(ws, svc, session, convert.result_builder(results))
+        frame_loop = _serve(ws, svc, session, convert.result_builder(view))
         await asyncio.create_task(frame_loop, name="ws-frame-loop")
     finally:
         session.websockets -= 1
