@@ -76,12 +76,14 @@ ERROR_CODE_DESCRIPTIONS: dict[ErrorCode, str] = {
     ErrorCode.METHOD_NOT_ALLOWED: "405: the path has no such method (`Allow` lists them)",
     ErrorCode.HTTP_ERROR: "any other HTTP error status the framework raises (no route "
     "raises one today)",
-    ErrorCode.PAYLOAD_TOO_LARGE: "413 / close 1009: body over IK_MAX_BODY_BYTES, message over "
+    ErrorCode.PAYLOAD_TOO_LARGE: "413 / 431 / close 1009: body over IK_MAX_BODY_BYTES, "
+    "headers over IK_MAX_HEADER_BYTES or IK_MAX_HEADERS, message over "
     "IK_WS_MAX_MESSAGE_BYTES",
     ErrorCode.TOO_MANY_SESSIONS: "503 + Retry-After: the session cap is reached",
     ErrorCode.KEY_SESSION_LIMIT: "429: this API key holds IK_MAX_SESSIONS_PER_KEY sessions",
     ErrorCode.RATE_LIMITED: "429 + Retry-After / WebSocket error message: more than "
-    "IK_MAX_FRAMES_PER_S frames per second on this session",
+    "IK_MAX_FRAMES_PER_S frames per second on this session; or, without API keys, "
+    "IK_SESSIONS_PER_ADDRESS_PER_MIN sessions created from one address",
     ErrorCode.NOT_READY: "503 + Retry-After / WebSocket error message: the solver is still "
     "warming up",
     ErrorCode.WARMUP_FAILED: "503 from /readyz: the solver's warm-up failed (the detail says why)",

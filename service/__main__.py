@@ -18,6 +18,7 @@ import uvicorn  # noqa: E402
 
 from .config import get_settings  # noqa: E402
 from .main import create_app  # noqa: E402
+from .peer_limits import PeerLimits, protocols  # noqa: E402
 
 _TOKEN = re.compile(r"(token=)[^&\s\"]+")
 
@@ -70,12 +71,26 @@ def main() -> None:
         settings.port,
     )
     app = create_app(settings)
+    http_protocol, ws_protocol = protocols(
+        PeerLimits(
+            max_header_bytes=settings.max_header_bytes,
+            max_headers=settings.max_headers,
+            header_timeout_s=settings.header_timeout_s,
+            body_timeout_s=settings.body_timeout_s,
+            max_connections_per_address=settings.max_connections_per_address or 2**62,
+            ws_max_write_buffer_bytes=settings.ws_max_write_buffer_bytes,
+        )
+    )
     config = uvicorn.Config(
         app,
         host=settings.host,
         port=settings.port,
-        ws="websockets-sansio",
+        http=http_protocol,  # httptools, with limits on headers and slow peers
+        ws=ws_protocol,  # websockets-sansio, with a bound on unread pongs
         ws_max_size=settings.ws_max_message_bytes,
+        ws_ping_interval=settings.ws_ping_interval_s,
+        ws_ping_timeout=settings.ws_ping_timeout_s,
+        timeout_keep_alive=settings.keep_alive_s,
         timeout_graceful_shutdown=settings.graceful_shutdown_s,
         log_level=settings.log_level,
         log_config=None,

@@ -16,6 +16,7 @@ from starlette.requests import HTTPConnection
 from .auth import API_KEY_HEADER, NOT_BEARER, authenticate, check_api_key, unauthorized
 from .config import Settings
 from .metrics import Metrics
+from .session_starts import SessionStarts
 from .sessions import Session, SessionStore
 from .solving import Runner
 
@@ -29,6 +30,7 @@ class Services:
     metrics: Metrics
     runner: Runner
     api_keys: tuple[bytes, ...] = ()
+    session_starts: SessionStarts | None = None  # per address, when there are no API keys
     open_websockets: int = 0
     ws_in_flight: int = 0  # WebSocket messages received and not yet answered
     draining: bool = False  # set on SIGTERM (python -m service): answer, then close 1012

@@ -14,7 +14,7 @@ forbidden_origin     --     close 4403 (a browser Origin not in IK_CORS_ORIGINS)
 not_found            404    close 4404 (no such session, or it expired / was deleted)
 method_not_allowed   405    --
 http_error           other  -- (any other status the framework raises; none today)
-payload_too_large    413    close 1009 (message larger than IK_WS_MAX_MESSAGE_BYTES)
+payload_too_large    413    close 1009 (message larger than IK_WS_MAX_MESSAGE_BYTES); 431 headers
 too_many_sessions    503    -- (+ Retry-After)
 key_session_limit    429    --
 rate_limited         429    error message (+ Retry-After / retry_after_s)

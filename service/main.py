@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
@@ -24,6 +25,7 @@ from .middleware import TimingAndLimits
 from .responses import ORJSONResponse
 from .routes import health, http, ws
 from .routes.docs import add_docs
+from .session_starts import SessionStarts
 from .sessions import InMemorySessionStore, SessionStore
 from .solving import Runner, Warmup, WarmupFn, default_warmup
 
@@ -91,6 +93,7 @@ def create_app(
             metrics=metrics,
             runner=runner,
             api_keys=settings.api_key_list(),
+            session_starts=SessionStarts(settings.sessions_per_address_per_min, time.monotonic),
         )
         warm.start()
         sweeper = asyncio.create_task(_sweep(sessions, metrics, settings.sweep_interval_s))

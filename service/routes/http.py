@@ -49,7 +49,12 @@ _KEY_ERRORS: dict[int | str, dict[str, Any]] = {
     403: {**_E, "description": "Unknown API key (`forbidden`)"},
 }
 _429_KEY: dict[int | str, dict[str, Any]] = {
-    429: {**_E, "description": "This API key holds its maximum of sessions (`key_session_limit`)"}
+    429: {
+        **_E,
+        "description": "This API key holds its maximum of sessions (`key_session_limit`), "
+        "or, without API keys, this address created IK_SESSIONS_PER_ADDRESS_PER_MIN in "
+        "the last minute (`rate_limited`, Retry-After)",
+    }
 }
 _429_RATE: dict[int | str, dict[str, Any]] = {
     429: {
@@ -179,11 +184,23 @@ def _session_info(session: Session, store: SessionStore) -> dict[str, Any]:
 )
 async def create_session(
     body: Annotated[S.SessionCreate, Body(openapi_examples=_CREATE_EXAMPLES)],
+    request: Request,
     svc: ServicesDep,
     owner: OwnerDep,
 ) -> Response:
     """Create a session: a chain, solver options and an optional initial pose."""
     svc.runner.check_ready()
+    if owner is None and svc.session_starts is not None:  # no API keys: per address
+        address = request.client.host if request.client else ""
+        wait_s = svc.session_starts.take(address)
+        if wait_s > 0:
+            raise ServiceError(
+                ErrorCode.RATE_LIMITED,
+                f"this address created {svc.settings.sessions_per_address_per_min:g} sessions "
+                "in the last minute (IK_SESSIONS_PER_ADDRESS_PER_MIN); reuse one, or wait",
+                status_code=status.HTTP_429_TOO_MANY_REQUESTS,
+                retry_after_s=wait_s,
+            )
     settings = svc.settings
     view = await svc.runner.run(WorkClass.BUILD, convert.chain_from_spec, body.chain, settings)
     options = convert.apply_options(body.options, convert.session_defaults(settings), settings)

@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from starlette.testclient import TestClient
 
 from schemas.chain import EXAMPLE_ARM
+from service.config import Settings
 
 from .helpers import create, hand_frame
 
@@ -106,7 +107,8 @@ def _answered_clearly(status: int, body: bytes) -> None:
 
 @pytest.fixture
 def client(make_client: Callable[..., TestClient]) -> TestClient:
-    return make_client()
+    # Each example creates a session: more than one address may create per minute.
+    return make_client(Settings(sessions_per_address_per_min=0))
 
 
 @settings_

@@ -13,6 +13,7 @@ import httpx
 import pytest
 from starlette.testclient import TestClient
 
+from schemas.chain import EXAMPLE_ARM
 from service import solving
 from service.config import Settings
 
@@ -108,3 +109,24 @@ def test_pooled_frames_beyond_the_queue_get_server_busy(
         assert r.headers["Retry-After"] == "1"
         stalled_frames.set()
         assert busy.result(timeout=WAIT_S).status_code == 200
+
+
+def test_without_api_keys_one_address_creates_a_bounded_number_of_sessions_per_minute(
+    make_client: Callable[..., TestClient],
+) -> None:
+    client = make_client(Settings(sessions_per_address_per_min=3))
+    for _ in range(3):
+        create(client)
+    r = client.post("/v1/sessions", json={"chain": {"format": "example", "name": "panda_arm"}})
+    assert r.status_code == 429 and r.json()["code"] == "rate_limited"
+    assert 1 <= int(r.headers["Retry-After"]) <= 20  # one session's worth: 20 s at 3/min
+    assert "IK_SESSIONS_PER_ADDRESS_PER_MIN" in r.json()["detail"]
+
+
+def test_with_api_keys_the_per_key_cap_applies_instead(
+    make_client: Callable[..., TestClient],
+) -> None:
+    client = make_client(Settings(sessions_per_address_per_min=1, api_keys="k1"))
+    for _ in range(3):
+        r = client.post("/v1/sessions", json={"chain": EXAMPLE_ARM}, headers={"X-API-Key": "k1"})
+        assert r.status_code == 201, r.text
