@@ -98,7 +98,8 @@ ERROR_CODE_DESCRIPTIONS: dict[ErrorCode, str] = {
     "(API key, else address) already has IK_MAX_CLIENT_WORK_S of pooled solving in flight",
     ErrorCode.TOO_MANY_WEBSOCKETS: "close 1013: IK_MAX_WEBSOCKETS are open; retry later",
     ErrorCode.SLOW_READER: "close 1008: the client did not read an answer for IK_WS_SEND_TIMEOUT_S",
-    ErrorCode.SHUTTING_DOWN: "close 1012: the server is shutting down; reconnect",
+    ErrorCode.SHUTTING_DOWN: "503 + Retry-After / WebSocket error message, then close 1012: "
+    "the server is shutting down before it answered; retry, or reconnect",
     ErrorCode.INTERNAL_ERROR: "500 / WebSocket error message then close 1011: a bug (logged "
     "once with its traceback)",
 }

@@ -8,6 +8,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import asyncio  # noqa: E402
+import contextlib  # noqa: E402
 import logging  # noqa: E402
 import re  # noqa: E402
 import socket  # noqa: E402
@@ -54,6 +55,10 @@ class DrainingServer(uvicorn.Server):
             deadline = time.monotonic() + float(self.config.timeout_graceful_shutdown or 0)
             while svc.ws_in_flight > 0 and time.monotonic() < deadline:
                 await asyncio.sleep(0.005)
+            # Messages still being solved get an error they can act on before 1012.
+            for reply in list(svc.shutdown_replies):
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(reply(), 1.0)
         await super().shutdown(sockets)
 
 

@@ -26,7 +26,7 @@ server_busy          503    error message (IK_MAX_QUEUED_JOBS of one kind of wor
 too_much_work        429    error message (this client's IK_MAX_CLIENT_WORK_S in flight)
 too_many_websockets  --     close 1013 (try again later)
 slow_reader          --     close 1008 (the client stopped reading its answers)
-shutting_down        --     close 1012 (the server is shutting down)
+shutting_down        503    error message, then close 1012 (the server is shutting down)
 internal_error       500    error message, then close 1011
 ==================== ====== =====================================================
 

@@ -7,6 +7,7 @@ stream per request and does not buffer the body.
 
 from __future__ import annotations
 
+import asyncio
 import time
 
 from starlette import status
@@ -81,6 +82,20 @@ class TimingAndLimits:
         except _BodyTooLarge:
             if not started and not refused:
                 await _too_large(send, limit)
+        except asyncio.CancelledError:
+            # uvicorn cancels what is still running when IK_GRACEFUL_SHUTDOWN_S is over,
+            # and answers a cancelled request with a plain-text 500 of its own: answer
+            # first, with what a client can act on (another replica, or a retry).
+            if not started and not refused:
+                await _error(
+                    send,
+                    status.HTTP_503_SERVICE_UNAVAILABLE,
+                    ErrorCode.SHUTTING_DOWN,
+                    "the server is shutting down; retry (another replica, or this one "
+                    "once restarted)",
+                    [(b"retry-after", b"1")],
+                )
+            raise
 
 
 class _BodyTooLarge(Exception):
@@ -88,19 +103,27 @@ class _BodyTooLarge(Exception):
 
 
 async def _too_large(send: Send, limit: int) -> None:
-    body = dumps(
-        {
-            "detail": f"body larger than {limit} bytes (IK_MAX_BODY_BYTES)",
-            "code": ErrorCode.PAYLOAD_TOO_LARGE,
-        }
-    )
+    detail = f"body larger than {limit} bytes (IK_MAX_BODY_BYTES)"
+    await _error(send, status.HTTP_413_CONTENT_TOO_LARGE, ErrorCode.PAYLOAD_TOO_LARGE, detail)
+
+
+async def _error(
+    send: Send,
+    status_code: int,
+    code: ErrorCode,
+    detail: str,
+    headers: list[tuple[bytes, bytes]] | None = None,
+) -> None:
+    """A whole JSON error response, as ``errors.ServiceError`` renders one."""
+    body = dumps({"detail": detail, "code": code})
     await send(
         {
             "type": "http.response.start",
-            "status": status.HTTP_413_CONTENT_TOO_LARGE,
+            "status": status_code,
             "headers": [
                 (b"content-type", b"application/json"),
                 (b"content-length", str(len(body)).encode()),
+                *(headers or []),
             ],
         }
     )

@@ -252,19 +252,42 @@ class _Connection:
             await self.send(self.error_reply(msg_id, ErrorCode.ID_REUSE, message, "id"), binary)
             return
         self.last_id = msg_id
+        if isinstance(msg, S.PingMessage):
+            await self.send(pong_message(msg_id), binary)
+            return
+        answered_by_shutdown = False
+
+        async def shutdown_reply() -> None:
+            """The answer when the server stops before this message is solved."""
+            nonlocal answered_by_shutdown
+            answered_by_shutdown = True
+            reply = self.error_reply(
+                msg_id,
+                ErrorCode.SHUTTING_DOWN,
+                "the server is shutting down before this message was solved; send it again "
+                "after reconnecting (another replica, or this one once restarted)",
+                retry_after_s=1.0,
+            )
+            if binary:
+                await self.ws.send_bytes(packb_message(reply))
+            else:
+                await self.ws.send_text(dumps_message(reply))
+
+        self.svc.shutdown_replies.add(shutdown_reply)
         try:
             if isinstance(msg, tuple):  # the fast path's (id, targets)
                 reply = await self.frame(msg_id, msg[1], t0)
             elif isinstance(msg, S.FrameMessage):
                 targets = convert.targets(msg.targets, self.session.view, "targets")
                 reply = await self.frame(msg_id, targets, t0)
-            elif isinstance(msg, S.ClipMessage):
-                reply = await self.clip(msg, t0)
             else:
-                reply = pong_message(msg_id)
+                reply = await self.clip(msg, t0)
         except (ServiceError, IKError) as e:
             reply = self.exception_reply(msg_id, e)
-        await self.send(reply, binary)
+        finally:
+            self.svc.shutdown_replies.discard(shutdown_reply)
+        if not answered_by_shutdown:
+            await self.send(reply, binary)
 
     async def frame(self, msg_id: int, targets: list[SolverTarget], t0: float) -> dict[str, Any]:
         """Solve one valid frame (from the fast path, or validated by pydantic)."""
