@@ -84,6 +84,7 @@ def main() -> None:
             body_timeout_s=settings.body_timeout_s,
             max_connections_per_address=settings.max_connections_per_address or 2**62,
             ws_max_write_buffer_bytes=settings.ws_max_write_buffer_bytes,
+            ws_max_pings_per_s=settings.ws_max_pings_per_s,
         )
     )
     config = uvicorn.Config(

@@ -61,6 +61,11 @@ class Settings(BaseSettings):
     ws_ping_timeout_s: float = Field(
         default=20.0, gt=0, description="A WebSocket whose pong is this late is closed [s]"
     )
+    ws_max_pings_per_s: int = Field(
+        default=50,
+        ge=1,
+        description="WebSocket ping frames a client may send per second; more drops the connection",
+    )
     ws_max_write_buffer_bytes: int = Field(
         default=1_048_576,
         ge=65_536,

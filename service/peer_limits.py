@@ -39,6 +39,7 @@ class PeerLimits:
     body_timeout_s: float
     max_connections_per_address: int
     ws_max_write_buffer_bytes: int
+    ws_max_pings_per_s: int
 
 
 @dataclass(slots=True)
@@ -202,6 +203,8 @@ def protocols(limits: PeerLimits) -> tuple[type[asyncio.Protocol], type[asyncio.
         """websockets-sansio that drops a client whose unread pongs pass the limit."""
 
         _address = ""
+        _pings = 0
+        _pings_since = 0.0
 
         def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
             super().connection_made(transport)
@@ -213,8 +216,16 @@ def protocols(limits: PeerLimits) -> tuple[type[asyncio.Protocol], type[asyncio.
             super().connection_lost(exc)
 
         def handle_ping(self) -> None:
-            if self.transport.get_write_buffer_size() > limits.ws_max_write_buffer_bytes:
-                log.info("dropped a WebSocket from %s: it does not read its pongs", self._address)
+            now = self.loop.time()
+            if now - self._pings_since >= 1.0:
+                self._pings_since, self._pings = now, 0
+            self._pings += 1
+            # Each ping is parsed and answered on the loop: a flood of them (thousands
+            # per read) held every other client for hundreds of milliseconds.
+            flood = self._pings > limits.ws_max_pings_per_s
+            if flood or self.transport.get_write_buffer_size() > limits.ws_max_write_buffer_bytes:
+                why = "pings too often" if flood else "does not read its pongs"
+                log.info("dropped a WebSocket from %s: it %s", self._address, why)
                 self.transport.abort()
                 return
             super().handle_ping()
