@@ -212,6 +212,7 @@ class Runner:
         t0: float,
         transport: str,
         client: str | None = None,
+        may_inline: bool = True,
     ) -> list[SolvedFrame]:
         """Solve a session's frames in order, each warm-started from the previous answer.
 
@@ -222,7 +223,7 @@ class Runner:
         """
         client = client or session_client(session)
         out, _ = await self._under_lock(
-            session, store, jobs, t0, transport, plan=False, client=client
+            session, store, jobs, t0, transport, plan=False, client=client, may_inline=may_inline
         )
         return out
 
@@ -283,6 +284,7 @@ class Runner:
         plan: bool,
         on_submit: Callable[[asyncio.Future[Any]], None] | None = None,
         client: str = "",
+        may_inline: bool = True,
     ) -> tuple[list[SolvedFrame], PlannedPath | None]:
         self.check_ready()
         wait_s = session.take_frames(
@@ -300,7 +302,7 @@ class Runner:
             work: Callable[..., tuple[list[SolvedFrame], PlannedPath | None]] = (
                 _plan_all if plan else _track_all
             )
-            if not plan and self.inline(len(jobs), options):
+            if not plan and may_inline and self.inline(len(jobs), options):
                 out = work(session, jobs, options, t0, metrics.frames, transport)
             elif not plan:
                 # Admitted before any state changes: a refusal leaves the lock free.
