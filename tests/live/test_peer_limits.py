@@ -30,6 +30,8 @@ LIMITS = {
     "IK_BODY_TIMEOUT_S": str(BODY_TIMEOUT_S),
     "IK_MAX_CONNECTIONS_PER_ADDRESS": str(MAX_CONNECTIONS),
     "IK_WS_MAX_WRITE_BUFFER_BYTES": "65536",
+    # High, so that the unread-pong bound is what drops the ping flood below.
+    "IK_WS_MAX_PINGS_PER_S": "1000000",
 }
 # What "within the configured timeout" allows for a loaded, noisy machine.
 SLACK_S = 3.0
@@ -146,12 +148,10 @@ def test_connections_per_address_are_capped(
         pytest.fail("no new connection accepted after the others closed")
 
 
-def test_a_client_that_pings_and_never_reads_is_dropped(
-    limited: Server, connect: Callable[[], socket.socket]
-) -> None:
-    sid, headers = session(limited)
-    s = connect()
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+def _upgraded(server: Server, s: socket.socket) -> None:
+    """A WebSocket handshake by hand on ``s`` (a client library would read in the
+    background; these clients never read)."""
+    sid, headers = session(server)
     key = base64.b64encode(os.urandom(16))
     s.sendall(
         b"GET /v1/sessions/%s/ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\n"
@@ -160,6 +160,14 @@ def test_a_client_that_pings_and_never_reads_is_dropped(
     )
     status, _ = _response(s)
     assert status == 101
+
+
+def test_a_client_that_pings_and_never_reads_is_dropped(
+    limited: Server, connect: Callable[[], socket.socket]
+) -> None:
+    s = connect()
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    _upgraded(limited, s)
     ping = Frame(Opcode.PING, b"p" * 125).serialize(mask=True)
     batch = ping * 1000  # 131 kB of pings: 127 kB of pongs the client never reads
     sent = 0
@@ -168,3 +176,12 @@ def test_a_client_that_pings_and_never_reads_is_dropped(
             s.sendall(batch)
             sent += len(batch)
     assert sent < 40_000_000, f"{sent} bytes of pings before the drop"
+
+
+def test_a_client_that_pings_too_often_is_dropped(start_server: Callable[..., Server]) -> None:
+    server = start_server(IK_WS_MAX_PINGS_PER_S="20")
+    s = socket.create_connection(("127.0.0.1", server.port), timeout=TIMEOUT_S)
+    with s:
+        _upgraded(server, s)
+        s.sendall(Frame(Opcode.PING, b"p").serialize(mask=True) * 21)
+        assert _closed_within(s, TIMEOUT_S) < TIMEOUT_S
