@@ -118,6 +118,10 @@ class ServiceProcess:
             "IK_HOST": "127.0.0.1",
             "IK_PORT": str(self.port),
             "PYTHONUNBUFFERED": "1",
+            # Every load-test client comes from 127.0.0.1: the per-address limits would
+            # count them as one client (tests of those limits set them back).
+            "IK_MAX_CONNECTIONS_PER_ADDRESS": "0",
+            "IK_SESSIONS_PER_ADDRESS_PER_MIN": "0",
             **(env or {}),
         }
         self._log = open(log_path, "wb") if log_path else None  # noqa: SIM115 (closed in stop)

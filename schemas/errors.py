@@ -36,6 +36,8 @@ class ErrorCode(enum.StrEnum):
     WARMUP_FAILED = "warmup_failed"
     PLANS_BUSY = "plans_busy"
     TOO_MANY_PLANS = "too_many_plans"
+    SERVER_BUSY = "server_busy"
+    TOO_MUCH_WORK = "too_much_work"
     TOO_MANY_WEBSOCKETS = "too_many_websockets"
     SLOW_READER = "slow_reader"
     SHUTTING_DOWN = "shutting_down"
@@ -74,12 +76,14 @@ ERROR_CODE_DESCRIPTIONS: dict[ErrorCode, str] = {
     ErrorCode.METHOD_NOT_ALLOWED: "405: the path has no such method (`Allow` lists them)",
     ErrorCode.HTTP_ERROR: "any other HTTP error status the framework raises (no route "
     "raises one today)",
-    ErrorCode.PAYLOAD_TOO_LARGE: "413 / close 1009: body over IK_MAX_BODY_BYTES, message over "
+    ErrorCode.PAYLOAD_TOO_LARGE: "413 / 431 / close 1009: body over IK_MAX_BODY_BYTES, "
+    "headers over IK_MAX_HEADER_BYTES or IK_MAX_HEADERS, message over "
     "IK_WS_MAX_MESSAGE_BYTES",
     ErrorCode.TOO_MANY_SESSIONS: "503 + Retry-After: the session cap is reached",
     ErrorCode.KEY_SESSION_LIMIT: "429: this API key holds IK_MAX_SESSIONS_PER_KEY sessions",
     ErrorCode.RATE_LIMITED: "429 + Retry-After / WebSocket error message: more than "
-    "IK_MAX_FRAMES_PER_S frames per second on this session",
+    "IK_MAX_FRAMES_PER_S frames per second on this session; or, without API keys, "
+    "IK_SESSIONS_PER_ADDRESS_PER_MIN sessions created from one address",
     ErrorCode.NOT_READY: "503 + Retry-After / WebSocket error message: the solver is still "
     "warming up",
     ErrorCode.WARMUP_FAILED: "503 from /readyz: the solver's warm-up failed (the detail says why)",
@@ -87,9 +91,15 @@ ERROR_CODE_DESCRIPTIONS: dict[ErrorCode, str] = {
     "planned clips are already queued or running",
     ErrorCode.TOO_MANY_PLANS: "429 + Retry-After / WebSocket error message: this client holds "
     "half of IK_MAX_QUEUED_PLANS",
+    ErrorCode.SERVER_BUSY: "503 + Retry-After / WebSocket error message: IK_MAX_QUEUED_JOBS "
+    "jobs of this kind (chain builds, one-shot solves or pooled frames) are already queued "
+    "or running",
+    ErrorCode.TOO_MUCH_WORK: "429 + Retry-After / WebSocket error message: this client "
+    "(API key, else address) already has IK_MAX_CLIENT_WORK_S of pooled solving in flight",
     ErrorCode.TOO_MANY_WEBSOCKETS: "close 1013: IK_MAX_WEBSOCKETS are open; retry later",
     ErrorCode.SLOW_READER: "close 1008: the client did not read an answer for IK_WS_SEND_TIMEOUT_S",
-    ErrorCode.SHUTTING_DOWN: "close 1012: the server is shutting down; reconnect",
+    ErrorCode.SHUTTING_DOWN: "503 + Retry-After / WebSocket error message, then close 1012: "
+    "the server is shutting down before it answered; retry, or reconnect",
     ErrorCode.INTERNAL_ERROR: "500 / WebSocket error message then close 1011: a bug (logged "
     "once with its traceback)",
 }

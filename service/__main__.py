@@ -8,6 +8,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import asyncio  # noqa: E402
+import contextlib  # noqa: E402
 import logging  # noqa: E402
 import re  # noqa: E402
 import socket  # noqa: E402
@@ -18,6 +19,7 @@ import uvicorn  # noqa: E402
 
 from .config import get_settings  # noqa: E402
 from .main import create_app  # noqa: E402
+from .peer_limits import PeerLimits, protocols  # noqa: E402
 
 _TOKEN = re.compile(r"(token=)[^&\s\"]+")
 
@@ -53,6 +55,10 @@ class DrainingServer(uvicorn.Server):
             deadline = time.monotonic() + float(self.config.timeout_graceful_shutdown or 0)
             while svc.ws_in_flight > 0 and time.monotonic() < deadline:
                 await asyncio.sleep(0.005)
+            # Messages still being solved get an error they can act on before 1012.
+            for reply in list(svc.shutdown_replies):
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(reply(), 1.0)
         await super().shutdown(sockets)
 
 
@@ -70,12 +76,27 @@ def main() -> None:
         settings.port,
     )
     app = create_app(settings)
+    http_protocol, ws_protocol = protocols(
+        PeerLimits(
+            max_header_bytes=settings.max_header_bytes,
+            max_headers=settings.max_headers,
+            header_timeout_s=settings.header_timeout_s,
+            body_timeout_s=settings.body_timeout_s,
+            max_connections_per_address=settings.max_connections_per_address or 2**62,
+            ws_max_write_buffer_bytes=settings.ws_max_write_buffer_bytes,
+            ws_max_pings_per_s=settings.ws_max_pings_per_s,
+        )
+    )
     config = uvicorn.Config(
         app,
         host=settings.host,
         port=settings.port,
-        ws="websockets-sansio",
+        http=http_protocol,  # httptools, with limits on headers and slow peers
+        ws=ws_protocol,  # websockets-sansio, with a bound on unread pongs
         ws_max_size=settings.ws_max_message_bytes,
+        ws_ping_interval=settings.ws_ping_interval_s,
+        ws_ping_timeout=settings.ws_ping_timeout_s,
+        timeout_keep_alive=settings.keep_alive_s,
         timeout_graceful_shutdown=settings.graceful_shutdown_s,
         log_level=settings.log_level,
         log_config=None,

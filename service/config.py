@@ -26,6 +26,53 @@ class Settings(BaseSettings):
         default=5, ge=0, description="Time in-flight requests get on SIGTERM [s]"
     )
 
+    # What a peer controls (service/peer_limits.py; docs/operations.md "Limits on peers").
+    max_header_bytes: int = Field(
+        default=32_768, ge=1024, description="Request line and headers [bytes] (431 above)"
+    )
+    max_headers: int = Field(default=100, ge=1, description="Header fields per request (431)")
+    header_timeout_s: float = Field(
+        default=10.0,
+        gt=0,
+        description="Time a connection gets to send a request's headers, from connect or "
+        "from the previous response; then it is closed [s]",
+    )
+    body_timeout_s: float = Field(
+        default=30.0, gt=0, description="Time a request gets to send its body; then closed [s]"
+    )
+    keep_alive_s: int = Field(
+        default=5, ge=1, description="Idle keep-alive connection closed after [s]"
+    )
+    max_connections_per_address: int = Field(
+        default=256,
+        ge=0,
+        description="Open connections (HTTP and WebSocket) per client address; more are "
+        "closed at once; 0 = no limit (behind a reverse proxy every client has its address)",
+    )
+    sessions_per_address_per_min: float = Field(
+        default=60.0,
+        ge=0,
+        description="Sessions one client address may create per minute when the server has "
+        "no API keys (429 rate_limited); 0 = no limit",
+    )
+    ws_ping_interval_s: float = Field(
+        default=20.0, gt=0, description="WebSocket keep-alive ping period [s]"
+    )
+    ws_ping_timeout_s: float = Field(
+        default=20.0, gt=0, description="A WebSocket whose pong is this late is closed [s]"
+    )
+    ws_max_pings_per_s: int = Field(
+        default=50,
+        ge=1,
+        description="WebSocket ping frames a client may send per second; more drops the connection",
+    )
+    ws_max_write_buffer_bytes: int = Field(
+        default=1_048_576,
+        ge=65_536,
+        description="Unsent bytes a WebSocket may hold when the client sends a ping; more "
+        "(a client that pings and never reads) drops it [bytes]",
+    )
+
     # Access control.
     api_keys: SecretStr = Field(
         default=SecretStr(""),
@@ -79,7 +126,31 @@ class Settings(BaseSettings):
         description="Solve inline on the event loop when frames x time_budget_us <= this [us]; "
         "otherwise in the solver thread pool",
     )
-    solver_threads: int = Field(default=2, ge=1, description="Solver thread-pool size")
+    solver_threads: int = Field(
+        default=2, ge=1, description="Threads for a session's frames too long to solve inline"
+    )
+    build_threads: int = Field(
+        default=1, ge=1, description="Threads for chain builds (POST /v1/sessions, /v1/solve)"
+    )
+    oneshot_threads: int = Field(default=1, ge=1, description="Threads for one-shot solves")
+    max_queued_jobs: int = Field(
+        default=64,
+        ge=1,
+        description="Jobs of one kind (chain builds, one-shot solves, pooled frames) queued "
+        "or running at once; more get 503 server_busy",
+    )
+    max_request_work_s: float = Field(
+        default=2.0,
+        gt=0,
+        description="Largest worst case of one request, frames x time_budget_us, "
+        "solved in order (422 invalid_problem, field frames) [s]",
+    )
+    max_client_work_s: float = Field(
+        default=4.0,
+        gt=0,
+        description="Worst case of pooled frames one client (API key, else address) may "
+        "have queued or running (429 too_much_work) [s]",
+    )
     compile_processes: int = Field(
         default=2,
         ge=1,

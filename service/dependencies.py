@@ -6,7 +6,8 @@ The checks themselves (tokens, keys) are in ``auth.py``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
 from typing import Annotated
 
 from fastapi import Depends, Request
@@ -16,6 +17,7 @@ from starlette.requests import HTTPConnection
 from .auth import API_KEY_HEADER, NOT_BEARER, authenticate, check_api_key, unauthorized
 from .config import Settings
 from .metrics import Metrics
+from .session_starts import SessionStarts
 from .sessions import Session, SessionStore
 from .solving import Runner
 
@@ -29,9 +31,13 @@ class Services:
     metrics: Metrics
     runner: Runner
     api_keys: tuple[bytes, ...] = ()
+    session_starts: SessionStarts | None = None  # per address, when there are no API keys
     open_websockets: int = 0
     ws_in_flight: int = 0  # WebSocket messages received and not yet answered
     draining: bool = False  # set on SIGTERM (python -m service): answer, then close 1012
+    # For each WebSocket message still being solved: sends it a shutting_down error
+    # (python -m service calls them when IK_GRACEFUL_SHUTDOWN_S is over, before 1012).
+    shutdown_replies: set[Callable[[], Awaitable[None]]] = field(default_factory=set)
 
 
 def services(conn: HTTPConnection) -> Services:

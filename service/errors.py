@@ -14,7 +14,7 @@ forbidden_origin     --     close 4403 (a browser Origin not in IK_CORS_ORIGINS)
 not_found            404    close 4404 (no such session, or it expired / was deleted)
 method_not_allowed   405    --
 http_error           other  -- (any other status the framework raises; none today)
-payload_too_large    413    close 1009 (message larger than IK_WS_MAX_MESSAGE_BYTES)
+payload_too_large    413    close 1009 (message larger than IK_WS_MAX_MESSAGE_BYTES); 431 headers
 too_many_sessions    503    -- (+ Retry-After)
 key_session_limit    429    --
 rate_limited         429    error message (+ Retry-After / retry_after_s)
@@ -22,9 +22,11 @@ not_ready            503    error message (solver still warming up) (+ Retry-Aft
 warmup_failed        503    -- (/readyz only)
 plans_busy           503    error message (IK_MAX_QUEUED_PLANS planned clips already queued)
 too_many_plans       429    error message (this client holds half of IK_MAX_QUEUED_PLANS)
+server_busy          503    error message (IK_MAX_QUEUED_JOBS of one kind of work queued)
+too_much_work        429    error message (this client's IK_MAX_CLIENT_WORK_S in flight)
 too_many_websockets  --     close 1013 (try again later)
 slow_reader          --     close 1008 (the client stopped reading its answers)
-shutting_down        --     close 1012 (the server is shutting down)
+shutting_down        503    error message, then close 1012 (the server is shutting down)
 internal_error       500    error message, then close 1011
 ==================== ====== =====================================================
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
@@ -24,6 +25,7 @@ from .middleware import TimingAndLimits
 from .responses import ORJSONResponse
 from .routes import health, http, ws
 from .routes.docs import add_docs
+from .session_starts import SessionStarts
 from .sessions import InMemorySessionStore, SessionStore
 from .solving import Runner, Warmup, WarmupFn, default_warmup
 
@@ -79,6 +81,11 @@ def create_app(
             max_frames_per_s=settings.max_frames_per_s,
             max_frames_per_request=settings.max_frames_per_request,
             max_queued_plans=settings.max_queued_plans,
+            build_threads=settings.build_threads,
+            oneshot_threads=settings.oneshot_threads,
+            max_queued_jobs=settings.max_queued_jobs,
+            max_request_work_s=settings.max_request_work_s,
+            max_client_work_s=settings.max_client_work_s,
         )
         app.state.ik = Services(
             settings=settings,
@@ -86,6 +93,7 @@ def create_app(
             metrics=metrics,
             runner=runner,
             api_keys=settings.api_key_list(),
+            session_starts=SessionStarts(settings.sessions_per_address_per_min, time.monotonic),
         )
         warm.start()
         sweeper = asyncio.create_task(_sweep(sessions, metrics, settings.sweep_interval_s))

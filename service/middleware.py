@@ -7,6 +7,7 @@ stream per request and does not buffer the body.
 
 from __future__ import annotations
 
+import asyncio
 import time
 
 from starlette import status
@@ -51,18 +52,27 @@ class TimingAndLimits:
                     return
         seen = 0
         started = False
+        refused = False
 
         async def limited_receive() -> Message:
-            nonlocal seen
+            nonlocal seen, refused
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
                 if seen > limit:
+                    # A chunked body (no Content-Length) is over the limit only once
+                    # read: answer 413 here. The app turns the exception below into a
+                    # 422 of its own ("error parsing the body"), which is dropped.
+                    if not started and not refused:
+                        refused = True
+                        await _too_large(send, limit)
                     raise _BodyTooLarge
             return message
 
         async def tracking_send(message: Message) -> None:
             nonlocal started
+            if refused:
+                return
             if message["type"] == "http.response.start":
                 started = True
             await send(message)
@@ -70,8 +80,22 @@ class TimingAndLimits:
         try:
             await self.app(scope, limited_receive, tracking_send)
         except _BodyTooLarge:
-            if not started:
+            if not started and not refused:
                 await _too_large(send, limit)
+        except asyncio.CancelledError:
+            # uvicorn cancels what is still running when IK_GRACEFUL_SHUTDOWN_S is over,
+            # and answers a cancelled request with a plain-text 500 of its own: answer
+            # first, with what a client can act on (another replica, or a retry).
+            if not started and not refused:
+                await _error(
+                    send,
+                    status.HTTP_503_SERVICE_UNAVAILABLE,
+                    ErrorCode.SHUTTING_DOWN,
+                    "the server is shutting down; retry (another replica, or this one "
+                    "once restarted)",
+                    [(b"retry-after", b"1")],
+                )
+            raise
 
 
 class _BodyTooLarge(Exception):
@@ -79,19 +103,27 @@ class _BodyTooLarge(Exception):
 
 
 async def _too_large(send: Send, limit: int) -> None:
-    body = dumps(
-        {
-            "detail": f"body larger than {limit} bytes (IK_MAX_BODY_BYTES)",
-            "code": ErrorCode.PAYLOAD_TOO_LARGE,
-        }
-    )
+    detail = f"body larger than {limit} bytes (IK_MAX_BODY_BYTES)"
+    await _error(send, status.HTTP_413_CONTENT_TOO_LARGE, ErrorCode.PAYLOAD_TOO_LARGE, detail)
+
+
+async def _error(
+    send: Send,
+    status_code: int,
+    code: ErrorCode,
+    detail: str,
+    headers: list[tuple[bytes, bytes]] | None = None,
+) -> None:
+    """A whole JSON error response, as ``errors.ServiceError`` renders one."""
+    body = dumps({"detail": detail, "code": code})
     await send(
         {
             "type": "http.response.start",
-            "status": status.HTTP_413_CONTENT_TOO_LARGE,
+            "status": status_code,
             "headers": [
                 (b"content-type", b"application/json"),
                 (b"content-length", str(len(body)).encode()),
+                *(headers or []),
             ],
         }
     )

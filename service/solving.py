@@ -14,6 +14,7 @@ import asyncio
 import contextlib
 import gc
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -29,10 +30,18 @@ from solver.ik import Target as SolverTarget
 from solver.path import PlannedPath, plan_path
 
 from .convert import ChainView, FrameJob, SolvedFrame
-from .errors import ServiceError, not_found, not_ready, plans_busy, too_many_plans
+from .errors import (
+    ServiceError,
+    invalid_problem,
+    not_found,
+    not_ready,
+    plans_busy,
+    too_many_plans,
+)
 from .metrics import Metrics
 from .sessions import Session, SessionStore
 from .startup import Report, warm_solver
+from .work import CostShares, WorkClass, WorkPool
 
 log = logging.getLogger("service")
 T = TypeVar("T")
@@ -125,6 +134,11 @@ class Runner:
         max_frames_per_s: float = 0.0,
         max_frames_per_request: int = 1,
         max_queued_plans: int = 4,
+        build_threads: int = 1,
+        oneshot_threads: int = 1,
+        max_queued_jobs: int = 64,
+        max_request_work_s: float = 2.0,
+        max_client_work_s: float = 4.0,
     ) -> None:
         self.inline_budget_us = inline_budget_us
         self.max_frames_per_s = max_frames_per_s
@@ -132,7 +146,17 @@ class Runner:
         self.burst = max(max_frames_per_s, float(max_frames_per_request))
         self.metrics = metrics
         self.warmup = warmup
-        self.pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="ik-solve")
+        # Each class of work on threads of its own (service/work.py): a long clip
+        # never delays a session's creation or a one-shot solve.
+        self.pools = {
+            WorkClass.BUILD: WorkPool(WorkClass.BUILD, build_threads, max_queued_jobs),
+            WorkClass.SOLVE: WorkPool(WorkClass.SOLVE, oneshot_threads, max_queued_jobs),
+            WorkClass.FRAMES: WorkPool(WorkClass.FRAMES, threads, max_queued_jobs),
+        }
+        # A request's worst case (frames x time_budget_us) is capped; of the pooled
+        # frames' worst case in flight, one client holds at most its share.
+        self.max_request_work_s = max_request_work_s
+        self.frame_shares = CostShares(max_client_work_s)
         # A planned clip takes 0.05-1 s (600 frames): they queue on a thread of their own
         # so that they never hold up the pool's frames, one-shot solves and chain builds.
         self.plan_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ik-plan")
@@ -146,7 +170,8 @@ class Runner:
         self.plans_by_client: dict[str, int] = {}  # the same, per client
 
     def shutdown(self) -> None:
-        self.pool.shutdown(wait=False, cancel_futures=True)
+        for pool in self.pools.values():
+            pool.shutdown()
         self.plan_pool.shutdown(wait=False, cancel_futures=True)
 
     def check_ready(self) -> None:
@@ -157,9 +182,27 @@ class Runner:
         budget = options.time_budget_us
         return budget is not None and n_frames * budget <= self.inline_budget_us
 
-    async def in_pool(self, fn: Callable[..., T], *args: Any) -> T:
-        """Run ``fn`` in the solver pool."""
-        return await asyncio.get_running_loop().run_in_executor(self.pool, fn, *args)
+    async def run(self, work: WorkClass, fn: Callable[..., T], *args: Any) -> T:
+        """Run ``fn`` on the threads of its class of work (503 ``server_busy`` when the
+        class is full)."""
+        return await self.pools[work].run(fn, *args)
+
+    def request_work_s(self, n_frames: int, options: IKOptions) -> float:
+        """A request's worst case [s]: frames x the per-frame wall-clock budget.
+
+        Raises:
+            ServiceError: ``invalid_problem`` (field ``frames``) over IK_MAX_REQUEST_WORK_S.
+        """
+        budget_us = options.time_budget_us
+        cost_s = math.inf if budget_us is None else n_frames * budget_us * 1e-6
+        if cost_s > self.max_request_work_s:
+            raise invalid_problem(
+                f"{n_frames} frame(s) x time_budget_us {budget_us} is {cost_s:.3g} s of "
+                f"solving at worst, over IK_MAX_REQUEST_WORK_S ({self.max_request_work_s:g} s):"
+                " send fewer frames per request or a smaller time_budget_us",
+                "frames",
+            )
+        return cost_s
 
     async def session_frames(
         self,
@@ -168,14 +211,20 @@ class Runner:
         jobs: Sequence[FrameJob],
         t0: float,
         transport: str,
+        client: str | None = None,
+        may_inline: bool = True,
     ) -> list[SolvedFrame]:
         """Solve a session's frames in order, each warm-started from the previous answer.
 
         Frames of one session never overlap: the session's lock is held until the last
         frame is done, also when the caller goes away while a pooled solve runs. The
-        caller renders the answers (``convert.render_frames``).
+        caller renders the answers (``convert.render_frames``). ``client`` (an API key's
+        fingerprint, else the peer's address) is who the pooled work is counted against.
         """
-        out, _ = await self._under_lock(session, store, jobs, t0, transport, plan=False)
+        client = client or session_client(session)
+        out, _ = await self._under_lock(
+            session, store, jobs, t0, transport, plan=False, client=client, may_inline=may_inline
+        )
         return out
 
     async def session_plan(
@@ -191,7 +240,7 @@ class Runner:
         per frame. At most ``max_queued_plans`` at once (503 ``plans_busy``), and at
         most half of them (at least one) for one client (429 ``too_many_plans``): a
         plan counts from here until its thread is done, also if its caller went away."""
-        client = session.owner if session.owner is not None else f"session:{session.id}"
+        client = session_client(session)
         held = self.plans_by_client.get(client, 0)
         if held >= self.max_plans_per_client:
             raise too_many_plans(self.max_plans_per_client)
@@ -234,6 +283,8 @@ class Runner:
         *,
         plan: bool,
         on_submit: Callable[[asyncio.Future[Any]], None] | None = None,
+        client: str = "",
+        may_inline: bool = True,
     ) -> tuple[list[SolvedFrame], PlannedPath | None]:
         self.check_ready()
         wait_s = session.take_frames(
@@ -251,8 +302,30 @@ class Runner:
             work: Callable[..., tuple[list[SolvedFrame], PlannedPath | None]] = (
                 _plan_all if plan else _track_all
             )
-            if not plan and self.inline(len(jobs), options):
+            if not plan and may_inline and self.inline(len(jobs), options):
                 out = work(session, jobs, options, t0, metrics.frames, transport)
+            elif not plan:
+                # Admitted before any state changes: a refusal leaves the lock free.
+                cost_s = self.request_work_s(len(jobs), options)
+                pool = self.pools[WorkClass.FRAMES]
+                pool.admit()
+                shares = self.frame_shares
+                shares.take(client, cost_s)
+                loop = asyncio.get_running_loop()
+
+                def record_frames(batch: list[SolvedFrame], transport: str) -> None:
+                    with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                        loop.call_soon_threadsafe(metrics.frames, batch, transport)
+
+                fut = pool.submit(work, session, jobs, options, t0, record_frames, transport)
+
+                def done(_: asyncio.Future[Any]) -> None:
+                    shares.give_back(client, cost_s)
+                    session.lock.release()  # when the thread is done, never earlier
+
+                fut.add_done_callback(done)
+                released = True
+                out = await asyncio.shield(fut)
             else:
                 loop = asyncio.get_running_loop()
 
@@ -262,8 +335,7 @@ class Runner:
                         loop.call_soon_threadsafe(metrics.frames, batch, transport)
 
                 args = (session, jobs, options, t0, record, transport)
-                pool = self.plan_pool if plan else self.pool
-                fut = loop.run_in_executor(pool, work, *args)
+                fut = loop.run_in_executor(self.plan_pool, work, *args)
                 if on_submit is not None:
                     on_submit(fut)
                 # The lock is released when the thread is done, never earlier.
@@ -275,6 +347,14 @@ class Runner:
                 session.lock.release()
         store.touch(session)
         return out
+
+
+def session_client(session: Session, peer: str | None = None) -> str:
+    """Whom a session's work counts against: its API key, else the peer's address (many
+    sessions from one address share one share), else the session itself."""
+    if session.owner is not None:
+        return session.owner
+    return f"peer:{peer}" if peer else f"session:{session.id}"
 
 
 def rate_limited(wait_s: float, rate: float) -> ServiceError:

@@ -23,7 +23,8 @@ from ..errors import ServiceError, not_found
 from ..middleware import received_at
 from ..responses import ORJSONResponse
 from ..sessions import OwnerFull, Session, SessionStore, StoreFull, new_session
-from ..solving import make_solver, solve_once
+from ..solving import make_solver, session_client, solve_once
+from ..work import WorkClass
 
 router = APIRouter(prefix="/v1")
 
@@ -48,7 +49,12 @@ _KEY_ERRORS: dict[int | str, dict[str, Any]] = {
     403: {**_E, "description": "Unknown API key (`forbidden`)"},
 }
 _429_KEY: dict[int | str, dict[str, Any]] = {
-    429: {**_E, "description": "This API key holds its maximum of sessions (`key_session_limit`)"}
+    429: {
+        **_E,
+        "description": "This API key holds its maximum of sessions (`key_session_limit`), "
+        "or, without API keys, this address created IK_SESSIONS_PER_ADDRESS_PER_MIN in "
+        "the last minute (`rate_limited`, Retry-After)",
+    }
 }
 _429_RATE: dict[int | str, dict[str, Any]] = {
     429: {
@@ -190,17 +196,29 @@ def _session_info(session: Session, store: SessionStore) -> dict[str, Any]:
 )
 async def create_session(
     body: Annotated[S.SessionCreate, Body(openapi_examples=_CREATE_EXAMPLES)],
+    request: Request,
     svc: ServicesDep,
     owner: OwnerDep,
 ) -> Response:
     """Create a session: a chain, solver options and an optional initial pose."""
     svc.runner.check_ready()
+    if owner is None and svc.session_starts is not None:  # no API keys: per address
+        address = request.client.host if request.client else ""
+        wait_s = svc.session_starts.take(address)
+        if wait_s > 0:
+            raise ServiceError(
+                ErrorCode.RATE_LIMITED,
+                f"this address created {svc.settings.sessions_per_address_per_min:g} sessions "
+                "in the last minute (IK_SESSIONS_PER_ADDRESS_PER_MIN); reuse one, or wait",
+                status_code=status.HTTP_429_TOO_MANY_REQUESTS,
+                retry_after_s=wait_s,
+            )
     settings = svc.settings
-    view = await svc.runner.in_pool(
-        convert.chain_from_spec, body.chain, settings, body.conventions, body.bones
+    view = await svc.runner.run(
+        WorkClass.BUILD, convert.chain_from_spec, body.chain, settings, body.conventions, body.bones
     )
     options = convert.apply_options(body.options, convert.session_defaults(settings), settings)
-    solver = await svc.runner.in_pool(make_solver, view, options)
+    solver = await svc.runner.run(WorkClass.BUILD, make_solver, view, options)
     if body.initial_pose is not None:
         solver.set_pose(convert.pose_vector(body.initial_pose, view, solver.q, "initial_pose"))
     session, token = new_session(view, solver, options, now=svc.store.clock(), owner=owner)
@@ -330,7 +348,9 @@ async def post_frames(
         solved, planned = await svc.runner.session_plan(session, svc.store, jobs, t0, "http")
         results = convert.add_bones(convert.render_frames(solved, build), solved, view, outputs)
         return ORJSONResponse({"results": results, "plan": convert.plan_summary(planned)})
-    solved = await svc.runner.session_frames(session, svc.store, jobs, t0, "http")
+    peer = request.client.host if request.client else None
+    client = session_client(session, peer)
+    solved = await svc.runner.session_frames(session, svc.store, jobs, t0, "http", client)
     results = convert.add_bones(convert.render_frames(solved, build), solved, view, outputs)
     return ORJSONResponse({"results": results})
 
@@ -365,15 +385,17 @@ async def solve(
     t0 = received_at(request)
     svc.runner.check_ready()
     settings = svc.settings
-    view = await svc.runner.in_pool(
-        convert.chain_from_spec, body.chain, settings, body.conventions, body.bones
+    view = await svc.runner.run(
+        WorkClass.BUILD, convert.chain_from_spec, body.chain, settings, body.conventions, body.bones
     )
     options = convert.apply_options(body.options, convert.oneshot_defaults(settings), settings)
     targets = convert.targets(body.targets, view, "targets")
     seed = None
     if body.seed is not None:
         seed = convert.pose_vector(body.seed, view, view.mid_limits, "seed")
-    solved = await svc.runner.in_pool(solve_once, view, targets, seed, options, body.id, t0)
+    solved = await svc.runner.run(
+        WorkClass.SOLVE, solve_once, view, targets, seed, options, body.id, t0
+    )
     svc.metrics.frame(solved.result, solved.server_us * 1e-6, "http")
     result = convert.result_dict(solved.result, solved.frame_id, solved.server_us)
     (result,) = convert.add_bones([result], [solved], view, [None])

@@ -24,7 +24,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
+import math
 import time
 from typing import Annotated, Any
 
@@ -51,7 +53,9 @@ from ..errors import (
     solver_error,
     validation_errors,
 )
+from ..responses import dumps_message, packb_message
 from ..sessions import Session
+from ..solving import session_client
 from .ws_messages import (
     clip_result_message,
     error_message,
@@ -61,6 +65,9 @@ from .ws_messages import (
 )
 
 log = logging.getLogger("service")
+# Less than this between an answer (and the loop's turn after it) and the next message
+# taken: it was waiting in uvicorn's queue, not sent after the answer arrived.
+_BACKLOG_GAP_S = 100e-6
 router = APIRouter(prefix="/v1")
 
 ClientMessage = S.FrameMessage | S.ClipMessage | S.FkMessage | S.PingMessage
@@ -116,12 +123,19 @@ class _Connection:
         self.session = session
         self.build = build
         self.last_id = -1
+        self.backlog = False
         self._loop = asyncio.get_running_loop()
         self._task = asyncio.current_task()
         self._send_timeout_s = svc.settings.ws_send_timeout_s
         self._sending_since: float | None = None  # loop.time() when a send started
         self._timed_out = False
         self._watch: asyncio.TimerHandle | None = None
+
+    @functools.cached_property
+    def client(self) -> str:
+        """Whom this socket's pooled work counts against (service/work.py)."""
+        peer = self.ws.client.host if self.ws.client else None
+        return session_client(self.session, peer)
 
     def start_watch(self) -> None:
         """Arm the send watchdog: one timer per connection, not one per send."""
@@ -163,9 +177,9 @@ class _Connection:
         self._sending_since = self._loop.time()
         try:
             if binary:
-                await self.ws.send_bytes(msgpack.packb(payload))
+                await self.ws.send_bytes(packb_message(payload))
             else:
-                await self.ws.send_text(orjson.dumps(payload).decode())
+                await self.ws.send_text(dumps_message(payload))
         except asyncio.CancelledError:
             task = self._task
             if self._timed_out and task is not None and task.uncancel() == 0:
@@ -234,8 +248,10 @@ class _Connection:
                 message, field = hints.message_type_hint(raw), "type"
             raise _Unreadable(_raw_id(raw), message, field) from None
 
-    async def handle(self, data: str | bytes, t0: float) -> None:
-        """Answer one message: decode, check its id, run it, send the one reply."""
+    async def handle(self, data: str | bytes, t0: float, backlog: bool = False) -> None:
+        """Answer one message: decode, check its id, run it, send the one reply.
+        ``backlog``: the message was already waiting (see ``_serve``)."""
+        self.backlog = backlog
         binary = isinstance(data, bytes)
         try:
             msg = self.decode(data, binary)
@@ -249,6 +265,28 @@ class _Connection:
             await self.send(self.error_reply(msg_id, ErrorCode.ID_REUSE, message, "id"), binary)
             return
         self.last_id = msg_id
+        if isinstance(msg, S.PingMessage):
+            await self.send(pong_message(msg_id), binary)
+            return
+        answered_by_shutdown = False
+
+        async def shutdown_reply() -> None:
+            """The answer when the server stops before this message is solved."""
+            nonlocal answered_by_shutdown
+            answered_by_shutdown = True
+            reply = self.error_reply(
+                msg_id,
+                ErrorCode.SHUTTING_DOWN,
+                "the server is shutting down before this message was solved; send it again "
+                "after reconnecting (another replica, or this one once restarted)",
+                retry_after_s=1.0,
+            )
+            if binary:
+                await self.ws.send_bytes(packb_message(reply))
+            else:
+                await self.ws.send_text(dumps_message(reply))
+
+        self.svc.shutdown_replies.add(shutdown_reply)
         try:
             if isinstance(msg, tuple):  # the fast path's (id, targets)
                 reply = await self.frame(msg_id, msg[1], t0)
@@ -260,16 +298,17 @@ class _Connection:
                 reply = await self.frame(msg_id, targets, t0, msg.bones)
             elif isinstance(msg, S.ClipMessage):
                 reply = await self.clip(msg, t0)
-            elif isinstance(msg, S.FkMessage):
+            else:  # an FkMessage (a ping was answered above)
                 out = convert.fk_dict(
                     self.session.view, self.session.solver.q, msg.q, msg.joints, msg.bones, ""
                 )
                 reply = fk_result_message(msg_id, out)
-            else:
-                reply = pong_message(msg_id)
         except (ServiceError, IKError) as e:
             reply = self.exception_reply(msg_id, e)
-        await self.send(reply, binary)
+        finally:
+            self.svc.shutdown_replies.discard(shutdown_reply)
+        if not answered_by_shutdown:
+            await self.send(reply, binary)
 
     async def frame(
         self,
@@ -280,7 +319,13 @@ class _Connection:
     ) -> dict[str, Any]:
         """Solve one valid frame (from the fast path, or validated by pydantic)."""
         (solved,) = await self.svc.runner.session_frames(
-            self.session, self.svc.store, [(msg_id, targets)], t0, "ws"
+            self.session,
+            self.svc.store,
+            [(msg_id, targets)],
+            t0,
+            "ws",
+            self.client,
+            may_inline=not self.backlog,
         )
         result = self.build(solved.result, msg_id, solved.server_us)
         view = self.session.view
@@ -307,7 +352,9 @@ class _Connection:
             )
             plan = convert.plan_summary(planned)
         else:
-            solved = await runner.session_frames(self.session, self.svc.store, jobs, t0, "ws")
+            solved = await runner.session_frames(
+                self.session, self.svc.store, jobs, t0, "ws", self.client
+            )
         results = convert.add_bones(
             convert.render_frames(solved, self.build), solved, view, outputs
         )
@@ -318,12 +365,19 @@ class _Connection:
 async def session_ws(
     ws: WebSocket,
     session_id: str,
-    results: Annotated[S.ResultView, Query()] = S.ResultView.FULL,
+    results: Annotated[str, Query()] = S.ResultView.FULL.value,
 ) -> None:
     """Frames over a WebSocket (protocol in docs/websocket.md); ``?results=compact`` answers
-    with CompactFrameResults. A bad ``results`` value closes 1008 (FastAPI's check)."""
+    with CompactFrameResults. A bad ``results`` value closes 1008 ``invalid_format``:
+    checked here, after the handshake, because FastAPI's own check refuses the handshake
+    (HTTP 403), which browsers report as a bare network error."""
     svc = services(ws)
     await ws.accept(subprotocol=websocket_subprotocol(ws))
+    try:
+        view = S.ResultView(results)
+    except ValueError:
+        await _close(ws, svc, status.WS_1008_POLICY_VIOLATION, ErrorCode.INVALID_FORMAT)
+        return
     if not origin_allowed(ws, svc.settings.cors_origin_list()):
         await _close(ws, svc, WS_FORBIDDEN, ErrorCode.FORBIDDEN_ORIGIN)
         return
@@ -345,7 +399,7 @@ async def session_ws(
     svc.metrics.websockets.inc()
     session.websockets += 1
     try:
-        frame_loop = _serve(ws, svc, session, convert.result_builder(results))
+        frame_loop = _serve(ws, svc, session, convert.result_builder(view))
         await asyncio.create_task(frame_loop, name="ws-frame-loop")
     finally:
         session.websockets -= 1
@@ -361,10 +415,16 @@ async def _serve(
     conn = _Connection(ws, svc, session, build)
     limit = svc.settings.ws_max_message_bytes
     conn.start_watch()
+    done_at = -math.inf
     try:
         while True:
             message = await ws.receive()
             t0 = time.perf_counter()
+            # A message that was already waiting (taken with no pause since the last
+            # answer) is from a client sending faster than it is answered: its frames
+            # are solved off the loop, so that they cannot take turns from clients that
+            # wait for their answers (measured under 10 such sockets: loadtest.hostile).
+            backlog = t0 - done_at < _BACKLOG_GAP_S
             if message["type"] == "websocket.disconnect":
                 return
             data: str | bytes | None = message.get("text")
@@ -382,7 +442,7 @@ async def _serve(
                 return
             svc.ws_in_flight += 1
             try:
-                await conn.handle(data, t0)
+                await conn.handle(data, t0, backlog)
             except ServiceError as e:  # the session went away while the frame waited
                 await ws.close(code=WS_NOT_FOUND, reason=e.code)
                 return
@@ -391,6 +451,14 @@ async def _serve(
             if svc.draining:  # shutting down: this message was answered; no more
                 await ws.close(code=status.WS_1012_SERVICE_RESTART, reason=ErrorCode.SHUTTING_DOWN)
                 return
+            # Let every other ready connection take its turn before this one's next
+            # message. uvicorn queues all the messages of one read, and taking one from
+            # a non-empty queue does not suspend: without this, one socket that sends
+            # a thousand frames back to back holds the loop for all of them (measured:
+            # a second client's round trip went from 1 ms to 1.2 s). With it, a client
+            # waits at most one frame per busy connection.
+            await asyncio.sleep(0)
+            done_at = time.perf_counter()
     except WebSocketDisconnect:
         return
     except _SlowReader:

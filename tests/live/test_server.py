@@ -279,3 +279,71 @@ def test_client_that_stops_reading_is_bounded_and_dropped(
         timeout=TIMEOUT_S,
     )
     assert r.status_code == 200 and r.json()["results"][0]["id"] == 1
+
+
+# Just out of the panda's reach: restarts spend each frame's whole 50 ms budget.
+_EDGE_OF_REACH = {
+    "effector": "tool",
+    "position": {"x": 0.9, "y": 0.0, "z": 0.3},
+    "orientation": {"w": 1.0, "x": 0.0, "y": 0.0, "z": 0.0},
+}
+
+
+def _slower_session(server: Server) -> tuple[str, dict[str, str]]:
+    """A session whose unreachable frames each take their whole 50 ms: restarts until
+    the budget is spent."""
+    options = {"time_budget_us": 50_000, "max_iter": 100_000, "max_restarts": 10_000}
+    r = httpx.post(
+        f"{server.base}/v1/sessions",
+        json={"chain": PANDA, "options": options},
+        timeout=TIMEOUT_S,
+    )
+    assert r.status_code == 201, r.text
+    return r.json()["id"], {"Authorization": f"Bearer {r.json()['token']}"}
+
+
+def test_sigterm_past_the_graceful_time_answers_http_with_json_503(
+    start_server: Callable[..., Server],
+) -> None:
+    """A clip longer than IK_GRACEFUL_SHUTDOWN_S: uvicorn cancels it; the client gets
+    JSON it can act on, not uvicorn's plain-text 500."""
+    doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="0")  # no grace: cancelled at once
+    sid, headers = _slower_session(doomed)
+    far = _EDGE_OF_REACH
+    clip = {"frames": [{"id": i, "targets": [far]} for i in range(38)]}  # about 1.9 s
+    result: dict[str, Any] = {}
+
+    def post() -> None:
+        result["r"] = httpx.post(
+            f"{doomed.base}/v1/sessions/{sid}/frames", json=clip, headers=headers, timeout=30.0
+        )
+
+    t = threading.Thread(target=post)
+    t.start()
+    time.sleep(0.3)
+    doomed.proc.send_signal(signal.SIGTERM)
+    t.join(TIMEOUT_S)
+    r = result["r"]
+    assert r.status_code == 503, r.text
+    assert r.json()["code"] == "shutting_down" and r.headers["Retry-After"] == "1"
+    assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)
+
+
+def test_sigterm_past_the_graceful_time_answers_the_ws_message_before_1012(
+    start_server: Callable[..., Server],
+) -> None:
+    doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="1", IK_MAX_REQUEST_WORK_S="10")
+    sid, headers = _slower_session(doomed)
+    far = _EDGE_OF_REACH
+    frames = [{"id": i, "targets": [far]} for i in range(150)]  # about 7 s
+    with ws_connect(doomed, sid, headers) as ws:
+        ws.send(json.dumps({"type": "clip", "id": 7, "frames": frames}))
+        time.sleep(0.3)
+        doomed.proc.send_signal(signal.SIGTERM)
+        reply = json.loads(ws.recv(timeout=TIMEOUT_S))
+        with pytest.raises(ConnectionClosed) as info:
+            ws.recv(timeout=TIMEOUT_S)
+    assert reply["id"] == 7 and reply["error"]["code"] == "shutting_down", reply
+    assert reply["error"]["retry_after_s"] == 1.0
+    assert info.value.rcvd is not None and info.value.rcvd.code == 1012
+    assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)

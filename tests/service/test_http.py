@@ -427,6 +427,15 @@ def test_body_over_the_limit_is_413(make_client: Callable[..., TestClient]) -> N
     assert r.status_code == 413 and r.json()["code"] == "payload_too_large"
 
 
+def test_chunked_body_over_the_limit_is_413(make_client: Callable[..., TestClient]) -> None:
+    """No Content-Length: the body is over the limit only once read (it was a 422)."""
+    client = make_client(Settings(max_body_bytes=2048))
+    chunks = iter([b'{"chain": {"format": "example", "name": "panda_arm"}, "pad": "', b"x" * 4096])
+    r = client.post("/v1/solve", content=chunks, headers={"content-type": "application/json"})
+    assert "content-length" not in r.request.headers
+    assert r.status_code == 413 and r.json()["code"] == "payload_too_large"
+
+
 def test_unknown_route_and_method(client: TestClient) -> None:
     assert client.get("/v1/nothing").json()["code"] == "not_found"
     r = client.put("/v1/solve", json={})

@@ -51,7 +51,8 @@ def test_a_planned_clip_crosses_smoothly_where_the_tracked_clip_jumps(
     make_client: Callable[..., TestClient],
 ) -> None:
     # The Panda stream of tests/solver/test_path.py whose tracker jumps at frame 78.
-    client = make_client(Settings(max_frames_per_request=600))
+    # 90 frames x 50 ms at worst: over the default IK_MAX_REQUEST_WORK_S.
+    client = make_client(Settings(max_frames_per_request=600, max_request_work_s=5.0))
     path = joint_stream(panda_arm(), 4, 90)
     ref = float(np.abs(np.diff(path, axis=0)).max())
     planned = _panda_session(client, path[0])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import gc
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -42,7 +43,7 @@ def test_frames_run_inline_or_in_the_pool(
     r = client.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(1), headers=s.headers)
     assert r.status_code == 200
     (name,) = threads
-    assert name.startswith("ik-solve") is not inline
+    assert name.startswith("ik-frames") is not inline
 
 
 def test_inline_rule_is_frames_times_budget() -> None:
@@ -155,3 +156,32 @@ def test_pooled_frames_come_back_typed_and_the_route_renders_them(
     assert not thread.startswith(("ik-solve", "ik-plan"))
     assert [f.frame_id for f in frames] == [1, 2]
     assert all(isinstance(f.result, IKResult) for f in frames)
+
+
+def test_ws_frames_sent_faster_than_answered_are_solved_off_the_loop(
+    make_client: Callable[..., TestClient], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A frame that was already waiting when the previous one was answered goes to the
+    frame threads; a frame sent after its answer arrived is solved inline, as before."""
+    threads: list[str] = []
+    real = solving._track_all
+
+    def spy(*args: Any) -> Any:
+        threads.append(threading.current_thread().name)
+        return real(*args)
+
+    monkeypatch.setattr(solving, "_track_all", spy)
+    client = make_client()
+    s = create(client)
+    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        ws.send_json({"type": "frame", **hand_frame(1)})
+        assert ws.receive_json()["type"] == "result"
+        time.sleep(0.01)  # a client that waits for its answer
+        ws.send_json({"type": "frame", **hand_frame(2)})
+        assert ws.receive_json()["type"] == "result"
+        polite = list(threads)
+        for i in range(3, 23):  # back to back, answers unread
+            ws.send_json({"type": "frame", **hand_frame(i)})
+        assert all(ws.receive_json()["type"] == "result" for _ in range(20))
+    assert not any(name.startswith("ik-frames") for name in polite)
+    assert sum(name.startswith("ik-frames") for name in threads[2:]) >= 10

@@ -505,3 +505,13 @@ def test_a_solver_error_in_a_clip_is_an_error_message_not_a_close(
         assert "refused for the test" in err.error.message
         ws.send_json(_clip(2, 2, False))
         assert ws.receive_json()["success"] is True
+
+
+def test_a_bad_results_value_closes_1008_after_the_handshake(
+    client: TestClient, session: Created
+) -> None:
+    path = f"/v1/sessions/{session.id}/ws?results=bogus"
+    with pytest.raises(WebSocketDisconnect) as info:
+        with client.websocket_connect(path, headers=session.headers) as ws:
+            ws.receive_text()
+    assert info.value.code == 1008 and info.value.reason == "invalid_format"
