@@ -33,6 +33,8 @@ class ErrorCode(enum.StrEnum):
     WARMUP_FAILED = "warmup_failed"
     PLANS_BUSY = "plans_busy"
     TOO_MANY_PLANS = "too_many_plans"
+    SERVER_BUSY = "server_busy"
+    TOO_MUCH_WORK = "too_much_work"
     # Reasons of WebSocket closes (a close's reason is its error code).
     TOO_MANY_WEBSOCKETS = "too_many_websockets"
     SLOW_READER = "slow_reader"
@@ -154,6 +156,8 @@ _ERROR_CLASSES: dict[str, type[ServiceError]] = {
     ErrorCode.WARMUP_FAILED: RetryLater,
     ErrorCode.PLANS_BUSY: RetryLater,
     ErrorCode.TOO_MANY_PLANS: RetryLater,
+    ErrorCode.SERVER_BUSY: RetryLater,
+    ErrorCode.TOO_MUCH_WORK: RetryLater,
     ErrorCode.TOO_MANY_WEBSOCKETS: RetryLater,
     ErrorCode.SHUTTING_DOWN: RetryLater,
 }

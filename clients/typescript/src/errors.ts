@@ -27,6 +27,8 @@ export const ErrorCode = {
   WarmupFailed: "warmup_failed",
   PlansBusy: "plans_busy",
   TooManyPlans: "too_many_plans",
+  ServerBusy: "server_busy",
+  TooMuchWork: "too_much_work",
   // Close reasons (a WebSocket close's reason is its error code).
   TooManyWebSockets: "too_many_websockets",
   SlowReader: "slow_reader",
@@ -146,6 +148,8 @@ const ERROR_CLASSES: Record<string, typeof ServiceError> = {
   warmup_failed: RetryLater,
   plans_busy: RetryLater,
   too_many_plans: RetryLater,
+  server_busy: RetryLater,
+  too_much_work: RetryLater,
   too_many_websockets: RetryLater,
   shutting_down: RetryLater,
 };
