@@ -93,6 +93,9 @@ MIRRORS: list[tuple[type, tuple[str, ...]]] = [
     (ik_client.SessionCounters, ("SessionCounters",)),
     (ik_client.Session, ("SessionCreated",)),
     (ik_client.SessionInfo, ("SessionInfo",)),
+    (ik_client.ConventionsOut, ("ConventionsOut",)),
+    (ik_client.Conventions, ("Conventions",)),
+    (ik_client.BoneOutput, ("BoneOutput",)),
 ]
 
 

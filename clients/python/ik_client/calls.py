@@ -12,8 +12,10 @@ import httpx
 
 from .errors import service_error
 from .types import (
+    BoneOutput,
     Chain,
     ClipResult,
+    Conventions,
     Frame,
     FrameResult,
     Pose,
@@ -93,9 +95,19 @@ def _without_none(**values: Any) -> dict[str, Any]:
 
 
 def create_session(
-    chain: Chain, options: SolverOptionsPatch | None, initial_pose: PoseIn | None
+    chain: Chain,
+    options: SolverOptionsPatch | None,
+    initial_pose: PoseIn | None,
+    conventions: Conventions | None = None,
+    bones: BoneOutput | None = None,
 ) -> Call[Session]:
-    body = _without_none(chain=chain, options=options, initial_pose=initial_pose)
+    body = _without_none(
+        chain=chain,
+        options=options,
+        initial_pose=initial_pose,
+        conventions=conventions,
+        bones=bones,
+    )
     return Call("POST", "/v1/sessions", lambda r: Session.from_json(r.json()), json=body)
 
 

@@ -15,8 +15,10 @@ from . import calls
 from .calls import Call, SessionRef
 from .stream import AsyncStream, Reconnect, Stream
 from .types import (
+    BoneOutput,
     Chain,
     ClipResult,
+    Conventions,
     Encoding,
     Frame,
     FrameResult,
@@ -81,9 +83,12 @@ class Client:
         *,
         options: SolverOptionsPatch | None = None,
         initial_pose: PoseIn | None = None,
+        conventions: Conventions | None = None,
+        bones: BoneOutput | None = None,
     ) -> Session:
-        """A new session on ``chain`` (e.g. ``{"format": "example", "name": "panda_arm"}``)."""
-        return self._do(calls.create_session(chain, options, initial_pose))
+        """A new session on ``chain`` (e.g. ``{"format": "example", "name": "panda_arm"}``),
+        speaking ``conventions`` (e.g. ``{"preset": "unity"}``), answering with ``bones``."""
+        return self._do(calls.create_session(chain, options, initial_pose, conventions, bones))
 
     def get_session(self, session: SessionRef) -> SessionInfo:
         return self._do(calls.get_session(session))
@@ -194,8 +199,12 @@ class AsyncClient:
         *,
         options: SolverOptionsPatch | None = None,
         initial_pose: PoseIn | None = None,
+        conventions: Conventions | None = None,
+        bones: BoneOutput | None = None,
     ) -> Session:
-        return await self._do(calls.create_session(chain, options, initial_pose))
+        return await self._do(
+            calls.create_session(chain, options, initial_pose, conventions, bones)
+        )
 
     async def get_session(self, session: SessionRef) -> SessionInfo:
         return await self._do(calls.get_session(session))

@@ -74,11 +74,31 @@ class Target(TypedDict):
     direction: NotRequired[Vec3]
 
 
+class BoneOutput(TypedDict, total=False):
+    """Which bone data an answer carries (schema ``BoneOutput``; skeleton chains):
+    each moving bone's local rotation, and the world transforms of the bones named."""
+
+    local_rotations: bool
+    world: list[str]
+
+
+class Conventions(TypedDict, total=False):
+    """The client's coordinates (schema ``Conventions``): a ``preset`` (unity, unreal,
+    godot, gltf, threejs, ros) or ``up`` ("y" / "z"), ``handedness`` ("right" /
+    "left") and ``unit`` ("m" / "cm"); docs/engines.md."""
+
+    preset: str
+    up: str
+    handedness: str
+    unit: str
+
+
 class Frame(TypedDict):
     """One frame of a clip (schema ``Frame``); ``id`` is echoed in its result."""
 
     targets: list[Target]
     id: NotRequired[int]
+    bones: NotRequired[BoneOutput]
 
 
 class PoseIn(TypedDict, total=False):
@@ -146,6 +166,8 @@ class FrameResult:
     restarts: int
     solve_us: float
     server_us: float
+    # Schema ``BonesOut`` as sent: {"local": {bone: {w,x,y,z}}, "world": {bone: {...}}}.
+    bones: dict[str, Any] | None = None
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> FrameResult:
@@ -166,6 +188,7 @@ class FrameResult:
             restarts=d["restarts"],
             solve_us=d["solve_us"],
             server_us=d["server_us"],
+            bones=d.get("bones"),
         )
 
 
@@ -275,6 +298,19 @@ def _effectors(d: dict[str, Any]) -> list[Effector]:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class ConventionsOut:
+    """Schema ``ConventionsOut``: the coordinates a session speaks."""
+
+    up: str
+    handedness: str
+    unit_m: float
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> ConventionsOut:
+        return cls(up=d["up"], handedness=d["handedness"], unit_m=d["unit_m"])
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Session:
     """Schema ``SessionCreated``: a new session. ``token`` is shown only once; every call
     on the session takes this object (or any object with ``id`` and ``token``)."""
@@ -287,6 +323,7 @@ class Session:
     options: SolverOptions
     pose: Pose
     idle_ttl_s: float
+    conventions: ConventionsOut
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> Session:
@@ -299,6 +336,7 @@ class Session:
             options=SolverOptions.from_json(d["options"]),
             pose=Pose.from_json(d["pose"]),
             idle_ttl_s=d["idle_ttl_s"],
+            conventions=ConventionsOut.from_json(d["conventions"]),
         )
 
 
@@ -317,6 +355,7 @@ class SessionInfo:
     idle_s: float
     idle_ttl_s: float
     websockets: int
+    conventions: ConventionsOut
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> SessionInfo:
@@ -333,6 +372,7 @@ class SessionInfo:
             idle_s=d["idle_s"],
             idle_ttl_s=d["idle_ttl_s"],
             websockets=d["websockets"],
+            conventions=ConventionsOut.from_json(d["conventions"]),
         )
 
 

@@ -61,6 +61,35 @@ export interface Target {
 export interface Frame {
   id?: number | null;
   targets: Target[];
+  /** Bone output for this frame (skeleton chains; default: the session's). */
+  bones?: BoneOutput | null;
+}
+
+/** Schema `BoneOutput`: which bone data an answer carries (docs/engines.md). */
+export interface BoneOutput {
+  local_rotations?: boolean;
+  world?: string[];
+}
+
+/** Schema `Conventions`: the client's coordinates (a preset, or up / handedness / unit). */
+export interface Conventions {
+  preset?: "unity" | "unreal" | "godot" | "gltf" | "threejs" | "ros" | null;
+  up?: "y" | "z" | null;
+  handedness?: "right" | "left" | null;
+  unit?: "m" | "cm" | null;
+}
+
+/** Schema `ConventionsOut`: the conventions a session speaks. */
+export interface ConventionsOut {
+  up: "y" | "z";
+  handedness: "right" | "left";
+  unit_m: number;
+}
+
+/** Schema `BonesOut`: bone local rotations and world transforms, when asked for. */
+export interface BonesOut {
+  local?: Record<string, Quaternion> | null;
+  world?: Record<string, { position: Vec3; rotation: Quaternion }> | null;
 }
 
 /** Schema `PoseIn`: exactly one of `q` (every DOF, in order) or `joints` (some, by name). */
@@ -144,6 +173,8 @@ export interface SessionCreate {
   chain: Chain;
   options?: OptionsPatch | null;
   initial_pose?: PoseIn | null;
+  conventions?: Conventions | null;
+  bones?: BoneOutput | null;
 }
 
 /** Schema `ClipRequest`. */
@@ -159,6 +190,8 @@ export interface SolveRequest {
   seed?: PoseIn | null;
   options?: OptionsPatch | null;
   id?: number | null;
+  conventions?: Conventions | null;
+  bones?: BoneOutput | null;
 }
 
 // --- answers -------------------------------------------------------------------------------
@@ -183,6 +216,7 @@ export interface CompactFrameResult {
   restarts: number;
   solve_us: number;
   server_us: number;
+  bones?: BonesOut | null;
 }
 
 /** Schema `FrameResult`: the answer to one frame (not reaching it is `success: false`). */
@@ -248,6 +282,7 @@ export interface SessionCreated {
   options: SolverOptions;
   pose: Pose;
   idle_ttl_s: number;
+  conventions: ConventionsOut;
 }
 
 /** Schema `SessionCounters`. */
@@ -270,6 +305,7 @@ export interface SessionInfo {
   idle_s: number;
   idle_ttl_s: number;
   websockets: number;
+  conventions: ConventionsOut;
 }
 
 /** Schema `ErrorBody`: every HTTP error. */

@@ -85,7 +85,7 @@ const DECLARED: Record<string, string[]> = {
   Vec3: k<Vec3>({ x: true, y: true, z: true }),
   Quaternion: k<Quaternion>({ w: true, x: true, y: true, z: true }),
   Target: k<Target>({ effector: true, position: true, orientation: true, direction: true }),
-  Frame: k<Frame>({ id: true, targets: true }),
+  Frame: k<Frame>({ id: true, targets: true, bones: true }),
   PoseIn: k<PoseIn>({ q: true, joints: true }),
   OptionsPatch: k<OptionsPatch>({
     position_tolerance_m: true,
@@ -138,9 +138,9 @@ const DECLARED: Record<string, string[]> = {
   HierarchyChain: k<HierarchyChain>({ format: true, joints: true, effectors: true }),
   UrdfChain: k<UrdfChain>({ format: true, urdf: true, base_link: true, tip_links: true, mode: true }),
   ExampleChain: k<ExampleChain>({ format: true, name: true }),
-  SessionCreate: k<SessionCreate>({ chain: true, options: true, initial_pose: true }),
+  SessionCreate: k<SessionCreate>({ chain: true, options: true, initial_pose: true, conventions: true, bones: true }),
   ClipRequest: k<ClipRequest>({ frames: true, plan: true }),
-  SolveRequest: k<SolveRequest>({ chain: true, targets: true, seed: true, options: true, id: true }),
+  SolveRequest: k<SolveRequest>({ chain: true, targets: true, seed: true, options: true, id: true, conventions: true, bones: true }),
   EffectorErrorOut: k<EffectorErrorOut>({
     name: true,
     position_error_m: true,
@@ -159,6 +159,7 @@ const DECLARED: Record<string, string[]> = {
     restarts: true,
     solve_us: true,
     server_us: true,
+    bones: true,
   }),
   FrameResult: k<FrameResult>({
     id: true,
@@ -174,6 +175,7 @@ const DECLARED: Record<string, string[]> = {
     restarts: true,
     solve_us: true,
     server_us: true,
+    bones: true,
   }),
   PlanSummary: k<PlanSummary>({ largest_step_rad: true, tracked_largest_step_rad: true, candidates: true, plan_us: true }),
   FrameResults: k<FrameResults>({ results: true, plan: true }),
@@ -190,6 +192,7 @@ const DECLARED: Record<string, string[]> = {
     options: true,
     pose: true,
     idle_ttl_s: true,
+    conventions: true,
   }),
   SessionCounters: k<SessionCounters>({ frames: true, solved: true, not_solved: true }),
   SessionInfo: k<SessionInfo>({
@@ -204,6 +207,7 @@ const DECLARED: Record<string, string[]> = {
     idle_s: true,
     idle_ttl_s: true,
     websockets: true,
+    conventions: true,
   }),
   ErrorBody: k<ErrorBody>({ detail: true, code: true, field: true }),
 };
