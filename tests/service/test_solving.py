@@ -17,6 +17,7 @@ import schemas as S
 from service import convert, solving
 from service.config import Settings
 from service.metrics import Metrics
+from service.routes import ws as ws_routes
 from service.sessions import InMemorySessionStore, new_session
 from solver.ik import IKResult, IKSolver
 
@@ -171,12 +172,16 @@ def test_ws_frames_sent_faster_than_answered_are_solved_off_the_loop(
         return real(*args)
 
     monkeypatch.setattr(solving, "_track_all", spy)
+    # What counts as "already waiting" is a gap in time; on busy shared cores one turn of
+    # the loop can take longer than the service's 1 ms, so the test widens it: the
+    # behaviour under test is where each kind of frame is solved, not the threshold.
+    monkeypatch.setattr(ws_routes, "BACKLOG_GAP_S", 0.05)
     client = make_client()
     s = create(client)
     with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
         ws.send_json({"type": "frame", **hand_frame(1)})
         assert ws.receive_json()["type"] == "result"
-        time.sleep(0.01)  # a client that waits for its answer
+        time.sleep(0.2)  # a client that waits for its answer
         ws.send_json({"type": "frame", **hand_frame(2)})
         assert ws.receive_json()["type"] == "result"
         polite = list(threads)
