@@ -73,6 +73,21 @@ WS_CLOSE_CODES: dict[int, str] = {
 }
 
 
+# An error echoes what the client sent (a joint name, a key, a field path): bounded, so
+# that a 1 MB key costs a 1 MB request, not also a 1 MB answer and a 1 MB log line.
+MAX_DETAIL_CHARS = 2000
+MAX_FIELD_CHARS = 500
+MAX_LOC_PART_CHARS = 200
+
+
+def clip(text: str, limit: int) -> str:
+    """``text`` cut to ``limit`` characters, saying how many were cut."""
+    if len(text) <= limit:
+        return text
+    cut = len(text) - limit
+    return f"{text[:limit]}... ({cut} more characters)"
+
+
 class ServiceError(Exception):
     """An error a client caused or must handle; carries its stable code.
 
@@ -93,11 +108,12 @@ class ServiceError(Exception):
         field: str | None = None,
         retry_after_s: float | None = None,
     ) -> None:
+        detail = clip(detail, MAX_DETAIL_CHARS)
         super().__init__(detail)
         self.code = code
         self.detail = detail
         self.status_code = status_code
-        self.field = field
+        self.field = None if field is None else clip(field, MAX_FIELD_CHARS)
         self.retry_after_s = retry_after_s
 
     def body(self) -> dict[str, Any]:
@@ -163,7 +179,10 @@ def validation_errors(errors: Any) -> list[dict[str, Any]]:
     out = []
     for e in errors:
         msg = hint(e) or str(e.get("msg", ""))
-        out.append({"loc": list(e.get("loc", ())), "msg": msg, "type": e.get("type", "")})
+        loc = [
+            p if isinstance(p, int) else clip(str(p), MAX_LOC_PART_CHARS) for p in e.get("loc", ())
+        ]
+        out.append({"loc": loc, "msg": clip(msg, MAX_DETAIL_CHARS), "type": e.get("type", "")})
     return out
 
 

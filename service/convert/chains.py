@@ -11,8 +11,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any, cast
 
+import numpy as np
+
 import schemas as S
 from schemas.chain import MAX_NAME_LENGTH
+from schemas.common import MAX_COORDINATE
 from solver.arrays import Vector
 from solver.errors import InvalidModel
 from solver.model import (
@@ -153,7 +156,7 @@ def _urdf_chain(spec: S.UrdfChain, settings: Settings) -> Chain:
             "chain.tip_links",
         )
     try:
-        return chain_from_urdf(
+        chain = chain_from_urdf(
             spec.urdf,
             base_link=spec.base_link,
             tip_links=spec.tip_links,
@@ -164,6 +167,26 @@ def _urdf_chain(spec: S.UrdfChain, settings: Settings) -> Chain:
     except InvalidModel as e:
         field = f"chain.{e.field}" if e.field in _URDF_REQUEST_FIELDS else "chain.urdf"
         raise invalid_problem(str(e), field) from None
+    _check_urdf_offsets(chain)
+    return chain
+
+
+def _check_urdf_offsets(chain: Chain) -> None:
+    """Refuse joint origins beyond ``MAX_COORDINATE`` (1000 km), as JSON chains do: the
+    URDF format has no bound, and an origin of 1e308 would make every frame's kinematics
+    overflow (each frame then ends ``nonfinite`` instead of the file being refused).
+
+    Raises:
+        ServiceError: ``invalid_problem`` at ``chain.urdf``, naming the joint.
+    """
+    for joint in chain.joints:
+        offset = joint.origin.translation
+        if not np.all(np.abs(offset) <= MAX_COORDINATE):
+            raise invalid_problem(
+                f"joint {joint.name!r}: origin.xyz {offset.tolist()} is beyond "
+                f"+-{MAX_COORDINATE:g} m; URDF lengths are in metres",
+                "chain.urdf",
+            )
 
 
 def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:

@@ -73,6 +73,13 @@ URDF_LAUGHS = (
     + ']><robot name="&lol9;"/>'
 )
 
+URDF_FAR_ORIGIN = (
+    '<robot name="r"><link name="a"/><link name="b"/>'
+    '<joint name="j" type="revolute"><parent link="a"/><child link="b"/>'
+    '<origin xyz="1e308 0 0"/><axis xyz="0 0 1"/><limit lower="-1" upper="1"/></joint>'
+    "</robot>"
+)
+
 
 def urdf_chain(text: str) -> dict[str, Any]:
     return {"format": "urdf", "urdf": text, "base_link": "a", "tip_links": ["b"]}
@@ -322,6 +329,14 @@ HTTP_ROWS = [
         "payload_too_large",
     ),
     Row("urdf-not-xml", S, body(urdf_chain("<robot")), 422, "invalid_problem", "chain.urdf"),
+    Row(  # found by the hostile suite: accepted, then every frame ended ``nonfinite``
+        "urdf-origin-1e308",
+        S,
+        body(urdf_chain(URDF_FAR_ORIGIN)),
+        422,
+        "invalid_problem",
+        "chain.urdf",
+    ),
     # -- frames ----------------------------------------------------------------------------
     Row(
         "unknown-effector",

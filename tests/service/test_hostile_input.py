@@ -98,9 +98,14 @@ def _json(body: Any) -> bytes:
     return json.dumps(body, ensure_ascii=True).encode()
 
 
+# An error names what was wrong, but does not echo a 1 MB string back in full.
+MAX_ERROR_BYTES = 50_000
+
+
 def _answered_clearly(status: int, body: bytes) -> None:
     assert status < 500, body[:500]
     if status >= 400:
+        assert len(body) < MAX_ERROR_BYTES, body[:500]
         reply = json.loads(body)
         assert reply["code"] and isinstance(reply["detail"], str | list)
 
@@ -151,10 +156,13 @@ def test_websocket_messages(client: TestClient, data: st.DataObject) -> None:
                 body["id"] = 10 * data.draw(st.integers(0, 1000)) + i  # any order
             if data.draw(st.booleans(), label="msgpack"):
                 ws.send_bytes(msgpack.packb(body, unicode_errors="surrogatepass"))
-                reply = msgpack.unpackb(ws.receive_bytes())
+                raw: bytes | str = ws.receive_bytes()
+                reply = msgpack.unpackb(raw)
             else:
                 ws.send_text(_json(body).decode())
-                reply = json.loads(ws.receive_text())
+                raw = ws.receive_text()
+                reply = json.loads(raw)
+            assert len(raw) < MAX_ERROR_BYTES, raw[:500]
             assert reply["type"] in {"result", "clip_result", "pong"}, reply
             error = reply.get("error") or {}
             assert error.get("code") != "internal_error", reply
