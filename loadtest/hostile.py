@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import multiprocessing
 import os
 import statistics
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
 
 import httpx
 import msgpack
@@ -350,22 +352,19 @@ ABUSES: dict[str, Abuse] = {
 }
 
 
-async def run_one(server: ServiceProcess, name: str, abuse: Abuse, seconds: float) -> Row:
+async def run_one(server: ServiceProcess, name: str, seconds: float) -> Row:
+    """The measured clients in this process, the abuse ``name`` in a child process of
+    its own: in one event loop, the abuser's thousand sockets delayed the measured
+    client's reads, and the load generator's own stalls were counted as the server's."""
     row = Row(name)
     row.rss_before_mb = rss_mb(server.proc.pid)
     stop = asyncio.Event()
-    limits = httpx.Limits(max_connections=200)
-    async with (
-        httpx.AsyncClient(
-            base_url=server.base,
-            timeout=30.0,
-            limits=limits,
-            transport=httpx.AsyncHTTPTransport(local_address=ABUSER_ADDRESS, limits=limits),
-        ) as abuser_http,
-        httpx.AsyncClient(base_url=server.base, timeout=30.0) as probe_http,
-    ):
-        abusing = asyncio.ensure_future(abuse(server.base, abuser_http, row, stop))
-        await asyncio.sleep(0.5)  # the abuse is under way
+    ours, theirs = multiprocessing.Pipe()
+    abuser = _SPAWN.Process(target=_abuser_main, args=(name, server.base, theirs), daemon=True)
+    abuser.start()
+    loop = asyncio.get_running_loop()
+    await loop.run_in_executor(None, ours.recv)  # the abuse is under way
+    async with httpx.AsyncClient(base_url=server.base, timeout=30.0) as probe_http:
         measured = [
             asyncio.ensure_future(polite(server.base, probe_http, row, stop)),
             asyncio.ensure_future(creator(probe_http, row, stop)),
@@ -375,8 +374,40 @@ async def run_one(server: ServiceProcess, name: str, abuse: Abuse, seconds: floa
             row.rss_peak_mb = max(row.rss_peak_mb, rss_mb(server.proc.pid))
             await asyncio.sleep(0.25)
         stop.set()
-        await asyncio.gather(*measured, abusing, return_exceptions=True)
+        await asyncio.gather(*measured, return_exceptions=True)
+    ours.send("stop")
+    row.server_5xx += await loop.run_in_executor(None, ours.recv)
+    await loop.run_in_executor(None, abuser.join, 30.0)
+    if abuser.is_alive():
+        abuser.kill()
     return row
+
+
+_SPAWN = multiprocessing.get_context("spawn")  # not fork: the parent runs an event loop
+ABUSER_WARMUP_S = 0.5
+
+
+def _abuser_main(name: str, base: str, conn: Connection) -> None:
+    """The child process: runs abuse ``name`` until the parent says stop, then sends
+    back how many 5xx answers the abuser saw."""
+
+    async def run() -> int:
+        row = Row(name)
+        stop = asyncio.Event()
+        limits = httpx.Limits(max_connections=200)
+        transport = httpx.AsyncHTTPTransport(local_address=ABUSER_ADDRESS, limits=limits)
+        async with httpx.AsyncClient(
+            base_url=base, timeout=30.0, limits=limits, transport=transport
+        ) as http:
+            abusing = asyncio.ensure_future(ABUSES[name](base, http, row, stop))
+            await asyncio.sleep(ABUSER_WARMUP_S)
+            conn.send("started")
+            await asyncio.get_running_loop().run_in_executor(None, conn.recv)
+            stop.set()
+            await asyncio.gather(abusing, return_exceptions=True)
+        return row.server_5xx
+
+    conn.send(asyncio.run(run()))
 
 
 def markdown(rows: list[Row]) -> str:
@@ -394,10 +425,10 @@ def main(argv: list[str] | None = None) -> int:
     chosen = {n: a for n, a in ABUSES.items() if not args.only or any(o in n for o in args.only)}
     rows = []
     # One server per abuse: no abuse inherits another's sessions or memory.
-    for name, abuse in chosen.items():
+    for name in chosen:
         with ServiceProcess(env=SERVER_ENV) as server:
             server.wait_ready()
-            row = asyncio.run(run_one(server, name, abuse, seconds))
+            row = asyncio.run(run_one(server, name, seconds))
         rows.append(row)
         print(" | ".join(row.cells()), flush=True)
     print()

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from dataclasses import dataclass, field
 
 import httptools
@@ -61,6 +62,25 @@ class ConnectionCounts:
             self.by_address.pop(address, None)
 
 
+@dataclass(slots=True)
+class RefusalLog:
+    """Connections refused at accept (over IK_MAX_CONNECTIONS_PER_ADDRESS), logged at
+    most once per ``every_s`` with how many there were since the last line."""
+
+    every_s: float = 1.0
+    pending: dict[str, int] = field(default_factory=dict)
+    last_logged: float = float("-inf")
+
+    def note(self, address: str) -> None:
+        self.pending[address] = self.pending.get(address, 0) + 1
+        now = time.monotonic()
+        if now - self.last_logged >= self.every_s:
+            for who, n in self.pending.items():
+                log.info("refused %d connection(s) from %s: too many open", n, who)
+            self.pending.clear()
+            self.last_logged = now
+
+
 def _address(transport: asyncio.BaseTransport) -> str:
     peer = transport.get_extra_info("peername")
     if isinstance(peer, tuple) and peer:
@@ -86,11 +106,13 @@ def protocols(limits: PeerLimits) -> tuple[type[asyncio.Protocol], type[asyncio.
     """The HTTP and WebSocket protocol classes for ``uvicorn.Config``, sharing one count
     of connections per address."""
     counts = ConnectionCounts()
+    refusals = RefusalLog()
 
     class LimitedHttp(HttpToolsProtocol):
         """httptools with a header budget (bytes, count, time) and a body time limit."""
 
         _address = ""
+        _refused = False
         _header_bytes = 0
         _header_count = 0
         _in_headers = True
@@ -98,15 +120,22 @@ def protocols(limits: PeerLimits) -> tuple[type[asyncio.Protocol], type[asyncio.
         _upgraded = False
 
         def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
-            super().connection_made(transport)
             self._address = _address(transport)
             if counts.add(self._address) > limits.max_connections_per_address:
-                log.info("refused a connection: %s has too many open", self._address)
+                # Refused before uvicorn sets the connection up, and logged once a
+                # second: an abuser over the cap reconnecting in a loop made thousands
+                # of accepts a second, each a log line and a protocol set-up on the loop.
+                self._refused = True
+                refusals.note(self._address)
                 transport.abort()
                 return
+            super().connection_made(transport)
             self._expect_headers()
 
         def connection_lost(self, exc: Exception | None) -> None:
+            if self._refused:
+                counts.remove(self._address)
+                return
             self._cancel_timer()
             if not self._upgraded:
                 counts.remove(self._address)
