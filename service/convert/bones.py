@@ -80,6 +80,13 @@ def fk_dict(
     """
     if q is not None and joints is not None:
         raise invalid_problem("give at most one of 'q' and 'joints'", field or None)
+    if view.skeleton is None:
+        # Whatever the output asks (even nothing: found by schemathesis, a 500): FK
+        # answers bones, and only skeleton chains have them.
+        raise invalid_problem(
+            "FK needs a skeleton chain (format gltf or bvh); this chain has no bones",
+            field or None,
+        )
     check_bone_output(output, view.skeleton, f"{field}.bones" if field else "bones")
     pose = current
     if q is not None or joints is not None:

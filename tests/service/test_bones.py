@@ -76,8 +76,15 @@ def test_fk_over_http_does_not_move_the_session(client: TestClient) -> None:
 
 def test_fk_on_a_chain_without_bones_is_refused(client: TestClient) -> None:
     s = create(client)
-    r = client.post(f"/v1/sessions/{s.id}/fk", json={}, headers=s.headers)
-    assert r.status_code == 422 and "gltf or bvh" in r.json()["detail"]
+    url = f"/v1/sessions/{s.id}/fk"
+    # Found by schemathesis: asking for no bone output at all was a 500.
+    for body in ({}, {"bones": {"local_rotations": False, "world": []}, "joints": {}}):
+        r = client.post(url, json=body, headers=s.headers)
+        assert r.status_code == 422 and "gltf or bvh" in r.json()["detail"], r.text
+    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        ws.send_json({"type": "fk", "id": 1, "bones": {"local_rotations": False}})
+        error = S.ErrorMessage.model_validate(ws.receive_json()).error
+        assert error.code == "invalid_problem" and "gltf or bvh" in error.message
 
 
 def test_websocket_frames_and_fk_carry_bones(client: TestClient) -> None:
