@@ -37,7 +37,7 @@ class BatchRun:
 
 async def _client(
     url: str, index: int, characters: int, chain: str, rate_hz: float, duration_s: float,
-    warmup_s: float, run: BatchRun, ready: asyncio.Barrier,
+    warmup_s: float, results: str, run: BatchRun, ready: asyncio.Barrier,
 ) -> None:  # fmt: skip
     path = make_path(chain, rate_hz)
     async with httpx.AsyncClient(base_url=url, timeout=60.0) as http:
@@ -56,7 +56,8 @@ async def _client(
         for s in sessions
     ]
     first = sessions[0]
-    ws_url = url.replace("http://", "ws://") + f"/v1/sessions/{first['id']}/ws"
+    query = "" if results == "full" else f"?results={results}"
+    ws_url = url.replace("http://", "ws://") + f"/v1/sessions/{first['id']}/ws{query}"
     headers = {"Authorization": f"Bearer {first['token']}"}
     period = 1.0 / rate_hz
     n_path = len(path.targets)
@@ -90,17 +91,20 @@ async def _client(
 
 def run_batches(
     url: str, *, clients: int, characters: int, chain: str, rate_hz: float, duration_s: float,
-    warmup_s: float, cpu_s: Callable[[], float],
+    warmup_s: float, results: str, cpu_s: Callable[[], float],
 ) -> BatchRun:  # fmt: skip
     """Run ``clients`` batch clients against ``url`` (in this process) until done;
-    ``cpu_s`` reads the server's CPU time, counted once every session is created."""
+    ``cpu_s`` reads the server's CPU time, counted once every session is created;
+    ``results``: ``full`` or ``compact`` (``?results=``)."""
     run = BatchRun()
     ready = asyncio.Barrier(clients + 1)
 
     async def main() -> None:
         tasks = [
             asyncio.create_task(
-                _client(url, i, characters, chain, rate_hz, duration_s, warmup_s, run, ready)
+                _client(
+                    url, i, characters, chain, rate_hz, duration_s, warmup_s, results, run, ready
+                )
             )
             for i in range(clients)
         ]
