@@ -145,11 +145,11 @@ async def solve(
     """Solve the entries that are ready; each comes back as its solved frame or its
     error, in order.
 
-    Inline when the batch's worst case (the sum of its frames' time budgets) is at most
-    IK_INLINE_BUDGET_US and ``may_inline``; else on the frame threads, counted against
-    ``client``'s share. The sessions' locks are taken in the order of their ids (two
-    batches that share sessions cannot wait for each other) and held until the last
-    frame is solved.
+    On the event loop when ``may_inline`` and no entry's time budget is over
+    IK_INLINE_BUDGET_US (in slices: ``_solve_in_slices``); else on the frame threads,
+    counted against ``client``'s share, as a clip. The sessions' locks are taken in the
+    order of their ids (two batches that share sessions cannot wait for each other) and
+    held until the last frame is solved.
 
     Raises:
         ServiceError: for the whole batch: not_ready, invalid_problem (work over
@@ -183,10 +183,11 @@ async def solve(
             else:
                 live.append((k, entry))
         work = [e for _, e in live]
-        budget_us = sum(_budget_us(e.session) for e in work)
-        if may_inline and budget_us <= runner.inline_budget_us:
-            solved = _solve_entries(work, t0, runner.metrics.frames, transport)
+        inline_us = runner.inline_budget_us
+        if may_inline and all(_budget_us(e.session) <= inline_us for e in work):
+            solved = await _solve_in_slices(work, t0, runner.metrics.frames, transport, inline_us)
         else:
+            budget_us = sum(_budget_us(e.session) for e in work)
             cost_s = budget_us * 1e-6
             if cost_s > runner.max_request_work_s:
                 raise invalid_problem(
@@ -237,18 +238,47 @@ def _budget_us(session: Session) -> float:
     return math.inf if budget is None else budget
 
 
+async def _solve_in_slices(
+    entries: Sequence[Entry],
+    t0: float,
+    record: Callable[[list[convert.SolvedFrame], str], None],
+    transport: str,
+    slice_us: float,
+) -> list[Outcome]:
+    """Solve on the event loop, letting the other connections take their turn after
+    each ``slice_us`` of solving (IK_INLINE_BUDGET_US): the loop is held at most a slice
+    plus one frame's time budget, as by one frame sent alone.
+
+    Why not the frame threads: a batch's entries are frames of a few microseconds each,
+    and handing 50 of them to a thread cost 8 us of CPU per character more than this
+    (loadtest.cost --characters 50, bench/RESULTS.md), the GIL going back and forth
+    between the thread and the loop at every compiled call.
+    """
+    out: list[Outcome] = []
+    while True:
+        until = time.perf_counter() + slice_us * 1e-6
+        out += _solve_entries(entries[len(out) :], t0, record, transport, until)
+        if len(out) == len(entries):
+            return out
+        await asyncio.sleep(0)
+
+
 def _solve_entries(
     entries: Sequence[Entry],
     t0: float,
     record: Callable[[list[convert.SolvedFrame], str], None],
     transport: str,
+    until: float = math.inf,
 ) -> list[Outcome]:
     """Track each entry's frame on its session's solver, in order (under the sessions'
-    locks, inline or on a frame thread); a solver error is that entry's own."""
+    locks, inline or on a frame thread), stopping after the first frame that ends past
+    ``until`` (a ``time.perf_counter()`` value); a solver error is that entry's own."""
     out: list[Outcome] = []
     solved: list[convert.SolvedFrame] = []
     try:
         for entry in entries:
+            if out and time.perf_counter() > until:
+                break
             session = entry.session
             try:
                 r = session.solver.track(entry.targets, options=session.options)
