@@ -191,3 +191,27 @@ def test_http_batch(client: TestClient) -> None:
 def test_http_batch_envelope_errors(client: TestClient, body: Any) -> None:
     r = client.post("/v1/batch", json=body)
     assert r.status_code == 422 and r.json()["code"] == "invalid_format"
+
+
+@pytest.mark.parametrize(
+    ("inline_budget_us", "where"),
+    [(20.0, "on the loop, a slice of 20 us at a time"), (5.0, "on the frame threads")],
+)
+def test_where_a_batch_is_solved_does_not_change_its_answers(
+    make_client: Callable[..., TestClient], inline_budget_us: float, where: str
+) -> None:
+    """Entries with a 20 us budget: solved on the loop in slices of 20 us (a few entries
+    each, the loop turning between them), or, with a smaller inline budget, on the frame
+    threads; every entry is answered, in order, and each session moves on."""
+    client = make_client(Settings(inline_budget_us=inline_budget_us))
+    sessions = [create(client, options={"time_budget_us": 20.0}) for _ in range(4)]
+    entries = [
+        entry(s, 10 * k + i, 0.1 + 0.01 * k) for k in range(5) for i, s in enumerate(sessions)
+    ]
+    (reply,) = send_batch(client, sessions[0], [batch_msg(1, entries)])
+    assert isinstance(reply, S.BatchResultMessage), where
+    assert [(r.session, r.id) for r in reply.results] == [(e["session"], e["id"]) for e in entries]
+    assert all(isinstance(r, S.BatchEntryResult) for r in reply.results), where
+    for s in sessions:
+        info = client.get(f"/v1/sessions/{s.id}", headers=s.headers).json()
+        assert info["counters"]["frames"] == 5
