@@ -1,5 +1,6 @@
 """Batches through a real uvicorn: pipelined batch messages answered in order with each
-session's frames in order, MessagePack, an entry's own error, per-session rate limits."""
+session's frames in order, MessagePack, an entry's own error, per-session rate limits,
+the size caps of a message and of a body."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from typing import Any
 import httpx
 import msgpack
 import pytest
+from websockets.exceptions import ConnectionClosed
 
 from .conftest import Server
 from .test_server import TIMEOUT_S, session, tool_target, ws_connect
@@ -68,3 +70,20 @@ def test_entry_errors_and_rate_limits(start_server: Callable[..., Server]) -> No
     codes = [e.get("error", {}).get("code") for e in second["results"]]
     assert codes[:2] == [None, None] and codes[2] == "rate_limited"
     assert second["results"][2]["error"]["retry_after_s"] > 0
+
+
+def test_size_caps(start_server: Callable[..., Server]) -> None:
+    """A batch over IK_WS_MAX_MESSAGE_BYTES closes the socket 1009; over HTTP, a body
+    over IK_MAX_BODY_BYTES is a 413."""
+    server = start_server(IK_WS_MAX_MESSAGE_BYTES="8192", IK_MAX_BODY_BYTES="8192")
+    a, ha = session(server)
+    entries = [entry(a, ha, i, 0.1) for i in range(40)]  # about 12 kB of JSON
+    with ws_connect(server, a, ha, max_size=None) as ws:
+        ws.send(json.dumps({"type": "batch", "id": 1, "frames": entries[:5]}))
+        assert json.loads(ws.recv(timeout=TIMEOUT_S))["type"] == "batch_result"
+        ws.send(json.dumps({"type": "batch", "id": 2, "frames": entries}))
+        with pytest.raises(ConnectionClosed) as closed:
+            ws.recv(timeout=TIMEOUT_S)
+    assert closed.value.rcvd is not None and closed.value.rcvd.code == 1009
+    r = httpx.post(f"{server.base}/v1/batch", json={"frames": entries}, timeout=TIMEOUT_S)
+    assert r.status_code == 413 and r.json()["code"] == "payload_too_large"
