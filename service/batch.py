@@ -297,19 +297,20 @@ def _solve_entries(
 
 def render(
     entries: Sequence[Entry | ServiceError],
-    raw_ids: Sequence[tuple[str | None, int | None]],
+    sent: Sequence[Any],
     outcomes: Sequence[Outcome],
     build: convert.ResultBuilder,
     count_error: Callable[[ErrorCode], None],
 ) -> list[dict[str, Any]]:
     """Each entry's answer, in order: ``{session, id, success, result}`` or
     ``{session, id, success: false, error}`` (schemas ``BatchEntryResult`` /
-    ``BatchEntryError``). ``raw_ids``: each entry's session and frame id as sent,
-    echoed when the entry did not get as far as its session."""
+    ``BatchEntryError``). ``sent``: the entries as sent (decoded or validated), whose
+    session and frame id an error echoes (``raw_ids``)."""
     out: list[dict[str, Any]] = []
-    for entry, (session_id, frame_id), outcome in zip(entries, raw_ids, outcomes, strict=True):
+    for entry, raw, outcome in zip(entries, sent, outcomes, strict=True):
         if isinstance(outcome, ServiceError):
             count_error(outcome.code)
+            session_id, frame_id = raw_ids(raw)
             error: dict[str, Any] = {"code": outcome.code.value, "message": outcome.detail}
             if outcome.field is not None:
                 error["field"] = outcome.field

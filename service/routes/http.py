@@ -408,10 +408,9 @@ async def post_batch(
     first = next((e.session for e in entries if isinstance(e, batch.Entry)), None)
     client = f"peer:{peer}" if first is None else session_client(first, peer)
     outcomes = await batch.solve(svc.runner, svc.store, entries, t0, "http", client)
-    ids = [batch.raw_ids(f) for f in body.frames]
     build = convert.result_builder(query.results)
     results = batch.render(
-        entries, ids, outcomes, build, lambda code: svc.metrics.error(code, "http")
+        entries, body.frames, outcomes, build, lambda code: svc.metrics.error(code, "http")
     )
     return ORJSONResponse({"results": results})
 

@@ -81,9 +81,9 @@ async def batch_reply(
     outcomes = await batch.solve(
         svc.runner, svc.store, ready, t0, "ws", conn.client, may_inline=not conn.backlog
     )
-    ids = [batch.raw_ids(f) for f in msg.frames]
     count = functools.partial(svc.metrics.error, transport="ws")
-    return batch_result_message(msg.id, batch.render(ready, ids, outcomes, conn.build, count))
+    results = batch.render(ready, msg.frames, outcomes, conn.build, count)
+    return batch_result_message(msg.id, results)
 
 
 async def entries(
