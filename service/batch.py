@@ -72,15 +72,21 @@ class SessionTokens:
     def __init__(self) -> None:
         self._opened: dict[str, tuple[str, Session]] = {}
 
+    def known(self, session_id: str, token: str) -> Session | None:
+        """The session if this connection opened it with ``token`` and it still exists."""
+        known = self._opened.get(session_id)
+        if known is not None and not known[1].closed and secrets.compare_digest(known[0], token):
+            return known[1]
+        return None
+
     async def open(self, store: SessionStore, session_id: str, token: str) -> Session:
         """The session if ``token`` opens it.
 
         Raises:
             ServiceError: unauthorized, not_found, forbidden (as ``auth.authenticate``).
         """
-        known = self._opened.get(session_id)
-        if known is not None and not known[1].closed and secrets.compare_digest(known[0], token):
-            return known[1]
+        if (session := self.known(session_id, token)) is not None:
+            return session
         session = await authenticate(store, session_id, token)
         if len(self._opened) >= MAX_REMEMBERED_SESSIONS:
             self._opened.pop(next(iter(self._opened)))

@@ -92,12 +92,18 @@ async def entries(
     """Each entry of a batch, ready to solve or as its own error, in order."""
     if isinstance(msg, S.BatchMessage):  # validated as a whole by pydantic
         return [await batch.prepare(i, f, store, tokens) for i, f in enumerate(msg.frames)]
-    return [await _entry(i, raw, binary, store, tokens) for i, raw in enumerate(msg.frames)]
+    out: list[batch.Entry | ServiceError] = []
+    for i, raw in enumerate(msg.frames):
+        # No await for a session this socket has opened before (the common case: the
+        # same characters every tick), one less coroutine per entry.
+        ready = _known_entry(raw, tokens)
+        out.append(ready if ready is not None else await _entry(i, raw, binary, store, tokens))
+    return out
 
 
-async def _entry(
-    index: int, raw: Any, binary: bool, store: SessionStore, tokens: batch.SessionTokens
-) -> batch.Entry | ServiceError:
+def _fields(raw: Any) -> tuple[str, str, int | None] | None:
+    """An entry's session id, token and frame id if it has the fast way's keys and
+    their types and bounds are the schema's, else None."""
     if (
         type(raw) is dict
         and raw.keys() <= _FAST_KEYS
@@ -110,6 +116,27 @@ async def _entry(
             or (type(frame_id) is int and 0 <= frame_id <= MAX_FRAME_ID)
         )
     ):
+        return session_id, token, frame_id
+    return None
+
+
+def _known_entry(raw: Any, tokens: batch.SessionTokens) -> batch.Entry | None:
+    """A well-formed entry for a session this socket has opened with the same token."""
+    if (fields := _fields(raw)) is None:
+        return None
+    session_id, token, frame_id = fields
+    session = tokens.known(session_id, token)
+    if session is None:
+        return None
+    targets = convert.fast_targets(raw.get("targets"), session.view)
+    return None if targets is None else batch.Entry(session, frame_id, targets)
+
+
+async def _entry(
+    index: int, raw: Any, binary: bool, store: SessionStore, tokens: batch.SessionTokens
+) -> batch.Entry | ServiceError:
+    if (fields := _fields(raw)) is not None:
+        session_id, token, frame_id = fields
         # A session the token does not open: the pydantic path says so, after it has
         # checked the entry's format (the order of the errors stays the schema's).
         with contextlib.suppress(ServiceError):
