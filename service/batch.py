@@ -256,9 +256,9 @@ async def _solve_in_slices(
     plus one frame's time budget, as by one frame sent alone.
 
     Why not the frame threads: a batch's entries are frames of a few microseconds each,
-    and handing 50 of them to a thread cost 8 us of CPU per character more than this
-    (loadtest.cost --characters 50, bench/RESULTS.md), the GIL going back and forth
-    between the thread and the loop at every compiled call.
+    and with 50 of them handed to a thread the server spent 1-4 us more CPU per
+    character than this (loadtest.cost --characters 50, same run: bench/RESULTS.md);
+    the thread also contends with the loop for the GIL.
     """
     out: list[Outcome] = []
     while True:
