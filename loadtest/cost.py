@@ -10,6 +10,11 @@ on it: a busier loop does more per wake-up). ``--repeat`` alternates the apps.
 
     OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --transport ws --clients 12 --duration 6
     OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --apps service --profile /tmp/p.txt
+    OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --clients 2 --characters 50 --duration 10
+
+With ``--characters N`` each client drives N sessions (``--chain``, default the 7-DOF
+panda_arm) over one WebSocket, one ``batch`` message per tick (loadtest.batch_load),
+and the figure is CPU per character; the floor is the bare echo of the same messages.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from .batch_load import run_batches, summary
 from .capacity import Deployment, Scenario, summarize_profile, trial
 from .cli import add_load_options, parser
 from .service_process import ROOT
@@ -52,8 +58,11 @@ def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None)
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.PIPE,
             )  # fmt: skip
-        sc = Scenario(f"{app}-{args.transport}", name, 1, args.transport, args.clients)
-        s = trial(dep, sc, args.clients, args)
+        if args.characters > 1:
+            s = batch_trial(dep, app, args)
+        else:
+            sc = Scenario(f"{app}-{args.transport}", name, 1, args.transport, args.clients)
+            s = trial(dep, sc, args.clients, args)
         if rec is not None:
             _, err = rec.communicate(timeout=args.duration + 60)
             if profile is not None and profile.exists():
@@ -65,11 +74,39 @@ def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None)
         dep.stop()
 
 
+def batch_trial(dep: Deployment, app: str, args: argparse.Namespace) -> dict[str, Any]:
+    """``--characters N``: each client sends one batch of N sessions' frames per tick;
+    the figure is the worker's CPU per character (entry) answered."""
+    run = run_batches(
+        dep.url, clients=args.clients, characters=args.characters, chain=args.chain,
+        rate_hz=args.rate, duration_s=args.duration, warmup_s=0.0, results=args.results,
+        cpu_s=dep.cpu_s,
+    )  # fmt: skip
+    s = summary(run)
+    s["server_cpu_s"] = run.server_cpu_s  # sessions created before it starts
+    s["server_cpu_us_per_frame"] = 1e6 * run.server_cpu_s / max(1, run.entries)
+    print(
+        f"  {app}: {args.clients} clients x {args.characters} {args.chain}  "
+        f"{run.messages} batches  {run.entries} entries  p50 {s['rtt_ms_p50'] or 0:.2f} ms  "
+        f"errors {sum(run.errors.values())}  server {s['server_cpu_us_per_frame']:5.1f} us "
+        "CPU/character",
+        flush=True,
+    )
+    return s
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = parser("python -m loadtest.cost", __doc__)
     ap.add_argument("--apps", default="service,floors", help="comma-separated: service, floors")
     add_load_options(ap, clients=12, duration_s=6.0)
     ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument(
+        "--characters",
+        type=int,
+        default=1,
+        help="sessions per client, sent together as one batch message per tick (WebSocket)",
+    )
+    ap.add_argument("--chain", default="panda_arm", help="example chain of --characters mode")
     ap.add_argument("--processes", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument(
         "--profile",

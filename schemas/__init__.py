@@ -15,6 +15,15 @@ This package imports pydantic and ``solver.termination`` only (the termination c
 are part of the contract).
 """
 
+from .batch import (
+    BatchEntry,
+    BatchEntryError,
+    BatchEntryResult,
+    BatchFrame,
+    BatchRequest,
+    BatchResults,
+    InvalidEntry,
+)
 from .chain import (
     BoneEffectorSpec,
     BoneSettingsSpec,
@@ -29,7 +38,7 @@ from .chain import (
     OriginSpec,
     UrdfChain,
 )
-from .common import ErrorBody, FiniteFloat, Quaternion, StrictModel, Vec3
+from .common import ErrorBody, ErrorPayload, FiniteFloat, Quaternion, StrictModel, Vec3
 from .engines import (
     BoneOutput,
     BonesOut,
@@ -73,11 +82,12 @@ from .solve import (
 )
 from .ws import (
     CLIENT_MESSAGE_TYPES,
+    BatchMessage,
+    BatchResultMessage,
     ClientMessage,
     ClipMessage,
     ClipResultMessage,
     ErrorMessage,
-    ErrorPayload,
     FkMessage,
     FkResultMessage,
     FrameMessage,
@@ -88,6 +98,15 @@ from .ws import (
 )
 
 __all__ = [
+    "BatchEntry",
+    "BatchEntryError",
+    "BatchEntryResult",
+    "BatchFrame",
+    "BatchMessage",
+    "BatchRequest",
+    "BatchResultMessage",
+    "BatchResults",
+    "InvalidEntry",
     "BoneEffectorSpec",
     "BoneOutput",
     "BoneSettingsSpec",

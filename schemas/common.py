@@ -107,3 +107,20 @@ class ErrorBody(StrictModel):
     field: str | None = Field(
         default=None, description="Dotted path of the offending field, when known"
     )
+
+
+class ErrorPayload(StrictModel):
+    """A recoverable error: the message (or the batch entry) was not solved; a WebSocket
+    stays open."""
+
+    code: ErrorCode = Field(
+        strict=False,  # a decoded message's string validates (see ErrorBody)
+        description="Stable error code (the ErrorCode schema lists and explains them)",
+    )
+    message: str
+    field: str | None = None
+    retry_after_s: float | None = Field(
+        default=None,
+        description="For not_ready, rate_limited, plans_busy, too_many_plans: when to try "
+        "again [s] (HTTP's Retry-After)",
+    )

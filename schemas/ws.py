@@ -11,9 +11,9 @@ from typing import Annotated, Literal, get_args
 
 from pydantic import Field
 
-from .common import StrictModel
+from .batch import BatchEntry, BatchEntryError, BatchEntryResult
+from .common import ErrorPayload, StrictModel
 from .engines import BoneOutput, BonesOut, FkRequest
-from .errors import ErrorCode
 from .results import CompactFrameResult, FrameResult, PlanSummary
 from .solve import (
     HARD_MAX_FRAMES,
@@ -56,6 +56,17 @@ class FkMessage(FkRequest):
     id: FrameId
 
 
+class BatchMessage(StrictModel):
+    """Client -> server: one frame for each of several sessions (a game server's
+    characters), answered by one ``batch_result``. Each entry names its session and
+    carries its token; an entry that fails gets its own error, the others are solved.
+    At most IK_MAX_FRAMES_PER_REQUEST entries."""
+
+    type: Literal["batch"]
+    id: FrameId = Field(description="Message id; must be greater than the previous message's id")
+    frames: list[BatchEntry] = Field(min_length=1, max_length=HARD_MAX_FRAMES)
+
+
 class PingMessage(StrictModel):
     """Client -> server: ask for a ``pong`` (keep-alive, round-trip time)."""
 
@@ -64,7 +75,8 @@ class PingMessage(StrictModel):
 
 
 ClientMessage = Annotated[
-    FrameMessage | ClipMessage | FkMessage | PingMessage, Field(discriminator="type")
+    FrameMessage | ClipMessage | BatchMessage | FkMessage | PingMessage,
+    Field(discriminator="type"),
 ]
 
 
@@ -77,7 +89,7 @@ def _message_types() -> tuple[str, ...]:
 
 
 CLIENT_MESSAGE_TYPES: tuple[str, ...] = _message_types()
-"""The ``type`` values a client may send: ``("frame", "clip", "fk", "ping")``."""
+"""The ``type`` values a client may send: ``("frame", "clip", "batch", "fk", "ping")``."""
 
 
 class ResultMessage(StrictModel):
@@ -106,20 +118,14 @@ class ClipResultMessage(StrictModel):
     )
 
 
-class ErrorPayload(StrictModel):
-    """A recoverable error: the message was not solved, the socket stays open."""
+class BatchResultMessage(StrictModel):
+    """Server -> client: the answers of batch ``id``, one per entry in order, each a
+    result or that entry's error; ``success``: every entry's success."""
 
-    code: ErrorCode = Field(
-        strict=False,  # a decoded message's string validates (see ErrorBody)
-        description="Stable error code (the ErrorCode schema lists and explains them)",
-    )
-    message: str
-    field: str | None = None
-    retry_after_s: float | None = Field(
-        default=None,
-        description="For not_ready, rate_limited, plans_busy, too_many_plans: when to try "
-        "again [s] (HTTP's Retry-After)",
-    )
+    id: int
+    type: Literal["batch_result"]
+    success: bool
+    results: list[BatchEntryResult | BatchEntryError]
 
 
 class ErrorMessage(StrictModel):
@@ -147,4 +153,11 @@ class PongMessage(StrictModel):
     type: Literal["pong"]
 
 
-ServerMessage = ResultMessage | ClipResultMessage | FkResultMessage | ErrorMessage | PongMessage
+ServerMessage = (
+    ResultMessage
+    | ClipResultMessage
+    | BatchResultMessage
+    | FkResultMessage
+    | ErrorMessage
+    | PongMessage
+)

@@ -21,7 +21,7 @@ Routes call these through the package (``convert.targets(...)``).
 
 from .bones import add_bones, bones_dict, fk_dict, wants_bones
 from .chains import ChainView, chain_from_spec, check_bone_output
-from .fast_path import FastFrame, fast_frame
+from .fast_path import FastFrame, fast_frame, fast_targets
 from .frames import FrameJob, clip_jobs, targets
 from .options import apply_options, oneshot_defaults, options_dict, session_defaults
 from .poses import pose_dict, pose_vector
@@ -51,6 +51,7 @@ __all__ = [
     "clip_jobs",
     "compact_result_dict",
     "fast_frame",
+    "fast_targets",
     "oneshot_defaults",
     "options_dict",
     "plan_summary",

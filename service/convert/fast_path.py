@@ -48,9 +48,25 @@ def _fast_frame(raw: object, modes: dict[str, EffectorMode]) -> FastFrame | None
     if type(raw) is not dict or len(raw) != 3 or raw.get("type") != "frame":
         return None
     frame_id = raw.get("id")
-    ts = raw.get("targets")
     if type(frame_id) is not int or not 0 <= frame_id <= MAX_FRAME_ID:
         return None  # also: no "id" key (None), a bool, a float
+    targets = _fast_targets(raw.get("targets"), modes)
+    return None if targets is None else (frame_id, targets)
+
+
+def fast_targets(ts: object, view: ChainView) -> list[SolverTarget] | None:
+    """The solver targets of a decoded frame's ``targets`` list (a batch entry's) that
+    the schema and ``frames.targets`` accept, else None (then validate with pydantic)."""
+    try:
+        targets = _fast_targets(ts, view.fast_modes)
+        if targets is None or view.convention.identity:
+            return targets
+        return view.convention.targets_in(targets)
+    except Exception:  # never expected; the pydantic path gives the answer
+        return None
+
+
+def _fast_targets(ts: object, modes: dict[str, EffectorMode]) -> list[SolverTarget] | None:
     if type(ts) is not list or not 0 < len(ts) <= HARD_MAX_TARGETS:
         return None
     out: list[SolverTarget] = []
@@ -109,7 +125,7 @@ def _fast_frame(raw: object, modes: dict[str, EffectorMode]) -> FastFrame | None
             given |= GIVEN_DIRECTION
         row = np.array(values, dtype=np.float64)
         out.append(SolverTarget.from_row(name, row, given))
-    return frame_id, out
+    return out
 
 
 # Target's placeholders for a part not given, as plain floats for the fast path.

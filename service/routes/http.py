@@ -17,7 +17,7 @@ import schemas as S
 from schemas import ErrorCode
 from schemas.chain import EXAMPLE_ARM, EXAMPLE_BVH_LEG, EXAMPLE_GLTF_LEG
 
-from .. import convert
+from .. import batch, convert
 from ..dependencies import OwnerDep, ServicesDep, SessionDep
 from ..errors import ServiceError, not_found
 from ..middleware import received_at
@@ -352,6 +352,66 @@ async def post_frames(
     client = session_client(session, peer)
     solved = await svc.runner.session_frames(session, svc.store, jobs, t0, "http", client)
     results = convert.add_bones(convert.render_frames(solved, build), solved, view, outputs)
+    return ORJSONResponse({"results": results})
+
+
+_BATCH_EXAMPLES = {
+    "two characters": {
+        "summary": "One frame for each of two sessions (3-DOF arm example)",
+        "value": {
+            "frames": [
+                {
+                    "session": "<session id>",
+                    "token": "<its token>",
+                    "id": 1,
+                    "targets": [{"effector": "hand", "position": {"x": 0.3, "y": 0.1, "z": 0.6}}],
+                },
+                {
+                    "session": "<another session id>",
+                    "token": "<its token>",
+                    "id": 1,
+                    "targets": [{"effector": "hand", "position": {"x": 0.2, "y": 0.3, "z": 0.5}}],
+                },
+            ]
+        },
+    },
+}
+
+
+@router.post(
+    "/batch",
+    response_model=S.BatchResults,
+    responses={
+        **_413,
+        **_422,
+        429: {**_E, "description": "This client holds its share of the frame threads"},
+        503: {**_E, "description": "`not_ready` (warming up) or `server_busy`; see Retry-After"},
+    },
+    tags=["sessions"],
+)
+async def post_batch(
+    body: Annotated[S.BatchRequest, Body(openapi_examples=_BATCH_EXAMPLES)],
+    request: Request,
+    svc: ServicesDep,
+    query: Annotated[S.FramesQuery, Query()],
+) -> Response:
+    """One frame for each of several sessions (a game server's characters), each entry
+    with its session's token; one answer per entry, in order: its result, or its own
+    error (the other entries are still solved)."""
+    t0 = received_at(request)
+    batch.check_length(len(body.frames), svc.settings.max_frames_per_request)
+    tokens = batch.SessionTokens()
+    entries = [
+        await batch.prepare(i, frame, svc.store, tokens) for i, frame in enumerate(body.frames)
+    ]
+    peer = request.client.host if request.client else None
+    first = next((e.session for e in entries if isinstance(e, batch.Entry)), None)
+    client = f"peer:{peer}" if first is None else session_client(first, peer)
+    outcomes = await batch.solve(svc.runner, svc.store, entries, t0, "http", client)
+    build = convert.result_builder(query.results)
+    results = batch.render(
+        entries, body.frames, outcomes, build, lambda code: svc.metrics.error(code, "http")
+    )
     return ORJSONResponse({"results": results})
 
 

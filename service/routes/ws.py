@@ -1,7 +1,7 @@
 """WebSocket ``/v1/sessions/{session_id}/ws``: the game-client path.
 
-The client sends ``frame`` messages (and ``clip``: several frames in one message,
-solved in order or planned as a whole, and ``ping``), each with an increasing ``id``;
+The client sends ``frame`` messages (and ``clip``, ``batch``: a frame for each of several
+sessions, service/batch.py, ``fk`` and ``ping``), each with an increasing ``id``;
 the server answers each one, in order, before reading the next. JSON text messages get JSON
 text answers, MessagePack binary messages get MessagePack answers.
 
@@ -41,8 +41,9 @@ from schemas import ErrorCode
 from solver.errors import IKError
 from solver.ik import Target as SolverTarget
 
-from .. import convert, hints
+from .. import batch, convert, hints
 from ..auth import authenticate, origin_allowed, websocket_subprotocol, websocket_token
+from ..convert import FastFrame
 from ..dependencies import Services, services
 from ..errors import (
     WS_FORBIDDEN,
@@ -56,6 +57,7 @@ from ..errors import (
 from ..responses import dumps_message, packb_message
 from ..sessions import Session
 from ..solving import session_client
+from .ws_batch import RawBatch, batch_reply, raw_batch
 from .ws_messages import (
     clip_result_message,
     error_message,
@@ -72,7 +74,7 @@ log = logging.getLogger("service")
 BACKLOG_GAP_S = 1e-3
 router = APIRouter(prefix="/v1")
 
-ClientMessage = S.FrameMessage | S.ClipMessage | S.FkMessage | S.PingMessage
+ClientMessage = S.FrameMessage | S.ClipMessage | S.BatchMessage | S.FkMessage | S.PingMessage
 _CLIENT_MESSAGE: TypeAdapter[ClientMessage] = TypeAdapter(S.ClientMessage)
 # pydantic's error types, at the message's top level, for a message whose ``type`` is
 # missing or unknown, or that is not an object at all: answered with the types there are
@@ -126,6 +128,7 @@ class _Connection:
         self.build = build
         self.last_id = -1
         self.backlog = False
+        self.tokens = batch.SessionTokens()  # the sessions this socket's batches opened
         self._loop = asyncio.get_running_loop()
         self._task = asyncio.current_task()
         self._send_timeout_s = svc.settings.ws_send_timeout_s
@@ -217,9 +220,10 @@ class _Connection:
             raise err
         return self.error_reply(msg_id, err.code, err.detail, err.field, err.retry_after_s)
 
-    def decode(self, data: str | bytes, binary: bool) -> convert.FastFrame | ClientMessage:
-        """A well-formed frame as the fast path's ``(id, targets)`` (convert.fast_frame);
-        any other message validated by pydantic, which gives the documented error.
+    def decode(self, data: str | bytes, binary: bool) -> FastFrame | RawBatch | ClientMessage:
+        """A well-formed frame as the fast path's ``(id, targets)`` (convert.fast_frame), a
+        batch as its entries (ws_batch.raw_batch: each is read on its own); any other
+        message validated by pydantic, which gives the documented error.
 
         Raises:
             _Unreadable: not JSON / MessagePack, or not a valid client message.
@@ -237,6 +241,8 @@ class _Connection:
                 pass  # validate_json below says why
         if raw is not None and (fast := convert.fast_frame(raw, self.session.view)) is not None:
             return fast
+        if (envelope := raw_batch(raw)) is not None:
+            return envelope
         try:
             if binary:
                 return _CLIENT_MESSAGE.validate_python(raw)
@@ -261,7 +267,7 @@ class _Connection:
             reply = self.error_reply(e.msg_id, ErrorCode.INVALID_FORMAT, e.message, e.field)
             await self.send(reply, binary)
             return
-        msg_id = msg[0] if isinstance(msg, tuple) else msg.id
+        msg_id = msg[0] if isinstance(msg, tuple) else msg.id  # a RawBatch's [0]: its id
         if msg_id <= self.last_id:
             message = f"id must be greater than {self.last_id}"
             await self.send(self.error_reply(msg_id, ErrorCode.ID_REUSE, message, "id"), binary)
@@ -290,7 +296,9 @@ class _Connection:
 
         self.svc.shutdown_replies.add(shutdown_reply)
         try:
-            if isinstance(msg, tuple):  # the fast path's (id, targets)
+            if isinstance(msg, RawBatch | S.BatchMessage):
+                reply = await batch_reply(msg, binary, t0, self)
+            elif isinstance(msg, tuple):  # the fast path's (id, targets)
                 reply = await self.frame(msg_id, msg[1], t0)
             elif isinstance(msg, S.FrameMessage):
                 view = self.session.view

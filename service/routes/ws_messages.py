@@ -2,8 +2,8 @@
 ``websocket_api/messages.py``: ``result_message`` / ``error_message``).
 
 Every answer the socket sends is built here, so its shape is in one place; the schemas
-are ``schemas.ws`` (``ResultMessage``, ``ClipResultMessage``, ``ErrorMessage``,
-``PongMessage``), which tests validate the answers against.
+are ``schemas.ws`` (``ResultMessage``, ``ClipResultMessage``, ``BatchResultMessage``,
+``ErrorMessage``, ``PongMessage``), which tests validate the answers against.
 """
 
 from __future__ import annotations
@@ -30,6 +30,12 @@ def clip_result_message(
         "results": results,
         "plan": plan,
     }
+
+
+def batch_result_message(msg_id: int, results: list[dict[str, Any]]) -> dict[str, Any]:
+    """The answer to a ``batch``: each entry's result or error, in order."""
+    success = all(r["success"] for r in results)
+    return {"id": msg_id, "type": "batch_result", "success": success, "results": results}
 
 
 def fk_result_message(msg_id: int, fk: dict[str, Any]) -> dict[str, Any]:

@@ -80,6 +80,8 @@ MIRRORS: list[tuple[type, tuple[str, ...]]] = [
     (ik_client.Quaternion, ("Quaternion",)),
     (ik_client.Target, ("Target",)),
     (ik_client.Frame, ("Frame",)),
+    (ik_client.BatchFrame, ("BatchFrame",)),
+    (ik_client.BatchEntryResult, ("BatchEntryResult", "BatchEntryError")),
     (ik_client.PoseIn, ("PoseIn",)),
     (ik_client.SolverOptionsPatch, ("OptionsPatch",)),
     (ik_client.EffectorError, ("EffectorErrorOut",)),
@@ -158,6 +160,24 @@ def test_frames_clips_and_planned_clips(ik: Client, session: Session) -> None:
     assert planned.plan.candidates > 0
     assert planned.plan.largest_step_rad <= planned.plan.tracked_largest_step_rad + 1e-9
     assert ik.get_session(session).counters.frames == 2 + 4 + 4
+
+
+def test_batch_answers_each_entry(ik: Client) -> None:
+    """One request for several sessions: each entry's result, or its own error."""
+    a, b = ik.create_session(PANDA), ik.create_session(PANDA)
+    frames: list[ik_client.BatchFrame] = [
+        {"session": a.id, "token": a.token, "id": 1, "targets": [tool(0.1)]},
+        {"session": b.id, "token": "not-its-token", "id": 2, "targets": [tool(0.1)]},
+        {"session": b.id, "token": b.token, "id": 3, "targets": [tool(0.12)]},
+    ]
+    first, wrong, third = ik.batch(frames)
+    assert (first.session, first.id, third.session, third.id) == (a.id, 1, b.id, 3)
+    assert first.result is not None and third.result is not None
+    assert_solved(first.result)
+    assert_solved(third.result)
+    assert wrong.result is None and isinstance(wrong.error, AuthError)
+    assert wrong.error.code is ErrorCode.FORBIDDEN and not wrong.success
+    assert ik.get_session(a).pose.q == pytest.approx(first.result.q, rel=0, abs=1e-12)
 
 
 def test_one_shot_solve(ik: Client) -> None:

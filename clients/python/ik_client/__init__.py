@@ -37,6 +37,8 @@ from .errors import (
 from .stream import AsyncStream, Reconnect, Stream
 from .types import (
     Answer,
+    BatchEntryResult,
+    BatchFrame,
     BoneOutput,
     Chain,
     ClipAnswer,
@@ -77,6 +79,8 @@ __all__ = [
     "Chain",
     "Client",
     "ClipAnswer",
+    "BatchEntryResult",
+    "BatchFrame",
     "ClipResult",
     "CloseCode",
     "ConnectionLost",

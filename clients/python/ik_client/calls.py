@@ -12,6 +12,8 @@ import httpx
 
 from .errors import service_error
 from .types import (
+    BatchEntryResult,
+    BatchFrame,
     BoneOutput,
     Chain,
     ClipResult,
@@ -165,6 +167,16 @@ def clip(session: SessionRef, frames: list[Frame], plan: bool, compact: bool) ->
         json={"frames": frames, "plan": plan},
         params=_results(compact),
         headers=_auth(session),
+    )
+
+
+def batch(frames: list[BatchFrame], compact: bool) -> Call[list[BatchEntryResult]]:
+    return Call(
+        "POST",
+        "/v1/batch",
+        lambda r: [BatchEntryResult.from_json(e) for e in r.json()["results"]],
+        json={"frames": frames},
+        params=_results(compact),
     )
 
 

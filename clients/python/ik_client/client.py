@@ -15,6 +15,8 @@ from . import calls
 from .calls import Call, SessionRef
 from .stream import AsyncStream, Reconnect, Stream
 from .types import (
+    BatchEntryResult,
+    BatchFrame,
     BoneOutput,
     Chain,
     ClipResult,
@@ -134,6 +136,12 @@ class Client:
         whole (the smoothest joint path; the answer's ``plan`` says how smooth)."""
         return self._do(calls.clip(session, frames, plan, compact))
 
+    def batch(self, frames: list[BatchFrame], *, compact: bool = False) -> list[BatchEntryResult]:
+        """One frame for each of several sessions (a game server's characters) in one
+        request; one answer per entry, in order, each a result or its own error (an
+        entry's error is not raised: the other entries were solved)."""
+        return self._do(calls.batch(frames, compact))
+
     def solve(
         self,
         chain: Chain,
@@ -243,6 +251,12 @@ class AsyncClient:
         compact: bool = False,
     ) -> ClipResult:
         return await self._do(calls.clip(session, frames, plan, compact))
+
+    async def batch(
+        self, frames: list[BatchFrame], *, compact: bool = False
+    ) -> list[BatchEntryResult]:
+        """As ``Client.batch``."""
+        return await self._do(calls.batch(frames, compact))
 
     async def solve(
         self,

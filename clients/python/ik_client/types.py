@@ -12,6 +12,8 @@ import enum
 from dataclasses import dataclass
 from typing import Any, Literal, NotRequired, TypedDict
 
+from .errors import ServiceError, service_error
+
 
 class Termination(enum.StrEnum):
     """How the optimizer's last pass ended (docs/api.md, Termination codes)."""
@@ -96,6 +98,17 @@ class Conventions(TypedDict, total=False):
 class Frame(TypedDict):
     """One frame of a clip (schema ``Frame``); ``id`` is echoed in its result."""
 
+    targets: list[Target]
+    id: NotRequired[int]
+    bones: NotRequired[BoneOutput]
+
+
+class BatchFrame(TypedDict):
+    """One session's frame in a batch (schema ``BatchFrame``): a ``Frame`` plus the
+    session it is for and that session's token."""
+
+    session: str
+    token: str
     targets: list[Target]
     id: NotRequired[int]
     bones: NotRequired[BoneOutput]
@@ -229,6 +242,32 @@ class ClipResult:
             [FrameResult.from_json(r) for r in d["results"]],
             None if plan is None else PlanSummary.from_json(plan),
         )
+
+
+@dataclass(frozen=True, slots=True)
+class BatchEntryResult:
+    """One entry of a batch's answer (schemas ``BatchEntryResult`` / ``BatchEntryError``):
+    its ``result``, or its own ``error`` (a ``ServiceError`` subclass, not raised: the
+    other entries were answered)."""
+
+    session: str | None
+    id: int | None
+    success: bool
+    result: FrameResult | None
+    error: ServiceError | None
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> BatchEntryResult:
+        e = d.get("error")
+        r = d.get("result")
+        error = None
+        if e is not None:
+            error = service_error(
+                e["code"], e["message"], field=e.get("field"),
+                retry_after_s=e.get("retry_after_s"),
+            )  # fmt: skip
+        result = None if r is None else FrameResult.from_json(r)
+        return cls(d["session"], d["id"], d["success"], result, error)
 
 
 @dataclass(frozen=True, slots=True)

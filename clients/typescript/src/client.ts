@@ -7,6 +7,9 @@
 import { serviceError } from "./errors.js";
 import { Stream, type StreamOptions } from "./stream.js";
 import type {
+  BatchEntry,
+  BatchFrame,
+  BatchResults,
   Chain,
   CompactFrameResult,
   Frame,
@@ -134,6 +137,22 @@ export class Client {
       compact: options.compact ?? false,
     });
     return { results: out.results, plan: out.plan ?? null }; // no `plan` key when not planned
+  }
+
+  /**
+   * One frame for each of several sessions (a game server's characters) in one request,
+   * each frame with its session's id and token: one entry per frame, in order, each its
+   * result or its own error (an entry's error does not reject: the others were solved).
+   */
+  async batch<C extends boolean = false>(
+    frames: BatchFrame[],
+    options: { compact?: C } = {},
+  ): Promise<BatchEntry<Result<C>>[]> {
+    const out: BatchResults<Result<C>> = await this.request("POST", "/v1/batch", {
+      body: { frames },
+      compact: options.compact ?? false,
+    });
+    return out.results;
   }
 
   /** A stateless one-shot solve (no session). */

@@ -65,6 +65,12 @@ export interface Frame {
   bones?: BoneOutput | null;
 }
 
+/** Schema `BatchFrame`: one session's frame in a batch, with that session's id and token. */
+export interface BatchFrame extends Frame {
+  session: string;
+  token: string;
+}
+
 /** Schema `BoneOutput`: which bone data an answer carries (docs/engines.md). */
 export interface BoneOutput {
   local_rotations?: boolean;
@@ -313,6 +319,38 @@ export interface ErrorBody {
   detail: string | Array<Record<string, unknown>>;
   code: string;
   field?: string | null;
+}
+
+/** Schema `ErrorPayload`: an error in an answer (a WebSocket message's, a batch entry's). */
+export interface ErrorPayload {
+  code: string;
+  message: string;
+  field?: string | null;
+  retry_after_s?: number | null;
+}
+
+/** Schema `BatchEntryResult`: a batch entry's result. */
+export interface BatchEntryResult<R = FrameResult> {
+  session: string;
+  id: number | null;
+  success: boolean;
+  result: R;
+}
+
+/** Schema `BatchEntryError`: a batch entry's own error (the other entries were answered). */
+export interface BatchEntryError {
+  session: string | null;
+  id: number | null;
+  success: false;
+  error: ErrorPayload;
+}
+
+/** One entry of a batch's answer: `"result" in entry` or `"error" in entry` says which. */
+export type BatchEntry<R = FrameResult> = BatchEntryResult<R> | BatchEntryError;
+
+/** Schema `BatchResults`: one entry per frame sent, in order. */
+export interface BatchResults<R = FrameResult> {
+  results: BatchEntry<R>[];
 }
 
 /** What a call on a session needs: a `SessionCreated`, or any object with `id` and `token`. */

@@ -12,6 +12,10 @@ import { WebSocket as NodeWebSocket } from "ws";
 
 import {
   AuthError,
+  type BatchEntryError,
+  type BatchEntryResult,
+  type BatchFrame,
+  type ErrorPayload,
   Client,
   ConnectionLost,
   ErrorCode,
@@ -210,6 +214,10 @@ const DECLARED: Record<string, string[]> = {
     conventions: true,
   }),
   ErrorBody: k<ErrorBody>({ detail: true, code: true, field: true }),
+  BatchFrame: k<BatchFrame>({ session: true, token: true, id: true, targets: true, bones: true }),
+  BatchEntryResult: k<BatchEntryResult>({ session: true, id: true, success: true, result: true }),
+  BatchEntryError: k<BatchEntryError>({ session: true, id: true, success: true, error: true }),
+  ErrorPayload: k<ErrorPayload>({ code: true, message: true, field: true, retry_after_s: true }),
 };
 
 describe("types", () => {
@@ -287,6 +295,23 @@ describe("http", () => {
     assert.ok(planned.plan !== null && planned.plan.candidates > 0);
     assert.ok(planned.plan.largest_step_rad <= planned.plan.tracked_largest_step_rad + 1e-9);
     assert.equal((await ik.getSession(session)).counters.frames, 2 + 4 + 4);
+  });
+
+  test("batch: one answer per entry, each a result or its own error", async () => {
+    const a = await ik.createSession(PANDA);
+    const b = await ik.createSession(PANDA);
+    const [first, wrong, third] = await ik.batch([
+      { session: a.id, token: a.token, id: 1, targets: [tool(0.1)] },
+      { session: b.id, token: "not-its-token", id: 2, targets: [tool(0.1)] },
+      { session: b.id, token: b.token, id: 3, targets: [tool(0.12)] },
+    ]);
+    assert.ok(first !== undefined && "result" in first && third !== undefined && "result" in third);
+    assert.deepEqual([first.session, first.id, third.session, third.id], [a.id, 1, b.id, 3]);
+    assertSolved(first.result);
+    assertSolved(third.result);
+    assert.ok(wrong !== undefined && "error" in wrong);
+    assert.equal(wrong.error.code, ErrorCode.Forbidden);
+    assert.deepEqual((await ik.getSession(a)).pose.q, first.result.q);
   });
 
   test("one-shot solve", async () => {

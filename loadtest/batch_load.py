@@ -1,0 +1,128 @@
+"""Many characters per message: clients that each drive ``characters`` sessions of one
+chain over one WebSocket, one ``batch`` message per tick (``loadtest.cost --characters``).
+
+Each client creates its sessions over HTTP, opens the socket on the first one and, at
+``rate_hz``, sends one batch holding a frame for every session, each session at its own
+point of the chain's path; it waits for the answer before the next tick's send is due
+(one message in flight). An entry answered with an error counts in ``errors``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import httpx
+import orjson
+from websockets.asyncio.client import connect
+
+from .paths import make_path
+
+
+@dataclass
+class BatchRun:
+    """What the clients saw: messages and entries answered, errors, round trips."""
+
+    server_cpu_s: float = 0.0  # from the moment every client has its sessions
+    messages: int = 0
+    entries: int = 0
+    measured_entries: int = 0  # answered after the warm-up
+    errors: Counter[str] = field(default_factory=Counter)
+    rtt_ms: list[float] = field(default_factory=list)
+
+
+async def _client(
+    url: str, index: int, characters: int, chain: str, rate_hz: float, duration_s: float,
+    warmup_s: float, results: str, run: BatchRun, ready: asyncio.Barrier,
+) -> None:  # fmt: skip
+    path = make_path(chain, rate_hz)
+    async with httpx.AsyncClient(base_url=url, timeout=60.0) as http:
+        sessions = []
+        for _ in range(characters):
+            r = await http.post(
+                "/v1/sessions", json={"chain": {"format": "example", "name": chain}}
+            )
+            if r.status_code != 201:
+                run.errors[f"setup_http_{r.status_code}"] += 1
+                return
+            sessions.append(r.json())
+    await ready.wait()  # every client has its sessions: the measured window starts
+    heads = [
+        b'{"session":"%s","token":"%s","id":' % (s["id"].encode(), s["token"].encode())
+        for s in sessions
+    ]
+    first = sessions[0]
+    query = "" if results == "full" else f"?results={results}"
+    ws_url = url.replace("http://", "ws://") + f"/v1/sessions/{first['id']}/ws{query}"
+    headers = {"Authorization": f"Bearer {first['token']}"}
+    period = 1.0 / rate_hz
+    n_path = len(path.targets)
+    async with connect(ws_url, additional_headers=headers, compression=None, max_size=None) as ws:
+        start = time.perf_counter() + index * period / 7
+        k = 0
+        while (t_sched := start + k * period) - start < duration_s:
+            delay = t_sched - time.perf_counter()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            entries = b",".join(
+                head + b'%d,"targets":%s}' % (k, path.targets[(k + 37 * j) % n_path])
+                for j, head in enumerate(heads)
+            )
+            await ws.send(b'{"type":"batch","id":%d,"frames":[%s]}' % (k, entries), text=True)
+            answer = orjson.loads(await ws.recv())
+            now = time.perf_counter()
+            run.messages += 1
+            results = answer.get("results") or answer.get("frames") or []
+            run.entries += len(results)
+            if now - start >= warmup_s:
+                run.measured_entries += len(results)
+                run.rtt_ms.append((now - t_sched) * 1e3)
+            if "error" in answer:
+                run.errors[f"ws_{answer['error'].get('code')}"] += 1
+            for r in results:
+                if "error" in r:
+                    run.errors[f"entry_{r['error'].get('code')}"] += 1
+            k += 1
+
+
+def run_batches(
+    url: str, *, clients: int, characters: int, chain: str, rate_hz: float, duration_s: float,
+    warmup_s: float, results: str, cpu_s: Callable[[], float],
+) -> BatchRun:  # fmt: skip
+    """Run ``clients`` batch clients against ``url`` (in this process) until done;
+    ``cpu_s`` reads the server's CPU time, counted once every session is created;
+    ``results``: ``full`` or ``compact`` (``?results=``)."""
+    run = BatchRun()
+    ready = asyncio.Barrier(clients + 1)
+
+    async def main() -> None:
+        tasks = [
+            asyncio.create_task(
+                _client(
+                    url, i, characters, chain, rate_hz, duration_s, warmup_s, results, run, ready
+                )
+            )
+            for i in range(clients)
+        ]
+        await ready.wait()
+        cpu0 = cpu_s()
+        await asyncio.gather(*tasks)
+        run.server_cpu_s = cpu_s() - cpu0
+
+    asyncio.run(main())
+    return run
+
+
+def summary(run: BatchRun) -> dict[str, Any]:
+    rtt = sorted(run.rtt_ms)
+    return {
+        "messages": run.messages,
+        "entries": run.entries,
+        "errors": dict(run.errors),
+        "rtt_ms_p50": rtt[len(rtt) // 2] if rtt else None,
+        "rtt_ms_p99": rtt[min(len(rtt) - 1, int(0.99 * len(rtt)))] if rtt else None,
+    }

@@ -1,0 +1,353 @@
+"""Batches: one frame for each of several sessions in one message, one answer holding
+each result (``POST /v1/batch`` and the WebSocket's ``batch`` message, schemas/batch.py).
+
+An entry is answered on its own: an entry that fails validation, whose token does not
+open its session, whose targets do not fit its chain, or whose session is over its rate
+limit gets its own error, and the other entries are solved. The limits are those of a
+frame sent alone: each session's rate limit, and for the whole batch, as for a clip,
+IK_MAX_FRAMES_PER_REQUEST entries and, when it goes to the frame threads, the client's
+share of them (service/work.py). Each session's entries are solved in the order given,
+each from the previous answer, under the session's lock.
+
+Codes, per entry: invalid_format, unauthorized, forbidden, not_found, invalid_problem,
+rate_limited. For the whole batch: invalid_problem (``frames``: too many entries, or
+more work than IK_MAX_REQUEST_WORK_S), not_ready, server_busy, too_much_work.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import secrets
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from starlette import status
+
+import schemas as S
+from schemas import ErrorCode
+from solver.errors import IKError
+from solver.ik import Target as SolverTarget
+
+from . import convert
+from .auth import authenticate
+from .errors import (
+    ServiceError,
+    dotted_field,
+    invalid_problem,
+    not_found,
+    solver_error,
+    validation_errors,
+)
+from .sessions import Session, SessionStore
+from .solving import Runner, rate_limited
+from .work import WorkClass
+
+# A connection remembers at most this many sessions it has opened (SessionTokens).
+MAX_REMEMBERED_SESSIONS = 4096
+
+
+@dataclass(frozen=True, slots=True)
+class Entry:
+    """A batch entry ready to solve: its session, its frame and its bone output."""
+
+    session: Session
+    frame_id: int | None
+    targets: list[SolverTarget]
+    bones: S.BoneOutput | None = None
+
+
+# What each entry comes to: its solved frame, or its own error.
+Outcome = convert.SolvedFrame | ServiceError
+
+
+class SessionTokens:
+    """The sessions one connection has opened with their tokens (a WebSocket's, for
+    its batches): an entry for one of them costs one constant-time comparison instead
+    of a store lookup and a hash. A session deleted since is looked up again (404)."""
+
+    def __init__(self) -> None:
+        self._opened: dict[str, tuple[str, Session]] = {}
+
+    def known(self, session_id: str, token: str) -> Session | None:
+        """The session if this connection opened it with ``token`` and it still exists."""
+        known = self._opened.get(session_id)
+        if known is not None and not known[1].closed and secrets.compare_digest(known[0], token):
+            return known[1]
+        return None
+
+    async def open(self, store: SessionStore, session_id: str, token: str) -> Session:
+        """The session if ``token`` opens it.
+
+        Raises:
+            ServiceError: unauthorized, not_found, forbidden (as ``auth.authenticate``).
+        """
+        if (session := self.known(session_id, token)) is not None:
+            return session
+        session = await authenticate(store, session_id, token)
+        if len(self._opened) >= MAX_REMEMBERED_SESSIONS:
+            self._opened.pop(next(iter(self._opened)))
+        self._opened[session_id] = (token, session)
+        return session
+
+
+def check_length(n_entries: int, limit: int) -> None:
+    """Raises ``invalid_problem`` (``frames``) over IK_MAX_FRAMES_PER_REQUEST entries."""
+    if n_entries > limit:
+        raise invalid_problem(
+            f"at most {limit} entries per batch (IK_MAX_FRAMES_PER_REQUEST)", "frames"
+        )
+
+
+def invalid_entry(index: int, entry: S.InvalidEntry) -> ServiceError:
+    """An entry that failed validation, as its ``invalid_format`` error (the field is
+    the entry's, ``frames.<index>.<loc>``, as a whole message's validation names it)."""
+    errors = validation_errors(entry.errors)
+    first = errors[0] if errors else {"loc": [], "msg": "invalid entry"}
+    inner = dotted_field(first["loc"])
+    field = f"frames.{index}" + ("" if inner is None else f".{inner}")
+    return ServiceError(
+        ErrorCode.INVALID_FORMAT,
+        str(first["msg"]),
+        status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
+        field=field,
+    )
+
+
+async def prepare(
+    index: int,
+    frame: S.BatchFrame | S.InvalidEntry,
+    store: SessionStore,
+    tokens: SessionTokens,
+) -> Entry | ServiceError:
+    """A validated entry checked against its session: its token, its targets and its
+    bone output (errors name ``frames[index].targets[j]...``)."""
+    if isinstance(frame, S.InvalidEntry):
+        return invalid_entry(index, frame)
+    try:
+        session = await tokens.open(store, frame.session, frame.token)
+        view = session.view
+        targets = convert.targets(frame.targets, view, f"frames[{index}].targets")
+        if frame.bones is not None:
+            convert.check_bone_output(frame.bones, view.skeleton, f"frames[{index}].bones")
+    except ServiceError as e:
+        return e
+    return Entry(session, frame.id, targets, frame.bones)
+
+
+async def solve(
+    runner: Runner,
+    store: SessionStore,
+    entries: Sequence[Entry | ServiceError],
+    t0: float,
+    transport: str,
+    client: str,
+    *,
+    may_inline: bool = True,
+) -> list[Outcome]:
+    """Solve the entries that are ready; each comes back as its solved frame or its
+    error, in order.
+
+    On the event loop when ``may_inline`` and no entry's time budget is over
+    IK_INLINE_BUDGET_US (in slices: ``_solve_in_slices``); else on the frame threads,
+    counted against ``client``'s share, as a clip. The sessions' locks are taken in the
+    order of their ids (two batches that share sessions cannot wait for each other) and
+    held until the last frame is solved.
+
+    Raises:
+        ServiceError: for the whole batch: not_ready, invalid_problem (work over
+            IK_MAX_REQUEST_WORK_S), server_busy, too_much_work.
+    """
+    runner.check_ready()
+    now = store.clock()
+    outcomes: list[Outcome | None] = [None] * len(entries)
+    admitted: list[tuple[int, Entry]] = []
+    for k, entry in enumerate(entries):
+        if isinstance(entry, ServiceError):
+            outcomes[k] = entry
+            continue
+        rate = runner.max_frames_per_s
+        wait_s = entry.session.take_frames(1, now=now, rate_per_s=rate, burst=runner.burst)
+        if wait_s > 0:
+            outcomes[k] = rate_limited(wait_s, rate)
+        else:
+            admitted.append((k, entry))
+    sessions = sorted({e.session.id: e.session for _, e in admitted}.values(), key=_by_id)
+    locked: list[Session] = []
+    handed_over = False
+    try:
+        for session in sessions:
+            await session.lock.acquire()
+            locked.append(session)
+        live: list[tuple[int, Entry]] = []
+        for k, entry in admitted:
+            if entry.session.closed:  # deleted while the batch waited for its lock
+                outcomes[k] = not_found()
+            else:
+                live.append((k, entry))
+        work = [e for _, e in live]
+        inline_us = runner.inline_budget_us
+        if may_inline and all(_budget_us(e.session) <= inline_us for e in work):
+            solved = await _solve_in_slices(work, t0, runner.metrics.frames, transport, inline_us)
+        else:
+            budget_us = sum(_budget_us(e.session) for e in work)
+            cost_s = budget_us * 1e-6
+            if cost_s > runner.max_request_work_s:
+                raise invalid_problem(
+                    f"the batch is {cost_s:.3g} s of solving at worst (the sum of its "
+                    f"frames' time_budget_us), over IK_MAX_REQUEST_WORK_S "
+                    f"({runner.max_request_work_s:g} s): send fewer entries",
+                    "frames",
+                )
+            pool = runner.pools[WorkClass.FRAMES]
+            pool.admit()
+            shares = runner.frame_shares
+            shares.take(client, cost_s)
+            loop = asyncio.get_running_loop()
+            metrics = runner.metrics
+
+            def record(batch: list[convert.SolvedFrame], transport: str) -> None:
+                with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                    loop.call_soon_threadsafe(metrics.frames, batch, transport)
+
+            fut = pool.submit(_solve_entries, work, t0, record, transport)
+            held = list(locked)
+
+            def done(_: asyncio.Future[Any]) -> None:
+                shares.give_back(client, cost_s)
+                for session in held:  # when the thread is done, never earlier
+                    session.lock.release()
+
+            fut.add_done_callback(done)
+            handed_over = True
+            solved = await asyncio.shield(fut)
+    finally:
+        if not handed_over:
+            for session in locked:
+                session.lock.release()
+    for (k, _), outcome in zip(live, solved, strict=True):
+        outcomes[k] = outcome
+    for session in sessions:
+        store.touch(session)
+    return [o for o in outcomes if o is not None]
+
+
+def _by_id(session: Session) -> str:
+    return session.id
+
+
+def _budget_us(session: Session) -> float:
+    budget = session.options.time_budget_us
+    return math.inf if budget is None else budget
+
+
+async def _solve_in_slices(
+    entries: Sequence[Entry],
+    t0: float,
+    record: Callable[[list[convert.SolvedFrame], str], None],
+    transport: str,
+    slice_us: float,
+) -> list[Outcome]:
+    """Solve on the event loop, letting the other connections take their turn after
+    each ``slice_us`` of solving (IK_INLINE_BUDGET_US): the loop is held at most a slice
+    plus one frame's time budget, as by one frame sent alone.
+
+    Why not the frame threads: a batch's entries are frames of a few microseconds each,
+    and with 50 of them handed to a thread the server spent 1-4 us more CPU per
+    character than this (loadtest.cost --characters 50, same run: bench/RESULTS.md);
+    the thread also contends with the loop for the GIL.
+    """
+    out: list[Outcome] = []
+    while True:
+        until = time.perf_counter() + slice_us * 1e-6
+        out += _solve_entries(entries[len(out) :], t0, record, transport, until)
+        if len(out) == len(entries):
+            return out
+        await asyncio.sleep(0)
+
+
+def _solve_entries(
+    entries: Sequence[Entry],
+    t0: float,
+    record: Callable[[list[convert.SolvedFrame], str], None],
+    transport: str,
+    until: float = math.inf,
+) -> list[Outcome]:
+    """Track each entry's frame on its session's solver, in order (under the sessions'
+    locks, inline or on a frame thread), stopping after the first frame that ends past
+    ``until`` (a ``time.perf_counter()`` value); a solver error is that entry's own."""
+    out: list[Outcome] = []
+    solved: list[convert.SolvedFrame] = []
+    try:
+        for entry in entries:
+            if out and time.perf_counter() > until:
+                break
+            session = entry.session
+            try:
+                r = session.solver.track(entry.targets, options=session.options)
+            except IKError as e:
+                out.append(solver_error(e))
+                continue
+            frame = convert.SolvedFrame(entry.frame_id, r, (time.perf_counter() - t0) * 1e6)
+            out.append(frame)
+            solved.append(frame)
+            session.frames += 1
+            session.solved += int(r.success)
+    finally:
+        record(solved, transport)
+    return out
+
+
+def render(
+    entries: Sequence[Entry | ServiceError],
+    sent: Sequence[Any],
+    outcomes: Sequence[Outcome],
+    build: convert.ResultBuilder,
+    count_error: Callable[[ErrorCode], None],
+) -> list[dict[str, Any]]:
+    """Each entry's answer, in order: ``{session, id, success, result}`` or
+    ``{session, id, success: false, error}`` (schemas ``BatchEntryResult`` /
+    ``BatchEntryError``). ``sent``: the entries as sent (decoded or validated), whose
+    session and frame id an error echoes (``raw_ids``)."""
+    out: list[dict[str, Any]] = []
+    for entry, raw, outcome in zip(entries, sent, outcomes, strict=True):
+        if isinstance(outcome, ServiceError):
+            count_error(outcome.code)
+            session_id, frame_id = raw_ids(raw)
+            error: dict[str, Any] = {"code": outcome.code.value, "message": outcome.detail}
+            if outcome.field is not None:
+                error["field"] = outcome.field
+            if outcome.retry_after_s is not None:
+                error["retry_after_s"] = outcome.retry_after_s
+            out.append({"session": session_id, "id": frame_id, "success": False, "error": error})
+            continue
+        assert isinstance(entry, Entry)
+        result = build(outcome.result, outcome.frame_id, outcome.server_us)
+        view = entry.session.view
+        chosen = view.bone_output if entry.bones is None else entry.bones
+        if chosen is not None and convert.wants_bones(chosen):
+            result["bones"] = convert.bones_dict(view, outcome.result.q, chosen)
+        session_id = entry.session.id
+        success = result["success"]
+        out.append(
+            {"session": session_id, "id": outcome.frame_id, "success": success, "result": result}
+        )
+    return out
+
+
+def raw_ids(raw: Any) -> tuple[str | None, int | None]:
+    """An entry's session id and frame id as sent, each if usable (echoed in its error)."""
+    if isinstance(raw, S.BatchFrame):
+        return raw.session, raw.id
+    if isinstance(raw, S.InvalidEntry):
+        raw = raw.raw
+    if not isinstance(raw, dict):
+        return None, None
+    session, frame_id = raw.get("session"), raw.get("id")
+    return (
+        session if isinstance(session, str) else None,
+        frame_id if isinstance(frame_id, int) and not isinstance(frame_id, bool) else None,
+    )

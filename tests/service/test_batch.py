@@ -1,0 +1,217 @@
+"""Batches (many characters per message) over the TestClient: one answer per entry, in
+order; each entry's own errors; the same solves as frames sent one by one; limits."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from typing import Any
+
+import msgpack
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from pydantic import TypeAdapter
+from starlette.testclient import TestClient
+
+import schemas as S
+from service.config import Settings
+
+from .helpers import Created, create, hand_frame
+
+SERVER_MESSAGE: TypeAdapter[Any] = TypeAdapter(S.ServerMessage)
+ErrorCodes = S.ErrorCode
+
+
+def entry(s: Created, frame_id: int | None, y: float = 0.1, **extra: Any) -> dict[str, Any]:
+    return {"session": s.id, "token": s.token, **hand_frame(frame_id, y=y), **extra}
+
+
+def batch_msg(msg_id: int, entries: list[dict[str, Any]]) -> dict[str, Any]:
+    return {"type": "batch", "id": msg_id, "frames": entries}
+
+
+def ws_url(s: Created) -> str:
+    return f"/v1/sessions/{s.id}/ws"
+
+
+def send_batch(client: TestClient, via: Created, msgs: list[dict[str, Any]]) -> list[Any]:
+    with client.websocket_connect(ws_url(via), headers=via.headers) as ws:
+        out = []
+        for m in msgs:
+            ws.send_text(json.dumps(m))
+            out.append(SERVER_MESSAGE.validate_python(ws.receive_json()))
+    return out
+
+
+def test_ws_batch_answers_each_session_in_order(client: TestClient) -> None:
+    a, b, c = (create(client) for _ in range(3))
+    replies = send_batch(
+        client,
+        a,
+        [
+            batch_msg(1, [entry(a, 10, 0.1), entry(b, 20, 0.12), entry(c, 30, 0.14)]),
+            batch_msg(2, [entry(c, 31, 0.15), entry(a, 11, 0.11)]),
+        ],
+    )
+    first, second = replies
+    assert isinstance(first, S.BatchResultMessage) and first.id == 1 and first.success
+    assert [(r.session, r.id) for r in first.results] == [(a.id, 10), (b.id, 20), (c.id, 30)]
+    assert [(r.session, r.id) for r in second.results] == [(c.id, 31), (a.id, 11)]
+    assert all(isinstance(r, S.BatchEntryResult) and r.result.id == r.id for r in first.results)
+    counters = {
+        s.id: client.get(f"/v1/sessions/{s.id}", headers=s.headers).json() for s in (a, b, c)
+    }
+    assert [counters[s.id]["counters"]["frames"] for s in (a, b, c)] == [2, 1, 2]
+    # Each session continued from its own last answer: its pose is the last result's q.
+    assert counters[c.id]["pose"]["q"] == second.results[0].result.q
+
+
+def test_batch_solves_as_frames_sent_one_by_one(client: TestClient) -> None:
+    """The same frames give the same joint values whether batched or sent alone."""
+    batched, alone = create(client), create(client)
+    ys = [0.1, 0.13, 0.16]
+    with client.websocket_connect(ws_url(batched), headers=batched.headers) as ws:
+        for i, y in enumerate(ys):
+            ws.send_text(json.dumps(batch_msg(i, [entry(batched, i, y)])))
+            got = SERVER_MESSAGE.validate_python(ws.receive_json()).results[0].result.q
+            frames_url = f"/v1/sessions/{alone.id}/frames"
+            r = client.post(frames_url, json=hand_frame(i, y=y), headers=alone.headers)
+            assert_allclose(got, r.json()["results"][0]["q"], rtol=0, atol=1e-12)
+
+
+def test_one_bad_entry_gets_its_own_error(client: TestClient) -> None:
+    a, b, gone = create(client), create(client), create(client)
+    assert client.delete(f"/v1/sessions/{gone.id}", headers=gone.headers).status_code == 204
+    bad_target = {**entry(b, 3), "targets": [{"effector": "hand", "position": {"x": "0.3"}}]}
+    unknown = {
+        **entry(b, 4),
+        "targets": [{"effector": "foot", "position": {"x": 0, "y": 0, "z": 0}}],
+    }
+    entries = [
+        entry(a, 1),
+        {**entry(b, 2), "token": "not-the-token"},
+        bad_target,
+        unknown,
+        entry(gone, 5),
+        "not an entry",
+        entry(b, 6),
+    ]
+    (reply,) = send_batch(client, a, [batch_msg(1, entries)])
+    assert isinstance(reply, S.BatchResultMessage) and not reply.success
+    codes = [r.error.code if isinstance(r, S.BatchEntryError) else "ok" for r in reply.results]
+    assert codes == [
+        "ok",
+        ErrorCodes.FORBIDDEN,
+        ErrorCodes.INVALID_FORMAT,
+        ErrorCodes.INVALID_PROBLEM,
+        ErrorCodes.NOT_FOUND,
+        ErrorCodes.INVALID_FORMAT,
+        "ok",
+    ]
+    errors = {i: r for i, r in enumerate(reply.results) if isinstance(r, S.BatchEntryError)}
+    assert errors[2].error.field is not None and errors[2].error.field.startswith(
+        "frames.2.targets"
+    )
+    assert errors[3].error.field == "frames[3].targets[0].effector"
+    assert [(errors[i].session, errors[i].id) for i in (1, 4, 5)] == [
+        (b.id, 2),
+        (gone.id, 5),
+        (None, None),
+    ]
+    assert reply.results[6].session == b.id and reply.results[6].success
+
+
+@pytest.mark.parametrize("with_bones_key", [False, True])
+def test_msgpack_batch_gets_msgpack_answer(client: TestClient, with_bones_key: bool) -> None:
+    """Both ways through the server (the fast path, and pydantic for an entry that
+    carries ``bones``) give the same answer."""
+    a, b = create(client), create(client)
+    extra = {"bones": None} if with_bones_key else {}
+    msg = batch_msg(7, [entry(a, 1, **extra), entry(b, 2, **extra)])
+    with client.websocket_connect(ws_url(a), headers=a.headers) as ws:
+        ws.send_bytes(msgpack.packb(msg))
+        reply = S.BatchResultMessage.model_validate(msgpack.unpackb(ws.receive_bytes()))
+    assert reply.id == 7 and reply.success
+    assert [(r.session, r.id) for r in reply.results] == [(a.id, 1), (b.id, 2)]
+
+
+def test_rate_limit_is_per_session(make_client: Callable[..., TestClient]) -> None:
+    # A bucket of 2 frames per session (burst: IK_MAX_FRAMES_PER_REQUEST), refilled at 1/s.
+    client = make_client(Settings(max_frames_per_s=1.0, max_frames_per_request=2))
+    a, b = create(client), create(client)
+    msgs = [batch_msg(1, [entry(a, 1), entry(a, 2)]), batch_msg(2, [entry(a, 3), entry(b, 4)])]
+    first, second = send_batch(client, a, msgs)
+    assert isinstance(first, S.BatchResultMessage) and first.success
+    assert isinstance(second, S.BatchResultMessage)
+    assert [r.success for r in second.results] == [False, True]
+    limited = second.results[0]
+    assert isinstance(limited, S.BatchEntryError) and limited.id == 3
+    assert limited.error.code == S.ErrorCode.RATE_LIMITED and limited.error.retry_after_s
+
+
+def test_too_many_entries_fail_the_whole_message(make_client: Callable[..., TestClient]) -> None:
+    client = make_client(Settings(max_frames_per_request=2))
+    a = create(client)
+    (reply,) = send_batch(client, a, [batch_msg(1, [entry(a, i) for i in range(3)])])
+    assert isinstance(reply, S.ErrorMessage) and reply.id == 1
+    assert reply.error.code == S.ErrorCode.INVALID_PROBLEM and reply.error.field == "frames"
+    r = client.post("/v1/batch", json={"frames": [entry(a, i) for i in range(3)]})
+    assert r.status_code == 422 and r.json()["code"] == "invalid_problem"
+
+
+def test_batch_message_needs_increasing_ids(client: TestClient) -> None:
+    a = create(client)
+    first, again = send_batch(client, a, [batch_msg(5, [entry(a, 1)]), batch_msg(5, [entry(a, 2)])])
+    assert isinstance(first, S.BatchResultMessage)
+    assert isinstance(again, S.ErrorMessage) and again.error.code == S.ErrorCode.ID_REUSE
+
+
+def test_http_batch(client: TestClient) -> None:
+    a, b = create(client), create(client)
+    body = {"frames": [entry(a, 1), {**entry(b, 2), "token": "wrong"}, entry(b, 3)]}
+    r = client.post("/v1/batch", json=body)
+    assert r.status_code == 200, r.text
+    out = S.BatchResults.model_validate(r.json())
+    assert [(x.session, x.id, x.success) for x in out.results] == [
+        (a.id, 1, True),
+        (b.id, 2, False),
+        (b.id, 3, True),
+    ]
+    assert isinstance(out.results[1], S.BatchEntryError)
+    assert out.results[1].error.code == S.ErrorCode.FORBIDDEN
+    compact = client.post("/v1/batch?results=compact", json={"frames": [entry(a, 4)]}).json()
+    (only,) = S.BatchResults.model_validate(compact).results
+    assert isinstance(only, S.BatchEntryResult)
+    assert isinstance(only.result, S.CompactFrameResult)
+    assert np.isfinite(only.result.q).all()
+
+
+@pytest.mark.parametrize("body", [{}, {"frames": []}, {"frames": "x"}, [], {"frames": [], "x": 1}])
+def test_http_batch_envelope_errors(client: TestClient, body: Any) -> None:
+    r = client.post("/v1/batch", json=body)
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format"
+
+
+@pytest.mark.parametrize(
+    ("inline_budget_us", "where"),
+    [(20.0, "on the loop, a slice of 20 us at a time"), (5.0, "on the frame threads")],
+)
+def test_where_a_batch_is_solved_does_not_change_its_answers(
+    make_client: Callable[..., TestClient], inline_budget_us: float, where: str
+) -> None:
+    """Entries with a 20 us budget: solved on the loop in slices of 20 us (a few entries
+    each, the loop turning between them), or, with a smaller inline budget, on the frame
+    threads; every entry is answered, in order, and each session moves on."""
+    client = make_client(Settings(inline_budget_us=inline_budget_us))
+    sessions = [create(client, options={"time_budget_us": 20.0}) for _ in range(4)]
+    entries = [
+        entry(s, 10 * k + i, 0.1 + 0.01 * k) for k in range(5) for i, s in enumerate(sessions)
+    ]
+    (reply,) = send_batch(client, sessions[0], [batch_msg(1, entries)])
+    assert isinstance(reply, S.BatchResultMessage), where
+    assert [(r.session, r.id) for r in reply.results] == [(e["session"], e["id"]) for e in entries]
+    assert all(isinstance(r, S.BatchEntryResult) for r in reply.results), where
+    for s in sessions:
+        info = client.get(f"/v1/sessions/{s.id}", headers=s.headers).json()
+        assert info["counters"]["frames"] == 5
