@@ -50,7 +50,11 @@ from .targets import Pole
 # enough to swing a limb in a few dozen iterations, weak enough that the targets stay
 # nearly met (the second call then has little to do).
 POLE_WEIGHT_VALUE = 0.1
-SHAPING_MAX_ITER = 40
+# Iterations of the shaping pass: enough to swing a knee from one side to the other in
+# a one-shot solve (tests/solver/test_poles_weights.py), few enough that a stream frame
+# with four poles costs ~5x a plain one rather than ~7x with 40 (bench/RESULTS.md); a
+# stream's shaping carries on from frame to frame.
+SHAPING_MAX_ITER = 15
 
 
 def limb_path(chain: Chain, effector: int) -> list[str]:
