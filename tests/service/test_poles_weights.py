@@ -12,16 +12,18 @@ import json
 import math
 import re
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgpack
 import numpy as np
 import pytest
-from starlette.testclient import TestClient
 
 from tests.solver.skeleton_refs import asset_bytes
 
 from .helpers import Created, create
+
+if TYPE_CHECKING:  # tests/live imports this module's helpers without the test client
+    from starlette.testclient import TestClient
 
 LEGS = [f"node_{i}" for i in range(3, 11)]
 HIP, KNEE, TOE = "node_3", "node_4", "node_6"
@@ -190,6 +192,8 @@ def test_a_weight_in_between_lands_between(legs: Legs, encoding: str) -> None:
         ({"pole": {"position": {"x": 0, "y": 1, "z": 0}, "bone": "no_such_bone"}}, "pole.bone"),
         ({"pole": {"position": {"x": 0, "y": 1, "z": 0}, "bone": "node_8"}}, "pole.bone"),
         ({"pole": {"position": {"x": 0, "y": 1}}}, "pole.position.z"),
+        ({"pole": {"position": {"x": 1e7, "y": 1, "z": 0}}}, "pole.position.x"),
+        ({"pole": {"position": {"x": 0, "y": 1, "z": 0}, "bone": 3}}, "pole.bone"),
     ],
 )
 def test_bad_weights_and_poles_get_422_naming_the_field(
