@@ -164,8 +164,12 @@ class Task:
         if wr == 0.0:
             ed[i, ED_TOL_R] = math.inf
         self._touched.append(i)
-        if 0.0 < wp < 1.0 or 0.0 < wr < 1.0:
-            self.blended.append((i, wp, wr, t.given))
+        # Soft parts, among those the target gives (a rotation weight on a position
+        # target, say, has nothing to blend): their weights, 1.0 for the others.
+        soft_p = wp if 0.0 < wp < 1.0 and t.given & GIVEN_POSITION else 1.0
+        soft_r = wr if 0.0 < wr < 1.0 and t.given & (GIVEN_ROTATION | GIVEN_DIRECTION) else 1.0
+        if soft_p < 1.0 or soft_r < 1.0:
+            self.blended.append((i, soft_p, soft_r, t.given))
         if t.pole is not None:
             self.poles.append((i, t.pole))
 

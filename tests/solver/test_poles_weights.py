@@ -236,3 +236,14 @@ def test_weights_reset_between_frames(legs: Chain) -> None:
     far = np.array([10.0, 10.0, 10.0])
     assert solver.solve([Target(effector="right_foot", position=far, position_weight=0.0)]).success
     assert not solver.solve([Target(effector="right_foot", position=far)]).success
+
+
+def test_a_weight_on_a_part_the_effector_lacks_changes_nothing(legs: Chain) -> None:
+    # right_foot is a position effector: a rotation weight has nothing to act on.
+    target, _, _ = bent_leg(legs)
+    plain = IKSolver(legs).solve([Target(effector="right_foot", position=target)])
+    weighted = IKSolver(legs).solve(
+        [Target(effector="right_foot", position=target, rotation_weight=0.5)]
+    )
+    assert plain.success and weighted.success
+    assert np.array_equal(plain.q, weighted.q)
