@@ -7,9 +7,12 @@ reach); each frame's answer is then turned into what a game engine applies
 (``SkeletonChain.local_rotations`` for the moving bones, ``world_transforms`` of the
 four effector bones). Reported: import times, frames solved, per-frame solve and output
 times (median and 99th percentile, microseconds), for every bone moving (the default)
-and for the limbs only.
+and for the limbs only; then the same stream with blend weights (0.5 on the feet's
+positions and the hands' rotations: the blend towards the start pose) and with a pole
+on each limb (knees and elbows, the default bone; each pole 0.3 m in front of that
+bone in the path's pose, so the poles move with the path).
 
-    OPENBLAS_NUM_THREADS=1 python -m bench.skeleton --frames 300
+    OPENBLAS_NUM_THREADS=1 python -m bench.skeleton --frames 300 [--budget-us 0]
 """
 
 from __future__ import annotations
@@ -17,15 +20,24 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from solver.ik import STREAM_DEFAULTS, IKSolver, pose_targets  # noqa: E402
+from solver.ik import (  # noqa: E402
+    STREAM_DEFAULTS,
+    IKSolver,
+    Pole,
+    Target,
+    default_pole_link,
+    pose_targets,
+)
 from solver.model import Effector, EffectorMode  # noqa: E402
 from solver.model.bvh import read_bvh  # noqa: E402
+from solver.model.forward import link_poses  # noqa: E402
 from solver.model.gltf import read_gltf  # noqa: E402
 from solver.model.skeleton import SkeletonSettings, chain_from_skeleton  # noqa: E402
 
@@ -54,11 +66,38 @@ def per_call_us(fn: object, repeat: int) -> float:
     return (time.perf_counter() - start) / repeat * 1e6
 
 
+def weighted(targets: list[Target]) -> list[Target]:
+    """Position weight 0.5 on position effectors, rotation weight 0.5 on pose ones."""
+    return [
+        Target(
+            effector=t.effector,
+            position=t.position,
+            rotation=t.rotation,
+            position_weight=0.5 if t.rotation is None else 1.0,
+            rotation_weight=0.5,
+        )
+        for t in targets
+    ]
+
+
+def with_poles(targets: list[Target], poles: list[np.ndarray]) -> list[Target]:
+    return [
+        Target(effector=t.effector, position=t.position, rotation=t.rotation, pole=Pole(p))
+        for t, p in zip(targets, poles, strict=True)
+    ]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--assets", default=None)
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--budget-us",
+        type=float,
+        default=STREAM_DEFAULTS.time_budget_us,
+        help="time budget per frame (0: none); default the stream defaults'",
+    )
     args = ap.parse_args(argv)
     folder = assets_dir(args.assets)
 
@@ -83,26 +122,41 @@ def main(argv: list[str] | None = None) -> int:
         phase = rng.uniform(0.0, 2.0 * np.pi, chain.n_dof)
         t = np.arange(args.frames)[:, None] / args.frames
         path = amplitude * (np.sin(2.0 * np.pi * t + phase) - np.sin(phase))
-        stream = [pose_targets(chain, np.clip(q, chain.lower, chain.upper)) for q in path]
-        solver = IKSolver(chain, STREAM_DEFAULTS, seed=args.seed)
-        solve_us, output_us, solved = [], [], 0
-        bones = [e.link for e in effectors]
-        for targets in stream:
-            start = time.perf_counter()
-            result = solver.track(targets)
-            mid = time.perf_counter()
-            built.local_rotations(result.q)
-            built.world_transforms(result.q, bones)
-            end = time.perf_counter()
-            solve_us.append((mid - start) * 1e6)
-            output_us.append((end - mid) * 1e6)
-            solved += result.success
-        print(
-            f"{label}: {len(built.moving)} bones, {chain.n_dof} variables, solved "
-            f"{solved}/{args.frames}; solve p50 {np.median(solve_us):.0f} us, "
-            f"p99 {np.percentile(solve_us, 99):.0f} us; bone output p50 "
-            f"{np.median(output_us):.0f} us, p99 {np.percentile(output_us, 99):.0f} us"
+        poses = [np.clip(q, chain.lower, chain.upper) for q in path]
+        plain = [pose_targets(chain, q) for q in poses]
+        bent = [default_pole_link(chain, i) for i in range(len(effectors))]
+        forward = np.array([0.0, 0.0, 0.3])  # glTF's front (+z), 0.3 m
+        poled = [
+            with_poles(t, [link_poses(chain, q)[b][:3, 3] + forward for b in bent])  # type: ignore[index]
+            for t, q in zip(plain, poses, strict=True)
+        ]
+        streams = (
+            ("", plain),
+            (" + weights 0.5", [weighted(t) for t in plain]),
+            (f" + poles on {', '.join(b or '-' for b in bent)}", poled),
         )
+        for variant, stream in streams:
+            budget = args.budget_us if args.budget_us > 0 else None
+            options = replace(STREAM_DEFAULTS, time_budget_us=budget)
+            solver = IKSolver(chain, options, seed=args.seed)
+            solve_us, output_us, solved = [], [], 0
+            bones = [e.link for e in effectors]
+            for targets in stream:
+                start = time.perf_counter()
+                result = solver.track(targets)
+                mid = time.perf_counter()
+                built.local_rotations(result.q)
+                built.world_transforms(result.q, bones)
+                end = time.perf_counter()
+                solve_us.append((mid - start) * 1e6)
+                output_us.append((end - mid) * 1e6)
+                solved += result.success
+            print(
+                f"{label}{variant}: {len(built.moving)} bones, {chain.n_dof} variables, "
+                f"solved {solved}/{args.frames}; solve p50 {np.median(solve_us):.0f} us, "
+                f"p99 {np.percentile(solve_us, 99):.0f} us; bone output p50 "
+                f"{np.median(output_us):.0f} us, p99 {np.percentile(output_us, 99):.0f} us"
+            )
     return 0
 
 

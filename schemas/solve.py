@@ -104,6 +104,31 @@ class OptionsPatch(StrictModel):
 
 
 # --- targets and frames ----------------------------------------------------------------
+BlendWeight = Annotated[float, Field(allow_inf_nan=False, ge=0.0, le=1.0)]
+
+
+class Pole(StrictModel):
+    """A point a mid-chain bone (knee, elbow) bends towards: it picks the bend side and
+    never makes a reachable frame fail. In the session's conventions, as targets."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {"position": {"x": 0.1, "y": 0.5, "z": 0.6}},
+                {"position": {"x": 0.1, "y": 0.5, "z": 0.6}, "bone": "leg_joint_R_2"},
+            ]
+        }
+    )
+
+    position: Vec3 = Field(description="The point the bone bends towards [session unit]")
+    bone: Name | None = Field(
+        default=None,
+        description="The link (bone) whose origin is pulled towards the point: the knee "
+        "or elbow bone (shin, forearm), on the effector's path to the root. Default: the "
+        "middle of the effector's limb",
+    )
+
+
 class Target(StrictModel):
     """What one effector should reach in this frame, in the chain's root frame.
 
@@ -111,6 +136,8 @@ class Target(StrictModel):
     ``position``, unless only the orientation matters); aim effectors need
     ``direction`` (and optionally ``position``). Effectors without a target in a frame
     are not pulled (their joints stay free only if another target moves them).
+    ``position_weight`` / ``rotation_weight`` blend IK in and out (docs/engines.md);
+    ``pole`` chooses where the limb bends.
     """
 
     model_config = ConfigDict(
@@ -121,6 +148,12 @@ class Target(StrictModel):
                     "effector": "tool",
                     "position": {"x": 0.4, "y": 0.0, "z": 0.5},
                     "orientation": {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0},
+                },
+                {
+                    "effector": "left_foot",
+                    "position": {"x": 0.1, "y": 0.05, "z": 0.1},
+                    "position_weight": 0.5,
+                    "pole": {"position": {"x": 0.1, "y": 0.5, "z": 0.6}},
                 },
             ]
         }
@@ -135,6 +168,19 @@ class Target(StrictModel):
         default=None,
         description="Direction the aim axis should point along (aim effectors); any "
         "non-zero length, normalised by the server",
+    )
+    position_weight: BlendWeight = Field(
+        default=1.0,
+        description="Blend weight of the position in [0, 1]: 1 exact, 0 free (not pulled, "
+        "never fails the frame), in between a soft pull towards the point that fraction of "
+        "the way from the tip's pose at the frame's start; below 1 it never fails the frame",
+    )
+    rotation_weight: BlendWeight = Field(
+        default=1.0,
+        description="The same for the orientation (pose effectors) or direction (aim)",
+    )
+    pole: Pole | None = Field(
+        default=None, description="Where this effector's limb bends (knee, elbow)"
     )
 
     @model_validator(mode="after")

@@ -29,6 +29,7 @@ import numpy as np
 import schemas as S
 from solver.arrays import Matrix, Vector
 from solver.ik import GIVEN_DIRECTION, GIVEN_POSITION, GIVEN_ROTATION
+from solver.ik import Pole as SolverPole
 from solver.ik import Target as SolverTarget
 
 _TO_GLTF: dict[tuple[str, str], Matrix] = {
@@ -92,7 +93,19 @@ class Convention:
             row[3:12] = (m @ row[3:12].reshape(3, 3) @ m.T).reshape(9)
         if t.given & GIVEN_DIRECTION:
             row[12:15] = m @ row[12:15]
-        return SolverTarget.from_row(t.effector, row, t.given)
+        if t.plain:
+            return SolverTarget.from_row(t.effector, row, t.given)
+        pole = t.pole
+        if pole is not None:
+            pole = SolverPole(self.scale * (m @ pole.point), pole.link)
+        return SolverTarget.from_row(
+            t.effector,
+            row,
+            t.given,
+            position_weight=t.position_weight,
+            rotation_weight=t.rotation_weight,
+            pole=pole,
+        )
 
     def targets_in(self, ts: list[SolverTarget]) -> list[SolverTarget]:
         return ts if self.identity else [self.target_in(t) for t in ts]

@@ -28,7 +28,10 @@ from .geometry import Flat9, rotation_rows
 
 # (frame id, solver targets) of a frame message the fast path accepted.
 FastFrame = tuple[int, list[SolverTarget]]
-_TARGET_KEYS = frozenset(("effector", "position", "orientation", "direction"))
+# A target with a pole takes the pydantic path (its bone is checked there).
+_TARGET_KEYS = frozenset(
+    ("effector", "position", "orientation", "direction", "position_weight", "rotation_weight")
+)
 
 
 def fast_frame(raw: object, view: ChainView) -> FastFrame | None:
@@ -124,7 +127,15 @@ def _fast_targets(ts: object, modes: dict[str, EffectorMode]) -> list[SolverTarg
             values += d
             given |= GIVEN_DIRECTION
         row = np.array(values, dtype=np.float64)
-        out.append(SolverTarget.from_row(name, row, given))
+        parts = (position is not None) + (orientation is not None) + (direction is not None)
+        if len(t) == 1 + parts:  # no weights: a stream's usual target
+            out.append(SolverTarget.from_row(name, row, given))
+            continue
+        wp = _fast_weight(t.get("position_weight", 1.0))
+        wr = _fast_weight(t.get("rotation_weight", 1.0))
+        if wp is None or wr is None:
+            return None
+        out.append(SolverTarget.from_row(name, row, given, position_weight=wp, rotation_weight=wr))
     return out
 
 
@@ -137,6 +148,14 @@ _NO_DIRECTION: tuple[float, ...] = tuple(TARGET_PLACEHOLDER_ROW[12:15].tolist())
 def _is_number(v: object) -> TypeGuard[float | int]:
     """A JSON / MessagePack number as pydantic's strict float takes it (not a bool)."""
     return type(v) is float or type(v) is int
+
+
+def _fast_weight(w: object) -> float | None:
+    """A ``BlendWeight``: a number (not a bool) in [0, 1]."""
+    if not _is_number(w):
+        return None
+    w = float(w)
+    return w if 0.0 <= w <= 1.0 else None  # NaN fails too
 
 
 def _fast_vec3(v: object) -> tuple[float, float, float] | None:

@@ -11,7 +11,10 @@ import math
 from collections.abc import Sequence
 
 import schemas as S
+from solver.errors import InvalidProblem
+from solver.ik import Pole as SolverPole
 from solver.ik import Target as SolverTarget
+from solver.ik import pole_node
 from solver.model import EffectorMode
 
 from ..errors import invalid_problem
@@ -97,15 +100,34 @@ def targets(ts: Sequence[S.Target], view: ChainView, field: str) -> list[SolverT
             if not math.sqrt(d.x * d.x + d.y * d.y + d.z * d.z) > 1e-9:
                 raise invalid_problem("direction must not be zero", f"{where}.direction")
             direction = vec3(d)
+        pole = None
+        if t.pole is not None:
+            pole = _pole(t.pole, view, t.effector, where)
         out.append(
             SolverTarget(
                 effector=t.effector,
                 position=None if t.position is None else vec3(t.position),
                 rotation=None if t.orientation is None else rotation_matrix(t.orientation),
                 direction=direction,
+                position_weight=t.position_weight,
+                rotation_weight=t.rotation_weight,
+                pole=pole,
             )
         )
     return view.convention.targets_in(out)
+
+
+def _pole(p: S.Pole, view: ChainView, effector: str, where: str) -> SolverPole:
+    """The solver's pole (in the client's frame: ``targets_in`` converts it), a named
+    bone checked against the effector's path to the root (``pole_node``; the default
+    bone is the solver's choice, cached per session)."""
+    if p.bone is not None:
+        chain = view.chain
+        try:
+            pole_node(chain, chain.effector_index(effector), p.bone)
+        except InvalidProblem as e:
+            raise invalid_problem(str(e), f"{where}.pole.bone") from None
+    return SolverPole(vec3(p.position), p.bone)
 
 
 def _require(ok: bool, message: str, where: str, name: str) -> None:

@@ -8,12 +8,16 @@ things are:
     frame.py        the compiled per-frame solve (validate, solve, report errors)
     kinematics.py   the IK objective, its exact gradient, the goal measure, errors
     metric.py       the Gauss-Newton metric handed to the optimizer; null-space step
-    targets.py      ``Target`` and its packed row
+    targets.py      ``Target`` and its packed row, ``Pole``
+    blend.py        blend weights between 0 and 1: the goal part of the way there
+    poles.py        pole targets: the shaping pass, the default pulled link
+    pole_term.py    the pole term of the objective (compiled)
     options.py      ``IKOptions``, ``STREAM_DEFAULTS``
     result.py       ``IKResult``, ``IKStatus``, ``EffectorError``
 """
 
 from .options import STREAM_DEFAULTS, IKOptions
+from .poles import default_pole_link, pole_node
 from .result import EffectorError, IKResult, IKStatus
 from .solver import IKData, IKSolver, StreamState, solve
 from .targets import (
@@ -22,7 +26,9 @@ from .targets import (
     GIVEN_ROTATION,
     TARGET_PLACEHOLDER_ROW,
     TARGET_ROW,
+    Pole,
     Target,
+    check_weight,
     pose_targets,
 )
 
@@ -39,8 +45,12 @@ __all__ = [
     "IKResult",
     "IKSolver",
     "IKStatus",
+    "Pole",
     "StreamState",
     "Target",
+    "check_weight",
+    "default_pole_link",
+    "pole_node",
     "pose_targets",
     "solve",
 ]

@@ -17,6 +17,7 @@ from ..model.layout import (
     ED_TPOS,
     ED_TROT,
     ED_WP,
+    ED_WR,
     EI_ACTIVE,
     EI_MODE,
     MODE_AIM,
@@ -106,7 +107,8 @@ def solve_frame(  # type: ignore[no-untyped-def]
     array argument, and each returned array or nested tuple is boxed.
 
     Writes the pose into ``out_x`` and, into ``out``: per-effector errors (m x 3:
-    position error, nan if not targeted; rotation error, nan if not constrained;
+    position error, nan if not targeted (or weighted 0); rotation error, nan if not
+    constrained (or weighted 0);
     1.0 if targeted), the final inverse Hessian (n x n), then the pass log.
     ``h0`` (the initial H) is read, never written.
 
@@ -206,7 +208,8 @@ def _copy_errors(data, errors):  # type: ignore[no-untyped-def]
     for e in range(ei.shape[0]):
         active = ei[e, EI_ACTIVE] != 0
         errors[e, 0] = ed[e, ED_ERR_P] if active and ed[e, ED_WP] > 0.0 else math.nan
-        errors[e, 1] = ed[e, ED_ERR_R] if active and ei[e, EI_MODE] != MODE_POSITION else math.nan
+        constrained = active and ei[e, EI_MODE] != MODE_POSITION and ed[e, ED_WR] > 0.0
+        errors[e, 1] = ed[e, ED_ERR_R] if constrained else math.nan
         errors[e, 2] = 1.0 if active else 0.0
 
 

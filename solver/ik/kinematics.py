@@ -10,9 +10,10 @@ written here and by the solver); DD and MISC are the IK's own:
     DD  float64[12 + n // 2, n]  reference pose, lower, upper, last q evaluated,
                               gradient scratch, 6 rows of Jacobian scratch, rest pose,
                               then n // 2 rows for several effectors' stacked Jacobian
-    MISC float64[7]           posture weight, limit weight, limit margin, goal
+    MISC float64[7 (+ pole block)]  posture weight, limit weight, limit margin, goal
                               measure of the last q evaluated, damping floor,
-                              f of the last q evaluated, damping scale
+                              f of the last q evaluated, damping scale; then, in an
+                              IKSolver's, the pole block (``pole_term``)
 
 The gradient needs no Jacobian matrix: for each effector we walk its ancestors once
 and accumulate J^T r column by column (revolute column: a x (p - o) for position and
@@ -68,6 +69,7 @@ from ..model.layout import (
     NI_PARENT,
     NODE_ROTATION,
 )
+from .pole_term import pole_terms
 
 # DD rows
 DD_QREF = 0
@@ -316,6 +318,9 @@ def ik_objective(q, g, need_grad, data):  # type: ignore[no-untyped-def]
             g[i] = 0.0
     f = effector_terms(q, g, need_grad, ni, nd, ei, ed)
     f += regularisation(q, g, need_grad, dd, misc)
+    if misc.shape[0] > MISC_SIZE and misc[MISC_SIZE] > 0.0:
+        # A frame's shaping pass with poles (pole_term, ik.poles); nd holds q's frames.
+        f += pole_terms(q, g, need_grad, ni, nd, misc, MISC_SIZE)
     # Remember the goal measure for this q so the goal test needs no second FK.
     misc[MISC_GOAL] = goal_measure(ei, ed)
     misc[MISC_LAST_F] = f

@@ -18,6 +18,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from functools import partial
 from typing import Any, NamedTuple, cast
 
 import numba
@@ -29,6 +30,7 @@ from ..model import Chain
 from ..optim import Termination, register_objective
 from ..optim import codes as C
 from ..optim.minimize import pack_options
+from .blend import blend_rows, solve_blended
 from .frame import (
     SEED_NOT_FINITE,
     TARGETS_OK,
@@ -53,6 +55,8 @@ from .kinematics import (
 )
 from .metric import ik_metric
 from .options import IKOptions
+from .pole_term import pole_block_size
+from .poles import PoleShaper
 from .result import STATUSES, EffectorError, IKResult, IKStatus, ResultLayout
 from .targets import Target
 from .task import Task
@@ -111,7 +115,9 @@ class IKSolver:
         self._dd = np.zeros((dd_rows(n), n))
         self._dd[DD_LO] = chain.lower
         self._dd[DD_HI] = chain.upper
-        self._misc = np.zeros(MISC_SIZE)
+        # The IK's entries, then the pole block (pole_term): zero poles switched on.
+        self._misc = np.zeros(MISC_SIZE + pole_block_size(len(chain.effectors)))
+        self._shaper: PoleShaper | None = None
         self._data: IKData = (cc.ni, cc.nd.copy(), ei, cc.ed.copy(), self._dd, self._misc)
         _register_once(self._data)
         self._task = Task(chain, ei, self._data[3], self._dd)
@@ -338,6 +344,8 @@ class IKSolver:
     ) -> IKResult:
         task = self._task
         task.load(targets, opts)
+        if task.blended:  # weights strictly between 0 and 1 (blend)
+            blend_rows(self.chain, q0, task.target_rows, task.blended)
         if self._misc_for is not opts:
             self._misc[MISC_POSTURE] = opts.posture_weight
             self._misc[MISC_LIMIT] = opts.limit_weight
@@ -395,7 +403,18 @@ class IKSolver:
             self._ints,
         )
         call = self._solve_call
-        bad, status, code, nit, nfev, npass, nrest, elapsed = call(*args)
+        usual: Callable[..., tuple[Any, ...]]
+        if task.blended:  # soft parts: aim at them, then judge full weights only (blend)
+            usual = partial(solve_blended, call, relax_soft_parts=task.relax_soft_parts)
+        else:
+            usual = call
+        if task.poles:  # a shaping pass first (poles)
+            if self._shaper is None:
+                self._shaper = PoleShaper(self.chain, MISC_SIZE)
+            solved = self._shaper.solve(args, task.poles, usual)
+        else:
+            solved = usual(*args)
+        bad, status, code, nit, nfev, npass, nrest, elapsed = solved
         if call is solve_frame:
             self._solve_call = _compiled_entry(solve_frame, args)
         if bad != TARGETS_OK:

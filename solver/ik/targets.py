@@ -29,6 +29,47 @@ TARGET_PLACEHOLDER_ROW = np.array([0.0, 0.0, 0.0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.0
 TARGET_PLACEHOLDER_ROW.setflags(write=False)
 
 
+@dataclass(frozen=True, slots=True)
+class Pole:
+    """A point that a mid-chain link (a knee, an elbow) should bend towards: soft, it
+    chooses the bend side and never makes a reachable frame fail (``poles``).
+
+    Attributes:
+        point: World point (root frame of the chain) [m], shape (3,), finite.
+        link: The link whose origin is pulled towards ``point`` (for a skeleton, the
+            bone whose joint is the knee or elbow: the shin or forearm bone); on the
+            effector's path to the root. None: the middle of the effector's limb
+            (``poles.default_pole_link``).
+    """
+
+    point: Vector
+    link: str | None = None
+
+    def __post_init__(self) -> None:
+        try:
+            point = np.array(self.point, dtype=np.float64).reshape(3)
+        except (ValueError, TypeError):
+            raise InvalidProblem("a pole point needs 3 numbers") from None
+        if not np.isfinite(point).all():
+            raise InvalidProblem("a pole point must be finite")
+        point.setflags(write=False)
+        object.__setattr__(self, "point", point)
+
+
+def check_weight(value: object, name: str) -> float:
+    """A blend weight as a float in [0, 1].
+
+    Raises:
+        InvalidProblem: not a number (bools are not), NaN, or outside [0, 1].
+    """
+    if type(value) is not float and type(value) is not int:
+        raise InvalidProblem(f"{name} must be a number in [0, 1], got {value!r}")
+    w = float(value)
+    if not 0.0 <= w <= 1.0:  # NaN fails too
+        raise InvalidProblem(f"{name} must be in [0, 1], got {value!r}")
+    return w
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Target:
     """What one effector should reach in this frame (world frame of the chain's root).
@@ -39,26 +80,39 @@ class Target:
             POSE and AIM optional (None drops the position term this frame).
         rotation: Target tip orientation, 3x3 rotation matrix (POSE).
         direction: Unit direction the aim axis should point along (AIM).
+        position_weight: Blend weight of the position part in [0, 1]: 1 exact (as
+            without weights), 0 free (not pulled, not judged), in between a soft
+            pull towards the point that fraction of the way from where the tip was
+            at the frame's start; a part below 1 never makes the frame fail
+            (``blend``).
+        rotation_weight: The same for the rotation (POSE) or direction (AIM) part.
+        pole: Where the effector's limb should bend (``Pole``), or None.
         packed: The numbers as one read-only float64 row (position, rotation,
             direction), built once here so that a solve copies one row per target;
             a target reused across solves (a benchmark, a replayed clip) is packed
             once. The given parts then read as views of this row: a Target is a
             snapshot, later edits to the arrays it was built from do not reach it.
         given: Which parts were given (GIVEN_* bits).
+        plain: Both weights 1 and no pole (what a solve can load with one row copy).
 
     Raises:
         InvalidProblem: a part of the wrong shape (finiteness and orthonormality
-            are checked in the compiled solve).
+            are checked in the compiled solve), a weight outside [0, 1].
     """
 
     effector: str
     position: Vector | None = None
     rotation: Matrix | None = None
     direction: Vector | None = None
+    position_weight: float = 1.0
+    rotation_weight: float = 1.0
+    pole: Pole | None = None
     packed: np.ndarray = field(init=False, repr=False, compare=False)
     given: int = field(init=False, repr=False, compare=False)
+    plain: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        self._set_extras(self.position_weight, self.rotation_weight, self.pole)
         try:
             fast = _pack_sequences(self.position, self.rotation, self.direction)
         except (ValueError, TypeError):
@@ -86,7 +140,16 @@ class Target:
         self._freeze(row, given)
 
     @classmethod
-    def from_row(cls, effector: str, row: np.ndarray, given: int) -> Target:
+    def from_row(
+        cls,
+        effector: str,
+        row: np.ndarray,
+        given: int,
+        *,
+        position_weight: float = 1.0,
+        rotation_weight: float = 1.0,
+        pole: Pole | None = None,
+    ) -> Target:
         """A Target from a row its caller packed: TARGET_ROW float64 values (position,
         rotation, direction; ``TARGET_PLACEHOLDER_ROW``'s values where a part is not given)
         and the GIVEN_* bits of the parts given. The row must own its data (not a view
@@ -99,7 +162,8 @@ class Target:
         orthonormality: in the compiled code).
 
         Raises:
-            InvalidProblem: a row of the wrong shape or dtype, a view, or unknown bits.
+            InvalidProblem: a row of the wrong shape or dtype, a view, unknown bits,
+                or a weight outside [0, 1].
         """
         if (
             type(row) is not np.ndarray
@@ -119,8 +183,33 @@ class Target:
         set_field(target, "position", None)
         set_field(target, "rotation", None)
         set_field(target, "direction", None)
+        if (
+            pole is None
+            and type(position_weight) is float
+            and type(rotation_weight) is float
+            and position_weight == 1.0
+            and rotation_weight == 1.0
+        ):
+            set_field(target, "position_weight", 1.0)
+            set_field(target, "rotation_weight", 1.0)
+            set_field(target, "pole", None)
+            set_field(target, "plain", True)
+        else:
+            target._set_extras(position_weight, rotation_weight, pole)
         target._freeze(row, given)
         return target
+
+    def _set_extras(self, position_weight: object, rotation_weight: object, pole: object) -> None:
+        """Check and keep the weights and the pole; ``plain`` when they change nothing."""
+        set_field = object.__setattr__
+        wp = check_weight(position_weight, f"target for {self.effector!r}: position_weight")
+        wr = check_weight(rotation_weight, f"target for {self.effector!r}: rotation_weight")
+        if pole is not None and not isinstance(pole, Pole):
+            raise InvalidProblem(f"target for {self.effector!r}: pole must be a Pole")
+        set_field(self, "position_weight", wp)
+        set_field(self, "rotation_weight", wr)
+        set_field(self, "pole", pole)
+        set_field(self, "plain", wp == 1.0 and wr == 1.0 and pole is None)
 
     def _freeze(self, row: np.ndarray, given: int) -> None:
         """Keep the packed row, read-only, and show the given parts as views of it: a

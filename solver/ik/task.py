@@ -4,10 +4,20 @@ A ``Task`` belongs to one ``IKSolver`` and writes into its arrays: the active fl
 (EI), the target rows and tolerances (ED) and the frame's bounds (DD). It keeps what
 the last frame loaded, so that a stream's usual frame (one target for the effector
 of the frame before) costs one row copy.
+
+Blend weights (``Target.position_weight`` / ``rotation_weight``) enter here: a part's
+weight multiplies the model's weight in ED (so 0 takes its rows out of the objective
+and the metric), and a part at weight 0 gets an infinite tolerance, so the goal measure
+(max error / tolerance) never counts it. Parts strictly between 0 and 1 ("soft") keep
+their tolerance until ``relax_soft_parts`` (``blend.solve_blended``: first the optimizer
+aims at them, then only full-weight parts decide success); their targets are moved
+towards the frame's start pose by ``blend.blend_rows`` (it needs the seed). Poles are
+kept for ``poles``.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -24,6 +34,7 @@ from .targets import (
     GIVEN_ROTATION,
     TARGET_PLACEHOLDER_ROW,
     TARGET_ROW,
+    Pole,
     Target,
 )
 
@@ -42,7 +53,10 @@ class Task:
 
     Attributes read by the solver on every frame: ``active`` (effector indexes with a
     target), ``redundant`` (more free joints than target rows), ``bounds_are_limits``
-    and ``every_effector_moves_all`` (when both hold, the bounds need no update).
+    and ``every_effector_moves_all`` (when both hold, the bounds need no update),
+    ``blended`` (effector index, position weight, rotation weight, GIVEN_* bits) for
+    each target with a part strictly between 0 and 1, ``poles`` (effector index, Pole),
+    ``target_rows`` (one packed row per effector, views of ED).
     """
 
     def __init__(self, chain: Chain, ei: np.ndarray, ed: np.ndarray, dd: np.ndarray) -> None:
@@ -55,28 +69,26 @@ class Task:
         self._dd = dd
         self._chain_dofs = cc.eff_dofs
         # One row per effector: what a Target's ``packed`` row is copied into.
-        self._target_rows = ed[:, ED_TPOS : ED_TDIR + 3]
-        assert self._target_rows.shape[1] == TARGET_ROW
-        self._target_rows[:] = TARGET_PLACEHOLDER_ROW
-        assert np.shares_memory(self._target_rows, ed)
+        self.target_rows = ed[:, ED_TPOS : ED_TDIR + 3]
+        assert self.target_rows.shape[1] == TARGET_ROW
+        self.target_rows[:] = TARGET_PLACEHOLDER_ROW
+        assert np.shares_memory(self.target_rows, ed)
         self._effector_names = chain.effector_names
         self._effector_slot = {name: i for i, name in enumerate(self._effector_names)}
         self._needs = tuple(NEEDS[e.mode] for e in chain.effectors)
-        # Target rows each effector adds, for the redundancy test: a part whose weight is
-        # zero in the model constrains nothing.
+        # Rows each effector's orientation part adds, for the redundancy test (a part
+        # whose weight in ED is zero, in the model or this frame, constrains nothing).
         static = cc.ed
-        self._position_rows = tuple(
-            3 if static[i, ED_WP] > 0.0 else 0 for i in range(len(self._needs))
-        )
-        self._mode_rows = tuple(
-            MODE_ROWS[e.mode] if static[i, ED_WR] > 0.0 else 0
-            for i, e in enumerate(chain.effectors)
-        )
+        self._mode_rows = tuple(MODE_ROWS[e.mode] for e in chain.effectors)
         self._movable = chain.lower < chain.upper  # a joint with lower == upper is locked
         self.redundant = True  # more free joints than target rows (set per target set)
-        self._static_weights = static[:, ED_WP].copy()
+        self._static_position_weights = static[:, ED_WP].copy()
+        self._static_rotation_weights = static[:, ED_WR].copy()
         self.active: list[int] = []
-        self._zeroed: list[int] = []
+        # Effectors whose ED weights or tolerances this frame changed (restored next load).
+        self._touched: list[int] = []
+        self.blended: list[tuple[int, float, float, int]] = []
+        self.poles: list[tuple[int, Pole]] = []
         self._tol_for: IKOptions | None = None
         self.bounds_are_limits = True
         self.every_effector_moves_all = all(d.shape[0] == n for d in cc.eff_dofs)
@@ -89,7 +101,7 @@ class Task:
             self._ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
             self._tol_for = opts
         active = self.active
-        if len(targets) == 1 and len(active) == 1 and not self._zeroed:
+        if len(targets) == 1 and len(active) == 1 and not self._touched and not self.poles:
             # A stream's usual frame: one target for the effector of the last frame.
             t = targets[0]
             i = active[0]
@@ -98,17 +110,23 @@ class Task:
                 t.effector == self._effector_names[i]
                 and t.given & need == need
                 and t.given & GIVEN_POSITION
+                and t.plain
             ):
-                self._target_rows[i] = t.packed
+                self.target_rows[i] = t.packed
                 return
         ei = self._ei
         ed = self._ed
         for i in active:
             ei[i, EI_ACTIVE] = 0
-        for i in self._zeroed:
-            ed[i, ED_WP] = self._static_weights[i]
+        for i in self._touched:
+            ed[i, ED_WP] = self._static_position_weights[i]
+            ed[i, ED_WR] = self._static_rotation_weights[i]
+            ed[i, ED_TOL_P] = opts.position_tolerance_m
+            ed[i, ED_TOL_R] = opts.rotation_tolerance_rad
         self.active = active = []
-        self._zeroed = []
+        self._touched = []
+        self.blended = []
+        self.poles = []
         try:
             for t in targets:
                 i = self._effector_slot.get(t.effector, -1)
@@ -123,16 +141,47 @@ class Task:
                     )
                     mode = self.chain.effectors[i].mode.value
                     raise InvalidProblem(f"target for {t.effector!r} ({mode}) needs {part}")
-                if not t.given & GIVEN_POSITION:
-                    ed[i, ED_WP] = 0.0
-                    self._zeroed.append(i)
-                self._target_rows[i] = t.packed
+                if not (t.plain and t.given & GIVEN_POSITION):
+                    self._weigh(i, t)
+                self.target_rows[i] = t.packed
                 ei[i, EI_ACTIVE] = 1
                 active.append(i)
         finally:
             # Also when a target is rejected: the effectors loaded before it stay active,
             # and the next frame's fast path keeps this answer.
             self.redundant = self.free_directions() > 0
+
+    def _weigh(self, i: int, t: Target) -> None:
+        """Effector i's ED weights and tolerances for target t's weights (a part not
+        given weighs 0 and keeps its tolerance); remembers what to blend and poles."""
+        ed = self._ed
+        wp = t.position_weight
+        wr = t.rotation_weight
+        ed[i, ED_WP] = self._static_position_weights[i] * (wp if t.given & GIVEN_POSITION else 0.0)
+        ed[i, ED_WR] = self._static_rotation_weights[i] * wr
+        if wp == 0.0:
+            ed[i, ED_TOL_P] = math.inf  # a free part is never judged
+        if wr == 0.0:
+            ed[i, ED_TOL_R] = math.inf
+        self._touched.append(i)
+        # Soft parts, among those the target gives (a rotation weight on a position
+        # target, say, has nothing to blend): their weights, 1.0 for the others.
+        soft_p = wp if 0.0 < wp < 1.0 and t.given & GIVEN_POSITION else 1.0
+        soft_r = wr if 0.0 < wr < 1.0 and t.given & (GIVEN_ROTATION | GIVEN_DIRECTION) else 1.0
+        if soft_p < 1.0 or soft_r < 1.0:
+            self.blended.append((i, soft_p, soft_r, t.given))
+        if t.pole is not None:
+            self.poles.append((i, t.pole))
+
+    def relax_soft_parts(self) -> None:
+        """Infinite tolerances for the soft parts (weight strictly between 0 and 1) of
+        the loaded targets: from now on they pull but are never judged."""
+        ed = self._ed
+        for i, wp, wr, _ in self.blended:
+            if wp < 1.0:
+                ed[i, ED_TOL_P] = math.inf
+            if wr < 1.0:
+                ed[i, ED_TOL_R] = math.inf
 
     def free_mask(self) -> np.ndarray:
         """1.0 for each variable the loaded targets may move: unlocked, and in the
@@ -151,8 +200,9 @@ class Task:
         dimension of the self-motion where the Jacobian has full rank (a 7-DOF arm
         under a 6-D pose: 1; <= 0: no self-motion)."""
         active = self.active
+        ed = self._ed
         rows = sum(
-            self._mode_rows[i] + (0 if i in self._zeroed else self._position_rows[i])
+            (self._mode_rows[i] if ed[i, ED_WR] > 0.0 else 0) + (3 if ed[i, ED_WP] > 0.0 else 0)
             for i in active
         )
         if self.every_effector_moves_all or not active:

@@ -79,6 +79,7 @@ MIRRORS: list[tuple[type, tuple[str, ...]]] = [
     (ik_client.Vec3, ("Vec3",)),
     (ik_client.Quaternion, ("Quaternion",)),
     (ik_client.Target, ("Target",)),
+    (ik_client.Pole, ("Pole",)),
     (ik_client.Frame, ("Frame",)),
     (ik_client.BatchFrame, ("BatchFrame",)),
     (ik_client.BatchEntryResult, ("BatchEntryResult", "BatchEntryError")),

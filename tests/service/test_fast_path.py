@@ -53,9 +53,19 @@ VIEWS["aim_unity"] = _in_convention(VIEWS["aim"], "unity")
 P = {"x": 0.4, "y": 0.1, "z": 0.5}
 Q = {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0}
 GOOD: dict[str, list[dict[str, Any]]] = {
-    "position": [{"effector": "tool", "position": P}],
+    "position": [
+        {"effector": "tool", "position": P},
+        {"effector": "tool", "position": P, "position_weight": 0.5},
+    ],
     "pose": [
         {"effector": "tool", "position": P, "orientation": Q},
+        {
+            "effector": "tool",
+            "position": P,
+            "orientation": Q,
+            "rotation_weight": 0,
+            "position_weight": 1,
+        },
         {"effector": "tool", "orientation": {"w": 0.5, "x": 0.5, "y": -0.5, "z": 0.5}},
         {"effector": "tool", "position": None, "orientation": Q, "direction": None},
     ],
@@ -96,9 +106,21 @@ def slow_path(raw: Any, view: convert.ChainView) -> tuple[str, Any]:
 
 def same_targets(a: list[Target], b: list[Target]) -> bool:
     return len(a) == len(b) and all(
-        x.effector == y.effector and x.given == y.given and x.packed.tobytes() == y.packed.tobytes()
+        x.effector == y.effector
+        and x.given == y.given
+        and x.packed.tobytes() == y.packed.tobytes()
+        and (x.position_weight, x.rotation_weight, x.pole)
+        == (y.position_weight, y.rotation_weight, y.pole)
         for x, y in zip(a, b, strict=True)
     )
+
+
+def test_a_target_with_a_pole_takes_the_pydantic_path() -> None:
+    pole = {"position": P}
+    raw = frame([{"effector": "tool", "position": P, "pole": pole}])
+    assert convert.fast_frame(raw, VIEWS["position"]) is None
+    kind, (_, targets) = slow_path(raw, VIEWS["position"])
+    assert kind == "frame" and targets[0].pole is not None
 
 
 def check(raw: Any, view: convert.ChainView) -> bool:

@@ -67,13 +67,27 @@ class Quaternion(TypedDict):
     z: float
 
 
+class Pole(TypedDict):
+    """Where an effector's limb bends (schema ``Pole``): a point the knee or elbow bone
+    bends towards, in the session's conventions; ``bone`` names it (default: the middle
+    of the limb). Soft: it never makes a reachable frame fail."""
+
+    position: Vec3
+    bone: NotRequired[str]
+
+
 class Target(TypedDict):
-    """What one effector should reach (schema ``Target``)."""
+    """What one effector should reach (schema ``Target``). ``position_weight`` and
+    ``rotation_weight`` in [0, 1] blend IK in and out (0 free, 1 exact, in between a
+    soft pull that never fails the frame); ``pole`` chooses where the limb bends."""
 
     effector: str
     position: NotRequired[Vec3]
     orientation: NotRequired[Quaternion]
     direction: NotRequired[Vec3]
+    position_weight: NotRequired[float]
+    rotation_weight: NotRequired[float]
+    pole: NotRequired[Pole]
 
 
 class BoneOutput(TypedDict, total=False):

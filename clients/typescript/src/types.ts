@@ -49,12 +49,28 @@ export interface Quaternion {
   z: number;
 }
 
-/** Schema `Target`: what one effector should reach. */
+/**
+ * Schema `Pole`: a point the knee or elbow bone bends towards (session conventions);
+ * `bone` names it (default: the middle of the limb). Soft: never fails a reachable frame.
+ */
+export interface Pole {
+  position: Vec3;
+  bone?: string | null;
+}
+
+/**
+ * Schema `Target`: what one effector should reach. `position_weight` and
+ * `rotation_weight` in [0, 1] blend IK in and out (0 free, 1 exact, in between a soft
+ * pull that never fails the frame); `pole` chooses where the limb bends.
+ */
 export interface Target {
   effector: string;
   position?: Vec3 | null;
   orientation?: Quaternion | null;
   direction?: Vec3 | null;
+  position_weight?: number;
+  rotation_weight?: number;
+  pole?: Pole | null;
 }
 
 /** Schema `Frame`: one frame of a clip; `id` is echoed in its result. */

@@ -42,6 +42,7 @@ import {
   type OptionsPatch,
   type OriginSpec,
   type PlanSummary,
+  type Pole,
   type Pose,
   type PoseIn,
   type Quaternion,
@@ -88,7 +89,16 @@ const k = <T>(keys: Keys<T>): string[] => Object.keys(keys);
 const DECLARED: Record<string, string[]> = {
   Vec3: k<Vec3>({ x: true, y: true, z: true }),
   Quaternion: k<Quaternion>({ w: true, x: true, y: true, z: true }),
-  Target: k<Target>({ effector: true, position: true, orientation: true, direction: true }),
+  Target: k<Target>({
+    effector: true,
+    position: true,
+    orientation: true,
+    direction: true,
+    position_weight: true,
+    rotation_weight: true,
+    pole: true,
+  }),
+  Pole: k<Pole>({ position: true, bone: true }),
   Frame: k<Frame>({ id: true, targets: true, bones: true }),
   PoseIn: k<PoseIn>({ q: true, joints: true }),
   OptionsPatch: k<OptionsPatch>({

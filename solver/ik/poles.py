@@ -1,0 +1,190 @@
+"""Pole (hint) targets: where a limb bends, chosen by a point, without ever making a
+reachable frame fail.
+
+A frame with poles is solved in two calls of the compiled solve (``frame.solve_frame``),
+the article's method unchanged in each:
+
+1. Shaping: the IK objective plus w |o_k - pole|^2 for each pole (``pole_term``: o_k
+   the origin of the pulled link, a knee or an elbow; w = ``POLE_WEIGHT``), from the
+   frame's seed, with the goal switched off (f_goal = -inf: the pass does not stop
+   when the targets are first met, so the pole gets to swing the limb round), no
+   restarts (a random restart would pick the bend side by chance) and at most
+   ``SHAPING_MAX_ITER`` iterations and half the time budget.
+2. The usual solve without the pole term, from the shaping pass's answer: it converges
+   to the targets on the side the pole chose (a local method stays in the basin it
+   starts in), and success is judged as in any frame.
+
+If the second call does not solve the frame, the frame is solved once more as if it had
+no pole, from the original seed: so a pole never turns a frame the plain solve reaches
+into a failure (it only costs the time). A stream's bend side follows a pole that
+moves smoothly (each frame starts from the last answer, and the shaping pass moves the
+limb continuously with the pole). The null-space step is skipped after a shaped frame
+(it would drift the self-motion the pole chose back towards the rest pose).
+
+The pulled link, when the client names none (``default_pole_link``): the middle of
+the effector's limb. The limb is the effector's path towards the root up to the first
+link another effector's path shares (the hips for a foot, the chest for a hand), or up
+to the root; the middle is the link origin on that path whose distance along the bones
+from the limb's top is nearest half the limb's length (the knee of hip-knee-ankle-toe,
+the elbow of clavicle-shoulder-elbow-wrist).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..errors import InvalidProblem
+from ..model import Chain
+from ..model.forward import effector_poses, link_poses
+from ..optim import codes as C
+from .blend import FrameCall, SolveResult, combined
+from .frame import STATUS_SOLVED, TARGETS_OK
+from .kinematics import DD_XLAST
+from .pole_term import POLE_NODE, POLE_POINT, POLE_WEIGHT, POLE_WIDTH
+from .targets import Pole
+
+# Weight of the pole term in the shaping pass [1/m^2 against the targets' m^2]: strong
+# enough to swing a limb in a few dozen iterations, weak enough that the targets stay
+# nearly met (the second call then has little to do).
+POLE_WEIGHT_VALUE = 0.1
+# Iterations of the shaping pass: enough to swing a knee from one side to the other in
+# a one-shot solve (tests/solver/test_poles_weights.py), few enough that a stream frame
+# with four poles costs ~5x a plain one rather than ~7x with 40 (bench/RESULTS.md); a
+# stream's shaping carries on from frame to frame.
+SHAPING_MAX_ITER = 15
+
+
+def limb_path(chain: Chain, effector: int) -> list[str]:
+    """The links from the effector's link up to the root (both included)."""
+    parent = {j.child: j.parent for j in chain.joints}
+    path = [chain.effectors[effector].link]
+    while path[-1] in parent:
+        path.append(parent[path[-1]])
+    return path
+
+
+def default_pole_link(chain: Chain, effector: int) -> str | None:
+    """The middle of the effector's limb (see the module docstring); None when the
+    limb has no link between its top and the tip."""
+    path = limb_path(chain, effector)
+    shared: set[str] = set()
+    for other in range(len(chain.effectors)):
+        if other != effector:
+            shared.update(limb_path(chain, other))
+    top = next((k for k, link in enumerate(path) if k > 0 and link in shared), len(path) - 1)
+    if path[0] in shared:  # another effector below this one (a hand and its finger)
+        top = len(path) - 1
+    q = chain.mid_limits()
+    poses = link_poses(chain, q)
+    tip = effector_poses(chain, q)[effector][:3, 3]
+    points = [poses[path[k]][:3, 3] for k in range(top, -1, -1)] + [tip]
+    links = [path[k] for k in range(top, -1, -1)]
+    steps = [float(np.linalg.norm(b - a)) for a, b in zip(points, points[1:], strict=False)]
+    lengths = np.cumsum([0.0, *steps])
+    total = lengths[-1]
+    best: str | None = None
+    best_gap = math.inf
+    for k in range(1, len(links)):
+        if float(np.linalg.norm(points[k] - tip)) < 1e-9 or chain.compiled.link_node[links[k]] < 0:
+            continue
+        gap = abs(lengths[k] - 0.5 * total)
+        if gap < best_gap - 1e-12:
+            best, best_gap = links[k], gap
+    return best
+
+
+def pole_node(chain: Chain, effector: int, link: str | None) -> int:
+    """The node whose origin the pole pulls: ``link``'s, or the default link's.
+
+    Raises:
+        InvalidProblem: a link not on the effector's path to the root, the root
+            (it cannot move), or no default for this effector.
+    """
+    name = chain.effectors[effector].name
+    if link is None:
+        link = default_pole_link(chain, effector)
+        if link is None:
+            raise InvalidProblem(f"pole for {name!r}: the limb has no middle link; name one")
+    path = limb_path(chain, effector)
+    if link not in path:
+        near = ", ".join(repr(p) for p in path[:-1][:8])
+        raise InvalidProblem(
+            f"pole for {name!r}: link {link!r} is not on the effector's path to the root"
+            f" (links there: {near})"
+        )
+    node = chain.compiled.link_node[link]
+    if node < 0:
+        raise InvalidProblem(f"pole for {name!r}: the root link {link!r} cannot bend")
+    return node
+
+
+class PoleShaper:
+    """The two calls of a frame with poles, for one solver (it caches the nodes)."""
+
+    def __init__(self, chain: Chain, misc_start: int) -> None:
+        self.chain = chain
+        self._start = misc_start
+        self._nodes: dict[tuple[int, str | None], int] = {}
+
+    def solve(
+        self,
+        args: tuple[Any, ...],
+        poles: list[tuple[int, Pole]],
+        usual: FrameCall,
+    ) -> SolveResult:
+        """The frame of ``args`` (``frame.solve_frame``'s arguments) with the poles'
+        shaping pass first, then ``usual`` (the frame's solve without poles: the
+        compiled call, or ``blend.solve_blended``); the answer is in ``args``' out_x
+        and out. Iterations, evaluations, restarts and time are summed over the
+        calls; passes are the answer's own (its pass log is the one in ``out``)."""
+        data, x0, h0, fopt, iopt, policy, out_x, out, step, scratch, ints = args
+        misc = data[5]
+        dd = data[4]
+        self._write(misc, poles)
+        shaping_f = fopt.copy()
+        shaping_f[C.F_F_GOAL] = -math.inf
+        shaping_f[C.F_BUDGET] = 0.5 * fopt[C.F_BUDGET]
+        shaping_i = iopt.copy()
+        shaping_i[C.I_MAX_RESTARTS] = 0
+        shaping_i[C.I_MAX_ITER] = min(int(iopt[C.I_MAX_ITER]), SHAPING_MAX_ITER)
+        shaped = np.empty_like(x0)
+        try:
+            first = usual(
+                data, x0, h0, shaping_f, shaping_i, policy, shaped, out, 0.0, scratch, ints
+            )
+        finally:
+            misc[self._start] = 0.0  # the pole term off for everything after
+            dd[DD_XLAST, 0] = math.nan  # cached f and goal include the pole: stale
+        if first[0] != TARGETS_OK:
+            return first
+        left_f = fopt.copy()
+        left_f[C.F_BUDGET] = max(0.0, fopt[C.F_BUDGET] - first[7])
+        second = usual(data, shaped, h0, left_f, iopt, policy, out_x, out, 0.0, scratch, ints)
+        if second[1] == STATUS_SOLVED:
+            return combined(second, (first, second))
+        # The plain solve from the seed: a pole never fails a frame it would reach.
+        left_f[C.F_BUDGET] = max(0.0, left_f[C.F_BUDGET] - second[7])
+        plain_x = np.empty_like(out_x)
+        plain_out = np.empty_like(out)
+        plain = usual(data, x0, h0, left_f, iopt, policy, plain_x, plain_out, step, scratch, ints)
+        if plain[1] != STATUS_SOLVED:
+            return combined(second, (first, second, plain))
+        out_x[:] = plain_x
+        out[:] = plain_out
+        return combined(plain, (first, second, plain))
+
+    def _write(self, misc: np.ndarray, poles: list[tuple[int, Pole]]) -> None:
+        start = self._start
+        for p, (effector, pole) in enumerate(poles):
+            key = (effector, pole.link)
+            node = self._nodes.get(key)
+            if node is None:
+                node = self._nodes[key] = pole_node(self.chain, effector, pole.link)
+            b = start + 1 + POLE_WIDTH * p
+            misc[b + POLE_NODE] = node
+            misc[b + POLE_WEIGHT] = POLE_WEIGHT_VALUE
+            misc[b + POLE_POINT : b + POLE_POINT + 3] = pole.point
+        misc[start] = len(poles)

@@ -1,0 +1,249 @@
+"""Pole targets and blend weights (issue 21 item 4), on CesiumMan's legs.
+
+Geometry is measured from each answer's FK: the knee's side is the sign of its offset
+from the hip-foot line along the direction from that line to the pole.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from solver.errors import InvalidProblem
+from solver.ik import (
+    STREAM_DEFAULTS,
+    IKOptions,
+    IKSolver,
+    Pole,
+    Target,
+    default_pole_link,
+    pole_node,
+)
+from solver.model import Chain, Effector, EffectorMode
+from solver.model.forward import effector_poses, link_poses
+from solver.model.gltf import read_gltf
+from solver.model.skeleton import SkeletonSettings, chain_from_skeleton
+from tests.solver.skeleton_refs import asset_bytes
+
+# CesiumMan: right leg nodes 3 (hip) 4 (knee) 5 (ankle) 6 (toe), left leg 7-10.
+LEGS = tuple(f"node_{i}" for i in range(3, 11))
+HIP, KNEE = "node_3", "node_4"
+
+
+@pytest.fixture(scope="module")
+def legs() -> Chain:
+    skeleton = read_gltf(asset_bytes("CesiumMan.glb"))
+    effectors = [
+        Effector(name="right_foot", link="node_6"),
+        Effector(name="left_foot", link="node_10"),
+        Effector(name="left_knee", link="node_8", mode=EffectorMode.POSE),
+    ]
+    settings = SkeletonSettings(effectors=effectors, moving=LEGS)
+    return chain_from_skeleton(skeleton, settings).chain
+
+
+def foot(chain: Chain, q: np.ndarray, effector: int = 0) -> np.ndarray:
+    return effector_poses(chain, q)[effector][:3, 3]
+
+
+def bent_leg(chain: Chain) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A right-foot target that bends the knee (the foot raised by 30% of the hip-foot
+    distance), and the unit direction across the leg that the poles lie along."""
+    rest = np.zeros(chain.n_dof)
+    hip = link_poses(chain, rest)[HIP][:3, 3]
+    toe = foot(chain, rest)
+    target = toe + 0.3 * (hip - toe)
+    axis = (hip - toe) / np.linalg.norm(hip - toe)
+    across = np.cross(axis, [1.0, 0.0, 0.0])
+    across /= np.linalg.norm(across)
+    return target, 0.5 * (hip + target), across
+
+
+def knee_side(chain: Chain, q: np.ndarray, across: np.ndarray) -> float:
+    """The knee's offset from the hip-foot line along ``across`` [m]."""
+    links = link_poses(chain, q)
+    hip = links[HIP][:3, 3]
+    knee = links[KNEE][:3, 3] - hip
+    axis = foot(chain, q) - hip
+    axis /= np.linalg.norm(axis)
+    return float((knee - (knee @ axis) * axis) @ across)
+
+
+def test_default_pole_bone_is_the_knee(legs: Chain) -> None:
+    assert default_pole_link(legs, 0) == KNEE
+    assert pole_node(legs, 0, None) == legs.compiled.link_node[KNEE]
+
+
+def test_a_pole_flips_the_knee_to_its_side(legs: Chain) -> None:
+    target, middle, across = bent_leg(legs)
+    solver = IKSolver(legs)
+    sides = {}
+    for sign in (1.0, -1.0):
+        pole = Pole(middle + sign * 0.5 * across)
+        result = solver.solve([Target(effector="right_foot", position=target, pole=pole)])
+        assert result.success, result.status
+        assert np.linalg.norm(foot(legs, result.q) - target) <= 1e-4 + 1e-9
+        sides[sign] = knee_side(legs, result.q, across)
+        # Flip on demand: from the answer on this side, the other pole brings it across.
+        flipped = solver.solve(
+            [Target(effector="right_foot", position=target, pole=Pole(middle - sign * across))],
+            result.q,
+        )
+        assert flipped.success
+        assert -sign * knee_side(legs, flipped.q, across) > 0.02
+    assert sides[1.0] > 0.02 and sides[-1.0] < -0.02
+
+
+def test_a_named_pole_bone_and_bad_poles(legs: Chain) -> None:
+    target, middle, across = bent_leg(legs)
+    solver = IKSolver(legs)
+    named = Pole(middle - 0.5 * across, link=KNEE)
+    result = solver.solve([Target(effector="right_foot", position=target, pole=named)])
+    assert result.success and knee_side(legs, result.q, across) < -0.02
+    with pytest.raises(InvalidProblem, match="not on the effector's path"):
+        solver.solve([Target(effector="right_foot", position=target, pole=Pole(target, "node_8"))])
+    with pytest.raises(InvalidProblem, match="finite"):
+        Pole([0.0, math.nan, 0.0])
+
+
+def test_a_pole_never_fails_a_reachable_frame(legs: Chain) -> None:
+    # A pole far away on the wrong side of everything: the frame still solves.
+    target, middle, across = bent_leg(legs)
+    pole = Pole(middle + 100.0 * across + 50.0)
+    result = IKSolver(legs).solve([Target(effector="right_foot", position=target, pole=pole)])
+    assert result.success
+
+
+def test_the_bend_side_follows_a_moving_pole_without_popping(legs: Chain) -> None:
+    # The pole swings 1 rad about the hip-foot line (within the hip's default ball-joint
+    # ranges: further round, the hip's Euler angles reach their +-90 deg middle axis and
+    # the chart itself must jump).
+    target, middle, across = bent_leg(legs)
+    hip = link_poses(legs, np.zeros(legs.n_dof))[HIP][:3, 3]
+    line = (hip - target) / np.linalg.norm(hip - target)
+    round_ = np.cross(line, across)
+    solver = IKSolver(legs, STREAM_DEFAULTS)
+    solver.track([Target(effector="right_foot", position=target, pole=Pole(middle + across))])
+    steps = []
+    for angle in np.linspace(0.0, 1.0, 31)[1:]:
+        towards = math.cos(angle) * across + math.sin(angle) * round_
+        before = solver.q.copy()
+        result = solver.track(
+            [Target(effector="right_foot", position=target, pole=Pole(middle + 0.5 * towards))]
+        )
+        assert result.success
+        steps.append(float(np.abs(result.q - before).max()))
+        # The knee's direction round the line follows the pole's.
+        knee = link_poses(legs, result.q)[KNEE][:3, 3] - hip
+        offset = knee - (knee @ line) * line
+        knee_angle = math.atan2(offset @ round_, offset @ across)
+        assert abs(knee_angle - angle) <= 0.25, (angle, knee_angle)
+    # No pop: no frame's largest joint step is more than 3x the median one.
+    assert max(steps) <= 3.0 * float(np.median(steps))
+
+
+def test_weight_zero_frees_an_effector(legs: Chain) -> None:
+    target, _, _ = bent_leg(legs)
+    left = foot(legs, np.zeros(legs.n_dof), 1) + [0.0, 0.1, 0.0]
+    far = np.array([10.0, 10.0, 10.0])  # unreachable
+    solver = IKSolver(legs)
+    alone = solver.solve([Target(effector="left_foot", position=left)])
+    result = solver.solve(
+        [
+            Target(effector="left_foot", position=left),
+            Target(effector="right_foot", position=far, position_weight=0.0),
+        ]
+    )
+    assert result.success and alone.success
+    assert np.linalg.norm(foot(legs, result.q, 1) - left) <= 1e-4 + 1e-9
+    # Not pulled at all: the answer is the one without that target.
+    assert np.allclose(result.q, alone.q, atol=1e-6)
+    errors = {e.name: e for e in result.effectors}
+    assert errors["right_foot"].position_error_m is None
+    # The same target at full weight fails the frame.
+    full = solver.solve(
+        [Target(effector="left_foot", position=left), Target(effector="right_foot", position=far)]
+    )
+    assert not full.success
+
+
+def test_rotation_weight_zero_frees_the_orientation(legs: Chain) -> None:
+    rest = np.zeros(legs.n_dof)
+    pose = effector_poses(legs, rest)[2]
+    turned = pose[:3, :3] @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    solver = IKSolver(legs)
+    result = solver.solve(
+        [Target(effector="left_knee", position=pose[:3, 3], rotation=turned, rotation_weight=0.0)]
+    )
+    assert result.success
+    assert np.allclose(result.q, rest, atol=1e-6)  # the position holds, nothing turns
+    assert result.effectors[0].rotation_error_rad is None
+
+
+def test_a_weight_in_between_lands_between(legs: Chain) -> None:
+    target, _, _ = bent_leg(legs)
+    rest = np.zeros(legs.n_dof)
+    start = foot(legs, rest)
+    solver = IKSolver(legs)
+    reached = []
+    for w in (0.25, 0.5, 0.75):
+        result = solver.solve([Target(effector="right_foot", position=target, position_weight=w)])
+        assert result.success
+        reached.append(foot(legs, result.q))
+        expected = start + w * (target - start)
+        assert np.linalg.norm(reached[-1] - expected) <= 1e-3
+    distances = [float(np.linalg.norm(p - target)) for p in reached]
+    assert distances[0] > distances[1] > distances[2] > 1e-3
+
+
+def test_a_soft_weight_never_fails_the_frame(legs: Chain) -> None:
+    far = np.array([10.0, 10.0, 10.0])
+    result = IKSolver(legs).solve(
+        [Target(effector="right_foot", position=far, position_weight=0.5)]
+    )
+    assert result.success
+
+
+def test_a_soft_rotation_lands_between(legs: Chain) -> None:
+    rest = np.zeros(legs.n_dof)
+    pose = effector_poses(legs, rest)[2]
+    c, s = math.cos(0.6), math.sin(0.6)
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    target = Target(
+        effector="left_knee", position=pose[:3, 3], rotation=pose[:3, :3] @ turn,
+        rotation_weight=0.5,
+    )  # fmt: skip
+    result = IKSolver(legs).solve([target])
+    assert result.success
+    got = effector_poses(legs, result.q)[2][:3, :3]
+    angle = math.acos(min(1.0, (np.trace(pose[:3, :3].T @ got) - 1.0) / 2.0))
+    assert abs(angle - 0.3) <= 1e-2
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, math.nan, math.inf, "1", True, None])
+def test_bad_weights_are_refused(bad: object) -> None:
+    with pytest.raises(InvalidProblem, match="position_weight"):
+        Target(effector="right_foot", position=[0.0, 0.0, 0.0], position_weight=bad)  # type: ignore[arg-type]
+    with pytest.raises(InvalidProblem, match="rotation_weight"):
+        Target.from_row("right_foot", np.zeros(15), 1, rotation_weight=bad)  # type: ignore[arg-type]
+
+
+def test_weights_reset_between_frames(legs: Chain) -> None:
+    # A weighted frame then a plain one: the plain one is judged at full weight again.
+    solver = IKSolver(legs, IKOptions())
+    far = np.array([10.0, 10.0, 10.0])
+    assert solver.solve([Target(effector="right_foot", position=far, position_weight=0.0)]).success
+    assert not solver.solve([Target(effector="right_foot", position=far)]).success
+
+
+def test_a_weight_on_a_part_the_effector_lacks_changes_nothing(legs: Chain) -> None:
+    # right_foot is a position effector: a rotation weight has nothing to act on.
+    target, _, _ = bent_leg(legs)
+    plain = IKSolver(legs).solve([Target(effector="right_foot", position=target)])
+    weighted = IKSolver(legs).solve(
+        [Target(effector="right_foot", position=target, rotation_weight=0.5)]
+    )
+    assert plain.success and weighted.success
+    assert np.array_equal(plain.q, weighted.q)
