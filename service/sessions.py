@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import schemas as S
 from solver.ik import IKOptions, IKSolver
 
 from .convert import ChainView, FrameJob, SolvedFrame
@@ -53,6 +54,8 @@ class Session:
         version: Commits of this session in a shared store (its optimistic lock).
         definition_key: Content hash of its chain definition in a shared store.
         answers: The last answers committed, by frame id (a shared store's replay).
+        definition: The create request's chain, conventions and bones (JSON), from which
+            another worker rebuilds the model; a shared store keeps it (empty after).
     """
 
     id: str
@@ -74,6 +77,7 @@ class Session:
     version: int = 0
     definition_key: str = ""
     answers: dict[int, StoredAnswer] = field(default_factory=dict)
+    definition: bytes = b""
 
     def set_pose(self, q: np.ndarray) -> None:
         """Set the pose and the rest pose (``IKSolver.set_pose``), remembering the rest
@@ -99,6 +103,14 @@ class Session:
 
     def token_ok(self, token: str) -> bool:
         return secrets.compare_digest(token_digest(token), self.token_digest)
+
+
+def chain_definition(body: S.SessionCreate) -> bytes:
+    """What another worker needs to build a session's model: the create request's chain,
+    conventions and bones, as JSON (a shared store keeps it once per distinct value)."""
+    return body.model_dump_json(
+        include={"chain", "conventions", "bones"}, exclude_none=True
+    ).encode()
 
 
 def new_session(
