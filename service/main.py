@@ -27,7 +27,6 @@ from .dependencies import Services
 from .errors import install_handlers
 from .metrics import Metrics
 from .middleware import TimingAndLimits
-from .redis_store import RedisSessionStore, connect
 from .responses import ORJSONResponse
 from .routes import health, http, ws
 from .routes.docs import add_docs
@@ -168,6 +167,9 @@ def default_store(settings: Settings, runner: Runner) -> SessionStore:
     def load_options(stored: dict[str, Any]) -> IKOptions:
         patch = S.OptionsPatch.model_validate(stored)
         return convert.apply_options(patch, convert.session_defaults(settings), settings)
+
+    # Imported here: redis-py is the optional extra `redis`, needed only with a URL.
+    from .redis_store import RedisSessionStore, connect
 
     log.info("sessions in Redis (IK_REDIS_URL)")
     return RedisSessionStore(
