@@ -162,6 +162,7 @@ class Cluster:
         old = self.workers[i]
         if old.proc.poll() is None:
             self.kill(i)
+        old.stop()  # closes its log
         self.workers[i] = self._start_worker(i, old.port)
         self.workers[i].wait_ready()
 
