@@ -10,12 +10,18 @@ on it: a busier loop does more per wake-up). ``--repeat`` alternates the apps.
 
     OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --transport ws --clients 12 --duration 6
     OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --apps service --profile /tmp/p.txt
+    OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --transport ws --store memory,redis
+
+``--store redis`` runs the service with its sessions in a real ``redis-server`` started
+for the run (IK_REDIS_URL; loadtest.cluster.RedisServer): the app is then named
+``service+redis``; ``--store memory,redis`` measures both, beside the floors, in one run.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -25,7 +31,10 @@ from typing import Any
 
 from .capacity import Deployment, Scenario, summarize_profile, trial
 from .cli import add_load_options, parser
+from .cluster import RedisServer
 from .service_process import ROOT
+
+REDIS_APP = "service+redis"
 
 
 def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None) -> dict[str, Any]:
@@ -36,7 +45,15 @@ def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None)
     link to this solver/), to compare two versions of service/ at the same load.
     """
     name, _, root = app.partition("@")
-    dep = Deployment(name, 1, "reuseport", log, Path(root) if root else ROOT)
+    redis = None
+    if name == REDIS_APP:  # the service, its sessions in a redis-server of its own
+        redis = RedisServer()
+        os.environ["IK_REDIS_URL"] = redis.url
+        name = "service"
+    try:
+        dep = Deployment(name, 1, "reuseport", log, Path(root) if root else ROOT)
+    finally:
+        os.environ.pop("IK_REDIS_URL", None)
     try:
         dep.wait_ready()
         rec = None
@@ -63,12 +80,19 @@ def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None)
         return s
     finally:
         dep.stop()
+        if redis is not None:
+            redis.stop()
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = parser("python -m loadtest.cost", __doc__)
     ap.add_argument("--apps", default="service,floors", help="comma-separated: service, floors")
     add_load_options(ap, clients=12, duration_s=6.0)
+    ap.add_argument(
+        "--store",
+        default="memory",
+        help="comma-separated session stores for the service: memory, redis",
+    )
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--processes", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument(
@@ -80,8 +104,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--gil", action="store_true", help="py-spy --gil (GIL holders only)")
     ap.add_argument("--json", type=Path, help="write the summaries here")
     args = ap.parse_args(argv)
-    apps = [a for a in args.apps.split(",") if a]
-    if not apps or any(a.partition("@")[0] not in ("service", "floors") for a in apps):
+    stores = [s for s in args.store.split(",") if s]
+    if not stores or set(stores) - {"memory", "redis"}:
+        ap.error("--store: memory, redis")
+    apps = []
+    for a in (a for a in args.apps.split(",") if a):
+        if a == "service":
+            apps += [a if s == "memory" else REDIS_APP for s in stores]
+        else:
+            apps.append(a)
+    if not apps or any(a.partition("@")[0] not in ("service", "floors", REDIS_APP) for a in apps):
         ap.error("--apps: service, floors or service@DIR")
     out: dict[str, list[dict[str, Any]]] = {a: [] for a in apps}
     with tempfile.TemporaryDirectory() as tmp:
