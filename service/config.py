@@ -98,6 +98,13 @@ class Settings(BaseSettings):
         "worker (docs/operations.md, 'Several workers'); empty = sessions in this process's "
         "memory. Never logged (it may hold a password).",
     )
+    redis_write_behind_ms: float = Field(
+        default=0.0,
+        ge=0,
+        description="0: each frame's pose and answer are in Redis before the answer is sent "
+        "(write-through, grouped); > 0: written behind, every this many ms, one write per "
+        "session (less CPU; a worker's death loses at most this long of poses) [ms]",
+    )
     redis_timeout_s: float = Field(
         default=0.5,
         gt=0,

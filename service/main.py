@@ -181,6 +181,7 @@ def default_store(settings: Settings, runner: Runner) -> SessionStore:
         build_solver=build_solver,
         load_options=load_options,
         dump_options=convert.options_dict,
+        write_behind_s=settings.redis_write_behind_ms / 1000,
     )
 
 

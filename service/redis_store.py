@@ -44,12 +44,13 @@ from typing import Any
 
 import msgpack
 import redis.asyncio as aioredis
-from redis.exceptions import NoScriptError, RedisError
+from redis.exceptions import RedisError
 
 from solver.ik import IKOptions, IKSolver, StreamState
 
 from .convert import ChainView, FrameJob, SolvedFrame
 from .errors import ServiceError, not_found, store_unavailable
+from .redis_commit import COMMIT_SCRIPT, GONE, MOVED, OWNER_FULL, SESSIONS_FULL, GroupCommit
 from .sessions import OwnerFull, Session, SessionStore, StaleSession, StoreFull
 from .stored_frames import (
     KEPT_ANSWERS,
@@ -74,108 +75,9 @@ SolverBuilder = Callable[[ChainView, IKOptions], Awaitable[IKSolver]]
 
 # Models kept per process, by chain definition hash.
 CACHED_VIEWS = 64
-
-# KEYS: s, a, o, chain, all, owner (all again when none); ARGV: version expected (-1:
-# create), state, ttl [ms], kept answers, session id, meta ('' keeps it), then pairs of
-# (frame id, answer). Returns the new version, -1 when the session is gone, -2 when the
-# version moved (another worker committed first), -3 / -4 at the session / owner cap.
-_COMMIT = """
-local expected = tonumber(ARGV[1])
-local ttl = tonumber(ARGV[3])
-local t = redis.call('TIME')
-local now = tonumber(t[1]) * 1000 + math.floor(tonumber(t[2]) / 1000)
-local v
-if expected < 0 then
-  local max_all, max_owner = tonumber(ARGV[7]), tonumber(ARGV[8])
-  redis.call('ZREMRANGEBYSCORE', KEYS[5], '-inf', now)
-  if redis.call('ZCARD', KEYS[5]) >= max_all then return -3 end
-  if KEYS[6] ~= KEYS[5] then
-    redis.call('ZREMRANGEBYSCORE', KEYS[6], '-inf', now)
-    if redis.call('ZCARD', KEYS[6]) >= max_owner then return -4 end
-  end
-  v = 0
-  redis.call('HSET', KEYS[1], 'v', 0, 'state', ARGV[2], 'meta', ARGV[6])
-else
-  local current = redis.call('HGET', KEYS[1], 'v')
-  if not current then return -1 end
-  if tonumber(current) ~= expected then return -2 end
-  v = expected + 1
-  redis.call('HSET', KEYS[1], 'v', v, 'state', ARGV[2])
-  if ARGV[6] ~= '' then redis.call('HSET', KEYS[1], 'meta', ARGV[6]) end
-  for i = 7, #ARGV, 2 do
-    redis.call('HSET', KEYS[2], ARGV[i], ARGV[i + 1])
-    redis.call('RPUSH', KEYS[3], ARGV[i])
-  end
-  local extra = redis.call('LLEN', KEYS[3]) - tonumber(ARGV[4])
-  while extra > 0 do
-    redis.call('HDEL', KEYS[2], redis.call('LPOP', KEYS[3]))
-    extra = extra - 1
-  end
-end
-for i = 1, 4 do redis.call('PEXPIRE', KEYS[i], ttl) end
-redis.call('ZADD', KEYS[5], now + ttl, ARGV[5])
-if KEYS[6] ~= KEYS[5] then
-  redis.call('ZADD', KEYS[6], now + ttl, ARGV[5])
-  redis.call('PEXPIRE', KEYS[6], ttl)
-end
-return v
-"""
-_GONE, _MOVED, _FULL, _OWNER_FULL = -1, -2, -3, -4
-
-
-class _GroupCommit:
-    """Runs the commit script for every caller that arrives while a round trip is under
-    way in one pipeline: one round trip per batch, not per frame.
-
-    EVALSHA by hand rather than redis-py's ``Script`` in a pipeline: that one asks
-    ``SCRIPT EXISTS`` before every pipeline, a second round trip each time (measured:
-    216 us of CPU per lone commit with it). The script is loaded once, and again when
-    Redis answers NOSCRIPT (it restarted and lost it)."""
-
-    def __init__(self, client: aioredis.Redis, script: str) -> None:
-        self._client = client
-        self._script = script
-        self._sha: str | None = None
-        self._pending: list[tuple[list[str], list[Any], asyncio.Future[Any]]] = []
-        self._flushing = False
-
-    async def run(self, keys: list[str], args: list[Any]) -> int:
-        fut: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
-        self._pending.append((keys, args, fut))
-        if not self._flushing:
-            self._flushing = True
-            asyncio.get_running_loop().create_task(self._flush())
-        return int(await fut)
-
-    async def _execute(self, batch: list[tuple[list[str], list[Any], Any]]) -> list[Any]:
-        if self._sha is None:
-            self._sha = str(await self._client.script_load(self._script))
-        pipe = self._client.pipeline(transaction=False)
-        for keys, args, _ in batch:
-            pipe.execute_command("EVALSHA", self._sha, len(keys), *keys, *args)
-        results: list[Any] = await pipe.execute(raise_on_error=False)
-        return results
-
-    async def _flush(self) -> None:
-        try:
-            while self._pending:
-                batch, self._pending = self._pending, []
-                try:
-                    results = await self._execute(batch)
-                    if any(isinstance(r, NoScriptError) for r in results):
-                        self._sha = None  # Redis restarted: load it, run the batch again
-                        results = await self._execute(batch)
-                except Exception as e:  # the whole batch failed (connection, timeout)
-                    results = [e] * len(batch)
-                for (_, _, fut), r in zip(batch, results, strict=True):
-                    if fut.done():
-                        continue
-                    if isinstance(r, Exception):
-                        fut.set_exception(r)
-                    else:
-                        fut.set_result(r)
-        finally:
-            self._flushing = False
+# Session.version of a session this worker must reload before its next frame: a write
+# failed (Redis gone) or was refused (another worker wrote first, written behind).
+RELOAD = -1
 
 
 def definition_key(definition: bytes) -> str:
@@ -196,6 +98,7 @@ class RedisSessionStore(SessionStore):
         load_options: OptionsLoader,
         dump_options: OptionsDumper,
         max_per_owner: int | None = None,
+        write_behind_s: float = 0.0,
         prefix: str = "ik:",
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -212,7 +115,12 @@ class RedisSessionStore(SessionStore):
         self._sessions: dict[str, Session] = {}
         self._loading: dict[str, asyncio.Future[Session | None]] = {}
         self._views: OrderedDict[str, ChainView] = OrderedDict()
-        self._commit = _GroupCommit(client, _COMMIT)
+        self._commit = GroupCommit(client, COMMIT_SCRIPT)
+        # Written behind: sessions with frames not yet in Redis, and their answers.
+        self.write_behind_s = write_behind_s
+        self._dirty: dict[str, tuple[Session, list[Any]]] = {}
+        self._behind_task: asyncio.Task[None] | None = None
+        self._behind_failed = False
         self._count = 0
 
     def __len__(self) -> int:
@@ -264,16 +172,16 @@ class RedisSessionStore(SessionStore):
         keys = self._keys(session.id, key, session.owner)
         no_cap = 2**62
         owner_cap = no_cap if self.max_per_owner is None else self.max_per_owner
-        args: list[bytes | str | int] = [-1, self._state(session), self._ttl_ms()]
+        args: list[bytes | str | int] = ["new", self._state(session), self._ttl_ms()]
         args += [KEPT_ANSWERS, session.id, self._meta(session), self.max_sessions, owner_cap]
         try:
             await self.client.set(keys[3], definition, px=self._ttl_ms())
             v = await self._commit.run(keys, args)
         except RedisError as e:
             raise _unavailable(e) from None
-        if v == _FULL:
+        if v == SESSIONS_FULL:
             raise StoreFull(retry_after_s=self.ttl_s)
-        if v == _OWNER_FULL:
+        if v == OWNER_FULL:
             raise OwnerFull(self.max_per_owner or 0)
         session.version = int(v)
         session.definition = b""
@@ -421,35 +329,102 @@ class RedisSessionStore(SessionStore):
     async def commit(
         self, session: Session, jobs: Sequence[FrameJob], out: list[SolvedFrame]
     ) -> None:
+        if session.version == RELOAD:  # a write failed or was refused: Redis is right
+            await self._reload_or_unavailable(session)
+            raise StaleSession(session.id)
         key = answer_key(jobs)
         answer = None if key is None else StoredAnswer(jobs_digest(jobs), tuple(out))
         pairs = [] if answer is None else [key, pack_answer(answer)]
-        await self._write(session, "", pairs)
+        if self.write_behind_s > 0:
+            self._behind(session, pairs)
+        else:
+            await self._write(session, "", pairs)
         if answer is not None and key is not None:
             session.answers[key] = answer
             if len(session.answers) > KEPT_ANSWERS:
                 del session.answers[min(session.answers)]
 
+    async def _reload_or_unavailable(self, session: Session) -> None:
+        """Reload ``session`` from Redis (503 ``store_unavailable`` if Redis is still gone)."""
+        self._dirty.pop(session.id, None)  # what this worker had not written is void
+        await self.refresh(session)
+        self._behind_failed = False
+
     async def save(self, session: Session) -> None:
+        self._dirty.pop(session.id, None)  # written now, with the new pose or options
         await self._write(session, self._meta(session), [])
+
+    def _args(self, session: Session, meta: bytes | str, pairs: list[Any]) -> list[Any]:
+        args = [session.version, self._state(session), self._ttl_ms(), KEPT_ANSWERS, session.id]
+        return [*args, meta, *pairs]
 
     async def _write(self, session: Session, meta: bytes | str, pairs: list[Any]) -> None:
         keys = self._keys(session.id, session.definition_key, session.owner)
-        args = [session.version, self._state(session), self._ttl_ms(), KEPT_ANSWERS, session.id]
         try:
-            v = await self._commit.run(keys, [*args, meta, *pairs])
+            v = await self._commit.run(keys, self._args(session, meta, pairs))
         except RedisError as e:
             # What this worker solved is not stored: whatever it holds now may be ahead
-            # of Redis, so its next commit is refused and it reloads first.
-            session.version = -10
+            # of Redis, so it reloads before its next frame.
+            session.version = RELOAD
             raise _unavailable(e) from None
-        if v == _GONE:
-            self._forget(session)
+        self._written(session, v)
+        if v == GONE:
             raise not_found()
-        if v == _MOVED:
+        if v == MOVED:
             await self.refresh(session)
             raise StaleSession(session.id)
-        session.version = v
+
+    def _written(self, session: Session, v: int) -> None:
+        """Take a commit's answer: the new version, or the session gone / moved on."""
+        if v == GONE:
+            self._forget(session)
+        elif v == MOVED:
+            session.version = RELOAD
+        else:
+            session.version = v
+
+    # -- written behind (IK_REDIS_WRITE_BEHIND_MS > 0) ---------------------------------
+    def _behind(self, session: Session, pairs: list[Any]) -> None:
+        """Queue the session's state and this answer for the next flush (the state is
+        read then: one write per session per flush, however many frames it solved)."""
+        if self._behind_failed:
+            session.version = RELOAD  # the next frame finds out whether Redis is back
+            raise store_unavailable()
+        _, pending = self._dirty.setdefault(session.id, (session, []))
+        pending.extend(pairs)
+        if self._behind_task is None:
+            self._behind_task = asyncio.get_running_loop().create_task(self._flush_behind())
+
+    async def _flush_behind(self) -> None:
+        try:
+            while self._dirty:
+                await asyncio.sleep(self.write_behind_s)
+                await self._flush_once()
+        finally:
+            self._behind_task = None
+
+    async def _flush_once(self) -> None:
+        dirty, self._dirty = self._dirty, {}
+        batch = [
+            (self._keys(s.id, s.definition_key, s.owner), self._args(s, "", pairs), s)
+            for s, pairs in dirty.values()
+            if not s.closed
+        ]
+        if not batch:
+            return
+        try:
+            results = await self._commit.execute(batch)
+        except RedisError as e:
+            _unavailable(e)
+            self._behind_failed = True
+            for _, _, s in batch:
+                s.version = RELOAD
+            return
+        for (_, _, s), v in zip(batch, results, strict=True):
+            if isinstance(v, Exception):
+                s.version = RELOAD
+            else:
+                self._written(s, int(v))
 
     def _forget(self, session: Session) -> None:
         session.closed = True
@@ -479,6 +454,8 @@ class RedisSessionStore(SessionStore):
             raise _unavailable(e) from None
 
     async def close(self) -> None:
+        if self._dirty:  # written behind and not yet flushed: now, before the exit
+            await self._flush_once()
         await self.client.aclose()
 
 
