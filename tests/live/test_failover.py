@@ -42,14 +42,19 @@ def _targets(k: int) -> list[dict[str, Any]]:
     return [{"effector": "tool", "position": position, "orientation": DOWN}]
 
 
-@pytest.fixture(scope="module")
-def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
+def _need_programs() -> None:
+    """Skip without redis-server or haproxy, except under CI=true, where that fails."""
     missing = missing_programs()
     if missing:
         reason = f"{', '.join(missing)} not installed (.ci/run installs them)"
         if os.environ.get("CI") == "true":
             pytest.fail(f"{reason}; CI=true, so this is a failure, not a skip", pytrace=False)
         pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
+    _need_programs()
     with Cluster(WORKERS, log_dir=tmp_path_factory.mktemp("cluster")) as c:
         yield c
 
@@ -101,11 +106,17 @@ def _session(cluster: Cluster) -> dict[str, Any]:
 
 
 def _counters(cluster: Cluster, session: dict[str, Any]) -> dict[str, int]:
-    r = httpx.get(
-        f"{cluster.base}/v1/sessions/{session['id']}",
-        headers={"Authorization": f"Bearer {session['token']}"},
-        timeout=10,
-    )
+    """The session's counters (after a restart, once the balancer sees a worker up)."""
+    deadline = time.monotonic() + 15
+    while True:
+        r = httpx.get(
+            f"{cluster.base}/v1/sessions/{session['id']}",
+            headers={"Authorization": f"Bearer {session['token']}"},
+            timeout=10,
+        )
+        if r.status_code != 503 or time.monotonic() > deadline:
+            break
+        time.sleep(0.1)
     assert r.status_code == 200, r.text
     counters: dict[str, int] = r.json()["counters"]
     return counters
@@ -246,3 +257,59 @@ def test_the_balancer_runs_the_shipped_configuration() -> None:
     assert templates == {"server-template ik 4 service:8000 resolvers docker"}
     assert sum(line.strip() in templates for line in shipped) == 2  # http and ws
     assert only_ran == {"server w0 127.0.0.1:1", "server w1 127.0.0.1:2"}
+
+
+@pytest.fixture(scope="module")
+def behind(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
+    """Two workers writing behind (IK_REDIS_WRITE_BEHIND_MS)."""
+    _need_programs()
+    env = {"IK_REDIS_WRITE_BEHIND_MS": "300"}
+    with Cluster(2, log_dir=tmp_path_factory.mktemp("behind"), env=env) as c:
+        yield c
+
+
+def test_written_behind_a_killed_worker_still_answers_every_frame_once(behind: Cluster) -> None:
+    """Written behind, a worker's death may lose the last flush interval of poses, never
+    an answer: each frame is answered once, none is counted twice, the pose goes on."""
+    session = _session(behind)
+    answered: dict[int, int] = {}
+    poses: list[list[float]] = []
+    n, kill_at = 40, 15
+
+    async def stream() -> None:
+        async with AsyncClient(behind.base) as client:
+            reconnect = Reconnect(attempts=10, initial_delay_s=0.1, max_delay_s=1.0)
+            handle = SessionRef.from_json(session)
+            async with client.stream(handle, reconnect=reconnect) as s:
+                for k in range(n):
+                    await s.send_frame(_targets(k))
+                    answer = await s.receive()
+                    assert isinstance(answer, FrameAnswer)
+                    answered[answer.id] = answered.get(answer.id, 0) + 1
+                    poses.append(list(answer.result.q))
+                    if k == kill_at:
+                        behind.kill(_serving_ws(behind))
+
+    asyncio.run(asyncio.wait_for(stream(), 120))
+    assert sorted(answered) == list(range(n)) and set(answered.values()) == {1}
+    assert _largest_step(poses) < MAX_STEP_RAD
+    assert _counters(behind, session)["frames"] <= n
+    for i in range(2):
+        if behind.workers[i].proc.poll() is not None:
+            behind.restart(i)
+
+
+def test_written_behind_a_graceful_restart_loses_nothing(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> None:
+    """SIGTERM flushes what is written behind: with a flush every 60 s, the frames are in
+    Redis after the worker's restart only because its shutdown wrote them."""
+    _need_programs()
+    env = {"IK_REDIS_WRITE_BEHIND_MS": "60000"}
+    with Cluster(1, log_dir=tmp_path_factory.mktemp("flush"), env=env) as c:
+        session = _session(c)
+        for i in range(10):
+            _frame_until_answered(c.base, session, i, i)
+        c.workers[0].stop()  # SIGTERM: drain, flush, exit
+        c.restart(0)
+        assert _counters(c, session)["frames"] == 10
