@@ -10,11 +10,13 @@ on it: a busier loop does more per wake-up). ``--repeat`` alternates the apps.
 
     OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --transport ws --clients 12 --duration 6
     OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --apps service --profile /tmp/p.txt
-    OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --transport ws --store memory,redis
+    OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --transport ws --store memory,redis,behind
 
 ``--store redis`` runs the service with its sessions in a real ``redis-server`` started
-for the run (IK_REDIS_URL; loadtest.cluster.RedisServer): the app is then named
-``service+redis``; ``--store memory,redis`` measures both, beside the floors, in one run.
+for the run (IK_REDIS_URL; loadtest.cluster.RedisServer), each frame written before its
+answer: the app is then named ``service+redis``; ``behind`` the same, written behind
+every 20 ms (IK_REDIS_WRITE_BEHIND_MS): ``service+behind``. ``--store memory,redis,behind``
+measures all three beside the floors in one run.
 """
 
 from __future__ import annotations
@@ -34,7 +36,9 @@ from .cli import add_load_options, parser
 from .cluster import RedisServer
 from .service_process import ROOT
 
-REDIS_APP = "service+redis"
+# The service with its sessions in Redis: written through, written behind (every 20 ms).
+STORE_APPS = {"redis": "service+redis", "behind": "service+behind"}
+BEHIND_MS = "20"
 
 
 def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None) -> dict[str, Any]:
@@ -46,14 +50,17 @@ def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None)
     """
     name, _, root = app.partition("@")
     redis = None
-    if name == REDIS_APP:  # the service, its sessions in a redis-server of its own
+    if name in STORE_APPS.values():  # the service, its sessions in a redis-server of its own
         redis = RedisServer()
         os.environ["IK_REDIS_URL"] = redis.url
+        if name == STORE_APPS["behind"]:
+            os.environ["IK_REDIS_WRITE_BEHIND_MS"] = BEHIND_MS
         name = "service"
     try:
         dep = Deployment(name, 1, "reuseport", log, Path(root) if root else ROOT)
     finally:
         os.environ.pop("IK_REDIS_URL", None)
+        os.environ.pop("IK_REDIS_WRITE_BEHIND_MS", None)
     try:
         dep.wait_ready()
         rec = None
@@ -91,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--store",
         default="memory",
-        help="comma-separated session stores for the service: memory, redis",
+        help="comma-separated session stores for the service: memory, redis, behind",
     )
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--processes", type=int, default=1, help=argparse.SUPPRESS)
@@ -105,15 +112,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, help="write the summaries here")
     args = ap.parse_args(argv)
     stores = [s for s in args.store.split(",") if s]
-    if not stores or set(stores) - {"memory", "redis"}:
-        ap.error("--store: memory, redis")
+    if not stores or set(stores) - {"memory", *STORE_APPS}:
+        ap.error("--store: memory, redis, behind")
     apps = []
     for a in (a for a in args.apps.split(",") if a):
         if a == "service":
-            apps += [a if s == "memory" else REDIS_APP for s in stores]
+            apps += [STORE_APPS.get(s, a) for s in stores]
         else:
             apps.append(a)
-    if not apps or any(a.partition("@")[0] not in ("service", "floors", REDIS_APP) for a in apps):
+    known = ("service", "floors", *STORE_APPS.values())
+    if not apps or any(a.partition("@")[0] not in known for a in apps):
         ap.error("--apps: service, floors or service@DIR")
     out: dict[str, list[dict[str, Any]]] = {a: [] for a in apps}
     with tempfile.TemporaryDirectory() as tmp:
