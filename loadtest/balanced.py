@@ -34,29 +34,35 @@ def _frame(i: int, k: int) -> bytes:
     return orjson.dumps({"type": "frame", "id": k, "targets": targets})
 
 
-async def _client(base: str, i: int, start: float, stop_at: float) -> int:
-    async with httpx.AsyncClient(base_url=base, timeout=30) as http:
-        r = await http.post(
-            "/v1/sessions", json={"chain": {"format": "example", "name": "panda_arm"}}
-        )
+async def _client(base: str, i: int, ready: asyncio.Barrier, stop_at: list[float]) -> int:
+    """One stream: its session and socket first, then (once every client has them)
+    frames back to back until ``stop_at[0]``; the frames answered in that window."""
+    async with httpx.AsyncClient(base_url=base, timeout=60) as http:
+        chain = {"format": "example", "name": "panda_arm"}
+        r = await http.post("/v1/sessions", json={"chain": chain})
         r.raise_for_status()
         s = r.json()
     ws_url = base.replace("http", "ws", 1) + f"/v1/sessions/{s['id']}/ws"
     n = 0
     headers = {"Authorization": f"Bearer {s['token']}"}
     async with connect(ws_url, additional_headers=headers) as ws:
-        while time.perf_counter() < stop_at:
+        await ready.wait()
+        while time.perf_counter() < stop_at[0]:
             await ws.send(_frame(i, n).decode())
             answer = orjson.loads(await ws.recv())
-            if answer.get("type") == "result" and time.perf_counter() >= start:
+            if answer.get("type") == "result":
                 n += 1
     return n
 
 
 async def _load(base: str, clients: int, duration_s: float) -> float:
-    start = time.perf_counter() + 2.0  # sessions created and sockets open first
-    stop_at = start + duration_s
-    counts = await asyncio.gather(*(_client(base, i, start, stop_at) for i in range(clients)))
+    """Answered frames per second over ``duration_s``, all clients streaming."""
+    stop_at = [math.inf]
+    ready = asyncio.Barrier(clients + 1)
+    tasks = [asyncio.create_task(_client(base, i, ready, stop_at)) for i in range(clients)]
+    await ready.wait()  # every session created and every socket open
+    stop_at[0] = time.perf_counter() + duration_s
+    counts = await asyncio.gather(*tasks)
     return sum(counts) / duration_s
 
 
@@ -65,12 +71,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", default="1,2,4", help="comma-separated worker counts")
     ap.add_argument("--clients", type=int, default=32)
     ap.add_argument("--duration", type=float, default=8.0)
+    ap.add_argument("--repeat", type=int, default=1, help="runs per worker count")
     args = ap.parse_args(argv)
     env = {"IK_MAX_FRAMES_PER_S": "0"}
     for n in (int(x) for x in args.workers.split(",") if x):
         with tempfile.TemporaryDirectory() as tmp, Cluster(n, log_dir=Path(tmp), env=env) as c:
-            rate = asyncio.run(_load(c.base, args.clients, args.duration))
-            print(f"{n} worker(s), {args.clients} clients: {rate:.0f} frames/s", flush=True)
+            rates = [
+                asyncio.run(_load(c.base, args.clients, args.duration)) for _ in range(args.repeat)
+            ]
+            shown = ", ".join(f"{r:.0f}" for r in rates)
+            print(f"{n} worker(s), {args.clients} clients: {shown} frames/s", flush=True)
     return 0
 
 
