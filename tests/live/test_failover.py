@@ -29,6 +29,10 @@ pytestmark = [pytest.mark.live, pytest.mark.timeout(240)]
 WORKERS = 3
 CHAIN = {"format": "example", "name": "panda_arm"}
 DOWN = {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0}  # the tool pointing down
+# A start away from the middle of the limits: the stream then tracks the circle in an
+# arm configuration 2.2 rad (joint 1) from the one a solve from the middle finds, so a
+# worker that lost the pose and started from the middle would show as a jump.
+BRANCH = [2.2, 0.3, -2.2, -2.0, 0.5, 2.2, 0.0]
 # Largest joint change between two consecutive frames of the smooth path below: the
 # warm-started stream moves ~0.05 rad per frame; a restart from another pose (a lost
 # pose after the failover) jumps by far more.
@@ -99,7 +103,8 @@ def _frame_until_answered(base: str, session: dict[str, Any], frame_id: int, k: 
 
 
 def _session(cluster: Cluster) -> dict[str, Any]:
-    r = httpx.post(f"{cluster.base}/v1/sessions", json={"chain": CHAIN}, timeout=10)
+    body = {"chain": CHAIN, "initial_pose": {"q": BRANCH}}
+    r = httpx.post(f"{cluster.base}/v1/sessions", json=body, timeout=10)
     assert r.status_code == 201, r.text
     body: dict[str, Any] = r.json()
     return body
