@@ -19,7 +19,7 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from ik_client import AsyncClient, FrameAnswer, Reconnect, ServiceError
+from ik_client import AsyncClient, FrameAnswer, Reconnect, ServiceError, StreamClosed
 from ik_client.types import Session as SessionRef
 
 from loadtest.cluster import HAPROXY_CFG, Cluster, balancer_config, missing_programs
@@ -103,10 +103,12 @@ def _frame_until_answered(base: str, session: dict[str, Any], frame_id: int, k: 
 
 
 def _session(cluster: Cluster) -> dict[str, Any]:
-    body = {"chain": CHAIN, "initial_pose": {"q": BRANCH}}
-    r = httpx.post(f"{cluster.base}/v1/sessions", json=body, timeout=10)
+    """A new session through the balancer; ``created_on``: the worker's index."""
+    request = {"chain": CHAIN, "initial_pose": {"q": BRANCH}}
+    r = httpx.post(f"{cluster.base}/v1/sessions", json=request, timeout=10)
     assert r.status_code == 201, r.text
     body: dict[str, Any] = r.json()
+    body["created_on"] = _worker_index(cluster, r.headers["x-served-by"])
     return body
 
 
@@ -229,6 +231,10 @@ def test_redis_down_gives_503_and_errors_then_recovers(cluster: Cluster) -> None
             time.sleep(0.2)
         ws_error = asyncio.run(asyncio.wait_for(_ws_frame_error(worker.base, session), 20))
         assert ws_error == "store_unavailable"
+        # A worker that does not hold the session cannot load it: the socket closes 1013.
+        stranger = next(i for i in range(WORKERS) if i not in (0, session["created_on"]))
+        refused = _ws_frame_error(cluster.workers[stranger].base, session)
+        assert asyncio.run(asyncio.wait_for(refused, 20)) == "close 1013 store_unavailable"
     finally:
         cluster.redis.resume()
     r = _frame_until_answered(cluster.base, session, 2, 2)
@@ -237,7 +243,8 @@ def test_redis_down_gives_503_and_errors_then_recovers(cluster: Cluster) -> None
 
 
 async def _ws_frame_error(base: str, session: dict[str, Any]) -> str:
-    """The error code of one WebSocket frame sent to ``base`` (no reconnects)."""
+    """The error code of one WebSocket frame sent to ``base`` (no reconnects), or the
+    close code and reason when the socket is closed instead."""
     async with AsyncClient(base) as client:
         handle = SessionRef.from_json(session)
         async with client.stream(handle, reconnect=Reconnect(attempts=0)) as s:
@@ -245,6 +252,8 @@ async def _ws_frame_error(base: str, session: dict[str, Any]) -> str:
                 await s.frame(_targets(1))
             except ServiceError as e:
                 return str(e.code)
+            except StreamClosed as e:
+                return f"close {e.close_code} {e.reason}"
     return "answered"
 
 
