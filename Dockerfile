@@ -26,7 +26,7 @@ COPY service/ service/
 # Install; drop the sources so that everything imports from site-packages; compile
 # the solver once so its numba cache ships in the image, owned by the runtime user
 # (a container is ready in about a second instead of after a 30-60 s compile).
-RUN pip install --constraint constraints.txt . \
+RUN pip install --constraint constraints.txt '.[redis]' \
     && rm -rf /app/solver /app/schemas /app/service \
     && python -c "import solver; print(f'solver warm in {solver.warmup():.1f} s')" \
     && chown -R 10001:10001 /app/numba-cache

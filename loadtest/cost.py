@@ -11,16 +11,24 @@ on it: a busier loop does more per wake-up). ``--repeat`` alternates the apps.
     OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --transport ws --clients 12 --duration 6
     OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --apps service --profile /tmp/p.txt
     OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --clients 2 --characters 50 --duration 10
+    OPENBLAS_NUM_THREADS=1 python -m loadtest.cost --transport ws --store memory,redis,behind
 
 With ``--characters N`` each client drives N sessions (``--chain``, default the 7-DOF
 panda_arm) over one WebSocket, one ``batch`` message per tick (loadtest.batch_load),
 and the figure is CPU per character; the floor is the bare echo of the same messages.
+
+``--store redis`` runs the service with its sessions in a real ``redis-server`` started
+for the run (IK_REDIS_URL; loadtest.cluster.RedisServer), each frame written before its
+answer: the app is then named ``service+redis``; ``behind`` the same, written behind
+every 20 ms (IK_REDIS_WRITE_BEHIND_MS): ``service+behind``. ``--store memory,redis,behind``
+measures all three beside the floors in one run.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -31,7 +39,12 @@ from typing import Any
 from .batch_load import run_batches, summary
 from .capacity import Deployment, Scenario, summarize_profile, trial
 from .cli import add_load_options, parser
+from .cluster import RedisServer
 from .service_process import ROOT
+
+# The service with its sessions in Redis: written through, written behind (every 20 ms).
+STORE_APPS = {"redis": "service+redis", "behind": "service+behind"}
+BEHIND_MS = "20"
 
 
 def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None) -> dict[str, Any]:
@@ -42,7 +55,18 @@ def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None)
     link to this solver/), to compare two versions of service/ at the same load.
     """
     name, _, root = app.partition("@")
-    dep = Deployment(name, 1, "reuseport", log, Path(root) if root else ROOT)
+    redis = None
+    if name in STORE_APPS.values():  # the service, its sessions in a redis-server of its own
+        redis = RedisServer()
+        os.environ["IK_REDIS_URL"] = redis.url
+        if name == STORE_APPS["behind"]:
+            os.environ["IK_REDIS_WRITE_BEHIND_MS"] = BEHIND_MS
+        name = "service"
+    try:
+        dep = Deployment(name, 1, "reuseport", log, Path(root) if root else ROOT)
+    finally:
+        os.environ.pop("IK_REDIS_URL", None)
+        os.environ.pop("IK_REDIS_WRITE_BEHIND_MS", None)
     try:
         dep.wait_ready()
         rec = None
@@ -72,6 +96,8 @@ def measure(app: str, args: argparse.Namespace, log: Path, profile: Path | None)
         return s
     finally:
         dep.stop()
+        if redis is not None:
+            redis.stop()
 
 
 def batch_trial(dep: Deployment, app: str, args: argparse.Namespace) -> dict[str, Any]:
@@ -99,6 +125,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = parser("python -m loadtest.cost", __doc__)
     ap.add_argument("--apps", default="service,floors", help="comma-separated: service, floors")
     add_load_options(ap, clients=12, duration_s=6.0)
+    ap.add_argument(
+        "--store",
+        default="memory",
+        help="comma-separated session stores for the service: memory, redis, behind",
+    )
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument(
         "--characters",
@@ -117,8 +148,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--gil", action="store_true", help="py-spy --gil (GIL holders only)")
     ap.add_argument("--json", type=Path, help="write the summaries here")
     args = ap.parse_args(argv)
-    apps = [a for a in args.apps.split(",") if a]
-    if not apps or any(a.partition("@")[0] not in ("service", "floors") for a in apps):
+    stores = [s for s in args.store.split(",") if s]
+    if not stores or set(stores) - {"memory", *STORE_APPS}:
+        ap.error("--store: memory, redis, behind")
+    apps = []
+    for a in (a for a in args.apps.split(",") if a):
+        if a == "service":
+            apps += [STORE_APPS.get(s, a) for s in stores]
+        else:
+            apps.append(a)
+    known = ("service", "floors", *STORE_APPS.values())
+    if not apps or any(a.partition("@")[0] not in known for a in apps):
         ap.error("--apps: service, floors or service@DIR")
     out: dict[str, list[dict[str, Any]]] = {a: [] for a in apps}
     with tempfile.TemporaryDirectory() as tmp:

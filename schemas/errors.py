@@ -37,6 +37,7 @@ class ErrorCode(enum.StrEnum):
     PLANS_BUSY = "plans_busy"
     TOO_MANY_PLANS = "too_many_plans"
     SERVER_BUSY = "server_busy"
+    STORE_UNAVAILABLE = "store_unavailable"
     TOO_MUCH_WORK = "too_much_work"
     TOO_MANY_WEBSOCKETS = "too_many_websockets"
     SLOW_READER = "slow_reader"
@@ -94,6 +95,8 @@ ERROR_CODE_DESCRIPTIONS: dict[ErrorCode, str] = {
     ErrorCode.SERVER_BUSY: "503 + Retry-After / WebSocket error message: IK_MAX_QUEUED_JOBS "
     "jobs of this kind (chain builds, one-shot solves or pooled frames) are already queued "
     "or running",
+    ErrorCode.STORE_UNAVAILABLE: "503 + Retry-After / WebSocket error message: the shared "
+    "session store (Redis, IK_REDIS_URL) does not answer; nothing was solved, send it again",
     ErrorCode.TOO_MUCH_WORK: "429 + Retry-After / WebSocket error message: this client "
     "(API key, else address) already has IK_MAX_CLIENT_WORK_S of pooled solving in flight",
     ErrorCode.TOO_MANY_WEBSOCKETS: "close 1013: IK_MAX_WEBSOCKETS are open; retry later",

@@ -92,6 +92,24 @@ class Settings(BaseSettings):
         default=100, ge=1, description="Sessions per API key (429 when reached)"
     )
     sweep_interval_s: float = Field(default=10.0, gt=0, description="Expiry sweep period [s]")
+    redis_url: SecretStr = Field(
+        default=SecretStr(""),
+        description="redis:// URL of a Redis that holds the sessions, shared by every "
+        "worker (docs/operations.md, 'Several workers'); empty = sessions in this process's "
+        "memory. Never logged (it may hold a password).",
+    )
+    redis_write_behind_ms: float = Field(
+        default=0.0,
+        ge=0,
+        description="0: each frame's pose and answer are in Redis before the answer is sent "
+        "(write-through, grouped); > 0: written behind, every this many ms, one write per "
+        "session (less CPU; a worker's death loses at most this long of poses) [ms]",
+    )
+    redis_timeout_s: float = Field(
+        default=0.5,
+        gt=0,
+        description="Longest wait for Redis on any call; then 503 store_unavailable [s]",
+    )
 
     # Limits.
     max_joints: int = Field(default=256, ge=1, description="Joints per chain")

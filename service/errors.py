@@ -23,6 +23,7 @@ warmup_failed        503    -- (/readyz only)
 plans_busy           503    error message (IK_MAX_QUEUED_PLANS planned clips already queued)
 too_many_plans       429    error message (this client holds half of IK_MAX_QUEUED_PLANS)
 server_busy          503    error message (IK_MAX_QUEUED_JOBS of one kind of work queued)
+store_unavailable    503    error message, close 1013 at connect (Redis does not answer)
 too_much_work        429    error message (this client's IK_MAX_CLIENT_WORK_S in flight)
 too_many_websockets  --     close 1013 (try again later)
 slow_reader          --     close 1008 (the client stopped reading its answers)
@@ -161,6 +162,16 @@ def too_many_plans(limit: int) -> ServiceError:
         "IK_MAX_QUEUED_PLANS, per API key, or per session when the server has no keys)",
         status_code=status.HTTP_429_TOO_MANY_REQUESTS,
         retry_after_s=1.0,
+    )
+
+
+def store_unavailable(retry_after_s: float = 1.0) -> ServiceError:
+    return ServiceError(
+        ErrorCode.STORE_UNAVAILABLE,
+        "the session store (Redis) does not answer; nothing was solved: send it again "
+        "after Retry-After",
+        status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
+        retry_after_s=retry_after_s,
     )
 
 

@@ -12,10 +12,15 @@ import logging
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 
+import schemas as S
+from solver.ik import IKOptions, IKSolver
+
+from . import convert
 from .auth import API_KEY_HEADER
 from .config import Settings, get_settings
 from .dependencies import Services
@@ -27,7 +32,8 @@ from .routes import health, http, ws
 from .routes.docs import add_docs
 from .session_starts import SessionStarts
 from .sessions import InMemorySessionStore, SessionStore
-from .solving import Runner, Warmup, WarmupFn, default_warmup
+from .solving import Runner, Warmup, WarmupFn, default_warmup, make_solver
+from .work import WorkClass
 
 log = logging.getLogger("service")
 
@@ -64,14 +70,8 @@ def create_app(
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        sessions = store
-        if sessions is None:  # (not `store or ...`: an empty store is falsy)
-            sessions = InMemorySessionStore(
-                max_sessions=settings.max_sessions,
-                ttl_s=settings.session_ttl_s,
-                max_per_owner=settings.max_sessions_per_key,
-            )
-        metrics = Metrics(lambda: len(sessions))
+        # The store is built after the runner (a shared one builds models on its threads).
+        metrics = Metrics(lambda: len(app.state.ik.store))
         warm = Warmup(warmup or default_warmup(settings.compile_processes))
         runner = Runner(
             inline_budget_us=settings.inline_budget_us,
@@ -87,6 +87,9 @@ def create_app(
             max_request_work_s=settings.max_request_work_s,
             max_client_work_s=settings.max_client_work_s,
         )
+        sessions = store
+        if sessions is None:  # (not `store or ...`: an empty store is falsy)
+            sessions = default_store(settings, runner)
         app.state.ik = Services(
             settings=settings,
             store=sessions,
@@ -104,6 +107,7 @@ def create_app(
             with contextlib.suppress(asyncio.CancelledError):
                 await sweeper
             runner.shutdown()
+            await sessions.close()
 
     app = FastAPI(
         title="IK service",
@@ -134,6 +138,51 @@ def create_app(
             max_age=600,
         )
     return app
+
+
+def default_store(settings: Settings, runner: Runner) -> SessionStore:
+    """Redis when IK_REDIS_URL is set (sessions shared by every worker), else memory."""
+    url = settings.redis_url.get_secret_value()
+    if not url:
+        return InMemorySessionStore(
+            max_sessions=settings.max_sessions,
+            ttl_s=settings.session_ttl_s,
+            max_per_owner=settings.max_sessions_per_key,
+        )
+
+    async def build_view(definition: bytes) -> convert.ChainView:
+        spec = S.SessionCreate.model_validate_json(definition)
+        return await runner.run(
+            WorkClass.BUILD,
+            convert.chain_from_spec,
+            spec.chain,
+            settings,
+            spec.conventions,
+            spec.bones,
+        )
+
+    async def build_solver(view: convert.ChainView, options: IKOptions) -> IKSolver:
+        return await runner.run(WorkClass.BUILD, make_solver, view, options)
+
+    def load_options(stored: dict[str, Any]) -> IKOptions:
+        patch = S.OptionsPatch.model_validate(stored)
+        return convert.apply_options(patch, convert.session_defaults(settings), settings)
+
+    # Imported here: redis-py is the optional extra `redis`, needed only with a URL.
+    from .redis_store import RedisSessionStore, connect
+
+    log.info("sessions in Redis (IK_REDIS_URL)")
+    return RedisSessionStore(
+        connect(url, settings.redis_timeout_s),
+        max_sessions=settings.max_sessions,
+        ttl_s=settings.session_ttl_s,
+        max_per_owner=settings.max_sessions_per_key,
+        build_view=build_view,
+        build_solver=build_solver,
+        load_options=load_options,
+        dump_options=convert.options_dict,
+        write_behind_s=settings.redis_write_behind_ms / 1000,
+    )
 
 
 async def _sweep(store: SessionStore, metrics: Metrics, interval_s: float) -> None:

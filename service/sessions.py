@@ -1,9 +1,10 @@
 """Sessions: one chain, one warm-started solver, one lock; and the store that holds them.
 
-``SessionStore`` is the interface (a shared store, e.g. Redis, comes later: it would
-hold the chain definition, options and current pose, and a worker would rebuild the
-solver on a miss). ``InMemorySessionStore`` is the default: one process, a dict, idle
-expiry and a cap.
+``SessionStore`` is the interface. ``InMemorySessionStore`` is the default: one
+process, a dict, idle expiry and a cap. ``service.redis_store.RedisSessionStore``
+(IK_REDIS_URL) shares sessions between workers: it holds the chain definition, options,
+token digest, owner, counters and pose, and a worker rebuilds the solver on a miss; its
+extra steps (a frame's commit, a retried frame's stored answer) are no-ops here.
 """
 
 from __future__ import annotations
@@ -14,12 +15,16 @@ import hashlib
 import math
 import secrets
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
+import schemas as S
 from solver.ik import IKOptions, IKSolver
 
-from .convert import ChainView
+from .convert import ChainView, FrameJob, SolvedFrame
+from .stored_frames import StoredAnswer
 
 
 def token_digest(token: str) -> bytes:
@@ -45,6 +50,12 @@ class Session:
         closed: Set when deleted or expired; waiting frames then answer not_found.
         owner: Fingerprint of the API key that created it (None when keys are off).
         bucket, bucket_at: Frame-rate token bucket (frames available, when counted).
+        rest: The rest pose set with the pose (None: the middle of the limits).
+        version: Commits of this session in a shared store (its optimistic lock).
+        definition_key: Content hash of its chain definition in a shared store.
+        answers: The last answers committed, by frame id (a shared store's replay).
+        definition: The create request's chain, conventions and bones (JSON), from which
+            another worker rebuilds the model; a shared store keeps it (empty after).
     """
 
     id: str
@@ -62,6 +73,17 @@ class Session:
     owner: str | None = None
     bucket: float = math.inf
     bucket_at: float = 0.0
+    rest: np.ndarray | None = None
+    version: int = 0
+    definition_key: str = ""
+    answers: dict[int, StoredAnswer] = field(default_factory=dict)
+    definition: bytes = b""
+
+    def set_pose(self, q: np.ndarray) -> None:
+        """Set the pose and the rest pose (``IKSolver.set_pose``), remembering the rest
+        pose so that a shared store can rebuild the solver as it is."""
+        self.solver.set_pose(q)
+        self.rest = self.solver.q.copy()
 
     def take_frames(self, n: int, *, now: float, rate_per_s: float, burst: float) -> float:
         """Spend ``n`` frames from the session's token bucket.
@@ -81,6 +103,14 @@ class Session:
 
     def token_ok(self, token: str) -> bool:
         return secrets.compare_digest(token_digest(token), self.token_digest)
+
+
+def chain_definition(body: S.SessionCreate) -> bytes:
+    """What another worker needs to build a session's model: the create request's chain,
+    conventions and bones, as JSON (a shared store keeps it once per distinct value)."""
+    return body.model_dump_json(
+        include={"chain", "conventions", "bones"}, exclude_none=True
+    ).encode()
 
 
 def new_session(
@@ -118,6 +148,11 @@ class OwnerFull(Exception):
         self.limit = limit
 
 
+class StaleSession(Exception):
+    """Another worker committed frames of this session first; the session has been
+    reloaded from the store, and the frames are to be solved again from there."""
+
+
 class SessionStore(abc.ABC):
     """Where sessions live. Async so that a networked store fits the same interface."""
 
@@ -143,6 +178,40 @@ class SessionStore(abc.ABC):
 
     @abc.abstractmethod
     def __len__(self) -> int: ...
+
+    # -- a shared store's steps; nothing to do when sessions live in this process -------
+    def stored_answer(self, session: Session, jobs: Sequence[FrameJob]) -> list[SolvedFrame] | None:
+        """The answers already given to exactly these frames (same ids, same targets),
+        or None: the frames are to be solved. Called under the session's lock."""
+        return None
+
+    async def commit(
+        self, session: Session, jobs: Sequence[FrameJob], out: list[SolvedFrame]
+    ) -> None:
+        """Make the frames just solved durable before they are answered. Called under the
+        session's lock.
+
+        Raises:
+            StaleSession: another worker committed first (the session is reloaded).
+            ServiceError: ``not_found`` (deleted elsewhere), ``store_unavailable``.
+        """
+        return None
+
+    async def save(self, session: Session) -> None:
+        """Write a changed pose or options through (PUT pose, PATCH options)."""
+        return None
+
+    async def refresh(self, session: Session) -> None:
+        """Reload what other workers may have changed (before a pose or options change)."""
+        return None
+
+    async def check(self) -> None:
+        """Raises ServiceError ``store_unavailable`` when the store does not answer."""
+        return None
+
+    async def close(self) -> None:
+        """Release connections (the app's shutdown)."""
+        return None
 
     def idle_s(self, session: Session) -> float:
         return max(0.0, self.clock() - session.last_seen)

@@ -36,10 +36,11 @@ from .errors import (
     not_found,
     not_ready,
     plans_busy,
+    store_unavailable,
     too_many_plans,
 )
 from .metrics import Metrics
-from .sessions import Session, SessionStore
+from .sessions import Session, SessionStore, StaleSession
 from .startup import Report, warm_solver
 from .work import CostShares, WorkClass, WorkPool
 
@@ -48,6 +49,10 @@ T = TypeVar("T")
 
 
 WarmupFn = Callable[[Report], float]
+# Times a request is solved again when another worker committed its session's frames
+# first (a shared store): the session is reloaded each time, so more than one retry
+# means the session is being fought over by several streams at once.
+STALE_RETRIES = 3
 
 
 def default_warmup(compile_processes: int) -> WarmupFn:
@@ -293,60 +298,94 @@ class Runner:
         if wait_s > 0:
             raise rate_limited(wait_s, self.max_frames_per_s)
         await session.lock.acquire()
-        released = False
+        handoff = _LockHandoff()
         try:
-            if session.closed:
-                raise not_found()
-            options = session.options
-            metrics = self.metrics
-            work: Callable[..., tuple[list[SolvedFrame], PlannedPath | None]] = (
-                _plan_all if plan else _track_all
-            )
-            if not plan and may_inline and self.inline(len(jobs), options):
-                out = work(session, jobs, options, t0, metrics.frames, transport)
-            elif not plan:
-                # Admitted before any state changes: a refusal leaves the lock free.
-                cost_s = self.request_work_s(len(jobs), options)
-                pool = self.pools[WorkClass.FRAMES]
-                pool.admit()
-                shares = self.frame_shares
-                shares.take(client, cost_s)
-                loop = asyncio.get_running_loop()
-
-                def record_frames(batch: list[SolvedFrame], transport: str) -> None:
-                    with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-                        loop.call_soon_threadsafe(metrics.frames, batch, transport)
-
-                fut = pool.submit(work, session, jobs, options, t0, record_frames, transport)
-
-                def done(_: asyncio.Future[Any]) -> None:
-                    shares.give_back(client, cost_s)
-                    session.lock.release()  # when the thread is done, never earlier
-
-                fut.add_done_callback(done)
-                released = True
-                out = await asyncio.shield(fut)
+            # A shared store (IK_REDIS_URL) commits the frames before they are answered;
+            # when another worker committed this session's frames first, the session is
+            # reloaded from the store and the frames are solved again from there.
+            for _ in range(STALE_RETRIES):
+                if session.closed:
+                    raise not_found()
+                stored = None if plan else store.stored_answer(session, jobs)
+                if stored is not None:  # the same frames sent again: the same answers
+                    out: tuple[list[SolvedFrame], PlannedPath | None] = (stored, None)
+                    break
+                out = await self._solve(
+                    session, jobs, t0, transport, plan, on_submit, client, may_inline, handoff
+                )
+                try:
+                    await store.commit(session, jobs, out[0])
+                except StaleSession:
+                    continue
+                break
             else:
-                loop = asyncio.get_running_loop()
-
-                def record(batch: list[SolvedFrame], transport: str) -> None:
-                    # The metrics are the loop's: hand the batch over (one wake-up).
-                    with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-                        loop.call_soon_threadsafe(metrics.frames, batch, transport)
-
-                args = (session, jobs, options, t0, record, transport)
-                fut = loop.run_in_executor(self.plan_pool, work, *args)
-                if on_submit is not None:
-                    on_submit(fut)
-                # The lock is released when the thread is done, never earlier.
-                fut.add_done_callback(lambda _: session.lock.release())
-                released = True
-                out = await asyncio.shield(fut)
+                raise store_unavailable()
         finally:
-            if not released:
+            if not handoff.handed_over:
                 session.lock.release()
         store.touch(session)
         return out
+
+    async def _solve(
+        self,
+        session: Session,
+        jobs: Sequence[FrameJob],
+        t0: float,
+        transport: str,
+        plan: bool,
+        on_submit: Callable[[asyncio.Future[Any]], None] | None,
+        client: str,
+        may_inline: bool,
+        handoff: _LockHandoff,
+    ) -> tuple[list[SolvedFrame], PlannedPath | None]:
+        """Solve under the session's lock: inline, on the frame threads, or planned.
+
+        When the caller is cancelled while a thread solves, the lock goes to the thread:
+        its end releases it (``handoff.handed_over``; the caller must not)."""
+        options = session.options
+        metrics = self.metrics
+        work: Callable[..., tuple[list[SolvedFrame], PlannedPath | None]] = (
+            _plan_all if plan else _track_all
+        )
+        if not plan and may_inline and self.inline(len(jobs), options):
+            return work(session, jobs, options, t0, metrics.frames, transport)
+        loop = asyncio.get_running_loop()
+
+        def record(batch: list[SolvedFrame], transport: str) -> None:
+            # The metrics are the loop's: hand the batch over (one wake-up).
+            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                loop.call_soon_threadsafe(metrics.frames, batch, transport)
+
+        if not plan:
+            # Admitted before any state changes: a refusal leaves the lock free.
+            cost_s = self.request_work_s(len(jobs), options)
+            pool = self.pools[WorkClass.FRAMES]
+            pool.admit()
+            shares = self.frame_shares
+            shares.take(client, cost_s)
+            fut = pool.submit(work, session, jobs, options, t0, record, transport)
+            fut.add_done_callback(lambda _: shares.give_back(client, cost_s))
+        else:
+            args = (session, jobs, options, t0, record, transport)
+            fut = loop.run_in_executor(self.plan_pool, work, *args)
+            if on_submit is not None:
+                on_submit(fut)
+        try:
+            return await asyncio.shield(fut)
+        except asyncio.CancelledError:
+            if not fut.done():
+                fut.add_done_callback(lambda _: session.lock.release())
+                handoff.handed_over = True
+            raise
+
+
+class _LockHandoff:
+    """Whether a session's lock went to a solving thread (see ``Runner._solve``)."""
+
+    __slots__ = ("handed_over",)
+
+    def __init__(self) -> None:
+        self.handed_over = False
 
 
 def session_client(session: Session, peer: str | None = None) -> str:

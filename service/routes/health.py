@@ -1,4 +1,5 @@
-"""/healthz (alive), /readyz (solver warm: 200, else 503 not_ready), /metrics (Prometheus)."""
+"""/healthz (alive), /readyz (solver warm and the session store answering: 200, else 503
+not_ready / store_unavailable), /metrics (Prometheus)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from starlette import status
 import schemas as S
 
 from ..dependencies import ServicesDep
+from ..errors import ServiceError
 from ..responses import ORJSONResponse
 
 router = APIRouter(tags=["operations"])
@@ -35,6 +37,14 @@ async def readyz(svc: ServicesDep) -> Response:
     """Ready once the compiled solver is loaded and warm (503 until then)."""
     warm = svc.runner.warmup
     if warm.ready.is_set():
+        try:
+            await svc.store.check()
+        except ServiceError as e:  # Redis (IK_REDIS_URL) does not answer
+            return ORJSONResponse(
+                {"detail": e.detail, "code": e.code},
+                status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
+                headers={"Retry-After": "1"},
+            )
         return ORJSONResponse({"status": "ready", "warmup_s": warm.seconds})
     if warm.error is not None:
         body = S.NotReadyBody(

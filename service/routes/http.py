@@ -22,7 +22,14 @@ from ..dependencies import OwnerDep, ServicesDep, SessionDep
 from ..errors import ServiceError, not_found
 from ..middleware import received_at
 from ..responses import ORJSONResponse
-from ..sessions import OwnerFull, Session, SessionStore, StoreFull, new_session
+from ..sessions import (
+    OwnerFull,
+    Session,
+    SessionStore,
+    StoreFull,
+    chain_definition,
+    new_session,
+)
 from ..solving import make_solver, session_client, solve_once
 from ..work import WorkClass
 
@@ -219,9 +226,10 @@ async def create_session(
     )
     options = convert.apply_options(body.options, convert.session_defaults(settings), settings)
     solver = await svc.runner.run(WorkClass.BUILD, make_solver, view, options)
-    if body.initial_pose is not None:
-        solver.set_pose(convert.pose_vector(body.initial_pose, view, solver.q, "initial_pose"))
     session, token = new_session(view, solver, options, now=svc.store.clock(), owner=owner)
+    if body.initial_pose is not None:
+        session.set_pose(convert.pose_vector(body.initial_pose, view, solver.q, "initial_pose"))
+    session.definition = chain_definition(body)
     try:
         await svc.store.add(session)
     except OwnerFull as e:
@@ -279,7 +287,9 @@ async def patch_session(
     async with session.lock:
         if session.closed:
             raise not_found()
+        await svc.store.refresh(session)
         session.options = convert.apply_options(body, session.options, svc.settings, field="body")
+        await svc.store.save(session)
     svc.store.touch(session)
     return _session_info(session, svc.store)
 
@@ -297,8 +307,10 @@ async def put_pose(
     async with session.lock:
         if session.closed:
             raise not_found()
+        await svc.store.refresh(session)
         q = convert.pose_vector(body, session.view, session.solver.q, "body")
-        session.solver.set_pose(q)
+        session.set_pose(q)
+        await svc.store.save(session)
     svc.store.touch(session)
     return convert.pose_dict(session.view, session.solver.q)
 

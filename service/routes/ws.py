@@ -394,7 +394,7 @@ async def session_ws(
     try:
         session = await authenticate(svc.store, session_id, websocket_token(ws))
     except ServiceError as e:
-        await _close(ws, svc, _AUTH_CLOSE[e.code], e.code)
+        await _close(ws, svc, _AUTH_CLOSE.get(e.code, status.WS_1013_TRY_AGAIN_LATER), e.code)
         return
     if svc.open_websockets >= svc.settings.max_websockets:
         await _close(ws, svc, status.WS_1013_TRY_AGAIN_LATER, ErrorCode.TOO_MANY_WEBSOCKETS)

@@ -39,6 +39,7 @@ class ErrorCode(enum.StrEnum):
     TOO_MANY_WEBSOCKETS = "too_many_websockets"
     SLOW_READER = "slow_reader"
     SHUTTING_DOWN = "shutting_down"
+    STORE_UNAVAILABLE = "store_unavailable"
     INTERNAL_ERROR = "internal_error"
 
 
@@ -130,7 +131,8 @@ class NotFound(ServiceError):
 
 class RetryLater(ServiceError):
     """rate_limited, not_ready, plans_busy, too_many_plans, too_many_sessions,
-    key_session_limit, warmup_failed, too_many_websockets, shutting_down: try again
+    key_session_limit, warmup_failed, too_many_websockets, shutting_down,
+    store_unavailable: try again
     (after ``retry_after_s`` when given)."""
 
 
@@ -160,6 +162,7 @@ _ERROR_CLASSES: dict[str, type[ServiceError]] = {
     ErrorCode.TOO_MUCH_WORK: RetryLater,
     ErrorCode.TOO_MANY_WEBSOCKETS: RetryLater,
     ErrorCode.SHUTTING_DOWN: RetryLater,
+    ErrorCode.STORE_UNAVAILABLE: RetryLater,
 }
 
 

@@ -4,10 +4,11 @@ The stream numbers its messages itself (0, 1, 2, ...), so a caller can send many
 the answers by the id each ``send_*`` returned; the server answers in order. When the
 connection drops (or the server closes 1011, 1012 or 1013), the stream reconnects with a
 bounded backoff and sends again, in order, every message that had no answer yet, under
-new ids on the new connection (each connection wants increasing ids; the stream keeps one
-counter, so an id is never used twice). Answers are reported under the id the caller got,
-and each message gets exactly one. A message the server had solved but whose answer was
-lost in the drop is solved once more on the new connection, from the session's pose.
+the id it was first sent with (each connection wants increasing ids; the stream keeps one
+counter over every connection, so they still increase). Answers are reported under the id
+the caller got, and each message gets exactly one. A server that keeps answers (sessions
+in Redis, docs/operations.md) answers a message it had solved, and whose answer was lost
+in the drop, with that stored answer (on another worker too): it is never solved twice.
 
 ``_Pipeline`` holds all of that without I/O; ``AsyncStream`` (websockets' asyncio client)
 and ``Stream`` (its threading client) only move bytes.
@@ -90,15 +91,11 @@ class _Pipeline:
         self._waiting[message.wire_id] = message
         return message.id, self._encode(message)
 
-    def renumber(self) -> list[str | bytes]:
-        """Every waiting message under a new id, in order: what a new connection gets."""
-        waiting = list(self._waiting.values())
-        self._waiting.clear()
-        for message in waiting:
-            message.wire_id = self._next_wire_id
-            self._next_wire_id += 1
-            self._waiting[message.wire_id] = message
-        return [self._encode(m) for m in waiting]
+    def resend(self) -> list[str | bytes]:
+        """Every waiting message, in order, under the id it was sent with: what a new
+        connection gets. The same id and content let a server that stored the answer
+        give it again rather than solve the frame twice."""
+        return [self._encode(m) for m in self._waiting.values()]
 
     def answer(self, data: str | bytes) -> Answer:
         """The answer ``data`` carries, under its message's caller id.
@@ -284,7 +281,7 @@ class AsyncStream:
                 self._tries += 1
                 try:
                     connection = await self._open()
-                    for data in self._pipeline.renumber():
+                    for data in self._pipeline.resend():
                         await connection.send(data)
                 except ConnectionClosed as again:
                     code, reason = _close_of(again)
@@ -403,7 +400,7 @@ class Stream:
             self._tries += 1
             try:
                 connection = self._open()
-                for data in self._pipeline.renumber():
+                for data in self._pipeline.resend():
                     connection.send(data)
             except ConnectionClosed as again:
                 code, reason = _close_of(again)

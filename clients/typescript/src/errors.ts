@@ -33,6 +33,7 @@ export const ErrorCode = {
   TooManyWebSockets: "too_many_websockets",
   SlowReader: "slow_reader",
   ShuttingDown: "shutting_down",
+  StoreUnavailable: "store_unavailable",
   InternalError: "internal_error",
 } as const;
 export type ErrorCode = (typeof ErrorCode)[keyof typeof ErrorCode];
@@ -121,7 +122,7 @@ export class NotFound extends ServiceError {
   override name = "NotFound";
 }
 /** rate_limited, not_ready, plans_busy, too_many_plans, too_many_sessions, key_session_limit,
- * warmup_failed, too_many_websockets, shutting_down: wait (`retryAfterS` when given). */
+ * warmup_failed, too_many_websockets, shutting_down, store_unavailable: wait (`retryAfterS` when given). */
 export class RetryLater extends ServiceError {
   override name = "RetryLater";
 }
@@ -152,6 +153,7 @@ const ERROR_CLASSES: Record<string, typeof ServiceError> = {
   too_much_work: RetryLater,
   too_many_websockets: RetryLater,
   shutting_down: RetryLater,
+  store_unavailable: RetryLater,
 };
 
 /** The `ServiceError` subclass for `code`. */

@@ -6,10 +6,11 @@
  * (the server answers in order), `frame` / `clip` / `ping` send one message and resolve
  * to its answer. When the connection drops (or the server closes 1011, 1012 or 1013),
  * the stream reconnects with a bounded backoff and sends again, in order, every message
- * that had no answer, under new ids on the new connection (one counter over every
- * connection, so no id is used twice). Answers carry the id the caller got, and each
- * message gets exactly one. A message the server had solved but whose answer was lost in
- * the drop is solved once more, from the session's pose.
+ * that had no answer, under the id it was first sent with (one counter over every
+ * connection, so the ids on a new connection still increase). Answers carry the id the
+ * caller got, and each message gets exactly one. A server that keeps answers (sessions in
+ * Redis, docs/operations.md) answers a message it had solved, and whose answer was lost
+ * in the drop, with that stored answer: on another worker too, and never solved twice.
  *
  * In a browser the stream uses the global WebSocket and sends the token as the
  * `ik.token.<token>` subprotocol (browsers cannot set headers); in Node 20, which has no
@@ -266,14 +267,9 @@ export class Stream<R = FrameResult> {
     this.watch(socket);
     socket.onopen = () => {
       this.reconnects += 1;
-      // Every waiting message, in order, under a new id on this connection.
-      const waiting = [...this.waiting.values()];
-      this.waiting.clear();
-      for (const message of waiting) {
-        message.wireId = this.nextWireId++;
-        this.waiting.set(message.wireId, message);
-        socket.send(this.encode(message));
-      }
+      // Every waiting message, in order, under the id it was sent with: a server that
+      // stored its answer recognises it (same id, same content) and does not solve it twice.
+      for (const message of this.waiting.values()) socket.send(this.encode(message));
     };
   }
 }

@@ -1,0 +1,476 @@
+"""Sessions in Redis (IK_REDIS_URL), shared by every worker behind the balancer.
+
+What is where (prefix ``ik:``; every key of a session expires after IK_SESSION_TTL_S
+without use, and each commit renews it):
+
+- ``chain:<sha256>``: a chain definition (the create request's chain, conventions and
+  bones, JSON), stored once per distinct definition. Each process keeps the models it
+  built by that hash (``ChainView``), so a second session of a known chain costs no
+  build, and a worker that meets a session it does not hold builds its model once.
+- ``s:<id>``: a hash: ``meta`` (token digest, owner, chain hash, options, created at),
+  ``state`` (pose, carried BFGS matrix, rest pose, counters) and ``v``, the session's
+  version: the number of commits.
+- ``a:<id>`` / ``o:<id>``: the last ``KEPT_ANSWERS`` answers by frame id, and their order.
+- ``all`` and ``owner:<fingerprint>``: sorted sets of session ids by expiry time (the
+  session cap and the per-key cap).
+
+Written per frame, before the answer is sent: the state, the version and the answer, in
+one Lua script. The frames of every session that commit while one round trip is under
+way go together in the next pipeline (a group commit), so the round trip is shared and
+its cost per frame falls as load grows; nothing is ever answered before it is stored.
+The guarantee: an answered frame survives the death of its worker. Another worker
+continues from its pose, and a frame sent again under the same id with the same targets
+gets the stored answer instead of a second solve.
+
+Ordering across workers: a worker that holds a session solves from its copy and commits
+with the version it started from; if another worker committed in between, the script
+refuses, the session is reloaded and the frame solved again (``StaleSession``). Within
+one worker the session's lock orders frames as before.
+
+Redis not answering: every call is bounded by IK_REDIS_TIMEOUT_S and becomes 503
+``store_unavailable`` (Retry-After) or the same WebSocket error; nothing waits for
+Redis to come back, and the next call after it does simply works.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import logging
+import time
+from collections import OrderedDict
+from collections.abc import Awaitable, Callable, Sequence
+from typing import Any
+
+import msgpack
+import redis.asyncio as aioredis
+from redis.exceptions import RedisError
+
+from solver.ik import IKOptions, IKSolver, StreamState
+
+from .convert import ChainView, FrameJob, SolvedFrame
+from .errors import ServiceError, not_found, store_unavailable
+from .redis_commit import COMMIT_SCRIPT, GONE, MOVED, OWNER_FULL, SESSIONS_FULL, GroupCommit
+from .sessions import OwnerFull, Session, SessionStore, StaleSession, StoreFull
+from .stored_frames import (
+    KEPT_ANSWERS,
+    StoredAnswer,
+    StreamRecord,
+    answer_key,
+    jobs_digest,
+    pack_answer,
+    pack_stream,
+    unpack_answer,
+    unpack_stream,
+)
+
+log = logging.getLogger("service")
+
+# Builds a chain's model from its stored definition (in the build threads).
+ViewBuilder = Callable[[bytes], Awaitable[ChainView]]
+# Options <-> their stored JSON-ready dict; a solver for a model and options.
+OptionsLoader = Callable[[dict[str, Any]], IKOptions]
+OptionsDumper = Callable[[IKOptions], dict[str, Any]]
+SolverBuilder = Callable[[ChainView, IKOptions], Awaitable[IKSolver]]
+
+# Models kept per process, by chain definition hash.
+CACHED_VIEWS = 64
+# Session.version of a session this worker must reload before its next frame: a write
+# failed (Redis gone) or was refused (another worker wrote first, written behind).
+RELOAD = -1
+
+
+def definition_key(definition: bytes) -> str:
+    return hashlib.sha256(definition).hexdigest()
+
+
+class RedisSessionStore(SessionStore):
+    """Sessions in Redis; this process keeps the ones it has served (and their solvers)."""
+
+    def __init__(
+        self,
+        client: aioredis.Redis,
+        *,
+        max_sessions: int,
+        ttl_s: float,
+        build_view: ViewBuilder,
+        build_solver: SolverBuilder,
+        load_options: OptionsLoader,
+        dump_options: OptionsDumper,
+        max_per_owner: int | None = None,
+        write_behind_s: float = 0.0,
+        prefix: str = "ik:",
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.client = client
+        self.max_sessions = max_sessions
+        self.max_per_owner = max_per_owner
+        self.ttl_s = ttl_s
+        self.clock = clock
+        self._p = prefix
+        self._build_view = build_view
+        self._build_solver = build_solver
+        self._load_options = load_options
+        self._dump_options = dump_options
+        self._sessions: dict[str, Session] = {}
+        self._loading: dict[str, asyncio.Future[Session | None]] = {}
+        self._views: OrderedDict[str, ChainView] = OrderedDict()
+        self._commit = GroupCommit(client, COMMIT_SCRIPT)
+        # Written behind: sessions with frames not yet in Redis, and their answers.
+        self.write_behind_s = write_behind_s
+        self._dirty: dict[str, tuple[Session, list[Any]]] = {}
+        self._behind_task: asyncio.Task[None] | None = None
+        self._behind_failed = False
+        self._count = 0
+
+    def __len__(self) -> int:
+        """Sessions in Redis at the last sweep (every worker's)."""
+        return self._count
+
+    # -- keys ------------------------------------------------------------------------
+    def _keys(self, session_id: str, chain: str, owner: str | None) -> list[str]:
+        p = self._p
+        all_key = p + "all"
+        return [
+            f"{p}s:{session_id}",
+            f"{p}a:{session_id}",
+            f"{p}o:{session_id}",
+            f"{p}chain:{chain}",
+            all_key,
+            all_key if owner is None else f"{p}owner:{owner}",
+        ]
+
+    def _ttl_ms(self) -> int:
+        return max(1, int(self.ttl_s * 1000))
+
+    def _meta(self, session: Session) -> bytes:
+        return bytes(
+            msgpack.packb(
+                [
+                    session.token_digest,
+                    session.owner,
+                    session.definition_key,
+                    self._dump_options(session.options),
+                    session.created_at,
+                ]
+            )
+        )
+
+    @staticmethod
+    def _state(session: Session) -> bytes:
+        state = session.solver.stream_state()
+        record = StreamRecord(
+            state.q, state.inverse_hessian, session.rest, session.frames, session.solved
+        )
+        return pack_stream(record)
+
+    # -- the interface ---------------------------------------------------------------
+    async def add(self, session: Session) -> None:
+        definition = session.definition
+        key = definition_key(definition)
+        session.definition_key = key
+        keys = self._keys(session.id, key, session.owner)
+        no_cap = 2**62
+        owner_cap = no_cap if self.max_per_owner is None else self.max_per_owner
+        args: list[bytes | str | int] = ["new", self._state(session), self._ttl_ms()]
+        args += [KEPT_ANSWERS, session.id, self._meta(session), self.max_sessions, owner_cap]
+        try:
+            await self.client.set(keys[3], definition, px=self._ttl_ms())
+            v = await self._commit.run(keys, args)
+        except RedisError as e:
+            raise _unavailable(e) from None
+        if v == SESSIONS_FULL:
+            raise StoreFull(retry_after_s=self.ttl_s)
+        if v == OWNER_FULL:
+            raise OwnerFull(self.max_per_owner or 0)
+        session.version = int(v)
+        session.definition = b""
+        self._sessions[session.id] = session
+        self._count += 1
+        self._views[key] = session.view
+
+    async def get(self, session_id: str) -> Session | None:
+        held = self._sessions.get(session_id)
+        if held is not None:
+            return held
+        loading = self._loading.get(session_id)
+        if loading is not None:  # another request of this session loads it already
+            return await asyncio.shield(loading)
+        fut: asyncio.Future[Session | None] = asyncio.get_running_loop().create_future()
+        self._loading[session_id] = fut
+        try:
+            session = await self._load(session_id)
+            fut.set_result(session)
+        except BaseException as e:
+            fut.set_exception(e)
+            fut.exception()  # retrieved: waiters get it, nobody else need
+            raise
+        finally:
+            del self._loading[session_id]
+        return session
+
+    async def _load(self, session_id: str) -> Session | None:
+        p = self._p
+        try:
+            async with self.client.pipeline(transaction=False) as pipe:
+                pipe.hgetall(f"{p}s:{session_id}")
+                pipe.hgetall(f"{p}a:{session_id}")
+                stored, answers = await pipe.execute()
+            if not stored:
+                return None
+            token, owner, chain, options, created_at = msgpack.unpackb(stored[b"meta"])
+            view = self._views.get(chain)
+            definition: bytes | None = None
+            if view is None:
+                found = await self.client.get(f"{p}chain:{chain}")
+                definition = found if isinstance(found, bytes) else None
+                if definition is None:
+                    return None
+        except RedisError as e:
+            raise _unavailable(e) from None
+        if view is None:
+            assert definition is not None
+            view = await self._build_view(definition)
+            self._remember_view(chain, view)
+        opts = self._load_options(options)
+        solver = await self._build_solver(view, opts)
+        now = self.clock()
+        session = Session(
+            id=session_id,
+            token_digest=token,
+            view=view,
+            solver=solver,
+            options=opts,
+            created_at=created_at,
+            last_seen=now,
+            owner=owner,
+            bucket_at=now,
+            definition_key=chain,
+        )
+        self._restore(session, stored, answers)
+        held = self._sessions.setdefault(session_id, session)
+        log.info("session %s loaded from Redis at version %d", session_id[:6], held.version)
+        return held
+
+    def _remember_view(self, key: str, view: ChainView) -> None:
+        self._views[key] = view
+        self._views.move_to_end(key)
+        while len(self._views) > CACHED_VIEWS:
+            self._views.popitem(last=False)
+
+    def _restore(
+        self, session: Session, stored: dict[bytes, bytes], answers: dict[bytes, bytes]
+    ) -> None:
+        n = session.view.chain.n_dof
+        record = unpack_stream(stored[b"state"], n)
+        if record.rest is not None:
+            session.set_pose(record.rest)
+        session.solver.restore(StreamState(record.q, record.inverse_hessian))
+        session.frames, session.solved = record.frames, record.solved
+        session.version = int(stored[b"v"])
+        session.answers = {int(k): unpack_answer(v) for k, v in answers.items()}
+
+    async def remove(self, session_id: str) -> Session | None:
+        session = self._sessions.pop(session_id, None)
+        p = self._p
+        try:
+            owner = session.owner if session is not None else None
+            async with self.client.pipeline(transaction=False) as pipe:
+                pipe.delete(f"{p}s:{session_id}", f"{p}a:{session_id}", f"{p}o:{session_id}")
+                pipe.zrem(f"{p}all", session_id)
+                if owner is not None:
+                    pipe.zrem(f"{p}owner:{owner}", session_id)
+                await pipe.execute()
+        except RedisError as e:
+            raise _unavailable(e) from None
+        if session is not None:
+            session.closed = True
+            self._count = max(0, self._count - 1)
+        return session
+
+    async def expire(self) -> list[Session]:
+        """Forget the sessions this worker has not used for a ttl (Redis keeps them while
+        any worker uses them and expires them itself); keep the ones with an open
+        WebSocket alive in Redis; count the sessions there."""
+        now = self.clock()
+        idle = [
+            s
+            for s in self._sessions.values()
+            if s.websockets == 0 and now - s.last_seen > self.ttl_s
+        ]
+        for s in idle:
+            del self._sessions[s.id]
+        streaming = [s for s in self._sessions.values() if s.websockets > 0]
+        p, ttl = self._p, self._ttl_ms()
+        try:
+            async with self.client.pipeline(transaction=False) as pipe:
+                for s in streaming:
+                    for key in (f"{p}s:{s.id}", f"{p}a:{s.id}", f"{p}o:{s.id}"):
+                        pipe.pexpire(key, ttl)
+                    pipe.pexpire(f"{p}chain:{s.definition_key}", ttl)
+                pipe.zremrangebyscore(f"{p}all", "-inf", int(time.time() * 1000))
+                pipe.zcard(f"{p}all")
+                results = await pipe.execute()
+            self._count = int(results[-1])
+        except RedisError as e:
+            log.warning("session sweep: Redis does not answer (%s)", type(e).__name__)
+        return []
+
+    # -- a frame's steps -------------------------------------------------------------
+    def stored_answer(self, session: Session, jobs: Sequence[FrameJob]) -> list[SolvedFrame] | None:
+        key = answer_key(jobs)
+        if key is None:
+            return None
+        answer = session.answers.get(key)
+        if answer is None or answer.digest != jobs_digest(jobs):
+            return None
+        return list(answer.frames)
+
+    async def commit(
+        self, session: Session, jobs: Sequence[FrameJob], out: list[SolvedFrame]
+    ) -> None:
+        if session.version == RELOAD:  # a write failed or was refused: Redis is right
+            await self._reload_or_unavailable(session)
+            raise StaleSession(session.id)
+        key = answer_key(jobs)
+        answer = None if key is None else StoredAnswer(jobs_digest(jobs), tuple(out))
+        pairs = [] if answer is None else [key, pack_answer(answer)]
+        if self.write_behind_s > 0:
+            self._behind(session, pairs)
+        else:
+            await self._write(session, "", pairs)
+        if answer is not None and key is not None:
+            session.answers[key] = answer
+            if len(session.answers) > KEPT_ANSWERS:
+                del session.answers[min(session.answers)]
+
+    async def _reload_or_unavailable(self, session: Session) -> None:
+        """Reload ``session`` from Redis (503 ``store_unavailable`` if Redis is still gone)."""
+        self._dirty.pop(session.id, None)  # what this worker had not written is void
+        await self.refresh(session)
+        self._behind_failed = False
+
+    async def save(self, session: Session) -> None:
+        self._dirty.pop(session.id, None)  # written now, with the new pose or options
+        await self._write(session, self._meta(session), [])
+
+    def _args(self, session: Session, meta: bytes | str, pairs: list[Any]) -> list[Any]:
+        args = [session.version, self._state(session), self._ttl_ms(), KEPT_ANSWERS, session.id]
+        return [*args, meta, *pairs]
+
+    async def _write(self, session: Session, meta: bytes | str, pairs: list[Any]) -> None:
+        keys = self._keys(session.id, session.definition_key, session.owner)
+        try:
+            v = await self._commit.run(keys, self._args(session, meta, pairs))
+        except RedisError as e:
+            # What this worker solved is not stored: whatever it holds now may be ahead
+            # of Redis, so it reloads before its next frame.
+            session.version = RELOAD
+            raise _unavailable(e) from None
+        self._written(session, v)
+        if v == GONE:
+            raise not_found()
+        if v == MOVED:
+            await self.refresh(session)
+            raise StaleSession(session.id)
+
+    def _written(self, session: Session, v: int) -> None:
+        """Take a commit's answer: the new version, or the session gone / moved on."""
+        if v == GONE:
+            self._forget(session)
+        elif v == MOVED:
+            session.version = RELOAD
+        else:
+            session.version = v
+
+    # -- written behind (IK_REDIS_WRITE_BEHIND_MS > 0) ---------------------------------
+    def _behind(self, session: Session, pairs: list[Any]) -> None:
+        """Queue the session's state and this answer for the next flush (the state is
+        read then: one write per session per flush, however many frames it solved)."""
+        if self._behind_failed:
+            session.version = RELOAD  # the next frame finds out whether Redis is back
+            raise store_unavailable()
+        _, pending = self._dirty.setdefault(session.id, (session, []))
+        pending.extend(pairs)
+        if self._behind_task is None:
+            self._behind_task = asyncio.get_running_loop().create_task(self._flush_behind())
+
+    async def _flush_behind(self) -> None:
+        try:
+            while self._dirty:
+                await asyncio.sleep(self.write_behind_s)
+                await self._flush_once()
+        finally:
+            self._behind_task = None
+
+    async def _flush_once(self) -> None:
+        dirty, self._dirty = self._dirty, {}
+        batch = [
+            (self._keys(s.id, s.definition_key, s.owner), self._args(s, "", pairs), s)
+            for s, pairs in dirty.values()
+            if not s.closed
+        ]
+        if not batch:
+            return
+        try:
+            results = await self._commit.execute(batch)
+        except RedisError as e:
+            _unavailable(e)
+            self._behind_failed = True
+            for _, _, s in batch:
+                s.version = RELOAD
+            return
+        for (_, _, s), v in zip(batch, results, strict=True):
+            if isinstance(v, Exception):
+                s.version = RELOAD
+            else:
+                self._written(s, int(v))
+
+    def _forget(self, session: Session) -> None:
+        session.closed = True
+        if self._sessions.get(session.id) is session:
+            del self._sessions[session.id]
+
+    async def refresh(self, session: Session) -> None:
+        p = self._p
+        try:
+            async with self.client.pipeline(transaction=False) as pipe:
+                pipe.hgetall(f"{p}s:{session.id}")
+                pipe.hgetall(f"{p}a:{session.id}")
+                stored, answers = await pipe.execute()
+        except RedisError as e:
+            raise _unavailable(e) from None
+        if not stored:
+            self._forget(session)
+            raise not_found()
+        options = msgpack.unpackb(stored[b"meta"])[3]
+        session.options = self._load_options(options)
+        self._restore(session, stored, answers)
+
+    async def check(self) -> None:
+        try:
+            await self.client.ping()
+        except RedisError as e:
+            raise _unavailable(e) from None
+
+    async def close(self) -> None:
+        if self._dirty:  # written behind and not yet flushed: now, before the exit
+            await self._flush_once()
+        await self.client.aclose()
+
+
+def _unavailable(e: RedisError) -> ServiceError:
+    log.warning("Redis does not answer: %s: %s", type(e).__name__, e)
+    return store_unavailable()
+
+
+def connect(url: str, timeout_s: float) -> aioredis.Redis:
+    """A client whose every call gives up after ``timeout_s`` (no call hangs when Redis
+    is gone) and that reconnects by itself on the next call."""
+    return aioredis.Redis.from_url(
+        url,
+        socket_timeout=timeout_s,
+        socket_connect_timeout=timeout_s,
+        health_check_interval=0,
+        retry_on_timeout=False,
+    )

@@ -1,0 +1,162 @@
+"""What a shared store keeps of a session's stream, as bytes: its state and its answers.
+
+The stream state is what the next frame starts from (pose, carried BFGS matrix, rest
+pose, counters); a stored answer is one solved frame, kept so that a frame sent again
+under the same id (a client resending after a failover) gets the answer it was given
+instead of a second solve. Both are MessagePack of plain numbers: nothing here runs code
+from the store (no pickle), so a store that is read by someone else grants nothing.
+
+A retried frame is recognised by its id *and* a digest of its targets: a client that
+starts its ids again at 0 on a new connection (allowed by the protocol: ids increase
+per connection) sends different targets and is solved as before.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+import numpy as np
+
+from solver.ik import IKResult, IKStatus
+from solver.ik.result import ResultLayout
+from solver.optim import Termination
+
+from .convert import FrameJob, SolvedFrame
+
+# Answers kept per session: more than a client has in flight when its connection drops
+# (our clients pipeline at most a few dozen frames).
+KEPT_ANSWERS = 64
+
+
+def jobs_digest(jobs: Sequence[FrameJob]) -> bytes:
+    """16 bytes that change when any frame's id or targets change."""
+    h = hashlib.blake2b(digest_size=16)
+    for frame_id, targets in jobs:
+        h.update(str(frame_id).encode())
+        for t in targets:
+            h.update(t.effector.encode("utf-8", "surrogatepass"))
+            h.update(t.given.to_bytes(2, "little"))
+            h.update(t.packed.tobytes())
+    return h.digest()
+
+
+@dataclass(frozen=True, slots=True)
+class StoredAnswer:
+    """A request's solved frames, as given to the client, and the digest of its jobs."""
+
+    digest: bytes
+    frames: tuple[SolvedFrame, ...]
+
+
+@dataclass(slots=True)
+class StreamRecord:
+    """The part of a session that changes with every frame."""
+
+    q: np.ndarray
+    inverse_hessian: np.ndarray | None
+    rest: np.ndarray | None  # None: the middle of the limits
+    frames: int
+    solved: int
+
+
+def _array(a: np.ndarray | None) -> bytes | None:
+    return None if a is None else np.ascontiguousarray(a, dtype=np.float64).tobytes()
+
+
+def _unarray(b: bytes | None, shape: tuple[int, ...]) -> np.ndarray | None:
+    if b is None:
+        return None
+    return np.frombuffer(b, dtype=np.float64).reshape(shape).copy()
+
+
+def pack_stream(record: StreamRecord) -> bytes:
+    return bytes(
+        msgpack.packb(
+            [
+                _array(record.q),
+                _array(record.inverse_hessian),
+                _array(record.rest),
+                record.frames,
+                record.solved,
+            ]
+        )
+    )
+
+
+def unpack_stream(data: bytes, n_dof: int) -> StreamRecord:
+    q, h, rest, frames, solved = msgpack.unpackb(data)
+    q_arr = _unarray(q, (n_dof,))
+    assert q_arr is not None
+    return StreamRecord(
+        q_arr, _unarray(h, (n_dof, n_dof)), _unarray(rest, (n_dof,)), frames, solved
+    )
+
+
+def _pack_frame(f: SolvedFrame) -> list[Any]:
+    r = f.result
+    lay = r.layout
+    # Only the errors part of the output block: what the answers are rendered from.
+    errors = r.raw[: lay.hessian_start]
+    return [
+        f.frame_id,
+        f.server_us,
+        _array(r.q),
+        r.status.value,
+        r.termination.value,
+        r.iterations,
+        r.function_evals,
+        r.passes,
+        r.restarts,
+        r.solve_us,
+        _array(errors),
+        list(lay.dof_names),
+        list(lay.effector_names),
+        list(lay.tolerances),
+    ]
+
+
+def _unpack_frame(row: list[Any]) -> SolvedFrame:
+    (fid, server_us, q, status, term, iters, evals, passes, restarts, solve_us) = row[:10]
+    errors, dof_names, effector_names, tolerances = row[10:]
+    n, m = len(dof_names), len(effector_names)
+    layout = ResultLayout(
+        tuple(dof_names), tuple(effector_names), (tolerances[0], tolerances[1]), n, m
+    )
+    # The output block as long as the layout says; past the errors it is NaN (a stored
+    # answer keeps no BFGS matrix or pass log: nothing renders them).
+    raw = np.full(layout.log_start, np.nan)
+    raw[: 3 * m] = np.frombuffer(errors, dtype=np.float64)
+    q_arr = _unarray(q, (n,))
+    assert q_arr is not None
+    result = IKResult(
+        q_arr,
+        IKStatus(status),
+        Termination(term),
+        iters,
+        evals,
+        passes,
+        restarts,
+        solve_us,
+        raw,
+        layout,
+    )
+    return SolvedFrame(fid, result, server_us)
+
+
+def pack_answer(answer: StoredAnswer) -> bytes:
+    return bytes(msgpack.packb([answer.digest, [_pack_frame(f) for f in answer.frames]]))
+
+
+def unpack_answer(data: bytes) -> StoredAnswer:
+    digest, rows = msgpack.unpackb(data)
+    return StoredAnswer(digest, tuple(_unpack_frame(r) for r in rows))
+
+
+def answer_key(jobs: Sequence[FrameJob]) -> int | None:
+    """A request's answers are kept under its last frame's id (None: not kept: a frame
+    without an id cannot be sent again as the same frame)."""
+    return jobs[-1][0] if jobs else None

@@ -1,0 +1,56 @@
+"""docker-compose.yml and deploy/k8s/ik.yaml say what the failover test runs: the
+shipped HAProxy file, IK_REDIS_URL, /readyz for readiness, /healthz for liveness, and
+only settings the service has (a misspelt IK_ variable is ignored by the service, so it
+would fail silently in a deployment). No container engine runs here: these files are
+read, not run (dclint and kubernetes-validate checked them, docs/operations.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml  # PyYAML, installed with schemathesis (the test extra)
+
+from service.config import Settings
+
+ROOT = Path(__file__).resolve().parents[1]
+SETTINGS = {f"IK_{name.upper()}" for name in Settings.model_fields}
+
+
+def _compose() -> dict[str, Any]:
+    doc: dict[str, Any] = yaml.safe_load((ROOT / "docker-compose.yml").read_text())
+    return doc
+
+
+def _k8s() -> list[dict[str, Any]]:
+    return [d for d in yaml.safe_load_all((ROOT / "deploy/k8s/ik.yaml").read_text()) if d]
+
+
+def test_compose_runs_the_shipped_balancer_config_in_front_of_workers_on_redis() -> None:
+    services = _compose()["services"]
+    assert (
+        "./deploy/haproxy.cfg:/usr/local/etc/haproxy/haproxy.cfg:ro"
+        in (services["balancer"]["volumes"])
+    )
+    worker = services["service"]
+    assert worker["environment"]["IK_REDIS_URL"].startswith("redis://redis:")
+    assert "/readyz" in " ".join(worker["healthcheck"]["test"])
+    assert set(worker["environment"]) <= SETTINGS
+    # The balancer's server-template names the compose service and the port it listens on.
+    cfg = (ROOT / "deploy/haproxy.cfg").read_text()
+    assert "server-template ik 4 service:8000" in cfg
+    assert worker["deploy"]["replicas"] == 4
+
+
+def test_k8s_workers_use_redis_and_the_health_routes() -> None:
+    by_kind = {(d["kind"], d["metadata"]["name"]): d for d in _k8s()}
+    pod = by_kind[("Deployment", "ik")]["spec"]["template"]["spec"]
+    (container,) = pod["containers"]
+    env = {e["name"]: e["value"] for e in container["env"]}
+    assert env["IK_REDIS_URL"].startswith("redis://ik-redis:")
+    assert set(env) <= SETTINGS
+    assert container["readinessProbe"]["httpGet"]["path"] == "/readyz"
+    assert container["livenessProbe"]["httpGet"]["path"] == "/healthz"
+    assert ("Service", "ik-redis") in by_kind and ("Service", "ik") in by_kind
+    ingress = by_kind[("Ingress", "ik")]["metadata"]["annotations"]
+    assert "upstream-hash-by" in " ".join(ingress)
