@@ -63,8 +63,8 @@ def measure(page: Any, encoding: str, compact: bool, seconds: float) -> dict[str
     )
     rtt = samples["roundTripMs"]
     elapsed_s = (samples["now"] - samples["since"]) / 1000
-    if samples["errors"]:
-        raise RuntimeError(f"the page reported errors: {samples['errors']}")
+    if samples["errors"] or not rtt:
+        raise RuntimeError(f"no frames answered; the page's errors: {samples['errors']}")
     return {
         "frames": len(rtt),
         "per_s": len(rtt) / elapsed_s,
@@ -95,6 +95,9 @@ def main(argv: list[str] | None = None) -> int:
                 executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
             )
             page = browser.new_page(viewport={"width": args.width, "height": args.height})
+            problems: list[str] = []
+            page.on("pageerror", lambda error: problems.append(str(error)))
+            page.on("console", lambda m: m.type == "error" and problems.append(m.text))
             page.goto(f"{server.base}/demo")
             wait(page, READY)
             rate = page.evaluate(
@@ -103,7 +106,11 @@ def main(argv: list[str] | None = None) -> int:
                 " : done(60000 / (performance.now() - t0))); requestAnimationFrame(f); })"
             )
             page.evaluate("() => window.ikDemo.startMotion()")
-            rows = [(e, c, measure(page, e, c, args.seconds)) for e, c in SETTINGS]
+            try:
+                rows = [(e, c, measure(page, e, c, args.seconds)) for e, c in SETTINGS]
+            finally:
+                if problems:
+                    print("# the page's errors:", problems)
             browser.close()
     finally:
         server.stop()

@@ -64,6 +64,7 @@ class DemoPage:
         self.server = server
         self.visit = Visit()
         self.console_errors: list[str] = []
+        self.websockets: list[str] = []
         self.context = browser.new_context(viewport={"width": 1280, "height": 800})
         page = self.context.new_page()
         page.add_init_script(RECORD_CSP_VIOLATIONS)
@@ -73,6 +74,8 @@ class DemoPage:
             "console",
             lambda message: message.type == "error" and self.console_errors.append(message.text),
         )
+        # Playwright's "request" event does not include WebSockets: recorded apart.
+        page.on("websocket", lambda socket: self.websockets.append(socket.url))
         page.route("**/*", self._keep_local)
         self.page = page
 
@@ -118,6 +121,9 @@ class DemoPage:
         assert not errors, f"console errors: {errors}"
         assert not self.state().get("errors"), self.state()["errors"]
         _assert_stayed_local(self.visit, self.server)
+        service_ws = self.server.base.replace("http://", "ws://", 1) + "/v1/sessions/"
+        assert self.websockets, "the page opened no WebSocket"
+        assert all(url.startswith(service_ws) for url in self.websockets), self.websockets
 
     def close(self) -> None:
         self.context.close()

@@ -335,6 +335,7 @@ function reportError(error: unknown): void {
 let motion: ((t: number) => void) | null = null;
 
 function tick(now: number): void {
+  requestAnimationFrame(tick); // first: a throw below must not end the loop
   motion?.(now / 1000);
   for (const [name, handle] of handles) state.targets[name] = handle.position.toArray() as Vec;
   if (needsRender) renderer.render(scene, camera);
@@ -356,7 +357,6 @@ function tick(now: number): void {
         if (current === stream) inFlight = false;
       });
   }
-  requestAnimationFrame(tick);
 }
 
 function wireSwitches(): void {
