@@ -59,12 +59,14 @@ def measure(page: Any, encoding: str, compact: bool, seconds: float) -> dict[str
     page.wait_for_timeout(seconds * 1000)
     samples = page.evaluate(
         "() => ({...window.ikDemo.state.samples, now: performance.now(),"
-        " errors: window.ikDemo.state.errors})"
+        " errors: window.ikDemo.state.errors, socket: window.ikDemo.state.socket})"
     )
     rtt = samples["roundTripMs"]
     elapsed_s = (samples["now"] - samples["since"]) / 1000
     if samples["errors"] or not rtt:
-        raise RuntimeError(f"no frames answered; the page's errors: {samples['errors']}")
+        raise RuntimeError(
+            f"no frames answered: errors {samples['errors']}, socket {samples['socket']}"
+        )
     return {
         "frames": len(rtt),
         "per_s": len(rtt) / elapsed_s,

@@ -19,14 +19,20 @@ from pathlib import Path
 from typing import Final
 
 from fastapi import FastAPI, Request
-from fastapi.responses import HTMLResponse
+from fastapi.responses import HTMLResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.responses import Response
 from starlette.types import Scope
 
+from solver.model.chain import Chain
+from solver.model.examples import EXAMPLES
+from solver.model.joints import Transform
+from solver.model.rotations import matrix_to_quaternion
+
 ASSETS_DIR: Final = Path(__file__).resolve().parent.parent / "demo_assets"
 ASSETS_URL: Final = "/demo-assets"
 DEMO_URL: Final = "/demo"
+EXAMPLES_URL: Final = "/demo/examples.json"
 
 # The page runs only its own bundle ('self', no inline script); three.js needs no inline
 # style, but the page's own code sets element styles through the CSSOM, which CSP allows.
@@ -111,6 +117,47 @@ class DemoAssets(StaticFiles):
         return response
 
 
+def _frame(transform: Transform) -> dict[str, list[float]]:
+    return {
+        "translation": [float(c) for c in transform.translation],
+        "rotation": [float(c) for c in matrix_to_quaternion(transform.rotation)],
+    }
+
+
+def example_geometry() -> dict[str, object]:
+    """The built-in example chains' joints and effectors, for the page to draw them:
+    ``link = parent * origin * Tr(pivot) * motion(q) * Tr(-pivot)`` (solver/model/chain.py),
+    in the chains' own frame (Z up, metres)."""
+    out: dict[str, object] = {}
+    for name, build in EXAMPLES.items():
+        chain: Chain = build()  # type: ignore[operator]  # EXAMPLES' builders differ in signature
+        out[name] = {
+            "joints": [
+                {
+                    "name": j.name,
+                    "parent": j.parent,
+                    "child": j.child,
+                    "kind": j.kind.value,
+                    "origin": _frame(j.origin),
+                    "pivot": [float(c) for c in j.pivot],
+                    "axis": [float(c) for c in j.axis],
+                    "axes": j.axes,
+                }
+                for j in chain.joints
+            ],
+            "effectors": [
+                {
+                    "name": e.name,
+                    "link": e.link,
+                    "mode": e.mode.value,
+                    "tip": _frame(Transform(e.tip_offset, e.tip_rotation)),
+                }
+                for e in chain.effectors
+            ],
+        }
+    return out
+
+
 def demo_page(root_path: str) -> str:
     """The page's HTML, its URLs under ``root_path`` (a proxy's prefix, or "")."""
     return _PAGE.format(root=html.escape(root_path, quote=True), assets=ASSETS_URL)
@@ -125,5 +172,11 @@ def add_demo(app: FastAPI) -> None:
         page.headers["Content-Security-Policy"] = CONTENT_SECURITY_POLICY
         return page
 
+    geometry = example_geometry()
+
+    async def examples(request: Request) -> JSONResponse:
+        return JSONResponse(geometry, headers={"Cache-Control": "no-cache"})
+
     app.add_route(DEMO_URL, demo, include_in_schema=False)
+    app.add_route(EXAMPLES_URL, examples, include_in_schema=False)
     app.mount(ASSETS_URL, DemoAssets(directory=ASSETS_DIR), name="demo-assets")

@@ -211,6 +211,36 @@ def test_msgpack_compact_and_a_planned_replay(demo: DemoPage) -> None:
     demo.assert_clean()
 
 
+def test_an_example_chain_follows_its_target(demo: DemoPage) -> None:
+    """two_arm_torso has no bones: the page poses it from the answers' joint values with
+    its own forward kinematics, so its hand reaching the target also checks that the
+    page's kinematics agree with the server's."""
+    demo.open()
+    demo.wait_for("solved frames", lambda s: s["ready"] and s["solved"] >= 3)
+    demo.page.select_option("#model", "two_arm_torso")
+    before = demo.wait_for(
+        "the example chain", lambda s: s["model"] == "two_arm_torso" and s["solved"] >= 3
+    )
+    assert set(before["effectors"]) == {"left_hand", "right_hand"}
+    assert distance(before["effectors"]["left_hand"], before["targets"]["left_hand"]) < 1e-3
+    demo.drag("left_hand", 40, -50)
+    moved = demo.wait_for(
+        "the target to move",
+        lambda s: distance(s["targets"]["left_hand"], before["targets"]["left_hand"]) > 0.05,
+    )
+    target = moved["targets"]["left_hand"]
+    after = demo.wait_for(
+        "the hand to follow",
+        lambda s: (
+            s["frames"] >= moved["frames"] + 10
+            and distance(s["effectors"]["left_hand"], target) < 0.01
+        ),
+    )
+    assert after["last"]["termination"]
+    _screenshot(demo.page, "demo-example-chain")
+    demo.assert_clean()
+
+
 def test_with_api_keys_the_page_asks_for_one(
     browser: Any, start_server: Callable[..., Server]
 ) -> None:

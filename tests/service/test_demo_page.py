@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 from fastapi.testclient import TestClient
@@ -62,3 +63,24 @@ def test_every_shipped_file_has_the_sha256_its_readme_states() -> None:
     assert set(listed) == shipped
     for name, digest in listed.items():
         assert hashlib.sha256(Path(ASSETS_DIR / name).read_bytes()).hexdigest() == digest, name
+
+
+def test_the_example_chains_geometry_matches_the_sessions(
+    make_client: Callable[..., TestClient],
+) -> None:
+    """Every DOF a session on an example chain has belongs to a joint the page draws."""
+    c = make_client()
+    geometry = c.get("/demo/examples.json").json()
+    for name, chain in geometry.items():
+        created = c.post("/v1/sessions", json={"chain": {"format": "example", "name": name}})
+        assert created.status_code == 201, created.text
+        drawn = set()
+        for joint in chain["joints"]:
+            if joint["kind"] == "rotational":
+                drawn |= {f"{joint['name']}.{axis}" for axis in joint["axes"]}
+            elif joint["kind"] != "fixed":
+                drawn.add(joint["name"])
+        assert drawn == {d["name"] for d in created.json()["dof"]}, name
+        assert [e["name"] for e in chain["effectors"]] == [
+            e["name"] for e in created.json()["effectors"]
+        ]

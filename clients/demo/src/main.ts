@@ -15,6 +15,8 @@ import {
   AuthError,
   Client,
   type CompactFrameResult,
+  type Chain,
+  type CreateSessionOptions,
   type Encoding,
   type Frame,
   type SessionCreated,
@@ -23,6 +25,7 @@ import {
   type Target,
 } from "../../typescript/src/index.js";
 import { Character, EFFECTORS, type EffectorName } from "./character.js";
+import { ExampleChain } from "./examples.js";
 import { drawPaths } from "./paths.js";
 import { Readout, largestStep } from "./readout.js";
 
@@ -40,6 +43,8 @@ type Vec = [number, number, number];
 /** What the page exposes as `window.ikDemo.state`. */
 interface DemoState {
   ready: boolean;
+  /** "character" or an example chain's name. */
+  model: string;
   encoding: Encoding;
   compact: boolean;
   frames: number;
@@ -53,6 +58,8 @@ interface DemoState {
   effectors: Record<string, Vec>;
   targets: Record<string, Vec>;
   errors: string[];
+  /** The loop's view of its socket: a frame in flight, reconnects, animation frames. */
+  socket: { open: boolean; inFlight: boolean; reconnects: number; ticks: number };
   clip: { recorded: number; planned: number; largest_step_rad: number; tracked_largest_step_rad: number } | null;
 }
 
@@ -62,6 +69,7 @@ const assets = body.dataset["assets"] ?? "/demo-assets";
 
 const state: DemoState = {
   ready: false,
+  model: "character",
   encoding: "json",
   compact: false,
   frames: 0,
@@ -72,6 +80,7 @@ const state: DemoState = {
   effectors: {},
   targets: {},
   errors: [],
+  socket: { open: false, inFlight: false, reconnects: 0, ticks: 0 },
   clip: null,
 };
 
@@ -163,7 +172,51 @@ renderer.domElement.addEventListener("pointerup", () => {
 });
 
 // --- the session and its stream --------------------------------------------------------------
+/** What the page shows: the character (bone rotations) or an example chain (joint values). */
+interface Model {
+  readonly root: THREE.Object3D;
+  readonly effectors: readonly string[];
+  readonly chain: Chain;
+  readonly sessionOptions: CreateSessionOptions;
+  show(result: CompactFrameResult): void;
+  worldPosition(name: string): THREE.Vector3;
+  target(name: string, world: THREE.Vector3): Target;
+}
+
+function characterModel(character: Character): Model {
+  return {
+    root: character.root,
+    effectors: EFFECTORS,
+    chain: character.chain(),
+    sessionOptions: {
+      conventions: { preset: "threejs" },
+      bones: { local_rotations: true },
+      // No pull towards the middle of the joint ranges: a limb at rest stays at rest.
+      options: { posture_weight: 0 },
+    },
+    show: (result) => {
+      if (result.bones?.local) character.apply(result.bones.local);
+    },
+    worldPosition: (name) => character.worldPosition(name),
+    target: (name, world) => ({ effector: name, position: { x: world.x, y: world.y, z: world.z } }),
+  };
+}
+
+function exampleModel(example: ExampleChain): Model {
+  return {
+    root: example.root,
+    effectors: example.effectors,
+    chain: { format: "example", name: example.name as "panda_arm" },
+    sessionOptions: {},
+    show: (result) => example.setQ(result.q, session.dof),
+    worldPosition: (name) => example.worldPosition(name),
+    target: (name, world) => example.target(name, world),
+  };
+}
+
 let character: Character;
+let examples = new Map<string, ExampleChain>();
+let model: Model;
 let client: Client;
 let session: SessionCreated;
 let stream: Stream<CompactFrameResult> | null = null;
@@ -195,12 +248,7 @@ async function createSession(): Promise<void> {
   for (;;) {
     client = new Client(window.location.origin + root, key === undefined ? {} : { apiKey: key });
     try {
-      session = await client.createSession(character.chain(), {
-        conventions: { preset: "threejs" },
-        bones: { local_rotations: true },
-        // No pull towards the middle of the joint ranges: a limb at rest stays at rest.
-        options: { posture_weight: 0 },
-      });
+      session = await client.createSession(model.chain, model.sessionOptions);
       return;
     } catch (error) {
       if (!(error instanceof AuthError)) throw error;
@@ -220,16 +268,13 @@ async function openStream(): Promise<void> {
 }
 
 function targets(): Target[] {
-  return EFFECTORS.map((name) => {
-    const p = handles.get(name)!.position;
-    return { effector: name, position: { x: p.x, y: p.y, z: p.z } };
-  });
+  return model.effectors.map((name) => model.target(name, handles.get(name)!.position));
 }
 
 function show(result: CompactFrameResult): void {
-  if (result.bones?.local) character.apply(result.bones.local);
+  model.show(result);
   needsRender = true;
-  for (const name of EFFECTORS) state.effectors[name] = character.worldPosition(name).toArray() as Vec;
+  for (const name of model.effectors) state.effectors[name] = model.worldPosition(name).toArray() as Vec;
 }
 
 // --- recording and planned replay ----------------------------------------------------------------
@@ -338,6 +383,7 @@ function tick(now: number): void {
   requestAnimationFrame(tick); // first: a throw below must not end the loop
   motion?.(now / 1000);
   for (const [name, handle] of handles) state.targets[name] = handle.position.toArray() as Vec;
+  state.socket = { open: stream !== null, inFlight, reconnects: stream?.reconnects ?? 0, ticks: state.socket.ticks + 1 };
   if (needsRender) renderer.render(scene, camera);
   needsRender = false;
   // Sent after drawing, so that the answer finds the main thread free (a frame drawn
@@ -371,8 +417,10 @@ function wireSwitches(): void {
     state.compact = compact.checked;
     void openStream().catch(reportError);
   });
-  const model = document.getElementById("model") as HTMLSelectElement;
-  model.add(new Option("stick figure (character.gltf)", "character"));
+  const select = document.getElementById("model") as HTMLSelectElement;
+  select.add(new Option("stick figure (character.gltf)", "character"));
+  for (const name of examples.keys()) select.add(new Option(`example chain: ${name}`, name));
+  select.addEventListener("change", () => void switchModel(select.value).catch(reportError));
 }
 
 /** Screen position [CSS px] of a handle, for a test's mouse. */
@@ -386,7 +434,7 @@ function screenOf(name: string): { x: number; y: number } {
 function startMotion(radiusM = 0.12, hz = 0.5): void {
   const rest = new Map([...handles].map(([name, h]) => [name, h.position.clone()]));
   motion = (t) => {
-    for (const name of EFFECTORS) {
+    for (const name of model.effectors) {
       const r = rest.get(name)!;
       const phase = 2 * Math.PI * hz * t + (name.endsWith("R") ? Math.PI : 0);
       // Up from the rest pose (limbs hang straight: nothing below it is in reach).
@@ -404,6 +452,54 @@ function resetStats(): void {
   state.samples = { roundTripMs: [], serverUs: [], solveUs: [], solved: 0, since: performance.now() };
 }
 
+const HANDLE_PALETTE = [0xe6194b, 0x4363d8, 0xf58231, 0x3cb44b];
+
+/** Show `name` (the character or an example chain) on a session of its own. */
+async function switchModel(name: string): Promise<void> {
+  const old = stream;
+  stream = null;
+  old?.close();
+  inFlight = false;
+  if (model !== undefined) scene.remove(model.root);
+  for (const handle of handles.values()) scene.remove(handle);
+  handles.clear();
+  if (session !== undefined) await client.deleteSession(session); // the page's previous one
+  previousQ = null;
+  recording = null;
+  recorded = null;
+  recordButton.textContent = "Record a drag";
+  replayButton.disabled = true;
+  const example = examples.get(name);
+  model = example === undefined ? characterModel(character) : exampleModel(example);
+  scene.add(model.root);
+  readout.status("creating a session");
+  await createSession();
+  if (example === undefined) {
+    // The rest pose: every DOF 0 (a session starts in the middle of the joint ranges).
+    await client.setPose(session, { q: new Array<number>(session.n_dof).fill(0) });
+  } else {
+    example.setQ(session.pose.q, session.dof);
+    example.holdOrientations();
+  }
+  model.effectors.forEach((effector, i) => {
+    const colour = HANDLE_COLOURS[effector as EffectorName] ?? HANDLE_PALETTE[i % HANDLE_PALETTE.length]!;
+    addHandle(effector, colour, model.worldPosition(effector));
+  });
+  if (example === undefined) {
+    const knee = character.worldPosition("shin_L");
+    addHandle(POLE, 0x9aa0a6, knee.add(new THREE.Vector3(0, 0, 0.4)), 0.5);
+    document.getElementById("r-pole")!.textContent = POLE_PENDING;
+  } else {
+    document.getElementById("r-pole")!.textContent = "";
+  }
+  state.effectors = {};
+  state.targets = {};
+  state.model = name;
+  readout.reset();
+  needsRender = true;
+  await openStream();
+}
+
 async function main(): Promise<void> {
   const setEncoding = (encoding: Encoding, compact: boolean): void => {
     (document.querySelector(`input[name=encoding][value=${encoding}]`) as HTMLInputElement).click();
@@ -414,17 +510,9 @@ async function main(): Promise<void> {
     ikDemo: { state, screenOf, startMotion, stopMotion: () => (motion = null), resetStats, setEncoding },
   });
   character = await Character.load(`${assets}/character.gltf`);
-  scene.add(character.root);
-  for (const name of EFFECTORS) addHandle(name, HANDLE_COLOURS[name], character.worldPosition(name));
-  const knee = character.worldPosition("shin_L");
-  addHandle(POLE, 0x9aa0a6, knee.add(new THREE.Vector3(0, 0, 0.4)), 0.5);
-  document.getElementById("r-pole")!.textContent = POLE_PENDING;
+  examples = await ExampleChain.load(`${root}/demo/examples.json`);
   wireSwitches();
-  readout.status("creating a session");
-  await createSession();
-  // The rest pose: every DOF 0 (the session's default start is the middle of the limits).
-  await client.setPose(session, { q: new Array<number>(session.n_dof).fill(0) });
-  await openStream();
+  await switchModel("character");
   state.ready = true;
   requestAnimationFrame(tick);
 }
