@@ -17,7 +17,7 @@ await esbuild.build({
   format: "esm",
   platform: "browser",
   target: ["es2022"],
-  minify: process.env.DEMO_MINIFY !== "0",
+  minify: process.env.DEMO_MINIFY !== "0", // DEMO_MINIFY=0: readable stack traces while debugging
   legalComments: "linked",
   // The client imports `ws` only where there is no global WebSocket (Node): never here.
   external: ["ws"],

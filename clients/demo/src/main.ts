@@ -258,12 +258,29 @@ async function createSession(): Promise<void> {
   }
 }
 
-async function openStream(): Promise<void> {
+// Bumped by every change of socket: an open that finishes after a newer one started (two
+// switches flipped at once) closes its socket instead of replacing the newer one, which
+// would leave a frame in flight on a socket nobody reads.
+let streamGeneration = 0;
+
+function dropStream(): void {
+  streamGeneration += 1;
   const old = stream;
   stream = null;
   old?.close();
   inFlight = false;
-  stream = await client.stream(session, { encoding: state.encoding, compact: state.compact });
+}
+
+async function openStream(): Promise<void> {
+  dropStream();
+  const generation = streamGeneration;
+  const opened = await client.stream(session, { encoding: state.encoding, compact: state.compact });
+  if (generation !== streamGeneration) {
+    opened.close();
+    return;
+  }
+  stream = opened;
+  inFlight = false;
   readout.status(`solving (${state.encoding}${state.compact ? ", compact" : ""})`);
 }
 
@@ -456,10 +473,7 @@ const HANDLE_PALETTE = [0xe6194b, 0x4363d8, 0xf58231, 0x3cb44b];
 
 /** Show `name` (the character or an example chain) on a session of its own. */
 async function switchModel(name: string): Promise<void> {
-  const old = stream;
-  stream = null;
-  old?.close();
-  inFlight = false;
+  dropStream();
   if (model !== undefined) scene.remove(model.root);
   for (const handle of handles.values()) scene.remove(handle);
   handles.clear();
