@@ -21,6 +21,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+import httpx
 import pytest
 
 from .conftest import Server
@@ -167,6 +168,12 @@ def test_dragging_a_hand_target_moves_the_hand(demo: DemoPage) -> None:
     )
     hand_after = after["effectors"]["hand_L"]
     assert distance(hand_after, target) < 0.05, (hand_after, target)
+    # The pole handle goes with the left foot's target exactly when the server's schema
+    # has a target `pole` field, and the readout says which.
+    schema = httpx.get(f"{demo.server.base}/openapi.json", timeout=WAIT_S).json()
+    has_poles = "pole" in schema["components"]["schemas"]["Target"]["properties"]
+    assert after["poles"] is has_poles
+    assert ("sent with foot_L" if has_poles else "not sent") in demo.page.inner_text("#r-pole")
     # The other limbs' targets did not move, and their effectors stayed on them.
     for name in ("hand_R", "foot_L", "foot_R"):
         assert distance(after["effectors"][name], after["targets"][name]) < 0.01, name

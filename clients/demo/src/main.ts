@@ -43,6 +43,8 @@ type Vec = [number, number, number];
 /** What the page exposes as `window.ikDemo.state`. */
 interface DemoState {
   ready: boolean;
+  /** Whether the left foot's target carries the pole handle (the server knows `pole`). */
+  poles: boolean;
   /** "character" or an example chain's name. */
   model: string;
   encoding: Encoding;
@@ -69,6 +71,7 @@ const assets = body.dataset["assets"] ?? "/demo-assets";
 
 const state: DemoState = {
   ready: false,
+  poles: false,
   model: "character",
   encoding: "json",
   compact: false,
@@ -134,8 +137,19 @@ function addHandle(name: string, colour: number, at: THREE.Vector3, opacity = 0.
 // Pole targets (which way a knee or elbow points) are being added to the API on another
 // branch; until the field exists this handle is drawn and can be dragged, but it is not
 // sent (the readout says so).
+// The pole target (which way the left knee points): a target's `pole` field, sent only when
+// the server's schema has it (it came with a later version of the API); otherwise the
+// handle is drawn but not sent, and the readout says so.
 const POLE = "pole_knee_L";
-const POLE_PENDING = "not in the API yet: shown, not sent";
+const POLE_BONE = "shin_L";
+let polesSupported = false;
+
+async function serverHasPoles(): Promise<boolean> {
+  const response = await fetch(`${root}/openapi.json`);
+  if (!response.ok) return false;
+  const spec = (await response.json()) as { components?: { schemas?: Record<string, { properties?: object }> } };
+  return "pole" in (spec.components?.schemas?.["Target"]?.properties ?? {});
+}
 
 // --- dragging ------------------------------------------------------------------------------
 const pointer = new THREE.Vector2();
@@ -198,7 +212,17 @@ function characterModel(character: Character): Model {
       if (result.bones?.local) character.apply(result.bones.local);
     },
     worldPosition: (name) => character.worldPosition(name),
-    target: (name, world) => ({ effector: name, position: { x: world.x, y: world.y, z: world.z } }),
+    target: (name, world) => {
+      const target: Target & { pole?: { position: { x: number; y: number; z: number }; bone: string } } = {
+        effector: name,
+        position: { x: world.x, y: world.y, z: world.z },
+      };
+      const pole = handles.get(POLE)?.position;
+      if (polesSupported && name === "foot_L" && pole !== undefined) {
+        target.pole = { position: { x: pole.x, y: pole.y, z: pole.z }, bone: POLE_BONE };
+      }
+      return target;
+    },
   };
 }
 
@@ -502,7 +526,9 @@ async function switchModel(name: string): Promise<void> {
   if (example === undefined) {
     const knee = character.worldPosition("shin_L");
     addHandle(POLE, 0x9aa0a6, knee.add(new THREE.Vector3(0, 0, 0.4)), 0.5);
-    document.getElementById("r-pole")!.textContent = POLE_PENDING;
+    document.getElementById("r-pole")!.textContent = polesSupported
+      ? `sent with foot_L (bone ${POLE_BONE})`
+      : "this server has no pole field: shown, not sent";
   } else {
     document.getElementById("r-pole")!.textContent = "";
   }
@@ -525,6 +551,8 @@ async function main(): Promise<void> {
   });
   character = await Character.load(`${assets}/character.gltf`);
   examples = await ExampleChain.load(`${root}/demo/examples.json`);
+  polesSupported = await serverHasPoles();
+  state.poles = polesSupported;
   wireSwitches();
   await switchModel("character");
   state.ready = true;
