@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+from urllib.parse import urlsplit
 
 from starlette import status
 from starlette.websockets import WebSocket
@@ -114,7 +115,13 @@ def websocket_subprotocol(ws: WebSocket) -> str | None:
 
 
 def origin_allowed(ws: WebSocket, allowed: list[str]) -> bool:
-    """Browsers send Origin; other clients usually do not. Only configured origins
-    (IK_CORS_ORIGINS) may open a WebSocket from a browser."""
+    """Browsers send Origin; other clients usually do not. A browser may open a WebSocket
+    from a configured origin (IK_CORS_ORIGINS) or from a page of the service itself
+    (/demo): its Origin names the host the socket connects to. That adds nothing a
+    same-origin page could not already do over HTTP; a page of another site has its own
+    host in Origin and is refused."""
     origin = ws.headers.get("origin")
-    return origin is None or origin in allowed or "*" in allowed
+    if origin is None or origin in allowed or "*" in allowed:
+        return True
+    parts = urlsplit(origin)
+    return parts.scheme in ("http", "https") and parts.netloc == ws.headers.get("host")

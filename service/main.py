@@ -29,6 +29,7 @@ from .metrics import Metrics
 from .middleware import TimingAndLimits
 from .responses import ORJSONResponse
 from .routes import health, http, ws
+from .routes.demo import add_demo
 from .routes.docs import add_docs
 from .session_starts import SessionStarts
 from .sessions import InMemorySessionStore, SessionStore
@@ -120,6 +121,7 @@ def create_app(
         redoc_url=None,
     )
     add_docs(app)
+    add_demo(app)
     install_handlers(app)
     app.include_router(http.router)
     app.include_router(ws.router)

@@ -1,4 +1,5 @@
-"""/docs (Swagger UI) and /redoc with every script, style and icon served by the service itself.
+"""/docs (Swagger UI), /redoc and /asyncapi.json (the WebSocket's AsyncAPI 3 document),
+with every script, style and icon served by the service itself.
 
 FastAPI's default pages load their scripts, styles, favicon and (ReDoc) Google fonts from
 public CDNs, so without internet they are blank. This follows FastAPI's "Custom Docs UI
@@ -36,6 +37,9 @@ from fastapi.staticfiles import StaticFiles
 from starlette.responses import Response
 from starlette.types import Scope
 
+from ..asyncapi import asyncapi_document
+from ..responses import ORJSONResponse
+
 ASSETS_DIR: Final = Path(__file__).resolve().parent.parent / "docs_assets"
 ASSETS_URL: Final = "/docs-assets"
 # Folder names under docs_assets/: "<npm package>-<version>", also the URL segment.
@@ -45,6 +49,8 @@ REDOC: Final = "redoc-2.5.4"
 DOCS_URL: Final = "/docs"
 REDOC_URL: Final = "/redoc"
 OAUTH2_REDIRECT_URL: Final = "/docs/oauth2-redirect"
+# The WebSocket protocol (AsyncAPI 3), next to /openapi.json (service/asyncapi.py).
+ASYNCAPI_URL: Final = "/asyncapi.json"
 
 IMMUTABLE: Final = "public, max-age=31536000, immutable"
 # 'unsafe-inline' scripts: FastAPI's Swagger page starts the UI from an inline <script>.
@@ -134,7 +140,11 @@ def add_docs(app: FastAPI) -> None:
         page.headers.update(_PAGE_HEADERS)
         return page
 
+    async def asyncapi(request: Request) -> ORJSONResponse:
+        return ORJSONResponse(asyncapi_document(title=app.title, version=app.version))
+
     app.add_route(DOCS_URL, swagger_ui, include_in_schema=False)
+    app.add_route(ASYNCAPI_URL, asyncapi, include_in_schema=False)
     app.add_route(OAUTH2_REDIRECT_URL, swagger_ui_redirect, include_in_schema=False)
     app.add_route(REDOC_URL, redoc, include_in_schema=False)
     app.mount(ASSETS_URL, VersionedAssets(directory=ASSETS_DIR), name="docs-assets")

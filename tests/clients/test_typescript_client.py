@@ -33,10 +33,10 @@ def npm_or_skip() -> str:
     return npm
 
 
-def run(args: list[str], **env: str) -> str:
+def run(args: list[str], cwd: Path = PACKAGE, **env: str) -> str:
     done = subprocess.run(
         args,
-        cwd=PACKAGE,
+        cwd=cwd,
         env={**os.environ, **env},
         capture_output=True,
         text=True,

@@ -185,6 +185,28 @@ def test_ws_from_an_unlisted_browser_origin_closes_4403(
         assert ws.receive_json()["type"] == "pong"
 
 
+def test_ws_from_a_page_of_the_service_itself_is_allowed(
+    make_client: Callable[..., TestClient],
+) -> None:
+    """/demo's socket: Origin is the host the socket connects to (no IK_CORS_ORIGINS)."""
+    client = make_client(Settings())
+    s = create(client)
+    url = f"/v1/sessions/{s.id}/ws"
+    host = {"Host": "ik.example:8000"}
+    with client.websocket_connect(
+        url, headers={**s.headers, **host, "Origin": "http://ik.example:8000"}
+    ) as ws:
+        ws.send_json({"type": "ping", "id": 1})
+        assert ws.receive_json()["type"] == "pong"
+    for other in ("http://ik.example:8001", "https://evil.example", "file://ik.example:8000"):
+        with pytest.raises(WebSocketDisconnect) as info:
+            with client.websocket_connect(
+                url, headers={**s.headers, **host, "Origin": other}
+            ) as ws:
+                ws.receive_json()
+        assert info.value.code == 4403, other
+
+
 # -- frames per second per session --------------------------------------------------------
 def rate_client(make_client: Callable[..., TestClient], now: list[float]) -> TestClient:
     store = InMemorySessionStore(max_sessions=10, ttl_s=1e9, clock=lambda: now[0])

@@ -10,7 +10,9 @@ import type {
   BatchEntry,
   BatchFrame,
   BatchResults,
+  BoneOutput,
   Chain,
+  Conventions,
   CompactFrameResult,
   Frame,
   FrameResult,
@@ -34,6 +36,10 @@ export interface ClientOptions {
 export interface CreateSessionOptions {
   options?: OptionsPatch;
   initialPose?: PoseIn;
+  /** The client's coordinates (docs/engines.md): targets in, bone output out. */
+  conventions?: Conventions;
+  /** Bone output on every answer (skeleton chains). */
+  bones?: BoneOutput;
 }
 
 export interface SolveOptions {
@@ -89,7 +95,13 @@ export class Client {
 
   /** A new session on `chain` (e.g. `{format: "example", name: "panda_arm"}`). */
   createSession(chain: Chain, options: CreateSessionOptions = {}): Promise<SessionCreated> {
-    const body = withoutUndefined({ chain, options: options.options, initial_pose: options.initialPose });
+    const body = withoutUndefined({
+      chain,
+      options: options.options,
+      initial_pose: options.initialPose,
+      conventions: options.conventions,
+      bones: options.bones,
+    });
     return this.request("POST", "/v1/sessions", { body });
   }
 

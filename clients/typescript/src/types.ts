@@ -188,7 +188,51 @@ export interface ExampleChain {
   name: "panda_arm" | "humanoid_arm" | "tail" | "two_arm_torso";
 }
 
-export type Chain = HierarchyChain | UrdfChain | ExampleChain;
+/** Schema `BoneEffectorSpec`: an effector on a skeleton bone (named after it by default). */
+export interface BoneEffectorSpec {
+  bone: string;
+  name?: string | null;
+  tip_offset?: Vec3;
+  tip_rotation?: Quaternion;
+  mode?: EffectorMode;
+  aim_axis?: Vec3;
+  position_weight?: number;
+  rotation_weight?: number;
+}
+
+/** Schema `BoneSettingsSpec`: one bone's axes (intrinsic order), limits [rad], terminator. */
+export interface BoneSettingsSpec {
+  axes?: string | null;
+  lower?: number[] | null;
+  upper?: number[] | null;
+  terminator?: boolean;
+}
+
+/** What skeleton chains (glTF, BVH) share (docs/engines.md, Skeleton formats). */
+interface SkeletonSettings {
+  effectors: BoneEffectorSpec[];
+  moving?: string[] | null;
+  bones?: Record<string, BoneSettingsSpec>;
+  default_axes?: string;
+  free_root?: { lower?: Vec3; upper?: Vec3 } | null;
+}
+
+/** Schema `GltfChain`: a glTF skin's joints as bones (`gltf`: the .gltf JSON, or `glb_base64`). */
+export interface GltfChain extends SkeletonSettings {
+  format: "gltf";
+  gltf?: Record<string, unknown> | null;
+  glb_base64?: string | null;
+  skin?: number | string | null;
+}
+
+/** Schema `BvhChain`: a BVH file's joints as bones; `unit_m`: metres per file unit. */
+export interface BvhChain extends SkeletonSettings {
+  format: "bvh";
+  bvh: string;
+  unit_m?: number;
+}
+
+export type Chain = HierarchyChain | UrdfChain | ExampleChain | GltfChain | BvhChain;
 
 /** Schema `SessionCreate`. */
 export interface SessionCreate {
