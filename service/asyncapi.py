@@ -36,6 +36,7 @@ CLIENT_MESSAGES: Final[tuple[tuple[str, type[BaseModel], str], ...]] = (
     ("clip", ws.ClipMessage, "Solve (or plan) a clip of frames"),
     ("fk", ws.FkMessage, "Forward kinematics of a pose, without moving it"),
     ("ping", ws.PingMessage, "Keep-alive and round-trip time"),
+    ("batch", ws.BatchMessage, "One frame for each of several sessions (many characters)"),
 )
 # ... and what the server answers.
 SERVER_MESSAGES: Final[tuple[tuple[str, type[BaseModel], str], ...]] = (
@@ -43,6 +44,7 @@ SERVER_MESSAGES: Final[tuple[tuple[str, type[BaseModel], str], ...]] = (
     ("clip_result", ws.ClipResultMessage, "A clip's results, one per frame"),
     ("fk_result", ws.FkResultMessage, "An fk message's bone data"),
     ("pong", ws.PongMessage, "The answer to a ping"),
+    ("batch_result", ws.BatchResultMessage, "A batch's results, one entry per frame"),
     ("error", ws.ErrorMessage, "A message that failed; the socket stays open"),
 )
 # Which answers each client message may get (an error is possible for every one).
@@ -51,6 +53,7 @@ REPLIES: Final[dict[str, tuple[str, ...]]] = {
     "clip": ("clip_result", "error"),
     "fk": ("fk_result", "error"),
     "ping": ("pong", "error"),
+    "batch": ("batch_result", "error"),
 }
 # The reason (an ErrorCode) each close code is sent with.
 CLOSE_REASONS: Final[dict[int, tuple[ErrorCode | str, ...]]] = {

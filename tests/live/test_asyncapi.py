@@ -198,6 +198,18 @@ def test_every_message_the_server_sends_matches_the_document(server: Server, spe
         clip = {"type": "clip", "id": 2, "frames": [{"targets": [TOOL]}]}
         assert exchange(spec, socket, clip, binary=True) == "clip_result"
 
+    # A batch: frames for two sessions over one socket, one of them refused in its place.
+    (a, a_token), (b, b_token) = create(server, PANDA), create(server, PANDA)
+    with ws(server, a, a_token) as socket:
+        entries = [
+            {"session": a, "token": a_token, "id": 1, "targets": [TOOL]},
+            {"session": b, "token": b_token, "id": 1, "targets": [TOOL]},
+            {"session": b, "token": "wrong", "id": 2, "targets": [TOOL]},
+        ]
+        batch = {"type": "batch", "id": 1, "frames": entries}
+        assert exchange(spec, socket, batch) == "batch_result"
+        assert exchange(spec, socket, {**batch, "id": 2}, binary=True) == "batch_result"
+
     sid, token = create(server, LEG, bones={"local_rotations": True})
     with ws(server, sid, token) as socket:
         assert exchange(spec, socket, {"type": "fk", "id": 1}) == "fk_result"
@@ -205,7 +217,14 @@ def test_every_message_the_server_sends_matches_the_document(server: Server, spe
         assert exchange(spec, socket, {"type": "frame", "id": 2, "targets": [foot]}) == "result"
         fk = {"type": "fk", "id": 3, "q": [0.1, 0.0, 0.0, 0.2, 0.0, 0.0], "bones": {"world": []}}
         exchange(spec, socket, fk)  # fk_result or, if q has the wrong length, an error
-    assert spec.seen_answers == {"result", "clip_result", "fk_result", "pong", "error"}
+    assert spec.seen_answers == {
+        "result",
+        "clip_result",
+        "fk_result",
+        "pong",
+        "error",
+        "batch_result",
+    }
 
 
 def test_every_close_code_the_server_sends_is_in_the_document(
