@@ -11,3 +11,13 @@ pool). ``loadtest.service_process`` starts a real ``python -m service`` and wait
 /readyz (also for bench/cold_start.py and the live tests); ``loadtest.cli`` holds the
 load options the command lines share.
 """
+
+import sys
+from pathlib import Path
+
+# The load tools drive the service through the repository's own Python client
+# (clients/python, a package of its own), imported from the checkout as the tests do
+# (pytest's ``pythonpath``): the load tools run from a checkout, never from an install.
+_CLIENT = Path(__file__).resolve().parent.parent / "clients" / "python"
+if str(_CLIENT) not in sys.path:
+    sys.path.append(str(_CLIENT))

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import math
 import re
 import sys
@@ -29,15 +28,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import httpx
-from websockets.sync.client import connect
+from ik_client import Chain, Client, Frame, ServiceError, Target
 
 from .service_process import ROOT, ServiceProcess, rss_mb, thread_count
 
 RESULTS = ROOT / "bench" / "RESULTS.md"
-PANDA = {"format": "example", "name": "panda_arm"}
+PANDA: Chain = {"format": "example", "name": "panda_arm"}
 
 
-def _target(t: float) -> dict[str, Any]:
+def _target(t: float) -> Target:
     return {
         "effector": "tool",
         "position": {"x": 0.4, "y": 0.1 + 0.05 * math.sin(t), "z": 0.5},
@@ -66,48 +65,41 @@ class Shared:
             self.errors[what] = self.errors.get(what, 0) + 1
 
 
-def _session(base: str) -> tuple[str, dict[str, str]]:
-    r = httpx.post(f"{base}/v1/sessions", json={"chain": PANDA}, timeout=30.0)
-    r.raise_for_status()
-    return r.json()["id"], {"Authorization": f"Bearer {r.json()['token']}"}
-
-
-def _delete(base: str, sid: str, headers: dict[str, str]) -> None:
-    httpx.delete(f"{base}/v1/sessions/{sid}", headers=headers, timeout=30.0)
-
-
 def ws_client(base: str, shared: Shared, rate: float, churn_s: float) -> None:
+    """A game client through ``ik_client``: a session, its WebSocket stream at ``rate``,
+    and every ``churn_s`` the socket closed, the session deleted, and over again."""
     period = 1.0 / rate
-    while not shared.stop.is_set():
-        try:
-            sid, headers = _session(base)
-            with shared.lock:
-                shared.sessions += 1
-            url = base.replace("http", "ws", 1) + f"/v1/sessions/{sid}/ws"
-            with connect(url, additional_headers=headers, open_timeout=30.0) as ws:
-                until = time.monotonic() + churn_s
-                i = 0
-                while time.monotonic() < until and not shared.stop.is_set():
-                    t0 = time.perf_counter()
-                    ws.send(json.dumps({"type": "frame", "id": i, "targets": [_target(i * 0.05)]}))
-                    reply = json.loads(ws.recv(timeout=30.0))
-                    shared.rtt(time.monotonic(), time.perf_counter() - t0)
-                    if "error" in reply:
-                        shared.error(reply["error"]["code"])
-                    i += 1
-                    time.sleep(max(0.0, period - (time.perf_counter() - t0)))
-            _delete(base, sid, headers)
-        except Exception as e:  # counted, and the client starts over
-            shared.error(type(e).__name__)
-            time.sleep(0.1)
+    with Client(base, timeout_s=30.0) as client:
+        while not shared.stop.is_set():
+            try:
+                session = client.create_session(PANDA)
+                with shared.lock:
+                    shared.sessions += 1
+                with client.stream(session, timeout_s=30.0) as stream:
+                    until = time.monotonic() + churn_s
+                    i = 0
+                    while time.monotonic() < until and not shared.stop.is_set():
+                        t0 = time.perf_counter()
+                        try:
+                            stream.frame([_target(i * 0.05)])
+                        except ServiceError as e:
+                            shared.error(str(e.code))
+                        shared.rtt(time.monotonic(), time.perf_counter() - t0)
+                        i += 1
+                        time.sleep(max(0.0, period - (time.perf_counter() - t0)))
+                client.delete_session(session)
+            except Exception as e:  # counted, and the client starts over
+                shared.error(type(e).__name__)
+                time.sleep(0.1)
 
 
 def http_client(base: str, shared: Shared, rate: float, churn_s: float) -> None:
+    """The same over HTTP: one frame per request, a 5-frame clip every tenth."""
     period = 1.0 / rate
-    with httpx.Client(timeout=30.0) as client:
+    with Client(base, timeout_s=30.0) as client:
         while not shared.stop.is_set():
             try:
-                sid, headers = _session(base)
+                session = client.create_session(PANDA)
                 with shared.lock:
                     shared.sessions += 1
                 until = time.monotonic() + churn_s
@@ -115,15 +107,21 @@ def http_client(base: str, shared: Shared, rate: float, churn_s: float) -> None:
                 while time.monotonic() < until and not shared.stop.is_set():
                     t0 = time.perf_counter()
                     n = 5 if i % 10 == 9 else 1
-                    frames = [{"id": i + k, "targets": [_target((i + k) * 0.05)]} for k in range(n)]
-                    body = frames[0] if n == 1 else {"frames": frames}
-                    r = client.post(f"{base}/v1/sessions/{sid}/frames", json=body, headers=headers)
+                    try:
+                        if n == 1:
+                            client.frame(session, [_target(i * 0.05)], id=i)
+                        else:
+                            frames: list[Frame] = [
+                                {"id": i + k, "targets": [_target((i + k) * 0.05)]}
+                                for k in range(n)
+                            ]
+                            client.clip(session, frames)
+                    except ServiceError as e:
+                        shared.error(f"http_{e.status_code}")
                     shared.rtt(time.monotonic(), time.perf_counter() - t0)
-                    if r.status_code != 200:
-                        shared.error(f"http_{r.status_code}")
                     i += n
                     time.sleep(max(0.0, period - (time.perf_counter() - t0)))
-                client.delete(f"{base}/v1/sessions/{sid}", headers=headers)
+                client.delete_session(session)
             except Exception as e:
                 shared.error(type(e).__name__)
                 time.sleep(0.1)
