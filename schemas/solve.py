@@ -270,7 +270,9 @@ class FollowerInfo(StrictModel):
     offset: float = Field(description="[rad] or [m]")
 
 
-ModelWarningCode = Literal["unlimited_by_convention", "default_limit", "mimic_narrows_leader"]
+ModelWarningCode = Literal[
+    "unlimited_by_convention", "default_limit", "mimic_narrows_leader", "mimic_limits_ignored"
+]
 assert set(ModelWarningCode.__args__) == {k.value for k in NoteKind}  # type: ignore[attr-defined]
 
 
@@ -294,7 +296,9 @@ class ModelWarning(StrictModel):
     code: ModelWarningCode = Field(
         description="unlimited_by_convention: `lower > upper` read as no limits (pybullet's "
         "files); default_limit: a missing `lower` or `upper` read as URDF's default 0; "
-        "mimic_narrows_leader: a mimic joint's limits narrow its leader's range"
+        "mimic_narrows_leader: a mimic joint's limits narrow its leader's range; "
+        "mimic_limits_ignored: a mimic joint's limits leave its leader no room (written for "
+        "the other sense of the map) and are ignored, as ROS and pinocchio do"
     )
     joint: str = Field(description="The joint in the file")
     field: str = Field(description="The element or attribute, e.g. `limit.lower`")

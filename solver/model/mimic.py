@@ -2,8 +2,11 @@
 offset``. It has no variable of its own: ``resolve_mimics`` finds each follower's
 leader (composing a follower of a follower), ``narrow_leaders`` intersects the
 leader's range with the follower's, mapped back through the affine map, and
-``Followers`` gives the followers' values for a q. How a follower moves in the
-compiled kinematics is ``chain._compile``'s business (``layout.ND_RATE``).
+``Followers`` gives the followers' values for a q. Limits that leave the leader no
+room (files written for the other sense of the map, e.g. PR2's grippers) are
+ignored with a ``mimic_limits_ignored`` note, as ROS and pinocchio ignore them. How
+a follower moves in the compiled kinematics is ``chain._compile``'s business
+(``layout.ND_RATE``).
 """
 
 from __future__ import annotations
@@ -34,7 +37,10 @@ class Followers:
 
     def values(self, q: Vector) -> Vector:
         """The followers' values for joint values q, in ``names`` order."""
-        return self.multiplier * np.asarray(q, dtype=np.float64)[self.leader] + self.offset
+        values: Vector = (
+            self.multiplier * np.asarray(q, dtype=np.float64)[self.leader] + self.offset
+        )
+        return values
 
 
 def check_mimic(j: Joint) -> None:
@@ -90,6 +96,16 @@ def resolve_mimics(checked: list[Joint]) -> dict[str, Mimic]:
     return resolved
 
 
+def _ignored(joint: str, why: str) -> ModelNote:
+    return ModelNote(
+        NoteKind.MIMIC_LIMITS_IGNORED,
+        joint,
+        "limit",
+        f"its limits are ignored: {why} (a mimic joint's limits contradicting its map; "
+        "ROS and pinocchio ignore them too)",
+    )
+
+
 def narrow_leaders(
     checked: list[Joint],
     mimics: dict[str, Mimic],
@@ -108,22 +124,20 @@ def narrow_leaders(
         i = var[m.joint]
         if m.multiplier == 0.0:
             if not lo_f <= m.offset <= hi_f:
-                raise InvalidModel(
-                    f"multiplier 0 holds the joint at {m.offset!r}, outside its limits "
-                    f"[{lo_f!r}, {hi_f!r}]",
-                    joint=j.name,
-                    field="mimic.offset",
-                )
+                notes.append(_ignored(j.name, f"its offset {m.offset!r} is outside them"))
             continue
         a, b = (lo_f - m.offset) / m.multiplier, (hi_f - m.offset) / m.multiplier
-        lo, hi = max(lower[i], min(a, b)), min(upper[i], max(a, b))
-        if lo > hi:
-            raise InvalidModel(
-                f"its limits [{lo_f!r}, {hi_f!r}] leave leader {m.joint!r} no value in "
-                f"[{lower[i]!r}, {upper[i]!r}]",
-                joint=j.name,
-                field="mimic",
+        # + 0.0: no -0.0 bound (numpy's uniform refuses high - low = -0.0).
+        lo, hi = max(lower[i], min(a, b)) + 0.0, min(upper[i], max(a, b)) + 0.0
+        if lo > hi or (lo == hi and lower[i] < upper[i]):
+            notes.append(
+                _ignored(
+                    j.name,
+                    f"mapped through the mimic they leave leader {m.joint!r} "
+                    f"[{max(lo, hi):.6g}, {min(lo, hi):.6g}] of [{lower[i]:.6g}, {upper[i]:.6g}]",
+                )
             )
+            continue
         if (lo, hi) != (lower[i], upper[i]):
             notes.append(
                 ModelNote(

@@ -14,6 +14,9 @@ class NoteKind(enum.StrEnum):
     UNLIMITED_BY_CONVENTION = "unlimited_by_convention"  # lower > upper: no limits
     DEFAULT_LIMIT = "default_limit"  # a missing lower or upper read as URDF's 0
     MIMIC_NARROWS_LEADER = "mimic_narrows_leader"  # a follower's limits cut the range
+    # A follower's limits leave its leader no room (written for the other sense of the
+    # map, e.g. PR2's grippers): ignored, as ROS and pinocchio ignore a mimic's limits.
+    MIMIC_LIMITS_IGNORED = "mimic_limits_ignored"
 
 
 @dataclass(frozen=True, slots=True)

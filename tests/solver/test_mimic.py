@@ -143,21 +143,6 @@ def _joint(name: str, parent: str, child: str, **kw: object) -> Joint:
             id="rotational_follower",
         ),
         pytest.param(
-            [
-                _joint("a", "w", "l1"),
-                _joint("b", "l1", "l2", lower=(5.0,), upper=(6.0,), mimic=Mimic("a", 2.0)),
-            ],
-            "mimic",
-            "b",
-            id="no_common_range",
-        ),
-        pytest.param(
-            [_joint("a", "w", "l1"), _joint("b", "l1", "l2", mimic=Mimic("a", 0.0, 3.0))],
-            "mimic.offset",
-            "b",
-            id="held_outside_its_limits",
-        ),
-        pytest.param(
             [_joint("a", "w", "l1"), _joint("b", "l1", "l2", mimic=Mimic("a", math.nan))],
             "mimic.multiplier",
             "b",
@@ -169,6 +154,30 @@ def test_invalid_mimic(joints: list[Joint], field: str, joint: str) -> None:
     with pytest.raises(InvalidModel) as info:
         build_chain(joints, [Effector(name="t", link="l2")])
     assert (info.value.field, info.value.joint) == (field, joint)
+
+
+@pytest.mark.parametrize(
+    ("follower", "leader_range"),
+    [
+        # b = 2 a in [5, 6] needs a in [2.5, 3]: outside a's [-1, 1].
+        (_joint("b", "l1", "l2", lower=(5.0,), upper=(6.0,), mimic=Mimic("a", 2.0)), (-1, 1)),
+        # PR2's gripper: b = -a with both in [0, 0.548] leaves a only 0.
+        (
+            _joint("b", "l1", "l2", lower=(0.0,), upper=(0.548,), mimic=Mimic("a", -1.0)),
+            (0.0, 0.548),
+        ),
+        # Held at 3 by multiplier 0, outside b's [-1, 1].
+        (_joint("b", "l1", "l2", mimic=Mimic("a", 0.0, 3.0)), (-1, 1)),
+    ],
+)
+def test_follower_limits_that_leave_the_leader_no_room_are_ignored_with_a_note(
+    follower: Joint, leader_range: tuple[float, float]
+) -> None:
+    lo, hi = leader_range
+    leader = _joint("a", "w", "l1", lower=(lo,), upper=(hi,))
+    chain = build_chain([leader, follower], [Effector(name="t", link="l2")])
+    assert (chain.lower[0], chain.upper[0]) == (lo, hi)
+    assert [(n.kind, n.joint) for n in chain.notes] == [(NoteKind.MIMIC_LIMITS_IGNORED, "b")]
 
 
 def test_multiplier_zero_holds_the_follower_at_its_offset() -> None:

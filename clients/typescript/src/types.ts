@@ -269,7 +269,7 @@ export interface FollowerInfo {
 
 /** Schema `ModelWarning`: the chain's file read by a convention or a default. */
 export interface ModelWarning {
-  code: "unlimited_by_convention" | "default_limit" | "mimic_narrows_leader";
+  code: "unlimited_by_convention" | "default_limit" | "mimic_narrows_leader" | "mimic_limits_ignored";
   joint: string;
   field: string;
   message: string;
