@@ -84,6 +84,7 @@ class ChainRun:
     tips: tuple[str, ...]
     n_dof: int = 0
     fk_error: float = math.nan
+    reference: str = ""  # why pinocchio gave no model (or one read with mimic=False)
     times_us: list[float] = field(default_factory=list)
     solved: int = 0
     statuses: collections.Counter[str] = field(default_factory=collections.Counter)
@@ -186,7 +187,14 @@ def pinocchio_model(text: str) -> tuple[object | None, str]:
     try:
         return pin.buildModelFromXML(text, mimic=True), ""
     except Exception as e:  # pinocchio raises ValueError / RuntimeError / std::exception
-        return None, str(e).splitlines()[0][:120] if str(e) else type(e).__name__
+        why = str(e).splitlines()[0][:120] if str(e) else type(e).__name__
+    # pinocchio 4.1 refuses some mimic files (a leader declared after its follower's
+    # parent: "The parent joint of the mimic joint is not in the kinematic tree");
+    # without mimic it reads every joint as free, and fk_error sets the followers.
+    try:
+        return pin.buildModelFromXML(text, mimic=False), f"mimic=False ({why})"
+    except Exception:
+        return None, why
 
 
 def fk_error(chain: Chain, model: object, base: str, rng: np.random.Generator) -> float:
@@ -199,8 +207,13 @@ def fk_error(chain: Chain, model: object, base: str, rng: np.random.Generator) -
     for _ in range(10):
         q = random_q(chain, rng)
         qp = pin.neutral(m)
-        for name, value in zip(chain.dof_names, q, strict=True):
+        values = dict(zip(chain.dof_names, q, strict=True))
+        followers = chain.followers
+        values.update(zip(followers.names, followers.values(q), strict=True))
+        for name, value in values.items():
             j = m.joints[m.getJointId(name)]  # type: ignore[attr-defined]
+            if j.nq == 0:
+                continue  # a mimic joint of a mimic=True model has no q of its own
             if j.nq == 2:  # continuous: (cos, sin)
                 qp[j.idx_q], qp[j.idx_q + 1] = math.cos(value), math.sin(value)
             else:
@@ -243,11 +256,20 @@ def solve_run(run: ChainRun, chain: Chain, poses: int, rng: np.random.Generator)
             )
             for e in chain.effectors
         ]
+        cpu0 = time.thread_time()
         r = solver.solve(targets, seed=seed)
+        cpu_us = (time.thread_time() - cpu0) * 1e6
         run.times_us.append(r.solve_us)
         ok = r.success and r.solve_us <= BUDGET_US
         run.solved += ok
-        run.statuses["solved" if ok else "late" if r.success else r.status.value] += 1
+        if ok:
+            run.statuses["solved"] += 1
+        elif cpu_us < 0.8 * r.solve_us:
+            # The thread ran for less than 80% of the solve's wall time: the machine
+            # took the budget (other processes on the shared cores), not the solver.
+            run.statuses["descheduled"] += 1
+        else:
+            run.statuses["late" if r.success else r.status.value] += 1
 
 
 def _variables_to(chain: Chain, link: str) -> int:
@@ -311,7 +333,7 @@ def main() -> None:
             import_classes["imported" + (" (with notes)" if chain.notes else "")] += 1
             for n in chain.notes:
                 notes[n.kind.value] += 1
-            run = ChainRun(label, tuple(tip_links), chain.n_dof)
+            run = ChainRun(label, tuple(tip_links), chain.n_dof, reference=why)
             try:
                 if model is not None:
                     run.fk_error = fk_error(chain, model, base, rng)
@@ -327,6 +349,12 @@ def main() -> None:
 
 def _rate(run: ChainRun) -> float:
     return run.solved / max(1, len(run.times_us))
+
+
+def _rate_on_cpu(run: ChainRun) -> float:
+    """The rate with the descheduled misses left out (what the solver did with the
+    CPU time it got)."""
+    return run.solved / max(1, len(run.times_us) - run.statuses["descheduled"])
 
 
 def report(files, import_classes, notes, refused, singles, multis, no_chain, args, elapsed):  # type: ignore[no-untyped-def]
@@ -355,6 +383,14 @@ def report(files, import_classes, notes, refused, singles, multis, no_chain, arg
     for r in compared:
         if r.fk_error > FK_TOLERANCE:
             print(f"  - {r.file} {r.tips}: {r.fk_error:.2e}")
+    unreferenced = collections.Counter(
+        (r.file, r.reference) for r in all_runs if math.isnan(r.fk_error) or r.reference
+    )
+    if unreferenced:
+        print("\nImported here, refused by pinocchio with mimic=True:\n")
+        print("| file | chains | pinocchio's reason |\n|---|---:|---|")
+        for (file, reason), n in sorted(unreferenced.items()):
+            print(f"| {file} | {n} | {reason} |")
     for title, runs, bar in (("single-tip", singles, 0.999), ("multi-tip", multis, 0.995)):
         if not runs:
             continue
@@ -365,6 +401,7 @@ def report(files, import_classes, notes, refused, singles, multis, no_chain, arg
         for r in runs:
             statuses.update({k: v for k, v in r.statuses.items() if k != "solved"})
         below = [r for r in runs if _rate(r) < bar]
+        below_cpu = [r for r in runs if _rate_on_cpu(r) < bar]
         print(f"\n### {title}: {len(runs)} chains, {args.poses} targets each\n")
         print(
             f"- solved within {BUDGET_US / 1000:g} ms: worst chain {min(rates):.2%}, "
@@ -372,20 +409,27 @@ def report(files, import_classes, notes, refused, singles, multis, no_chain, arg
             f"chains below {bar:.1%}: {len(below)}"
         )
         print(
+            f"- leaving out the descheduled misses: worst chain "
+            f"{min(_rate_on_cpu(r) for r in runs):.2%}; chains below {bar:.1%}: "
+            f"{len(below_cpu)}"
+        )
+        print(
             f"- median solve time per chain: median {statistics.median(meds):.0f} us, "
             f"largest {max(meds):.0f} us; p99 per chain: median {statistics.median(p99):.0f} us, "
             f"largest {max(p99):.0f} us"
         )
         print(f"- misses by class: {dict(statuses) or 'none'}")
-        if below:
+        if below_cpu:
             print(
-                "\n| chain | DOF | solved | median [us] | p99 [us] | misses |\n|---|---:|---:|---:|---:|---|"
+                "\n| chain | DOF | solved | on CPU | median [us] | p99 [us] | misses |\n"
+                "|---|---:|---:|---:|---:|---:|---|"
             )
-            for r in sorted(below, key=_rate):
+            for r in sorted(below_cpu, key=_rate_on_cpu):
                 misses = {k: v for k, v in r.statuses.items() if k != "solved"}
                 print(
                     f"| {r.file} -> {','.join(r.tips)[:60]} | {r.n_dof} | {_rate(r):.2%} | "
-                    f"{statistics.median(r.times_us):.0f} | {np.percentile(r.times_us, 99):.0f} | {misses} |"
+                    f"{_rate_on_cpu(r):.2%} | {statistics.median(r.times_us):.0f} | "
+                    f"{np.percentile(r.times_us, 99):.0f} | {misses} |"
                 )
 
 
