@@ -42,6 +42,7 @@ from .layout import (
     MODE_POSE,
     MODE_POSITION,
     ND_AXIS,
+    ND_JAXIS,
     ND_PRE,
     ND_RATE,
     ND_WIDTH,
@@ -478,6 +479,7 @@ def _compile(
         ni[k] = (parent[k], kind[k], dof[k])
         nd[k, ND_PRE : ND_PRE + 12] = pre[k].reshape(-1)
         nd[k, ND_AXIS : ND_AXIS + 3] = axis[k]
+        nd[k, ND_JAXIS : ND_JAXIS + 3] = rate[k] * np.asarray(axis[k])
         nd[k, ND_RATE] = rate[k]
     ei = np.zeros((len(effectors), 3), dtype=np.int64)
     ed = np.zeros((len(effectors), ED_WIDTH))
