@@ -80,8 +80,13 @@ class FrameResult(StrictModel):
         "out; best pose returned) | nonfinite (the model produced NaN/inf)"
     )
     termination: TerminationName = Field(description="How the optimizer's last pass ended")
-    joints: dict[str, float] = Field(description="Joint values by DOF name [rad] or [m]")
-    q: list[float] = Field(description="The same values as an array, in the session's DOF order")
+    joints: dict[str, float] = Field(
+        description="Joint values by DOF name [rad] or [m], then the mimic joints' values "
+        "(the session's `followers`: multiplier x leader + offset)"
+    )
+    q: list[float] = Field(
+        description="The DOFs' values as an array, in the session's DOF order (no mimic joints)"
+    )
     effectors: list[EffectorErrorOut] = Field(description="Errors of the targeted effectors")
     iterations: int = Field(description="Optimizer iterations, all passes")
     function_evals: int = Field(description="Objective evaluations")

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
+
+from solver.model.notes import NoteKind
 
 from .chain import EXAMPLE_ARM, ChainSpec, EffectorModeName, Name
 from .common import FiniteFloat, Quaternion, StrictModel, Vec3
@@ -252,7 +254,11 @@ class Pose(StrictModel):
     """Joint values, by name and as an array in DOF order."""
 
     q: list[float] = Field(description="Values in DOF order [rad] or [m]")
-    joints: dict[str, float] = Field(description="Values by DOF name [rad] or [m]")
+    joints: dict[str, float] = Field(
+        description="Values by name [rad] or [m]: every DOF, then every mimic joint "
+        "(`followers`: multiplier x its leader + offset; not in `q`)",
+        examples=[{"panda_finger_joint1": 0.02, "panda_finger_joint2": 0.02}],
+    )
 
 
 class PoseIn(StrictModel):
@@ -286,11 +292,74 @@ class DofInfo(StrictModel):
     upper: float | None = Field(description="Upper limit [rad] or [m]; null if unbounded")
 
 
+class FollowerInfo(StrictModel):
+    """A mimic joint (URDF ``<mimic>``): not a DOF, its value is
+    ``multiplier * leader + offset``. It moves with its leader (whose limits its own
+    narrow); results report its value in ``joints``, not in ``q``."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "name": "panda_finger_joint2",
+                    "leader": "panda_finger_joint1",
+                    "multiplier": 1.0,
+                    "offset": 0.0,
+                }
+            ]
+        }
+    )
+
+    name: str = Field(description="The mimic joint")
+    leader: str = Field(description="The DOF it follows")
+    multiplier: float
+    offset: float = Field(description="[rad] or [m]")
+
+
+ModelWarningCode = Literal[
+    "unlimited_by_convention", "default_limit", "mimic_narrows_leader", "mimic_limits_ignored"
+]
+assert set(ModelWarningCode.__args__) == {k.value for k in NoteKind}  # type: ignore[attr-defined]
+
+
+class ModelWarning(StrictModel):
+    """Something in the chain's file read in a way you should know about: the chain
+    was built, but maybe not as you meant it."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "code": "unlimited_by_convention",
+                    "joint": "xtrans",
+                    "field": "limit",
+                    "message": "lower > upper (1.0 > -1.0) read as no limits (Bullet's convention)",
+                }
+            ]
+        }
+    )
+
+    code: ModelWarningCode = Field(
+        description="unlimited_by_convention: `lower > upper` read as no limits (pybullet's "
+        "files); default_limit: a missing `lower` or `upper` read as URDF's default 0; "
+        "mimic_narrows_leader: a mimic joint's limits narrow its leader's range; "
+        "mimic_limits_ignored: a mimic joint's limits leave its leader no room (written for "
+        "the other sense of the map) and are ignored, as ROS and pinocchio do"
+    )
+    joint: str = Field(description="The joint in the file")
+    field: str = Field(description="The element or attribute, e.g. `limit.lower`")
+    message: str
+
+
 class EffectorInfo(StrictModel):
     """One effector of the chain."""
 
     name: str
     mode: EffectorModeName
+
+
+_FOLLOWERS = "Mimic joints: not DOFs (not in `q`); their values are in results' `joints`"
+_WARNINGS = "What the chain's file was read by a convention or default you should know of"
 
 
 class SessionCreate(StrictModel):
@@ -330,6 +399,8 @@ class SessionCreated(StrictModel):
     n_dof: int
     dof: list[DofInfo] = Field(description="The joint order of q, with limits")
     effectors: list[EffectorInfo]
+    followers: list[FollowerInfo] = Field(description=_FOLLOWERS)
+    warnings: list[ModelWarning] = Field(description=_WARNINGS)
     conventions: ConventionsOut
     options: SolverOptions
     pose: Pose
@@ -351,6 +422,8 @@ class SessionInfo(StrictModel):
     n_dof: int
     dof: list[DofInfo]
     effectors: list[EffectorInfo]
+    followers: list[FollowerInfo] = Field(description=_FOLLOWERS)
+    warnings: list[ModelWarning] = Field(description=_WARNINGS)
     conventions: ConventionsOut
     options: SolverOptions
     pose: Pose

@@ -69,10 +69,25 @@ class ChainView:
             {"name": n, "lower": _finite_or_none(lo), "upper": _finite_or_none(hi)}
             for n, lo, hi in zip(chain.dof_names, chain.lower, chain.upper, strict=True)
         ]
+        followers = chain.followers
         summary = {
             "n_dof": chain.n_dof,
             "dof": dof,
             "effectors": [{"name": e.name, "mode": e.mode.value} for e in chain.effectors],
+            "followers": [
+                {"name": n, "leader": chain.dof_names[i], "multiplier": m, "offset": o}
+                for n, i, m, o in zip(
+                    followers.names,
+                    followers.leader.tolist(),
+                    followers.multiplier.tolist(),
+                    followers.offset.tolist(),
+                    strict=True,
+                )
+            ],
+            "warnings": [
+                {"code": w.kind.value, "joint": w.joint, "field": w.field, "message": w.message}
+                for w in chain.notes
+            ],
         }
         index = {n: i for i, n in enumerate(chain.dof_names)}
         mid = chain.mid_limits()

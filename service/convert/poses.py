@@ -32,6 +32,13 @@ def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str) ->
         q = np.array(current, dtype=np.float64)
         for name, value in pose.joints.items():
             i = view.dof_index.get(name)
+            if i is None and name in chain.followers.names:
+                k = chain.followers.names.index(name)
+                leader = chain.dof_names[int(chain.followers.leader[k])]
+                raise invalid_problem(
+                    f"{name!r} is a mimic joint: it follows {leader!r}; set {leader!r} instead",
+                    f"{field}.joints.{name}",
+                )
             if i is None:
                 raise invalid_problem(
                     f"unknown DOF {name!r} (DOFs: {list(chain.dof_names)})",
@@ -42,6 +49,11 @@ def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str) ->
 
 
 def pose_dict(view: ChainView, q: Vector) -> dict[str, Any]:
-    """A ``Pose``: q in DOF order and by name."""
+    """A ``Pose``: q in DOF order, and by name with the mimic joints' values."""
     values = q.tolist()
-    return {"q": values, "joints": dict(zip(view.chain.dof_names, values, strict=True))}
+    chain = view.chain
+    joints = dict(zip(chain.dof_names, values, strict=True))
+    followers = chain.followers
+    if followers.names:
+        joints.update(zip(followers.names, followers.values(q).tolist(), strict=True))
+    return {"q": values, "joints": joints}

@@ -57,12 +57,16 @@ def result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str
                 "within_tolerance": (p is None or p <= tol_p) and (e is None or e <= tol_r),
             }
         )
+    joints = dict(zip(layout.dof_names, values, strict=True))
+    followers = layout.followers
+    if followers.names:  # mimic joints: by name only, not in q
+        joints.update(zip(followers.names, followers.values(r.q).tolist(), strict=True))
     return {
         "id": frame_id,
         "success": r.success,
         "status": r.status.value,
         "termination": r.termination.value,
-        "joints": dict(zip(layout.dof_names, values, strict=True)),
+        "joints": joints,
         "q": values,
         "effectors": effectors,
         "iterations": r.iterations,

@@ -61,7 +61,7 @@ from ..model.layout import (
     MODE_AIM,
     MODE_POSE,
     MODE_POSITION,
-    ND_AXIS,
+    ND_JAXIS,
     ND_R,
     ND_T,
     NI_DOF,
@@ -145,9 +145,11 @@ def _rotate(r00, r01, r02, r10, r11, r12, r20, r21, r22, ux, uy, uz):  # type: i
 
 @jit_inline
 def world_axis(nd, k):  # type: ignore[no-untyped-def]
-    """World axis R_k a of node k's motion, from the frames FK wrote into ND. Takes
-    the array: every caller is compiled without reference counting (jit_leaf), so
-    passing it costs nothing."""
+    """World axis R_k a of node k's motion per unit of its variable, from the frames
+    FK wrote into ND (a is the Jacobian's axis, ``layout.ND_JAXIS``: a mimic joint
+    moves multiplier x as fast as its leader's variable, so its column is scaled by
+    it, and adds to the leader's column). Takes the array: every caller is compiled
+    without reference counting (jit_leaf), so passing it costs nothing."""
     return _rotate(
         nd[k, ND_R],
         nd[k, ND_R + 1],
@@ -158,9 +160,9 @@ def world_axis(nd, k):  # type: ignore[no-untyped-def]
         nd[k, ND_R + 6],
         nd[k, ND_R + 7],
         nd[k, ND_R + 8],
-        nd[k, ND_AXIS],
-        nd[k, ND_AXIS + 1],
-        nd[k, ND_AXIS + 2],
+        nd[k, ND_JAXIS],
+        nd[k, ND_JAXIS + 1],
+        nd[k, ND_JAXIS + 2],
     )
 
 

@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..arrays import Matrix, Vector
+from ..model.mimic import Followers
 from ..optim import PassRecord, Termination
 from ..optim import codes as C
 from ..optim.minimize import unpack_pass_log
@@ -66,6 +67,7 @@ class ResultLayout:
     tolerances: tuple[float, float]  # position [m], rotation [rad]
     n_dof: int
     n_effectors: int
+    followers: Followers = Followers()  # the chain's mimic joints (values from q)
 
     @property
     def hessian_start(self) -> int:

@@ -326,6 +326,7 @@ class IKSolver:
                 (opts.position_tolerance_m, opts.rotation_tolerance_rad),
                 n,
                 m,
+                self.chain.followers,
             )
             out_size = 3 * m + n * n + mopts.max_passes * C.N_LOG
             hit = _Packed(opts, fopt, iopt, opts.policy.as_array(), out_size, layout)

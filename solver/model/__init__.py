@@ -4,6 +4,8 @@ importers (URDF, glTF, BVH). Knows no optimizer and no IK.
 Where things are:
     joints.py     ``JointKind``, ``EffectorMode``, ``Transform``, ``Joint``, ``Effector``
     chain.py      ``Chain``, ``build_chain`` (validation) and its compiled arrays
+    mimic.py      mimic joints: ``Followers``, leaders resolved, leaders' ranges narrowed
+    notes.py      ``ModelNote``, ``NoteKind``: what an importer read by a convention
     layout.py     the columns of those arrays (shared with ``solver.ik``'s kernels)
     forward.py    forward kinematics (compiled, and ``link_poses`` / ``effector_poses``)
     rotations.py  quaternion / matrix / roll-pitch-yaw conversions
@@ -19,7 +21,9 @@ Where things are:
 """
 
 from .chain import MAX_DOF_HARD, Chain, CompiledChain, build_chain
-from .joints import Effector, EffectorMode, Joint, JointKind, Transform
+from .joints import Effector, EffectorMode, Joint, JointKind, Mimic, Transform
+from .mimic import Followers
+from .notes import ModelNote, NoteKind
 from .rotations import matrix_to_quaternion, quaternion_to_matrix, rpy_to_matrix
 
 __all__ = [
@@ -28,8 +32,12 @@ __all__ = [
     "CompiledChain",
     "Effector",
     "EffectorMode",
+    "Followers",
     "Joint",
     "JointKind",
+    "Mimic",
+    "ModelNote",
+    "NoteKind",
     "Transform",
     "build_chain",
     "matrix_to_quaternion",

@@ -11,19 +11,25 @@ To add a joint kind: a ``JointKind`` member (``joints``), its checks in
 translation about a unit axis: ``layout.NODE_*``); a motion that is none of these
 needs a new node kind in ``forward.forward_kinematics`` and in the Jacobian columns
 of ``solver.ik.kinematics``.
+
+Mimic joints (``Joint.mimic``): a follower's node reads its leader's variable at the
+rate ``multiplier`` (``layout.ND_RATE``), its offset folded into the node's fixed
+transform, so FK and the exact gradient need nothing else: the follower's column
+adds to the leader's. Its limits, mapped back through the affine map, narrow the
+leader's range. ``Chain.followers`` gives the followers' values for a q.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..arrays import Matrix, Vector
 from ..errors import InvalidModel, InvalidProblem
-from .joints import AXIS_VECTORS, Effector, EffectorMode, Joint, JointKind, finite_array
+from .joints import AXIS_VECTORS, Effector, EffectorMode, Joint, JointKind, Mimic, finite_array
 from .layout import (
     ED_AIM,
     ED_TIP,
@@ -36,12 +42,16 @@ from .layout import (
     MODE_POSE,
     MODE_POSITION,
     ND_AXIS,
+    ND_JAXIS,
     ND_PRE,
+    ND_RATE,
     ND_WIDTH,
     NODE_FIXED,
     NODE_ROTATION,
     NODE_TRANSLATION,
 )
+from .mimic import Followers, check_mimic, narrow_leaders, resolve_mimics
+from .notes import ModelNote
 
 # Joints above this many degrees of freedom make a chain's dense BFGS matrix
 # (n x n) and its Jacobian walks too slow for a frame budget; the service caps lower.
@@ -59,6 +69,9 @@ class Chain:
         dof_names: One name per variable, in the order of q.
         lower, upper: Limits per variable, shape (n_dof,).
         compiled: The flat arrays the compiled kinematics use.
+        followers: The mimic joints, which have no variable of their own.
+        notes: What an importer read in a way the user should know about (URDF
+            conventions such as ``lower > upper`` for an unlimited joint).
     """
 
     joints: tuple[Joint, ...]
@@ -68,6 +81,8 @@ class Chain:
     lower: Vector
     upper: Vector
     compiled: CompiledChain
+    followers: Followers = field(default_factory=Followers)
+    notes: tuple[ModelNote, ...] = ()
 
     @property
     def n_dof(self) -> int:
@@ -181,7 +196,9 @@ def _check_joint(j: Joint) -> Joint:
         lo, hi = lower[k], upper[k]
         if math.isnan(lo) or math.isnan(hi):
             raise InvalidModel("limits must not be NaN", joint=j.name, field="lower")
-        if j.kind is not JointKind.CONTINUOUS and not (math.isfinite(lo) and math.isfinite(hi)):
+        # A slider may be unlimited (URDF files by Bullet's lower > upper convention).
+        unlimited_ok = j.kind in (JointKind.CONTINUOUS, JointKind.PRISMATIC)
+        if not unlimited_ok and not (math.isfinite(lo) and math.isfinite(hi)):
             raise InvalidModel(
                 "limits must be finite (use a continuous joint for unlimited rotation)",
                 joint=j.name,
@@ -189,6 +206,8 @@ def _check_joint(j: Joint) -> Joint:
             )
         if lo > hi:
             raise InvalidModel(f"lower > upper ({lo!r} > {hi!r})", joint=j.name, field="lower")
+    if j.mimic is not None:
+        check_mimic(j)
     return Joint(
         name=j.name,
         parent=j.parent,
@@ -201,6 +220,7 @@ def _check_joint(j: Joint) -> Joint:
         lower=lower,
         upper=upper,
         terminator=j.terminator,
+        mimic=j.mimic,
     )
 
 
@@ -264,6 +284,7 @@ def build_chain(
         if j.name in seen:
             raise InvalidModel("duplicate joint name", joint=j.name, field="name")
         seen.add(j.name)
+    mimics = resolve_mimics(checked)
     by_child: dict[str, Joint] = {}
     for j in checked:
         if j.child in by_child:
@@ -317,10 +338,33 @@ def build_chain(
     effs = [_check_effector(e, links) for e in effectors]
     if len({e.name for e in effs}) != len(effs):
         raise InvalidModel("duplicate effector name", field="effectors")
-    lower = np.array([v for j in ordered for v in j.lower], dtype=np.float64)
-    upper = np.array([v for j in ordered for v in j.upper], dtype=np.float64)
-    compiled = _compile(ordered, effs, root)
-    return Chain(tuple(ordered), tuple(effs), root, dof_names, lower, upper, compiled)
+    leaders = [j for j in ordered if j.mimic is None]
+    lower = np.array([v for j in leaders for v in j.lower], dtype=np.float64)
+    upper = np.array([v for j in leaders for v in j.upper], dtype=np.float64)
+    var: dict[str, int] = {}  # joint -> its first variable, in the order of q
+    n_vars = 0
+    for j in leaders:
+        var[j.name] = n_vars
+        n_vars += len(j.dof_names)
+    notes = narrow_leaders(ordered, mimics, lower, upper, var)
+    compiled = _compile(ordered, effs, root, var, mimics)
+    followers = [j.name for j in ordered if j.name in mimics]
+    return Chain(
+        tuple(ordered),
+        tuple(effs),
+        root,
+        dof_names,
+        lower,
+        upper,
+        compiled,
+        Followers(
+            tuple(followers),
+            np.array([var[mimics[n].joint] for n in followers], dtype=np.int64),
+            np.array([mimics[n].multiplier for n in followers], dtype=np.float64),
+            np.array([mimics[n].offset for n in followers], dtype=np.float64),
+        ),
+        tuple(notes),
+    )
 
 
 def _translation_only(t: Vector) -> Matrix:
@@ -337,23 +381,40 @@ def _compose(a: Matrix, b: Matrix) -> Matrix:
     return out
 
 
-def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> CompiledChain:
+def _motion(j: Joint, value: float) -> Matrix:
+    """A single-axis joint's motion for one value, as a 3x4 transform."""
+    if j.kind is JointKind.PRISMATIC:
+        return _translation_only(value * j.axis)
+    ux, uy, uz = j.axis
+    k = np.array([[0.0, -uz, uy], [uz, 0.0, -ux], [-uy, ux, 0.0]])
+    m = np.zeros((3, 4))
+    m[:, :3] = np.eye(3) + math.sin(value) * k + (1.0 - math.cos(value)) * (k @ k)
+    return m
+
+
+def _compile(
+    ordered: list[Joint],
+    effectors: list[Effector],
+    root: str,
+    var: dict[str, int],
+    mimics: dict[str, Mimic],
+) -> CompiledChain:
     parent: list[int] = []
     pre: list[Matrix] = []
     kind: list[int] = []
     axis: list[Vector] = []
     dof: list[int] = []
+    rate: list[float] = []
     link_node: dict[str, int] = {root: -1}
-    joint_first_node: dict[str, int] = {}
     node_joint: list[str] = []
-    next_dof = 0
 
-    def add(p: int, m: Matrix, k: int, a: Vector, d: int, owner: str) -> int:
+    def add(p: int, m: Matrix, k: int, a: Vector, d: int, owner: str, r: float = 1.0) -> int:
         parent.append(p)
         pre.append(m)
         kind.append(k)
         axis.append(a)
         dof.append(d)
+        rate.append(r)
         node_joint.append(owner)
         return len(parent) - 1
 
@@ -365,29 +426,33 @@ def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> Comp
             if has_pivot
             else j.origin.as_matrix34()
         )
-        first = -1
+        mimic = mimics.get(j.name)
         if j.kind is JointKind.FIXED:
             p = add(p, base, NODE_FIXED, np.zeros(3), -1, j.name)
-            first = p
         elif j.kind is JointKind.ROTATIONAL:
             m = base
-            for a in j.axes:
-                p = add(p, m, NODE_ROTATION, np.array(AXIS_VECTORS[a]), next_dof, j.name)
-                first = p if first < 0 else first
-                next_dof += 1
+            for i, a in enumerate(j.axes):
+                p = add(p, m, NODE_ROTATION, np.array(AXIS_VECTORS[a]), var[j.name] + i, j.name)
                 m = _translation_only(np.zeros(3))
+        elif mimic is not None and mimic.multiplier == 0.0:
+            # Held at its offset whatever the leader does: a fixed node.
+            held = _compose(base, _motion(j, mimic.offset))
+            p = add(p, held, NODE_FIXED, np.zeros(3), -1, j.name)
         else:
             k = NODE_TRANSLATION if j.kind is JointKind.PRISMATIC else NODE_ROTATION
-            p = add(p, base, k, j.axis, next_dof, j.name)
-            first = p
-            next_dof += 1
+            if mimic is None:
+                p = add(p, base, k, j.axis, var[j.name], j.name)
+            else:
+                # multiplier x leader + offset: the offset's motion is fixed (rotations
+                # about one axis commute, as do translations along one).
+                moved = _compose(base, _motion(j, mimic.offset))
+                p = add(p, moved, k, j.axis, var[mimic.joint], j.name, mimic.multiplier)
         if has_pivot and j.kind is not JointKind.FIXED:
             p = add(p, _translation_only(-j.pivot), NODE_FIXED, np.zeros(3), -1, j.name)
         elif has_pivot:
             # A fixed joint has no motion: fold -pivot into the same node.
             pre[p] = _compose(pre[p], _translation_only(-j.pivot))
         link_node[j.child] = p
-        joint_first_node[j.name] = first
 
     node_parent = np.array(parent, dtype=np.int64)
     node_dof = np.array(dof, dtype=np.int64)
@@ -405,7 +470,8 @@ def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> Comp
             if owner in terminators and (parent_node < 0 or node_joint[parent_node] != owner):
                 break
             node = parent_node
-        eff_dofs.append(np.array(sorted(dofs), dtype=np.int64))
+        # A follower reads its leader's variable: count it once.
+        eff_dofs.append(np.array(sorted(set(dofs)), dtype=np.int64))
     n_nodes = len(parent)
     ni = np.zeros((n_nodes, 3), dtype=np.int64)
     nd = np.zeros((n_nodes, ND_WIDTH))
@@ -413,6 +479,8 @@ def _compile(ordered: list[Joint], effectors: list[Effector], root: str) -> Comp
         ni[k] = (parent[k], kind[k], dof[k])
         nd[k, ND_PRE : ND_PRE + 12] = pre[k].reshape(-1)
         nd[k, ND_AXIS : ND_AXIS + 3] = axis[k]
+        nd[k, ND_JAXIS : ND_JAXIS + 3] = rate[k] * np.asarray(axis[k])
+        nd[k, ND_RATE] = rate[k]
     ei = np.zeros((len(effectors), 3), dtype=np.int64)
     ed = np.zeros((len(effectors), ED_WIDTH))
     for i, e in enumerate(effectors):

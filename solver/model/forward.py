@@ -19,6 +19,7 @@ from .layout import (
     ND_AXIS,
     ND_PRE,
     ND_R,
+    ND_RATE,
     ND_T,
     NI_DOF,
     NI_KIND,
@@ -61,10 +62,13 @@ def forward_kinematics(q, ni, nd):  # type: ignore[no-untyped-def]
         ux = nd[k, ND_AXIS]
         uy = nd[k, ND_AXIS + 1]
         uz = nd[k, ND_AXIS + 2]
+        # A mimic joint moves by multiplier x its leader's variable (its offset is in
+        # the fixed transform); every other joint's rate is 1.
+        value = nd[k, ND_RATE] * q[d]
         if ni[k, NI_KIND] == NODE_ROTATION:
-            # R <- R @ Rot(axis, q) (Rodrigues).
-            c = math.cos(q[d])
-            s = math.sin(q[d])
+            # R <- R @ Rot(axis, value) (Rodrigues).
+            c = math.cos(value)
+            s = math.sin(value)
             v = 1.0 - c
             r00 = c + ux * ux * v
             r01 = ux * uy * v - uz * s
@@ -88,7 +92,7 @@ def forward_kinematics(q, ni, nd):  # type: ignore[no-untyped-def]
                     nd[k, ND_R + 3 * i] * ux
                     + nd[k, ND_R + 3 * i + 1] * uy
                     + nd[k, ND_R + 3 * i + 2] * uz
-                ) * q[d]
+                ) * value
 
 
 @jit_inline

@@ -126,6 +126,19 @@ def _translation(values: Sequence[float], owner: str) -> Vector:
     return t
 
 
+@dataclass(frozen=True, slots=True)
+class Mimic:
+    """A joint that follows another: its value is ``multiplier * leader + offset``.
+
+    The follower is not a variable of its own: its motion adds to its leader's
+    Jacobian column, and its limits narrow the leader's range (URDF ``<mimic>``).
+    """
+
+    joint: str  # the leader
+    multiplier: float = 1.0
+    offset: float = 0.0  # [rad] or [m]
+
+
 AXIS_VECTORS = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 
@@ -145,6 +158,8 @@ class Joint:
         axes: Active local axes of a rotational joint, in order, e.g. "zyx".
         lower, upper: One limit per DOF [rad] or [m]; continuous joints use -inf/inf.
         terminator: Joints above this one do not move for chains running through it.
+        mimic: Set for a joint that follows another single-DOF joint (``Mimic``): it
+            has no variable of its own and is not in ``dof_names``.
     """
 
     name: str
@@ -158,10 +173,11 @@ class Joint:
     lower: tuple[float, ...] = ()
     upper: tuple[float, ...] = ()
     terminator: bool = False
+    mimic: Mimic | None = None
 
     @property
     def dof_names(self) -> tuple[str, ...]:
-        if self.kind is JointKind.FIXED:
+        if self.kind is JointKind.FIXED or self.mimic is not None:
             return ()
         if self.kind is JointKind.ROTATIONAL:
             return tuple(f"{self.name}.{a}" for a in self.axes)

@@ -3,9 +3,14 @@ writes them and the compiled kinematics that read them.
 
     NI  int64[n_nodes, 3]     parent node (-1: root), kind (NODE_*), variable index
                               (-1: none)
-    ND  float64[n_nodes, 27]  fixed transform before the motion (3x4, row-major,
+    ND  float64[n_nodes, 31]  fixed transform before the motion (3x4, row-major,
                               0:12), unit axis (12:15), world rotation (15:24, row-
-                              major) and origin (24:27) written by FK
+                              major) and origin (24:27) written by FK, the
+                              Jacobian's axis (27:30): rate x the unit axis, and
+                              the rate (30): the motion is rate x q[variable] (1,
+                              or a mimic joint's multiplier). The Jacobian reads
+                              its own axis so that a column costs what it did
+                              before mimic joints (bench/RESULTS.md, issue 26).
     EI  int64[n_eff, 3]       node, mode (MODE_*), active flag
     ED  float64[n_eff, 36]    tip frame in the link (3x4, 0:12), aim axis (12:15),
                               weights w_p, w_r (15, 16), target position (17:20),
@@ -27,7 +32,9 @@ ND_PRE = 0
 ND_AXIS = 12
 ND_R = 15
 ND_T = 24
-ND_WIDTH = 27
+ND_JAXIS = 27
+ND_RATE = 30
+ND_WIDTH = 31
 # EI columns
 EI_NODE = 0
 EI_MODE = 1

@@ -4,8 +4,23 @@ Parsing is hardened (defusedxml, DTDs forbidden: no entity expansion, no externa
 entities, no DTD retrieval) and size-capped before the parser sees the text. Only the
 kinematic subset of URDF is read: ``<joint>`` elements that are direct children of
 ``<robot>`` (``<transmission>`` and ``<gazebo>`` also contain ``<joint>`` tags), with
-``type``, ``<parent>``, ``<child>``, ``<origin xyz rpy>``, ``<axis xyz>`` and
-``<limit lower upper>``. Meshes, inertials, dynamics and everything else are ignored.
+``type``, ``<parent>``, ``<child>``, ``<origin xyz rpy>``, ``<axis xyz>``,
+``<limit lower upper>`` and ``<mimic joint multiplier offset>``. Meshes, inertials,
+dynamics, ``effort`` and ``velocity`` and everything else are ignored.
+
+The specification's defaults and the conventions of files in the wild:
+  - ``<limit>`` is required on revolute and prismatic joints (as in urdfdom), but its
+    ``lower`` and ``upper`` default to 0 (a ``default_limit`` note says so);
+    ``effort`` and ``velocity`` may be missing (urdfdom requires them; IK needs neither).
+  - ``lower > upper`` is read as "no limits" (Bullet's convention, used by pybullet's
+    files): a revolute joint turns like a continuous one, a prismatic one slides
+    freely; an ``unlimited_by_convention`` note says so.
+  - Whitespace (or a byte-order mark) before ``<?xml`` and NULs or whitespace at the
+    end (C strings written whole) are dropped before parsing.
+  - A mimic joint on a path brings its leader's path in (a finger's tip then moves
+    with the other finger's variable); see ``solver.model.mimic``.
+  - ``floating`` and ``planar`` joints are not variables here: one on a path is
+    refused with the link below it to use as ``base_link`` instead.
 
 Every joint's name, type and links are checked, because the paths are found from
 them; the numbers and the supported-type rules only apply to joints on the paths, so a
@@ -21,9 +36,10 @@ Errors are ``InvalidModel``; ``field`` is one of:
   ``type``          missing, unknown or unsupported type (floating, planar)
   ``parent``        missing <parent>, undeclared parent link, a cycle
   ``child``         missing <child>, undeclared child link, a link with two parent joints
-  ``mimic``         a mimic joint on a path
+  ``mimic``         no leader named, an unknown leader, a leader not below the base,
+                    ``mimic.multiplier`` / ``mimic.offset`` not numbers
   ``origin.xyz``, ``origin.rpy``, ``axis``   not 3 finite numbers; zero axis
-  ``limit``, ``limit.lower``, ``limit.upper``  missing, non-numeric, NaN, lower > upper
+  ``limit``, ``limit.lower``, ``limit.upper``  missing <limit>, non-numeric, NaN
 ``joint`` names the joint (or, for link-level errors, the link).
 
 URDF conventions: a joint's child frame is ``parent * origin * motion(q)`` with
@@ -33,6 +49,7 @@ default (1, 0, 0) and unit-normalised; continuous joints have no limits.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import xml.etree.ElementTree as ET
@@ -45,7 +62,8 @@ import numpy as np
 
 from ..errors import InvalidModel
 from .chain import MAX_DOF_HARD, Chain, build_chain
-from .joints import Effector, EffectorMode, Joint, JointKind, Transform
+from .joints import Effector, EffectorMode, Joint, JointKind, Mimic, Transform
+from .notes import ModelNote, NoteKind
 
 _KINDS = {
     "revolute": JointKind.REVOLUTE,
@@ -54,6 +72,10 @@ _KINDS = {
     "fixed": JointKind.FIXED,
 }
 _UNSUPPORTED_TYPES = frozenset({"floating", "planar"})
+# Dropped around the document: a byte-order mark or blank lines before <?xml (which
+# must be the first characters), NULs after the root (a C string written whole).
+_LEADING_JUNK = "\ufeff \t\r\n"
+_TRAILING_JUNK = "\x00 \t\r\n"
 # build_chain's cycle check walks up from every joint (quadratic in the path length):
 # 18,000 fixed joints fit in 2 MB and took 39 s. Real robots have a handful per path.
 MAX_FIXED_JOINTS = 1000
@@ -117,9 +139,11 @@ def chain_from_urdf(
     on_path: set[str] = set()
     for tip in tips:
         on_path.update(_path_joint_names(tip, base_link, links, by_child))
+    _add_mimic_leaders(on_path, base_link, links, by_child)
     # Document order among the path joints keeps DOF order stable and readable.
     raw = [j for j in by_child.values() if j.name in on_path]
-    joints = [_joint(j) for j in raw]
+    notes: list[ModelNote] = []
+    joints = [_joint(j, base_link, notes) for j in raw]
     n_fixed = sum(1 for j in joints if j.kind is JointKind.FIXED)
     n_dof = len(joints) - n_fixed
     # Both before build_chain, whose checks grow with the square of the joint count.
@@ -130,7 +154,8 @@ def chain_from_urdf(
             f"too many fixed joints on the paths: {n_fixed} > {MAX_FIXED_JOINTS}", field="joints"
         )
     effectors = [Effector(name=tip, link=tip, mode=mode) for tip in tips]
-    return build_chain(joints, effectors, max_dof=max_dof)
+    chain = build_chain(joints, effectors, max_dof=max_dof)
+    return dataclasses.replace(chain, notes=(*notes, *chain.notes))
 
 
 def _parse_xml(text: str, max_bytes: int) -> ET.Element:
@@ -145,6 +170,7 @@ def _parse_xml(text: str, max_bytes: int) -> ET.Element:
         raise InvalidModel("URDF is not valid Unicode (lone surrogate)", field="urdf") from None
     if size > max_bytes:
         raise InvalidModel(f"URDF is larger than {max_bytes} bytes ({size})", field="urdf")
+    text = text.lstrip(_LEADING_JUNK).rstrip(_TRAILING_JUNK)
     try:
         root: ET.Element = DET.fromstring(text, forbid_dtd=True)
     except defusedxml.DTDForbidden:
@@ -262,18 +288,63 @@ def _path_joint_names(
     return names
 
 
-def _joint(raw: _RawJoint) -> Joint:
+def _add_mimic_leaders(
+    on_path: set[str], base: str, links: set[str], by_child: dict[str, _RawJoint]
+) -> None:
+    """Add to ``on_path`` the path of every mimic joint's leader (and theirs in turn):
+    a follower moves with its leader's variable, so the leader must be in the chain."""
+    by_name = {j.name: j for j in by_child.values()}
+    pending = list(on_path)
+    while pending:
+        raw = by_name[pending.pop()]
+        mimic = _child(raw.element, "mimic")
+        if mimic is None:
+            continue
+        leader = by_name.get(mimic.get("joint") or "")
+        if leader is None:
+            raise InvalidModel(
+                f"<mimic joint={mimic.get('joint')!r}> names no joint of this file: give "
+                "the name of the joint it follows",
+                joint=raw.name,
+                field="mimic",
+            )
+        if leader.name in on_path:
+            continue
+        try:
+            names = _path_joint_names(leader.child, base, links, by_child)
+        except InvalidModel:
+            raise InvalidModel(
+                f"it follows joint {leader.name!r}, which is not below base link {base!r}: "
+                "choose a base link above both joints",
+                joint=raw.name,
+                field="mimic",
+            ) from None
+        fresh = [n for n in names if n not in on_path]
+        on_path.update(fresh)
+        pending.extend(fresh)
+
+
+def _refuse_free_joint(raw: _RawJoint, base: str) -> InvalidModel:
+    return InvalidModel(
+        f"{raw.type} joints are not supported: a {raw.type} joint's motion is not a joint "
+        f"variable here; use base_link={raw.child!r} (the link it moves) or a link below it "
+        f"instead of {base!r}, and move the base with the targets' frame",
+        joint=raw.name,
+        field="type",
+    )
+
+
+def _joint(raw: _RawJoint, base: str, notes: list[ModelNote]) -> Joint:
     e, name = raw.element, raw.name
     if raw.type in _UNSUPPORTED_TYPES:
-        raise InvalidModel(f"{raw.type} joints are not supported", joint=name, field="type")
+        raise _refuse_free_joint(raw, base)
     kind = _KINDS.get(raw.type)
     if kind is None:
-        raise InvalidModel(f"unknown joint type {raw.type!r}", joint=name, field="type")
-    if _child(e, "mimic") is not None:
         raise InvalidModel(
-            "mimic joints are not supported (the follower would need its own coupling)",
+            f"unknown joint type {raw.type!r}: URDF's types are revolute, continuous, "
+            "prismatic, fixed, floating and planar",
             joint=name,
-            field="mimic",
+            field="type",
         )
     origin = _child(e, "origin")
     xyz = _vector(origin, "xyz", name, "origin.xyz", default=(0.0, 0.0, 0.0))
@@ -283,11 +354,28 @@ def _joint(raw: _RawJoint) -> Joint:
         return Joint(name=name, parent=raw.parent, child=raw.child, kind=kind, origin=transform)
     axis = np.array(_vector(_child(e, "axis"), "xyz", name, "axis", default=(1.0, 0.0, 0.0)))
     if float(np.linalg.norm(axis)) < 1e-9:
-        raise InvalidModel("axis must not be zero", joint=name, field="axis")
+        raise InvalidModel(
+            "axis must not be zero: give <axis xyz> a direction, or make the joint fixed",
+            joint=name,
+            field="axis",
+        )
     lower: tuple[float, ...] = ()
     upper: tuple[float, ...] = ()
     if kind is not JointKind.CONTINUOUS:
-        lower, upper = _limits(_child(e, "limit"), raw.type, name)
+        lo, hi = _limits(_child(e, "limit"), raw.type, name, notes)
+        if lo > hi:
+            notes.append(
+                ModelNote(
+                    NoteKind.UNLIMITED_BY_CONVENTION,
+                    name,
+                    "limit",
+                    f"lower > upper ({lo!r} > {hi!r}) read as no limits (Bullet's convention)",
+                )
+            )
+            lo, hi = -math.inf, math.inf
+            if kind is JointKind.REVOLUTE:
+                kind = JointKind.CONTINUOUS
+        lower, upper = (lo,), (hi,)
     return Joint(
         name=name,
         parent=raw.parent,
@@ -297,25 +385,54 @@ def _joint(raw: _RawJoint) -> Joint:
         axis=axis / np.linalg.norm(axis),
         lower=lower,
         upper=upper,
+        mimic=_mimic(_child(e, "mimic"), name),
     )
 
 
-def _limits(limit: ET.Element | None, kind: str, joint: str) -> tuple[tuple[float], tuple[float]]:
-    # URDF defaults lower/upper to 0, which silently freezes the joint; we require both.
+def _mimic(element: ET.Element | None, joint: str) -> Mimic | None:
+    if element is None:
+        return None
+    leader = element.get("joint")
+    if not leader:
+        raise InvalidModel(
+            "<mimic> needs a joint attribute: the name of the joint it follows",
+            joint=joint,
+            field="mimic",
+        )
+    values = []
+    for attr, default in (("multiplier", 1.0), ("offset", 0.0)):
+        s = element.get(attr)
+        values.append(default if s is None else _number(s, joint, f"mimic.{attr}"))
+    return Mimic(leader, values[0], values[1])
+
+
+def _limits(
+    limit: ET.Element | None, kind: str, joint: str, notes: list[ModelNote]
+) -> tuple[float, float]:
+    """(lower, upper) as written; a missing side is URDF's default, 0, with a note."""
     if limit is None:
-        raise InvalidModel(f"a {kind} joint needs <limit lower upper>", joint=joint, field="limit")
+        raise InvalidModel(
+            f"a {kind} joint needs <limit lower=... upper=...> (URDF requires it); add one, "
+            "or make the joint continuous if it turns without limits",
+            joint=joint,
+            field="limit",
+        )
     values = []
     for side in ("lower", "upper"):
         s = limit.get(side)
         if s is None:
-            raise InvalidModel(
-                f"<limit> needs the {side} attribute", joint=joint, field=f"limit.{side}"
+            notes.append(
+                ModelNote(
+                    NoteKind.DEFAULT_LIMIT,
+                    joint,
+                    f"limit.{side}",
+                    f"<limit> has no {side} attribute: URDF's default 0 is used",
+                )
             )
-        values.append(_number(s, joint, f"limit.{side}"))
-    lo, hi = values
-    if lo > hi:
-        raise InvalidModel(f"lower > upper ({lo!r} > {hi!r})", joint=joint, field="limit.lower")
-    return (lo,), (hi,)
+            values.append(0.0)
+        else:
+            values.append(_number(s, joint, f"limit.{side}"))
+    return values[0], values[1]
 
 
 def _vector(

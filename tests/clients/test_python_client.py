@@ -92,6 +92,8 @@ MIRRORS: list[tuple[type, tuple[str, ...]]] = [
     (ik_client.Pose, ("Pose",)),
     (ik_client.Dof, ("DofInfo",)),
     (ik_client.Effector, ("EffectorInfo",)),
+    (ik_client.Follower, ("FollowerInfo",)),
+    (ik_client.ModelWarning, ("ModelWarning",)),
     (ik_client.SolverOptions, ("SolverOptions",)),
     (ik_client.SessionCounters, ("SessionCounters",)),
     (ik_client.Session, ("SessionCreated",)),

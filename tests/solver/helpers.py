@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from solver.model import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from solver.model import Effector, EffectorMode, Joint, JointKind, Mimic, Transform, build_chain
 from solver.model.examples import humanoid_arm, panda_arm, tail, two_arm_torso
 
 
@@ -60,6 +60,73 @@ def slider_arm():  # type: ignore[no-untyped-def]
     )
 
 
+def mimic_gripper():  # type: ignore[no-untyped-def]
+    """A shoulder, a slide and a finger (the leader) with two mimic joints: a revolute
+    finger at -1.5 x the leader + 0.2, and a prismatic pad following that follower (a
+    chain of mimics); a pose effector on the finger, a position effector on the pad."""
+    z = np.array([0.0, 0.0, 1.0])
+    joints = [
+        Joint(
+            name="shoulder",
+            parent="base",
+            child="upper",
+            kind=JointKind.REVOLUTE,
+            axis=z,
+            lower=(-2.0,),
+            upper=(2.0,),
+        ),
+        Joint(
+            name="slide",
+            parent="upper",
+            child="hand",
+            kind=JointKind.PRISMATIC,
+            axis=np.array([1.0, 0.0, 0.0]),
+            origin=Transform(np.array([0.3, 0.0, 0.1])),
+            lower=(0.0,),
+            upper=(0.4,),
+        ),
+        Joint(
+            name="finger_a",
+            parent="hand",
+            child="a",
+            kind=JointKind.REVOLUTE,
+            axis=np.array([0.0, 1.0, 0.0]),
+            origin=Transform(np.array([0.1, 0.02, 0.0])),
+            lower=(-0.3,),
+            upper=(0.8,),
+        ),
+        Joint(
+            name="finger_b",
+            parent="hand",
+            child="b",
+            kind=JointKind.REVOLUTE,
+            axis=np.array([0.0, 1.0, 1.0]) / math.sqrt(2.0),
+            origin=Transform.from_rpy([0.1, -0.02, 0.0], 0.3, 0.0, 0.1),
+            lower=(-1.0,),
+            upper=(0.5,),
+            mimic=Mimic("finger_a", -1.5, 0.2),
+        ),
+        Joint(
+            name="pad",
+            parent="b",
+            child="pad_link",
+            kind=JointKind.PRISMATIC,
+            axis=np.array([1.0, 0.0, 0.0]),
+            origin=Transform(np.array([0.05, 0.0, 0.0])),
+            lower=(-1.0,),
+            upper=(1.0,),
+            mimic=Mimic("finger_b", 0.02, 0.01),
+        ),
+    ]
+    effectors = [
+        Effector(
+            name="b_tip", link="b", tip_offset=np.array([0.04, 0.0, 0.0]), mode=EffectorMode.POSE
+        ),
+        Effector(name="pad_tip", link="pad_link", mode=EffectorMode.POSITION),
+    ]
+    return build_chain(joints, effectors)
+
+
 CHAINS = {
     "panda-pose": lambda: panda_arm(),
     "panda-position": lambda: panda_arm(EffectorMode.POSITION),
@@ -68,6 +135,7 @@ CHAINS = {
     "two-arms": two_arm_torso,
     "slider-aim": slider_arm,
     "tail": lambda: tail(8),
+    "mimic-gripper": mimic_gripper,
 }
 
 

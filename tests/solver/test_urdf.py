@@ -20,7 +20,7 @@ from numpy.testing import assert_allclose
 
 import solver.model.urdf
 from solver.errors import InvalidModel
-from solver.model import EffectorMode, JointKind
+from solver.model import EffectorMode, JointKind, NoteKind
 from solver.model.forward import effector_poses, link_poses
 from solver.model.urdf import MAX_FIXED_JOINTS, chain_from_urdf
 
@@ -105,8 +105,23 @@ ERROR_CASES: list[tuple[str, str, dict[str, object], str, str | None]] = [
     ("empty", "", {}, "urdf", None),
     ("root_not_robot", '<sdf version="1.7"><model name="t"/></sdf>', {}, "urdf", None),
     ("lone_surrogate", '<robot name="\ud800"/>', {}, "urdf", None),
-    # unsupported joint features on the path
-    ("mimic", _robot(_j2(_AXIS_LIMIT + '<mimic joint="j1" multiplier="2"/>')), {}, "mimic", "j2"),
+    # unsupported joint features on the path; mimic joints the chain cannot follow
+    ("mimic_no_leader", _robot(_j2(_AXIS_LIMIT + '<mimic multiplier="2"/>')), {}, "mimic", "j2"),
+    ("mimic_unknown", _robot(_j2(_AXIS_LIMIT + '<mimic joint="j9"/>')), {}, "mimic", "j2"),
+    (
+        "mimic_leader_not_below_base",
+        _robot(_j2(_AXIS_LIMIT + '<mimic joint="j1"/>')),
+        {"base_link": "l1"},
+        "mimic",
+        "j2",
+    ),
+    (
+        "mimic_text_multiplier",
+        _robot(_j2(_AXIS_LIMIT + '<mimic joint="j1" multiplier="two"/>')),
+        {},
+        "mimic.multiplier",
+        "j2",
+    ),
     ("floating", _robot(_j2("", type_="floating")), {}, "type", "j2"),
     ("planar", _robot(_j2('<axis xyz="0 0 1"/>', type_="planar")), {}, "type", "j2"),
     ("unknown_type", _robot(_j2(type_="ball")), {}, "type", "j2"),
@@ -120,9 +135,6 @@ ERROR_CASES: list[tuple[str, str, dict[str, object], str, str | None]] = [
         "limit",
         "j2",
     ),
-    ("no_lower", _robot(_j2('<limit upper="1"/>')), {}, "limit.lower", "j2"),
-    ("no_upper", _robot(_j2('<limit lower="-1"/>')), {}, "limit.upper", "j2"),
-    ("lower_gt_upper", _robot(_j2('<limit lower="1" upper="-1"/>')), {}, "limit.lower", "j2"),
     ("nan_lower", _robot(_j2('<limit lower="NaN" upper="1"/>')), {}, "limit.lower", "j2"),
     ("inf_upper", _robot(_j2('<limit lower="0" upper="inf"/>')), {}, "limit.upper", "j2"),
     ("text_lower", _robot(_j2('<limit lower="low" upper="1"/>')), {}, "limit.lower", "j2"),
@@ -365,10 +377,46 @@ def test_panda_tree_with_two_tips() -> None:
     assert "panda_rightfinger" not in chain.link_names
 
 
-def test_panda_mimic_finger_on_the_path_is_rejected() -> None:
+# --- the specification's defaults and the conventions of files in the wild -------------
+
+
+def test_missing_lower_or_upper_is_urdfs_zero_with_a_note() -> None:
+    text = _robot(_j2('<axis xyz="0 0 1"/><limit upper="1.5" effort="1" velocity="1"/>'))
+    chain = chain_from_urdf(text, base_link="base", tip_links="l2")
+    assert (chain.lower[1], chain.upper[1]) == (0.0, 1.5)
+    assert [(n.kind, n.joint, n.field) for n in chain.notes] == [
+        (NoteKind.DEFAULT_LIMIT, "j2", "limit.lower")
+    ]
+    # Neither side, and no effort or velocity either: the joint is held at 0.
+    held = chain_from_urdf(_robot(_j2("<limit/>")), base_link="base", tip_links="l2")
+    assert (held.lower[1], held.upper[1]) == (0.0, 0.0)
+    assert [n.field for n in held.notes] == ["limit.lower", "limit.upper"]
+
+
+@pytest.mark.parametrize("type_", ["revolute", "prismatic"])
+def test_lower_above_upper_is_bullets_unlimited_joint(type_: str) -> None:
+    text = _robot(_j2('<axis xyz="0 0 1"/><limit lower="1" upper="-1"/>', type_=type_))
+    chain = chain_from_urdf(text, base_link="base", tip_links="l2")
+    assert (chain.lower[1], chain.upper[1]) == (-math.inf, math.inf)
+    expected = JointKind.CONTINUOUS if type_ == "revolute" else JointKind.PRISMATIC
+    assert chain.joints[1].kind is expected
+    assert [(n.kind, n.joint, n.field) for n in chain.notes] == [
+        (NoteKind.UNLIMITED_BY_CONVENTION, "j2", "limit")
+    ]
+
+
+def test_whitespace_before_the_declaration_and_nuls_after_the_root() -> None:
+    text = '\n  \ufeff<?xml version="1.0"?>\n' + PLANAR.split("?>", 1)[1] + "\n\x00\x00"
+    chain = chain_from_urdf(text, base_link="base", tip_links="tip")
+    assert chain.dof_names == ("shoulder", "elbow")
+
+
+@pytest.mark.parametrize("type_", ["floating", "planar"])
+def test_a_free_joint_on_the_path_names_the_base_link_to_use(type_: str) -> None:
     with pytest.raises(InvalidModel) as info:
-        chain_from_urdf(PANDA, base_link="panda_link0", tip_links="panda_rightfinger")
-    assert (info.value.field, info.value.joint) == ("mimic", "panda_finger_joint2")
+        chain_from_urdf(_robot(_j2(type_=type_)), base_link="base", tip_links="l2")
+    assert (info.value.field, info.value.joint) == ("type", "j2")
+    assert "base_link='l2'" in str(info.value)
 
 
 # --- installed robots (benchmark extras) --------------------------------------------------

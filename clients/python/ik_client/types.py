@@ -313,6 +313,27 @@ class Effector:
     mode: EffectorMode
 
 
+@dataclass(frozen=True, slots=True)
+class Follower:
+    """Schema ``FollowerInfo``: a mimic joint, ``multiplier * leader + offset``; not a
+    DOF (not in ``q``), its value is in results' ``joints``."""
+
+    name: str
+    leader: str
+    multiplier: float
+    offset: float
+
+
+@dataclass(frozen=True, slots=True)
+class ModelWarning:
+    """Schema ``ModelWarning``: the chain's file read by a convention or a default."""
+
+    code: str
+    joint: str
+    field: str
+    message: str
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SolverOptions:
     """Schema ``SolverOptions``: the effective options of a session."""
@@ -350,6 +371,14 @@ def _effectors(d: dict[str, Any]) -> list[Effector]:
     return [Effector(x["name"], EffectorMode(x["mode"])) for x in d["effectors"]]
 
 
+def _followers(d: dict[str, Any]) -> list[Follower]:
+    return [Follower(x["name"], x["leader"], x["multiplier"], x["offset"]) for x in d["followers"]]
+
+
+def _warnings(d: dict[str, Any]) -> list[ModelWarning]:
+    return [ModelWarning(x["code"], x["joint"], x["field"], x["message"]) for x in d["warnings"]]
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ConventionsOut:
     """Schema ``ConventionsOut``: the coordinates a session speaks."""
@@ -373,6 +402,8 @@ class Session:
     n_dof: int
     dof: list[Dof]
     effectors: list[Effector]
+    followers: list[Follower]
+    warnings: list[ModelWarning]
     options: SolverOptions
     pose: Pose
     idle_ttl_s: float
@@ -386,6 +417,8 @@ class Session:
             n_dof=d["n_dof"],
             dof=_dofs(d),
             effectors=_effectors(d),
+            followers=_followers(d),
+            warnings=_warnings(d),
             options=SolverOptions.from_json(d["options"]),
             pose=Pose.from_json(d["pose"]),
             idle_ttl_s=d["idle_ttl_s"],
@@ -401,6 +434,8 @@ class SessionInfo:
     n_dof: int
     dof: list[Dof]
     effectors: list[Effector]
+    followers: list[Follower]
+    warnings: list[ModelWarning]
     options: SolverOptions
     pose: Pose
     counters: SessionCounters
@@ -418,6 +453,8 @@ class SessionInfo:
             n_dof=d["n_dof"],
             dof=_dofs(d),
             effectors=_effectors(d),
+            followers=_followers(d),
+            warnings=_warnings(d),
             options=SolverOptions.from_json(d["options"]),
             pose=Pose.from_json(d["pose"]),
             counters=SessionCounters(c["frames"], c["solved"], c["not_solved"]),

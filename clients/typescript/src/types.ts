@@ -324,6 +324,23 @@ export interface EffectorInfo {
   mode: EffectorMode;
 }
 
+/** Schema `FollowerInfo`: a mimic joint, `multiplier * leader + offset`; not a DOF (not in `q`),
+ * its value is in results' `joints`. */
+export interface FollowerInfo {
+  name: string;
+  leader: string;
+  multiplier: number;
+  offset: number;
+}
+
+/** Schema `ModelWarning`: the chain's file read by a convention or a default. */
+export interface ModelWarning {
+  code: "unlimited_by_convention" | "default_limit" | "mimic_narrows_leader" | "mimic_limits_ignored";
+  joint: string;
+  field: string;
+  message: string;
+}
+
 /** Schema `SolverOptions`: the effective options of a session. */
 export interface SolverOptions {
   position_tolerance_m: number;
@@ -345,6 +362,8 @@ export interface SessionCreated {
   n_dof: number;
   dof: DofInfo[];
   effectors: EffectorInfo[];
+  followers: FollowerInfo[];
+  warnings: ModelWarning[];
   options: SolverOptions;
   pose: Pose;
   idle_ttl_s: number;
@@ -364,6 +383,8 @@ export interface SessionInfo {
   n_dof: number;
   dof: DofInfo[];
   effectors: EffectorInfo[];
+  followers: FollowerInfo[];
+  warnings: ModelWarning[];
   options: SolverOptions;
   pose: Pose;
   counters: SessionCounters;
