@@ -10,9 +10,11 @@ things are:
     metric.py       the Gauss-Newton metric handed to the optimizer; null-space step
     targets.py      ``Target`` and its packed row
     options.py      ``IKOptions``, ``STREAM_DEFAULTS``
+    continuity.py   a stream's continuity policy (``Continuity``) and ``FrameStep``
     result.py       ``IKResult``, ``IKStatus``, ``EffectorError``
 """
 
+from .continuity import Continuity, FrameStep
 from .options import STREAM_DEFAULTS, IKOptions
 from .result import EffectorError, IKResult, IKStatus
 from .solver import IKData, IKSolver, StreamState, solve
@@ -31,9 +33,11 @@ __all__ = [
     "GIVEN_POSITION",
     "GIVEN_ROTATION",
     "STREAM_DEFAULTS",
+    "Continuity",
     "TARGET_PLACEHOLDER_ROW",
     "TARGET_ROW",
     "EffectorError",
+    "FrameStep",
     "IKData",
     "IKOptions",
     "IKResult",

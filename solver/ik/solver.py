@@ -29,6 +29,7 @@ from ..model import Chain
 from ..optim import Termination, register_objective
 from ..optim import codes as C
 from ..optim.minimize import pack_options
+from .continuity import NO_STEP, Continuity, FrameStep, largest_step, narrow_bounds
 from .frame import (
     SEED_NOT_FINITE,
     TARGETS_OK,
@@ -130,6 +131,11 @@ class IKSolver:
         # solve_frame's work space (it allocates nothing: see _jit.jit_leaf).
         self._scratch = np.empty(scratch_size(n, ei.shape[0]))
         self._ints = np.empty(3, dtype=np.int64)
+        self._largest_step: Callable[..., float] = largest_step
+        self._narrow_bounds: Callable[..., None] = narrow_bounds
+        # How far the last ``track`` frame moved (``continuity.FrameStep``).
+        self.last_step: FrameStep = NO_STEP
+        self._answered = False  # has ``track`` answered since the pose was set?
 
     # -- public API ------------------------------------------------------------
     def solve(
@@ -169,7 +175,10 @@ class IKSolver:
         """Solve the next frame of a stream, warm-started from the previous answer.
 
         The pose (and, with ``carry_hessian``, the BFGS matrix) carries over; the
-        posture pull, if any, is towards the previous pose.
+        posture pull, if any, is towards the previous pose. ``options.continuity``
+        decides what a frame whose target is not reachable nearby does (see
+        ``continuity``; the first frame after ``set_pose`` has no previous answer and
+        is solved as under REACH); ``last_step`` then says how far the answer moved.
         """
         opts = options or self.options
         h0 = self._h if opts.carry_hessian else None
@@ -178,18 +187,33 @@ class IKSolver:
         step = float(opts.null_space_step_rad)
         # ``q`` is public: check it as a seed (length, dtype, layout) every frame.
         q0 = self.check_seed(self.q)
-        result = self._frame(targets, q0, opts, rng, h0, step)
-        if not result.success and opts.global_fallback and math.isfinite(opts.restart_radius_rad):
+        # The first frame of a stream (after set_pose) has no previous answer to stay
+        # near: it is solved as REACH would.
+        smooth = opts.continuity is Continuity.SMOOTH and self._answered
+        box = float(opts.max_joint_step_rad) if smooth else 0.0
+        result = self._frame(targets, q0, opts, rng, h0, step, box)
+        if (
+            not smooth
+            and not result.success
+            and opts.global_fallback
+            and math.isfinite(opts.restart_radius_rad)
+        ):
             budget = opts.time_budget_us
             left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
             if left is None or left > 0.0:
-                wide = replace(opts, restart_radius_rad=math.inf, time_budget_us=left)
+                wide = replace(opts, restart_radius_rad=_GLOBAL_RADIUS, time_budget_us=left)
                 retry = self._frame(targets, q0, wide, rng, None, step)
                 if retry.success:
                     result = retry
         self.q = result.q.copy()
+        self._answered = True
         # A copy: the result's block is the caller's to keep (and to write to).
         self._h = result.inverse_hessian.copy() if opts.carry_hessian else None
+        largest = self._largest_step(result.q, q0)
+        if self._largest_step is largest_step:
+            self._largest_step = _compiled_entry(largest_step, (result.q, q0))
+        # 1e-9: under SMOOTH, (q0 + box) - q0 may round one ulp above the box.
+        self.last_step = FrameStep(largest, largest > opts.max_joint_step_rad + 1e-9)
         return result
 
     def set_pose(self, q: Vector) -> None:
@@ -201,6 +225,8 @@ class IKSolver:
         self.q = np.clip(self.check_seed(q), self.chain.lower, self.chain.upper)
         self._dd[DD_REST] = self.q
         self._h = None
+        self.last_step = NO_STEP
+        self._answered = False
 
     def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:
         """Pose errors of q against targets with the solver's tolerances (no solving)."""
@@ -298,6 +324,7 @@ class IKSolver:
         """Continue a stream from ``state`` (the rest pose is kept: see ``set_pose``)."""
         self.q = state.q
         self._h = state.inverse_hessian
+        self._answered = True
 
     # -- internals -------------------------------------------------------------
     def _packed_options(self, opts: IKOptions) -> _Packed:
@@ -335,6 +362,7 @@ class IKSolver:
         rng: np.random.Generator | None,
         h0: Matrix | None,
         null_space_step_rad: float,
+        box: float = 0.0,
     ) -> IKResult:
         task = self._task
         task.load(targets, opts)
@@ -351,6 +379,14 @@ class IKSolver:
         )
         if not (task.bounds_are_limits and task.every_effector_moves_all and task.active):
             task.set_free_bounds(q0)
+        if box > 0.0:
+            # SMOOTH: this frame's bounds are the limits within box of q0 (the next
+            # frame's load restores the limits: bounds_are_limits is off).
+            call_narrow = self._narrow_bounds
+            call_narrow(self._dd, q0, box)
+            if call_narrow is narrow_bounds:
+                self._narrow_bounds = _compiled_entry(narrow_bounds, (self._dd, q0, box))
+            task.bounds_are_limits = False
         packed = self._last_packed
         if packed is None or packed.options is not opts:
             packed = self._packed_options(opts)
@@ -431,6 +467,11 @@ class IKSolver:
 
 
 _REGISTERED = False
+# Restart radius of ``track``'s global fallback: a full turn either side of the seed
+# reaches every angle of a revolute joint. Not inf: the optimizer samples an unbounded
+# side within 10 x |seed| (it knows no joints), and each fallback on PR2's continuous
+# wrist then took the answer ten times further out (bench/tracking.py: 20,000 rad).
+_GLOBAL_RADIUS = 2.0 * math.pi
 
 
 def _compiled_entry(dispatcher: Any, args: tuple[Any, ...]) -> Callable[..., Any]:
