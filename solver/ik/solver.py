@@ -133,8 +133,7 @@ class IKSolver:
         self._ints = np.empty(3, dtype=np.int64)
         self._largest_step: Callable[..., float] = largest_step
         self._narrow_bounds: Callable[..., None] = narrow_bounds
-        # How far the last ``track`` frame moved (``continuity.FrameStep``).
-        self.last_step: FrameStep = NO_STEP
+        self.last_step: FrameStep = NO_STEP  # how far the last ``track`` frame moved
         self._answered = False  # has ``track`` answered since the pose was set?
 
     # -- public API ------------------------------------------------------------
@@ -175,10 +174,9 @@ class IKSolver:
         """Solve the next frame of a stream, warm-started from the previous answer.
 
         The pose (and, with ``carry_hessian``, the BFGS matrix) carries over; the
-        posture pull, if any, is towards the previous pose. ``options.continuity``
-        decides what a frame whose target is not reachable nearby does (see
-        ``continuity``; the first frame after ``set_pose`` has no previous answer and
-        is solved as under REACH); ``last_step`` then says how far the answer moved.
+        posture pull, if any, is towards the previous pose. ``options.continuity``: what
+        a frame whose target is not reachable nearby does (``continuity``; the first
+        after ``set_pose`` is solved as under REACH); ``last_step``: how far it moved.
         """
         opts = options or self.options
         h0 = self._h if opts.carry_hessian else None
@@ -192,12 +190,8 @@ class IKSolver:
         smooth = opts.continuity is Continuity.SMOOTH and self._answered
         box = float(opts.max_joint_step_rad) if smooth else 0.0
         result = self._frame(targets, q0, opts, rng, h0, step, box)
-        if (
-            not smooth
-            and not result.success
-            and opts.global_fallback
-            and math.isfinite(opts.restart_radius_rad)
-        ):
+        fallback = opts.global_fallback and math.isfinite(opts.restart_radius_rad)
+        if fallback and not smooth and not result.success:
             budget = opts.time_budget_us
             left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
             if left is None or left > 0.0:
@@ -212,7 +206,7 @@ class IKSolver:
         largest = self._largest_step(result.q, q0)
         if self._largest_step is largest_step:
             self._largest_step = _compiled_entry(largest_step, (result.q, q0))
-        # 1e-9: under SMOOTH, (q0 + box) - q0 may round one ulp above the box.
+        # + 1e-9: under SMOOTH, (q0 + box) - q0 may round one ulp above the box.
         self.last_step = FrameStep(largest, largest > opts.max_joint_step_rad + 1e-9)
         return result
 
@@ -379,9 +373,7 @@ class IKSolver:
         )
         if not (task.bounds_are_limits and task.every_effector_moves_all and task.active):
             task.set_free_bounds(q0)
-        if box > 0.0:
-            # SMOOTH: this frame's bounds are the limits within box of q0 (the next
-            # frame's load restores the limits: bounds_are_limits is off).
+        if box > 0.0:  # SMOOTH: the limits within box of q0 (reset by the next frame)
             call_narrow = self._narrow_bounds
             call_narrow(self._dd, q0, box)
             if call_narrow is narrow_bounds:
@@ -467,10 +459,9 @@ class IKSolver:
 
 
 _REGISTERED = False
-# Restart radius of ``track``'s global fallback: a full turn either side of the seed
-# reaches every angle of a revolute joint. Not inf: the optimizer samples an unbounded
-# side within 10 x |seed| (it knows no joints), and each fallback on PR2's continuous
-# wrist then took the answer ten times further out (bench/tracking.py: 20,000 rad).
+# ``track``'s global fallback samples a full turn either side of the seed (every angle of
+# a revolute joint). Not inf: the optimizer samples an unbounded side within 10 x |seed|,
+# so each fallback took PR2's continuous wrist ten times further (20,000 rad).
 _GLOBAL_RADIUS = 2.0 * math.pi
 
 
