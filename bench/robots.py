@@ -18,6 +18,9 @@ from pathlib import Path
 import numpy as np
 
 ROBOTS: tuple[str, ...] = ("panda", "ur5", "iiwa")
+# Two more arms for the tracking benchmark (bench/tracking.py): 7-DOF, both in
+# example-robot-data; not in ROBOTS, which bench/ik/'s tables and bars are about.
+TRACKING_ARMS: tuple[str, ...] = ("baxter_left", "pr2_right")
 
 # (distribution name, path inside the distribution, base link, tip link)
 # Tips are the flange frames, chosen so the chain has 7 (Panda, iiwa) / 6 (UR5) DOF:
@@ -44,6 +47,21 @@ _SOURCES: dict[str, tuple[str, str, str, str]] = {
         "rtbdata/xacro/kuka_description/kuka_lbr_iiwa/urdf/lbr_iiwa_14_r820.urdf",
         "base_link",
         "tool0",
+    ),
+    # Baxter's left arm from its mount on the torso to the gripper frame (s0 .. w2).
+    "baxter_left": (
+        "example-robot-data",
+        f"{_ERD}/baxter_description/urdf/baxter.urdf",
+        "left_arm_mount",
+        "left_gripper",
+    ),
+    # PR2's right arm from the torso lift link (the lift itself stays out) to the tool
+    # frame: forearm and wrist roll are continuous joints (no limits).
+    "pr2_right": (
+        "example-robot-data",
+        f"{_ERD}/pr2_description/urdf/pr2.urdf",
+        "torso_lift_link",
+        "r_gripper_tool_frame",
     ),
 }
 

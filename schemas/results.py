@@ -67,6 +67,8 @@ class FrameResult(StrictModel):
                     "restarts": 0,
                     "solve_us": 21.4,
                     "server_us": 160.2,
+                    "largest_step_rad": 0.0123,
+                    "jumped": False,
                 }
             ]
         }
@@ -95,6 +97,14 @@ class FrameResult(StrictModel):
     solve_us: float = Field(description="Time in the compiled solver [us]")
     server_us: float = Field(
         description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
+    )
+    largest_step_rad: float | None = Field(
+        description="Largest change of any joint from the previous answer of the session "
+        "(a planned clip: from the frame before) [rad] or [m]; null for one-shot solves"
+    )
+    jumped: bool = Field(
+        description="`largest_step_rad` is over the session's `max_joint_step_rad` (never "
+        "under `continuity: smooth`)"
     )
     bones: BonesOut | None = Field(
         default=None,
@@ -152,6 +162,8 @@ class CompactFrameResult(StrictModel):
                     "restarts": 0,
                     "solve_us": 21.4,
                     "server_us": 160.2,
+                    "largest_step_rad": 0.0123,
+                    "jumped": False,
                 }
             ]
         }
@@ -169,6 +181,14 @@ class CompactFrameResult(StrictModel):
     solve_us: float = Field(description="Time in the compiled solver [us]")
     server_us: float = Field(
         description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
+    )
+    largest_step_rad: float | None = Field(
+        description="Largest change of any joint from the previous answer of the session "
+        "(a planned clip: from the frame before) [rad] or [m]; null for one-shot solves"
+    )
+    jumped: bool = Field(
+        description="`largest_step_rad` is over the session's `max_joint_step_rad` (never "
+        "under `continuity: smooth`)"
     )
     bones: BonesOut | None = Field(
         default=None,

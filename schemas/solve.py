@@ -62,7 +62,23 @@ _OPTION_FIELDS: dict[str, dict[str, Any]] = {
         "lt": 0.5,
         "description": "Width of the limit band, as a fraction of each joint's range",
     },
+    "continuity": {
+        "description": "What a session frame does when its target cannot be reached near "
+        "the previous answer: `smooth` never moves a joint more than `max_joint_step_rad` "
+        "from the previous answer (such a frame answers `not_reached` with the closest pose "
+        "inside that step); `reach` solves every frame, jumping to another branch if it "
+        "must (the result says `jumped`). One-shot solves ignore it",
+    },
+    "max_joint_step_rad": {
+        "gt": 0.0,
+        "le": 1e3,
+        "description": "Per-frame step limit of `smooth` [rad] or [m]; under `reach` a "
+        "larger step is reported as `jumped`",
+    },
 }
+
+# A session's continuity policy (solver.ik.Continuity's values).
+ContinuityName = Literal["smooth", "reach"]
 
 
 class SolverOptions(StrictModel):
@@ -78,6 +94,8 @@ class SolverOptions(StrictModel):
     posture_weight: FiniteFloat = Field(**_OPTION_FIELDS["posture_weight"])
     limit_weight: FiniteFloat = Field(**_OPTION_FIELDS["limit_weight"])
     limit_margin: FiniteFloat = Field(**_OPTION_FIELDS["limit_margin"])
+    continuity: ContinuityName = Field(**_OPTION_FIELDS["continuity"])
+    max_joint_step_rad: FiniteFloat = Field(**_OPTION_FIELDS["max_joint_step_rad"])
 
 
 class OptionsPatch(StrictModel):
@@ -103,6 +121,10 @@ class OptionsPatch(StrictModel):
     posture_weight: FiniteFloat | None = Field(default=None, **_OPTION_FIELDS["posture_weight"])
     limit_weight: FiniteFloat | None = Field(default=None, **_OPTION_FIELDS["limit_weight"])
     limit_margin: FiniteFloat | None = Field(default=None, **_OPTION_FIELDS["limit_margin"])
+    continuity: ContinuityName | None = Field(default=None, **_OPTION_FIELDS["continuity"])
+    max_joint_step_rad: FiniteFloat | None = Field(
+        default=None, **_OPTION_FIELDS["max_joint_step_rad"]
+    )
 
 
 # --- targets and frames ----------------------------------------------------------------

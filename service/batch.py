@@ -291,7 +291,8 @@ def _solve_entries(
             except IKError as e:
                 out.append(solver_error(e))
                 continue
-            frame = convert.SolvedFrame(entry.frame_id, r, (time.perf_counter() - t0) * 1e6)
+            server_us = (time.perf_counter() - t0) * 1e6
+            frame = convert.SolvedFrame(entry.frame_id, r, server_us, session.solver.last_step)
             out.append(frame)
             solved.append(frame)
             session.frames += 1
@@ -325,7 +326,7 @@ def render(
             out.append({"session": session_id, "id": frame_id, "success": False, "error": error})
             continue
         assert isinstance(entry, Entry)
-        result = build(outcome.result, outcome.frame_id, outcome.server_us)
+        result = build(outcome.result, outcome.frame_id, outcome.server_us, outcome.step)
         view = entry.session.view
         chosen = view.bone_output if entry.bones is None else entry.bones
         if chosen is not None and convert.wants_bones(chosen):

@@ -29,7 +29,7 @@ from solver.ik import IKOptions, IKSolver
 from solver.ik import Target as SolverTarget
 from solver.path import PlannedPath, plan_path
 
-from .convert import ChainView, FrameJob, SolvedFrame
+from .convert import ChainView, FrameJob, SolvedFrame, plan_steps
 from .errors import (
     ServiceError,
     invalid_problem,
@@ -420,7 +420,8 @@ def _track_all(
     try:
         for frame_id, targets in jobs:
             r = solver.track(targets, options=options)
-            out.append(SolvedFrame(frame_id, r, (time.perf_counter() - t0) * 1e6))
+            server_us = (time.perf_counter() - t0) * 1e6
+            out.append(SolvedFrame(frame_id, r, server_us, solver.last_step))
             session.frames += 1
             session.solved += int(r.success)
     finally:
@@ -440,11 +441,13 @@ def _plan_all(
     the request and leaves the session's pose as it was)."""
     if session.closed:  # deleted while the plan waited for the planning thread
         raise not_found()
+    start = session.solver.q.copy()
     plan = plan_path(session.solver, [targets for _, targets in jobs], options=options)
     server_us = (time.perf_counter() - t0) * 1e6
+    steps = plan_steps(start, [r.q for r in plan.results], options.max_joint_step_rad)
     out = [
-        SolvedFrame(frame_id, r, server_us)
-        for (frame_id, _), r in zip(jobs, plan.results, strict=True)
+        SolvedFrame(frame_id, r, server_us, step)
+        for (frame_id, _), r, step in zip(jobs, plan.results, steps, strict=True)
     ]
     session.frames += len(plan.results)
     session.solved += sum(r.success for r in plan.results)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba.core import event
 
-from .ik import IKData, IKOptions, IKSolver, Target, pose_targets
+from .ik import Continuity, IKData, IKOptions, IKSolver, Target, pose_targets
 from .model import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
 from .model.examples import panda_arm
 from .path import plan_path
@@ -46,6 +46,9 @@ def _solve_and_track(mode: EffectorMode) -> None:
     q = chain.mid_limits() + 0.1
     solver.solve(pose_targets(chain, q))
     solver.track(pose_targets(chain, q + 0.01))
+    # The SMOOTH policy's bounds (ik/continuity.py).
+    smooth = IKOptions(time_budget_us=None, max_iter=50, continuity=Continuity.SMOOTH)
+    solver.track(pose_targets(chain, q + 0.02), options=smooth)
 
 
 def _plan() -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import time
 import warnings
+from typing import Any
 
 import numpy as np
 from roboticstoolbox.models.URDF.URDFRobot import URDF_file
@@ -30,12 +31,21 @@ SLIMIT = 100  # rtb default: cap on searches, further cut by the time budget
 _SHARE = 0.5
 
 
+def renumber_joints(ets: Any) -> None:
+    """Number an ETS's joints 0..n-1 along the chain. ``Robot.ets(start, end)`` keeps
+    each joint's index in the whole robot (PR2's right arm: 3..9), and ``ik_LM`` then
+    reads a q of the chain's length at those indexes: it failed every frame."""
+    for i, e in enumerate(e for e in ets if e.isjoint):
+        e.jindex = i
+
+
 class RtbIK:
     def __init__(self, robot: RobotSpec, method: str = "LM") -> None:
         with warnings.catch_warnings():  # rtb warns about deprecated helpers on load
             warnings.simplefilter("ignore")
             elinks, name, _ = URDF_file(io.StringIO(robot.kinematic_urdf_text()))
             self._ets = Robot(elinks, name=name).ets(start=robot.base_link, end=robot.tip_link)
+        renumber_joints(self._ets)
         self.joint_names = robot.joint_names
         self.lower, self.upper = robot.lower, robot.upper
         # rtb numbers the joints along the ETS, which is the chain order; check it really

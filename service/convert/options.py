@@ -74,4 +74,6 @@ def options_dict(o: IKOptions) -> dict[str, Any]:
         "posture_weight": o.posture_weight,
         "limit_weight": o.limit_weight,
         "limit_margin": o.limit_margin,
+        "continuity": o.continuity.value,
+        "max_joint_step_rad": o.max_joint_step_rad,
     }

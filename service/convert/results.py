@@ -8,11 +8,13 @@ layer (``service/solving.py``) returns typed ``SolvedFrame``s and never builds J
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any, NamedTuple
 
+import numpy as np
+
 import schemas as S
-from solver.ik import IKResult
+from solver.ik import FrameStep, IKResult
 from solver.path import PlannedPath
 
 
@@ -22,13 +24,16 @@ class SolvedFrame(NamedTuple):
     frame_id: int | None  # the client's id, echoed (None if it sent none)
     result: IKResult
     server_us: float  # request or message received -> this frame solved [us]
+    step: FrameStep | None = None  # from the session's previous answer (None: one-shot)
 
 
-# Renders one solved frame (result, frame id, server_us) as the answer a view asks for.
-ResultBuilder = Callable[[IKResult, int | None, float], dict[str, Any]]
+# Renders one solved frame (result, frame id, server_us, step) as the answer a view asks for.
+ResultBuilder = Callable[[IKResult, int | None, float, FrameStep | None], dict[str, Any]]
 
 
-def result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str, Any]:
+def result_dict(
+    r: IKResult, frame_id: int | None, server_us: float, step: FrameStep | None = None
+) -> dict[str, Any]:
     """A FrameResult as a JSON/MessagePack-ready dict (the hot path: no re-validation;
     tests check the shape against ``schemas.FrameResult``).
 
@@ -75,7 +80,21 @@ def result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str
         "restarts": r.restarts,
         "solve_us": r.solve_us,
         "server_us": server_us,
+        "largest_step_rad": None if step is None else step.largest_rad,
+        "jumped": False if step is None else step.jumped,
     }
+
+
+def plan_steps(start: np.ndarray, poses: Sequence[np.ndarray], limit: float) -> list[FrameStep]:
+    """Each planned frame's step from the frame before (the first: from ``start``, the
+    pose before the clip), a jump when over ``limit`` (as ``IKSolver.track`` reports)."""
+    steps = []
+    before = start
+    for q in poses:
+        largest = float(np.abs(q - before).max()) if q.size else 0.0
+        steps.append(FrameStep(largest, largest > limit + 1e-9))
+        before = q
+    return steps
 
 
 def plan_summary(plan: PlannedPath) -> dict[str, Any]:
@@ -88,7 +107,9 @@ def plan_summary(plan: PlannedPath) -> dict[str, Any]:
     }
 
 
-def compact_result_dict(r: IKResult, frame_id: int | None, server_us: float) -> dict[str, Any]:
+def compact_result_dict(
+    r: IKResult, frame_id: int | None, server_us: float, step: FrameStep | None = None
+) -> dict[str, Any]:
     """A CompactFrameResult (``?results=compact``): no ``joints`` by name and no
     per-effector errors, which a stream reading ``q`` does not need. About a third of
     a panda answer's bytes and less work to build and encode; tests check the shape
@@ -105,6 +126,8 @@ def compact_result_dict(r: IKResult, frame_id: int | None, server_us: float) -> 
         "restarts": r.restarts,
         "solve_us": r.solve_us,
         "server_us": server_us,
+        "largest_step_rad": None if step is None else step.largest_rad,
+        "jumped": False if step is None else step.jumped,
     }
 
 
@@ -121,4 +144,4 @@ def result_builder(view: S.ResultView) -> ResultBuilder:
 
 def render_frames(frames: Iterable[SolvedFrame], build: ResultBuilder) -> list[dict[str, Any]]:
     """The answers of solved frames, in order, as ``build`` renders them."""
-    return [build(f.result, f.frame_id, f.server_us) for f in frames]
+    return [build(f.result, f.frame_id, f.server_us, f.step) for f in frames]

@@ -337,7 +337,7 @@ class _Connection:
             self.client,
             may_inline=not self.backlog,
         )
-        result = self.build(solved.result, msg_id, solved.server_us)
+        result = self.build(solved.result, msg_id, solved.server_us, solved.step)
         view = self.session.view
         chosen = view.bone_output if bones is None else bones
         if chosen is not None and convert.wants_bones(chosen):

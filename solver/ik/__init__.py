@@ -13,9 +13,11 @@ things are:
     poles.py        pole targets: the shaping pass, the default pulled link
     pole_term.py    the pole term of the objective (compiled)
     options.py      ``IKOptions``, ``STREAM_DEFAULTS``
+    continuity.py   a stream's continuity policy (``Continuity``) and ``FrameStep``
     result.py       ``IKResult``, ``IKStatus``, ``EffectorError``
 """
 
+from .continuity import Continuity, FrameStep
 from .options import STREAM_DEFAULTS, IKOptions
 from .poles import default_pole_link, pole_node
 from .result import EffectorError, IKResult, IKStatus
@@ -37,9 +39,11 @@ __all__ = [
     "GIVEN_POSITION",
     "GIVEN_ROTATION",
     "STREAM_DEFAULTS",
+    "Continuity",
     "TARGET_PLACEHOLDER_ROW",
     "TARGET_ROW",
     "EffectorError",
+    "FrameStep",
     "IKData",
     "IKOptions",
     "IKResult",

@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 
 from .._jit import jit, jit_leaf
+from ..errors import InvalidProblem
+from ..model import Chain
 from ..model.layout import (
     ED_ERR_P,
     ED_ERR_R,
@@ -226,3 +228,18 @@ def report_only(data, q, out):  # type: ignore[no-untyped-def]
     if bad != -1:
         return bad, 0.0
     return bad, _report(data, q, errors)
+
+
+def raise_bad_target(chain: Chain, bad: int) -> None:
+    """Raise the ``InvalidProblem`` that ``solve_frame``'s "bad" code names (a seed with
+    NaN or inf, or the effector and part of a malformed target); nothing for TARGETS_OK."""
+    if bad == SEED_NOT_FINITE:
+        raise InvalidProblem("seed must be finite")
+    if bad >= 0:
+        name = chain.effectors[bad // 3].name
+        what = (
+            "numbers must be finite",
+            "rotation must be orthonormal with det +1",
+            "direction must not be zero",
+        )[bad % 3]
+        raise InvalidProblem(f"target for {name!r}: {what}")

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 from ..errors import InvalidProblem
 from ..optim import AnalyzerPolicy, MinimizeOptions
+from .continuity import Continuity
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -71,6 +72,13 @@ class IKOptions:
             BFGS updates (0: always). Near a singularity damped Gauss-Newton crawls
             (hundreds of iterations per frame, bench/ik/ part (c), iiwa); BFGS
             learns the missing curvature in a few steps. Streams use 8.
+        continuity: What a ``track`` frame may do when its target is not reachable near
+            the previous answer (``continuity.Continuity``): ``REACH`` solves it anyway,
+            jumping if it must; ``SMOOTH`` keeps every variable within
+            ``max_joint_step_rad`` of the previous answer and answers NOT_REACHED with
+            the closest pose inside that box. ``solve`` ignores it.
+        max_joint_step_rad: The per-frame step limit of ``SMOOTH``; under ``REACH`` a
+            larger step is reported as a jump (``IKSolver.last_step``).
         policy: The analyzer's table.
     """
 
@@ -97,14 +105,25 @@ class IKOptions:
     damping_redundant_only: bool = False
     damping_scale: float = 0.5
     global_fallback: bool = False
+    continuity: Continuity = Continuity.REACH
+    max_joint_step_rad: float = 0.1
     policy: AnalyzerPolicy = field(default_factory=AnalyzerPolicy.default)
 
     def __post_init__(self) -> None:
+        try:
+            # Frozen: the coercion of a plain string ("smooth") goes through object.
+            object.__setattr__(self, "continuity", Continuity(self.continuity))
+        except ValueError:
+            known = ", ".join(c.value for c in Continuity)
+            raise InvalidProblem(
+                f"continuity must be one of {known}, got {self.continuity!r}"
+            ) from None
         for name in (
             "position_tolerance_m",
             "rotation_tolerance_rad",
             "max_step_rad",
             "restart_radius_rad",
+            "max_joint_step_rad",
         ):
             v = getattr(self, name)
             if not v > 0.0 or math.isnan(v):
@@ -164,7 +183,14 @@ class IKOptions:
 # self-motion for it to steady, and with it the answer lagged behind the target at
 # singularities (UR5 at 1e-5 m / 1e-4 rad: 33 of 40 streams within twice the
 # reference's largest step; 39 without; bench/ik/ --parts c --streams 40).
+# SMOOTH at 0.1 rad per frame (6 rad/s at 60 Hz): on bench/tracking.py's streams the
+# REACH tracker stepped radians where the reference stepped hundredths (a redundant arm
+# drifted along its self-motion into a limit or a singular pose, then the global
+# fallback jumped); SMOOTH never steps more than the limit and answers NOT_REACHED on
+# the frames it cannot follow (figures: bench/RESULTS.md, tracking without pops).
 STREAM_DEFAULTS = IKOptions(
+    continuity=Continuity.SMOOTH,
+    max_joint_step_rad=0.1,
     restart_radius_rad=0.3,
     limit_weight=1e-3,
     limit_margin=0.02,

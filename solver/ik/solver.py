@@ -19,22 +19,23 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from functools import partial
-from typing import Any, NamedTuple, cast
+from typing import Any, NamedTuple
 
-import numba
 import numpy as np
 
+from .._jit import compiled_entry
 from ..arrays import Matrix, Vector
-from ..errors import DimensionMismatch, InvalidProblem
+from ..errors import DimensionMismatch
 from ..model import Chain
 from ..optim import Termination, register_objective
 from ..optim import codes as C
 from ..optim.minimize import pack_options
 from .blend import blend_rows, solve_blended
+from .continuity import NO_STEP, Continuity, FrameStep, largest_step, narrow_bounds
 from .frame import (
-    SEED_NOT_FINITE,
     TARGETS_OK,
     check_targets,
+    raise_bad_target,
     report_only,
     scratch_size,
     solve_frame,
@@ -136,6 +137,10 @@ class IKSolver:
         # solve_frame's work space (it allocates nothing: see _jit.jit_leaf).
         self._scratch = np.empty(scratch_size(n, ei.shape[0]))
         self._ints = np.empty(3, dtype=np.int64)
+        self._largest_step: Callable[..., float] = largest_step
+        self._narrow_bounds: Callable[..., None] = narrow_bounds
+        self.last_step: FrameStep = NO_STEP  # how far the last ``track`` frame moved
+        self._answered = False  # has ``track`` answered since the pose was set?
 
     # -- public API ------------------------------------------------------------
     def solve(
@@ -175,7 +180,9 @@ class IKSolver:
         """Solve the next frame of a stream, warm-started from the previous answer.
 
         The pose (and, with ``carry_hessian``, the BFGS matrix) carries over; the
-        posture pull, if any, is towards the previous pose.
+        posture pull, if any, is towards the previous pose. ``options.continuity``: what
+        a frame whose target is not reachable nearby does (``continuity``; the first
+        after ``set_pose`` is solved as under REACH); ``last_step``: how far it moved.
         """
         opts = options or self.options
         h0 = self._h if opts.carry_hessian else None
@@ -184,18 +191,29 @@ class IKSolver:
         step = float(opts.null_space_step_rad)
         # ``q`` is public: check it as a seed (length, dtype, layout) every frame.
         q0 = self.check_seed(self.q)
-        result = self._frame(targets, q0, opts, rng, h0, step)
-        if not result.success and opts.global_fallback and math.isfinite(opts.restart_radius_rad):
+        # The first frame of a stream (after set_pose) has no previous answer to stay
+        # near: it is solved as REACH would.
+        smooth = opts.continuity is Continuity.SMOOTH and self._answered
+        box = float(opts.max_joint_step_rad) if smooth else 0.0
+        result = self._frame(targets, q0, opts, rng, h0, step, box)
+        fallback = opts.global_fallback and math.isfinite(opts.restart_radius_rad)
+        if fallback and not smooth and not result.success:
             budget = opts.time_budget_us
             left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
             if left is None or left > 0.0:
-                wide = replace(opts, restart_radius_rad=math.inf, time_budget_us=left)
+                wide = replace(opts, restart_radius_rad=_GLOBAL_RADIUS, time_budget_us=left)
                 retry = self._frame(targets, q0, wide, rng, None, step)
                 if retry.success:
                     result = retry
         self.q = result.q.copy()
+        self._answered = True
         # A copy: the result's block is the caller's to keep (and to write to).
         self._h = result.inverse_hessian.copy() if opts.carry_hessian else None
+        largest = self._largest_step(result.q, q0)
+        if self._largest_step is largest_step:
+            self._largest_step = compiled_entry(largest_step, (result.q, q0))
+        # + 1e-9: under SMOOTH, (q0 + box) - q0 may round one ulp above the box.
+        self.last_step = FrameStep(largest, largest > opts.max_joint_step_rad + 1e-9)
         return result
 
     def set_pose(self, q: Vector) -> None:
@@ -207,6 +225,8 @@ class IKSolver:
         self.q = np.clip(self.check_seed(q), self.chain.lower, self.chain.upper)
         self._dd[DD_REST] = self.q
         self._h = None
+        self.last_step = NO_STEP
+        self._answered = False
 
     def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:
         """Pose errors of q against targets with the solver's tolerances (no solving)."""
@@ -255,7 +275,7 @@ class IKSolver:
         raw = np.full(packed.out_size, math.nan)
         q = self.check_seed(q)
         bad, measure = report_only(self._data, q, raw)
-        self._raise_bad_target(bad)
+        raise_bad_target(self.chain, bad)
         ok = measure <= 1.0
         return IKResult(
             q,
@@ -304,6 +324,7 @@ class IKSolver:
         """Continue a stream from ``state`` (the rest pose is kept: see ``set_pose``)."""
         self.q = state.q
         self._h = state.inverse_hessian
+        self._answered = True
 
     # -- internals -------------------------------------------------------------
     def _packed_options(self, opts: IKOptions) -> _Packed:
@@ -342,6 +363,7 @@ class IKSolver:
         rng: np.random.Generator | None,
         h0: Matrix | None,
         null_space_step_rad: float,
+        box: float = 0.0,
     ) -> IKResult:
         task = self._task
         task.load(targets, opts)
@@ -360,6 +382,12 @@ class IKSolver:
         )
         if not (task.bounds_are_limits and task.every_effector_moves_all and task.active):
             task.set_free_bounds(q0)
+        if box > 0.0:  # SMOOTH: the limits within box of q0 (reset by the next frame)
+            call_narrow = self._narrow_bounds
+            call_narrow(self._dd, q0, box)
+            if call_narrow is narrow_bounds:
+                self._narrow_bounds = compiled_entry(narrow_bounds, (self._dd, q0, box))
+            task.bounds_are_limits = False
         packed = self._last_packed
         if packed is None or packed.options is not opts:
             packed = self._packed_options(opts)
@@ -369,7 +397,7 @@ class IKSolver:
         if self._n == 0:
             # An all-fixed chain: nothing to solve, only errors to report.
             bad, measure = report_only(self._data, q0, out)
-            self._raise_bad_target(bad)
+            raise_bad_target(self.chain, bad)
             ok = measure <= 1.0
             return IKResult(
                 q0.copy(),
@@ -417,9 +445,9 @@ class IKSolver:
             solved = usual(*args)
         bad, status, code, nit, nfev, npass, nrest, elapsed = solved
         if call is solve_frame:
-            self._solve_call = _compiled_entry(solve_frame, args)
+            self._solve_call = compiled_entry(solve_frame, args)
         if bad != TARGETS_OK:
-            self._raise_bad_target(bad)
+            raise_bad_target(self.chain, bad)
         # tuple.__new__ directly: the NamedTuple's generated __new__ is Python code.
         return _tuple_new(
             IKResult,
@@ -437,35 +465,12 @@ class IKSolver:
             ),
         )
 
-    def _raise_bad_target(self, bad: int) -> None:
-        if bad == SEED_NOT_FINITE:
-            raise InvalidProblem("seed must be finite")
-        if bad >= 0:
-            name = self.chain.effectors[bad // 3].name
-            what = (
-                "numbers must be finite",
-                "rotation must be orthonormal with det +1",
-                "direction must not be zero",
-            )[bad % 3]
-            raise InvalidProblem(f"target for {name!r}: {what}")
-
 
 _REGISTERED = False
-
-
-def _compiled_entry(dispatcher: Any, args: tuple[Any, ...]) -> Callable[..., Any]:
-    """The compiled overload of ``dispatcher`` for these arguments' types, called
-    directly: skips the dispatcher's per-call type resolution (~0.3 us of a ~20 us
-    solve). Only for callers whose argument types never change, as an IKSolver's
-    (its arrays are its own; seeds and H pass ``check_seed`` / the H check, which
-    fix dtype, layout and writeability). The dispatcher itself if there is no such
-    overload (``NUMBA_DISABLE_JIT``).
-    """
-    overloads = getattr(dispatcher, "overloads", None)
-    if overloads is None:
-        return cast(Callable[..., Any], dispatcher)
-    compiled = overloads.get(tuple(numba.typeof(a) for a in args))
-    return cast(Callable[..., Any], dispatcher if compiled is None else compiled.entry_point)
+# ``track``'s global fallback samples a full turn either side of the seed (every angle of
+# a revolute joint). Not inf: the optimizer samples an unbounded side within 10 x |seed|,
+# so each fallback took PR2's continuous wrist ten times further (20,000 rad).
+_GLOBAL_RADIUS = 2.0 * math.pi
 
 
 def _register_once(data: tuple[np.ndarray, ...]) -> None:

@@ -72,10 +72,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
-from ..ik import IKOptions, IKResult, IKSolver, StreamState, Target
+from ..ik import Continuity, IKOptions, IKResult, IKSolver, StreamState, Target
 from .kernels import project_onto
 from .keyframes import plan_keyed
 from .options import PathOptions, PlannedPath
@@ -95,6 +96,10 @@ def plan_path(
     carried state as they were. ``options`` (default: the solver's) give the
     tolerances, and the tracker's settings."""
     opts = options or solver.options
+    if opts.continuity is not Continuity.REACH:
+        # The plan chooses among every frame's answers for the smallest largest step;
+        # its tracker must answer every frame it can (a SMOOTH tracker would not).
+        opts = replace(opts, continuity=Continuity.REACH)
     popts = path_options or PathOptions()
     start = solver.check_seed(solver.q).copy()
     carried = solver.stream_state()

@@ -77,8 +77,10 @@ def test_all_joints_at_their_limits(client: TestClient, arm: Created) -> None:
     assert_inside_limits(arm, result)
     # A target that needs every joint at a limit: shoulder.z = 3.1, shoulder.y = 1.5,
     # elbow = 2.6, computed by forward kinematics through a one-frame round trip.
-    # The stream defaults pull gently away from the limits (limit_weight): off here.
-    r = client.patch(f"/v1/sessions/{arm.id}", json={"limit_weight": 0.0}, headers=arm.headers)
+    # The stream defaults pull gently away from the limits (limit_weight): off here; and
+    # the two corners are one frame apart only under REACH (smooth moves 0.1 rad a frame).
+    patch = {"limit_weight": 0.0, "continuity": "reach"}
+    r = client.patch(f"/v1/sessions/{arm.id}", json=patch, headers=arm.headers)
     assert r.status_code == 200
     lower = [d["lower"] for d in arm.body["dof"]]
     for corner in (upper, lower):

@@ -38,6 +38,13 @@ class Status(enum.StrEnum):
     NONFINITE = "nonfinite"
 
 
+class Continuity(enum.StrEnum):
+    """A session's continuity policy (schema ``SolverOptions.continuity``)."""
+
+    SMOOTH = "smooth"  # never step a joint more than max_joint_step_rad per frame
+    REACH = "reach"  # solve every frame, jumping to another branch if it must
+
+
 class EffectorMode(enum.StrEnum):
     POSITION = "position"
     POSE = "pose"
@@ -149,6 +156,8 @@ class SolverOptionsPatch(TypedDict, total=False):
     posture_weight: float
     limit_weight: float
     limit_margin: float
+    continuity: Continuity | str
+    max_joint_step_rad: float
 
 
 # A chain is one of the schema's three formats (HierarchyChain, UrdfChain, ExampleChain),
@@ -193,6 +202,10 @@ class FrameResult:
     restarts: int
     solve_us: float
     server_us: float
+    # Largest joint step from the session's previous answer (None: a one-shot solve) and
+    # whether it is over the session's ``max_joint_step_rad`` (a jump).
+    largest_step_rad: float | None = None
+    jumped: bool = False
     # Schema ``BonesOut`` as sent: {"local": {bone: {w,x,y,z}}, "world": {bone: {...}}}.
     bones: dict[str, Any] | None = None
 
@@ -215,6 +228,8 @@ class FrameResult:
             restarts=d["restarts"],
             solve_us=d["solve_us"],
             server_us=d["server_us"],
+            largest_step_rad=d["largest_step_rad"],
+            jumped=d["jumped"],
             bones=d.get("bones"),
         )
 
@@ -348,10 +363,14 @@ class SolverOptions:
     posture_weight: float
     limit_weight: float
     limit_margin: float
+    continuity: Continuity
+    max_joint_step_rad: float
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> SolverOptions:
-        return cls(**{name: d[name] for name in cls.__dataclass_fields__})
+        values = {name: d[name] for name in cls.__dataclass_fields__}
+        values["continuity"] = Continuity(values["continuity"])
+        return cls(**values)
 
 
 @dataclass(frozen=True, slots=True)

@@ -29,6 +29,11 @@ export type Status = (typeof Status)[keyof typeof Status];
 
 export type EffectorMode = "position" | "pose" | "aim";
 
+/** A session's continuity policy: `smooth` never steps a joint more than
+ * `max_joint_step_rad` per frame; `reach` solves every frame, jumping if it must. */
+export const Continuity = { Smooth: "smooth", Reach: "reach" } as const;
+export type Continuity = (typeof Continuity)[keyof typeof Continuity];
+
 /** How a stream's messages travel: JSON text or MessagePack binary messages. */
 export const Encoding = { Json: "json", MessagePack: "msgpack" } as const;
 export type Encoding = (typeof Encoding)[keyof typeof Encoding];
@@ -131,6 +136,8 @@ export interface OptionsPatch {
   posture_weight?: number | null;
   limit_weight?: number | null;
   limit_margin?: number | null;
+  continuity?: Continuity | null;
+  max_joint_step_rad?: number | null;
 }
 
 /** Schema `OriginSpec`. */
@@ -282,6 +289,10 @@ export interface CompactFrameResult {
   restarts: number;
   solve_us: number;
   server_us: number;
+  /** Largest joint step from the session's previous answer; null for one-shot solves. */
+  largest_step_rad: number | null;
+  /** `largest_step_rad` is over the session's `max_joint_step_rad` (a jump). */
+  jumped: boolean;
   bones?: BonesOut | null;
 }
 
@@ -353,6 +364,8 @@ export interface SolverOptions {
   posture_weight: number;
   limit_weight: number;
   limit_margin: number;
+  continuity: Continuity;
+  max_joint_step_rad: number;
 }
 
 /** Schema `SessionCreated`: `token` is shown only here. */

@@ -118,6 +118,8 @@ const DECLARED: Record<string, string[]> = {
     posture_weight: true,
     limit_weight: true,
     limit_margin: true,
+    continuity: true,
+    max_joint_step_rad: true,
   }),
   SolverOptions: k<SolverOptions>({
     position_tolerance_m: true,
@@ -130,6 +132,8 @@ const DECLARED: Record<string, string[]> = {
     posture_weight: true,
     limit_weight: true,
     limit_margin: true,
+    continuity: true,
+    max_joint_step_rad: true,
   }),
   OriginSpec: k<OriginSpec>({ translation: true, rotation: true }),
   JointSpec: k<JointSpec>({
@@ -211,6 +215,8 @@ const DECLARED: Record<string, string[]> = {
     restarts: true,
     solve_us: true,
     server_us: true,
+    largest_step_rad: true,
+    jumped: true,
     bones: true,
   }),
   FrameResult: k<FrameResult>({
@@ -227,6 +233,8 @@ const DECLARED: Record<string, string[]> = {
     restarts: true,
     solve_us: true,
     server_us: true,
+    largest_step_rad: true,
+    jumped: true,
     bones: true,
   }),
   PlanSummary: k<PlanSummary>({ largest_step_rad: true, tracked_largest_step_rad: true, candidates: true, plan_us: true }),

@@ -1,0 +1,175 @@
+"""A stream's continuity policy (solver/ik/continuity.py): what ``track`` does when a
+target is not reachable near the previous answer, and what each frame reports."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from solver.errors import InvalidProblem
+from solver.ik import STREAM_DEFAULTS, Continuity, IKOptions, IKSolver, IKStatus, Target
+from solver.model import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from solver.model.examples import panda_arm
+from solver.model.forward import effector_poses
+from tests.solver.helpers import joint_stream
+
+# No time budget: what a frame finds must not depend on how busy the machine is.
+UNTIMED = replace(STREAM_DEFAULTS, time_budget_us=None)
+SMOOTH = replace(UNTIMED, continuity=Continuity.SMOOTH, max_joint_step_rad=0.1)
+REACH = replace(UNTIMED, continuity=Continuity.REACH, max_joint_step_rad=0.1)
+
+
+def dial() -> Chain:
+    """One revolute joint in [-3, 3] turning a 1 m link: the target at angle -2.9 from
+    q = 2.9 needs a 5.8 rad turn (the short way, through +-pi, is outside the limits)."""
+    joints = [
+        Joint(
+            name="turn",
+            parent="world",
+            child="link",
+            kind=JointKind.REVOLUTE,
+            axis=np.array([0.0, 0.0, 1.0]),
+            lower=(-3.0,),
+            upper=(3.0,),
+        ),
+        Joint(
+            name="tip",
+            parent="link",
+            child="hand",
+            kind=JointKind.FIXED,
+            origin=Transform(np.array([1.0, 0.0, 0.0])),
+        ),
+    ]
+    return build_chain(joints, [Effector(name="hand", link="hand", mode=EffectorMode.POSITION)])
+
+
+def at_angle(a: float) -> list[Target]:
+    return [Target(effector="hand", position=np.array([math.cos(a), math.sin(a), 0.0]))]
+
+
+def test_reach_jumps_to_the_other_branch_and_says_so() -> None:
+    solver = IKSolver(dial(), REACH)
+    solver.set_pose(np.array([2.9]))
+    r = solver.track(at_angle(-2.9))
+    assert r.status is IKStatus.SOLVED
+    assert r.q[0] == pytest.approx(-2.9, abs=1e-3)
+    assert solver.last_step.jumped
+    assert solver.last_step.largest_rad == pytest.approx(5.8, abs=1e-3)
+
+
+def test_smooth_answers_not_reached_with_the_closest_pose_within_its_step() -> None:
+    solver = IKSolver(dial(), SMOOTH)
+    solver.set_pose(np.array([2.9]))
+    near = solver.track(at_angle(2.85))
+    assert near.success
+    r = solver.track(at_angle(-2.9))
+    assert r.status is IKStatus.NOT_REACHED
+    # The closest pose to the target within 0.1 rad of the answer near 2.85: the
+    # box's edge.
+    assert r.q[0] == pytest.approx(near.q[0] + 0.1, abs=1e-9)
+    assert not solver.last_step.jumped
+    assert solver.last_step.largest_rad <= 0.1 + 1e-9
+    # The next frame's box is around 2.95: the limit, 3.0, is as close as it gets.
+    r = solver.track(at_angle(-2.9))
+    assert r.status is IKStatus.NOT_REACHED
+    assert r.q[0] == pytest.approx(3.0, abs=1e-6)
+    # The stream goes on from there: a reachable target near it is solved again.
+    r = solver.track(at_angle(2.95))
+    assert r.status is IKStatus.SOLVED
+    assert r.q[0] == pytest.approx(2.95, abs=1e-3)
+
+
+def test_the_first_frame_after_set_pose_has_no_step_limit() -> None:
+    # No previous answer to stay near: a session's first target may be anywhere.
+    solver = IKSolver(dial(), SMOOTH)
+    solver.set_pose(np.array([2.9]))
+    r = solver.track(at_angle(-2.9))
+    assert r.status is IKStatus.SOLVED
+    assert solver.last_step.jumped
+
+
+def test_a_small_step_is_no_jump_under_either_policy() -> None:
+    for options in (SMOOTH, REACH):
+        solver = IKSolver(dial(), options)
+        solver.set_pose(np.array([0.5]))
+        r = solver.track(at_angle(0.55))
+        assert r.success
+        assert solver.last_step.largest_rad == pytest.approx(0.05, abs=1e-3)
+        assert not solver.last_step.jumped
+
+
+def panda_stream_into_a_limit(frames: int) -> tuple[Chain, np.ndarray]:
+    """A panda pose stream whose reference path drives joint 4 (the elbow) from the
+    middle of its range to its upper limit and keeps pushing there (clipped)."""
+    chain = panda_arm()
+    q0 = chain.mid_limits()
+    path = np.repeat(q0[None, :], frames, axis=0)
+    path[:, 3] = np.linspace(q0[3], chain.upper[3] + 0.3, frames)
+    path[:, 0] += 0.4 * np.sin(np.linspace(0.0, 3.0, frames))
+    return chain, np.clip(path, chain.lower, chain.upper)
+
+
+def test_smooth_holds_its_step_limit_on_a_stream_into_a_limit() -> None:
+    chain, path = panda_stream_into_a_limit(240)
+    fast = path[::4]  # four times the pace: the reference itself steps up to ~0.06 rad
+    solver = IKSolver(chain, replace(SMOOTH, max_joint_step_rad=0.03))
+    solver.set_pose(fast[0])
+    before = fast[0]
+    worst = 0.0
+    for q in fast:
+        pose = effector_poses(chain, q)[0]
+        r = solver.track([Target(effector="tool", position=pose[:3, 3], rotation=pose[:3, :3])])
+        step = float(np.abs(r.q - before).max())
+        assert step == pytest.approx(solver.last_step.largest_rad)
+        worst = max(worst, step)
+        assert not np.any(r.q < chain.lower) and not np.any(r.q > chain.upper)
+        before = r.q
+    assert worst <= 0.03 + 1e-9
+
+
+def closest_to_a_limit(options: IKOptions, path: np.ndarray) -> tuple[float, float]:
+    """Over a panda pose stream along ``path``: the answers' smallest distance to a
+    limit (fraction of the range) and their largest step."""
+    chain = panda_arm()
+    solver = IKSolver(chain, options)
+    solver.set_pose(path[0])
+    span = chain.upper - chain.lower
+    closest, worst, before = math.inf, 0.0, path[0]
+    for q in path:
+        pose = effector_poses(chain, q)[0]
+        r = solver.track([Target(effector="tool", position=pose[:3, 3], rotation=pose[:3, :3])])
+        assert r.success
+        room = np.minimum(r.q - chain.lower, chain.upper - r.q) / span
+        closest = min(closest, float(room.min()))
+        worst = max(worst, float(np.abs(r.q - before).max()))
+        before = r.q
+    return closest, worst
+
+
+def test_the_null_space_step_keeps_a_redundant_arm_off_the_limit_its_stream_drifts_into() -> None:
+    # A 600-frame panda pose stream (bench/ik/'s generator, seed 2) on which the
+    # tracker's self-motion drifts into a limit unless the null-space step pulls it
+    # towards the rest pose (the stream's first pose).
+    path = joint_stream(panda_arm(), 2, 600)
+    tight = replace(UNTIMED, position_tolerance_m=1e-5, rotation_tolerance_rad=1e-4)
+    reference = float(np.abs(np.diff(path, axis=0)).max())
+    closest, worst = closest_to_a_limit(tight, path)
+    assert closest > 0.05
+    assert worst <= 2.0 * reference
+    # Without it: at the limit under SMOOTH; in the limit band, then a jump, under REACH.
+    drifting = replace(tight, null_space_step_rad=0.0)
+    assert closest_to_a_limit(drifting, path)[0] < 0.005
+    closest, worst = closest_to_a_limit(replace(drifting, continuity=Continuity.REACH), path)
+    assert closest < 0.02
+    assert worst > 1.0
+
+
+def test_continuity_is_checked() -> None:
+    assert IKOptions(continuity="smooth").continuity is Continuity.SMOOTH  # type: ignore[arg-type]
+    with pytest.raises(InvalidProblem, match="continuity"):
+        IKOptions(continuity="jump")  # type: ignore[arg-type]
+    with pytest.raises(InvalidProblem, match="max_joint_step_rad"):
+        IKOptions(max_joint_step_rad=0.0)
