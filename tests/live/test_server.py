@@ -292,7 +292,14 @@ _EDGE_OF_REACH = {
 def _slower_session(server: Server) -> tuple[str, dict[str, str]]:
     """A session whose unreachable frames each take their whole 50 ms: restarts until
     the budget is spent."""
-    options = {"time_budget_us": 50_000, "max_iter": 100_000, "max_restarts": 10_000}
+    # continuity "reach": a smooth session keeps its restarts within one step of the
+    # last answer and gives up far sooner; this test needs frames that use their budget.
+    options = {
+        "time_budget_us": 50_000,
+        "max_iter": 100_000,
+        "max_restarts": 10_000,
+        "continuity": "reach",
+    }
     r = httpx.post(
         f"{server.base}/v1/sessions",
         json={"chain": PANDA, "options": options},

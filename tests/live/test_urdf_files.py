@@ -36,7 +36,9 @@ def _create(
     chain = {"format": "urdf", "urdf": urdf, "base_link": base, "tip_links": tips, **kw}
     body: dict[str, Any] = {"chain": chain}
     if budget_us is not None:
-        body["options"] = {"time_budget_us": budget_us}
+        # continuity "reach": each frame is an independent random pose, not a stream
+        # (a smooth session, the default, would move at most 0.1 rad per frame).
+        body["options"] = {"time_budget_us": budget_us, "continuity": "reach"}
     return httpx.post(f"{server.base}/v1/sessions", json=body, timeout=TIMEOUT_S)
 
 
