@@ -51,8 +51,6 @@ _SOLVER_DIR = Path(__file__).resolve().parent
 _NOT_COMPILED = frozenset(
     {
         "precompile.py",
-        "ik/blend.py",
-        "ik/poles.py",
         "model/bones.py",
         "model/bvh.py",
         "model/examples.py",

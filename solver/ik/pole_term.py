@@ -13,7 +13,7 @@ rotation leaves its origin where it is: its column is zero).
 from __future__ import annotations
 
 from .._jit import jit_inline
-from ..model.layout import ND_AXIS, ND_R, ND_T, NI_DOF, NI_KIND, NI_PARENT, NODE_ROTATION
+from ..model.layout import ND_JAXIS, ND_R, ND_T, NI_DOF, NI_KIND, NI_PARENT, NODE_ROTATION
 
 POLE_WIDTH = 5  # node, weight, point (3)
 POLE_NODE = 0
@@ -49,9 +49,11 @@ def pole_terms(q, g, need_grad, ni, nd, misc, start):  # type: ignore[no-untyped
         while j >= 0:
             d = ni[j, NI_DOF]
             if d >= 0:
-                ux = nd[j, ND_AXIS]
-                uy = nd[j, ND_AXIS + 1]
-                uz = nd[j, ND_AXIS + 2]
+                # The Jacobian's axis (rate x axis): a mimic joint moves at its
+                # multiplier times its leader's variable (kinematics.world_axis).
+                ux = nd[j, ND_JAXIS]
+                uy = nd[j, ND_JAXIS + 1]
+                uz = nd[j, ND_JAXIS + 2]
                 r = ND_R
                 wx = nd[j, r] * ux + nd[j, r + 1] * uy + nd[j, r + 2] * uz
                 wy = nd[j, r + 3] * ux + nd[j, r + 4] * uy + nd[j, r + 5] * uz

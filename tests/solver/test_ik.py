@@ -29,8 +29,9 @@ from solver import (
 )
 from solver.ik import STREAM_DEFAULTS, IKResult, pose_targets
 from solver.ik.frame import solve_frame
-from solver.ik.kinematics import DD_HI, DD_LO, ik_objective
+from solver.ik.kinematics import DD_HI, DD_LO, MISC_SIZE, ik_objective
 from solver.ik.metric import ik_metric
+from solver.ik.pole_term import POLE_NODE, POLE_POINT, POLE_WEIGHT
 from solver.model.examples import humanoid_arm, panda_arm, tail, two_arm_torso
 from solver.model.forward import effector_poses
 
@@ -55,6 +56,44 @@ def test_gradient_matches_central_differences(name: str, posture: float, limit: 
         q = rng.uniform(chain.lower, chain.upper)
         g = np.zeros(chain.n_dof)
         ik_objective(q, g, True, data)
+        fd = np.zeros_like(g)
+        for i in range(chain.n_dof):
+            h = 1e-6
+            qp, qm = q.copy(), q.copy()
+            qp[i] += h
+            qm[i] -= h
+            fd[i] = (
+                ik_objective(qp, np.zeros_like(g), False, data)
+                - ik_objective(qm, np.zeros_like(g), False, data)
+            ) / (2 * h)
+        assert_allclose(g, fd, rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize("name", sorted(CHAINS))
+def test_gradient_with_a_pole_matches_central_differences(name: str) -> None:
+    """The pole term's gradient (solver.ik.pole_term), mimic joints included: a
+    follower above the pulled link moves it at its multiplier times the leader."""
+    chain = CHAINS[name]()
+    rng = np.random.default_rng(12)
+    solver = IKSolver(chain)
+    targets = pose_targets(chain, rng.uniform(chain.lower, chain.upper))
+    data = solver.load_frame(targets, chain.mid_limits())
+    misc = data[5]
+    pulled = chain.compiled.link_node[chain.effectors[-1].link]
+    row = MISC_SIZE + 1
+    misc[MISC_SIZE] = 1.0  # one pole, on the last effector's link
+    misc[row + POLE_NODE] = pulled
+    misc[row + POLE_WEIGHT] = 0.7
+    misc[row + POLE_POINT : row + POLE_POINT + 3] = rng.normal(size=3)
+    without = np.zeros(chain.n_dof)
+    for _ in range(3):
+        q = rng.uniform(chain.lower, chain.upper)
+        g = np.zeros(chain.n_dof)
+        ik_objective(q, g, True, data)
+        misc[MISC_SIZE] = 0.0
+        ik_objective(q, without, True, data)
+        misc[MISC_SIZE] = 1.0
+        assert np.any(np.abs(g - without) > 1e-6)  # the pole term is on
         fd = np.zeros_like(g)
         for i in range(chain.n_dof):
             h = 1e-6
