@@ -22,7 +22,7 @@ from loadtest.cluster import RedisServer
 from service.config import Settings
 from service.redis_store import RedisSessionStore
 
-from .helpers import Created, create
+from .helpers import Created, create, hand_frame
 
 
 @pytest.fixture(scope="module")
@@ -112,3 +112,43 @@ def test_put_pose_racing_another_worker_is_applied_not_a_500(workers: Workers) -
     stored = _in_redis(workers, s)
     assert stored["pose"]["q"] == pytest.approx(q)
     assert stored["options"]["max_iter"] == 9  # B's change is kept too
+
+
+def _entry(s: Created, frame_id: int, y: float) -> dict[str, Any]:
+    return {"session": s.id, "token": s.token, **hand_frame(frame_id, y=y)}
+
+
+def _batch(client: TestClient, entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    r = client.post("/v1/batch", json={"frames": entries})
+    assert r.status_code == 200, r.text
+    results: list[dict[str, Any]] = r.json()["results"]
+    return results
+
+
+def test_a_batch_is_stored_and_a_resent_batch_gets_its_stored_answers(workers: Workers) -> None:
+    a, b = workers()
+    s1, s2 = create(a), create(a)
+    sent = [_entry(s1, 1, 0.1), _entry(s2, 1, 0.1), _entry(s1, 2, 0.11)]
+    first = _batch(a, sent)
+    assert all("result" in r for r in first), first
+    stored = _in_redis(workers, s1)
+    assert stored["counters"]["frames"] == 2
+    assert stored["pose"]["q"] == pytest.approx(first[2]["result"]["q"])
+    # The same batch to another worker (a client retrying after a failover): the answers
+    # stored, not a second solve.
+    again = _batch(b, sent)
+    assert [r["result"]["q"] for r in again] == [r["result"]["q"] for r in first]
+    assert _in_redis(workers, s1)["counters"]["frames"] == 2
+
+
+def test_a_batch_racing_another_worker_is_solved_again_from_its_frame(workers: Workers) -> None:
+    a, b = workers()
+    s = create(a)
+    _batch(a, [_entry(s, 1, 0.1)])  # worker A holds the session
+    r = b.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(2, y=0.11), headers=s.headers)
+    assert r.status_code == 200, r.text
+    (answer,) = _batch(a, [_entry(s, 3, 0.12)])
+    assert "result" in answer, answer
+    stored = _in_redis(workers, s)
+    assert stored["counters"]["frames"] == 3
+    assert stored["pose"]["q"] == pytest.approx(answer["result"]["q"])
