@@ -268,7 +268,8 @@ class RedisSessionStore(SessionStore):
         session.solver.restore(StreamState(record.q, record.inverse_hessian))
         session.frames, session.solved = record.frames, record.solved
         session.version = int(stored[b"v"])
-        session.answers = {int(k): unpack_answer(v) for k, v in answers.items()}
+        followers = session.view.chain.followers
+        session.answers = {int(k): unpack_answer(v, followers) for k, v in answers.items()}
 
     async def remove(self, session_id: str) -> Session | None:
         session = self._sessions.pop(session_id, None)
