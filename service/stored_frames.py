@@ -34,7 +34,8 @@ KEPT_ANSWERS = 64
 
 
 def jobs_digest(jobs: Sequence[FrameJob]) -> bytes:
-    """16 bytes that change when any frame's id or targets change."""
+    """16 bytes that change when any frame's id or targets change: each target's parts
+    (the packed row), its blend weights and its pole (which the row does not hold)."""
     h = hashlib.blake2b(digest_size=16)
     for frame_id, targets in jobs:
         h.update(str(frame_id).encode())
@@ -42,6 +43,15 @@ def jobs_digest(jobs: Sequence[FrameJob]) -> bytes:
             h.update(t.effector.encode("utf-8", "surrogatepass"))
             h.update(t.given.to_bytes(2, "little"))
             h.update(t.packed.tobytes())
+            h.update(np.array([t.position_weight, t.rotation_weight]).tobytes())
+            if t.pole is None:
+                h.update(b"\x00")
+            else:
+                h.update(b"\x01" + np.asarray(t.pole.point, dtype=np.float64).tobytes())
+                link = t.pole.link
+                h.update(
+                    b"\x00" if link is None else b"\x01" + link.encode("utf-8", "surrogatepass")
+                )
     return h.digest()
 
 

@@ -5,6 +5,7 @@ state continues the stream exactly where it was."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -36,9 +37,10 @@ def _panda() -> convert.ChainView:
     return convert.chain_from_spec(body.chain, Settings(), body.conventions, body.bones)
 
 
-def _targets(view: convert.ChainView, x: float) -> list[Target]:
+def _targets(view: convert.ChainView, x: float, **extra: Any) -> list[Target]:
+    position = {"x": x, "y": 0.1, "z": 0.45}
     frame = S.Target.model_validate(
-        {"effector": "tool", "position": {"x": x, "y": 0.1, "z": 0.45}, "orientation": DOWN}
+        {"effector": "tool", "position": position, "orientation": DOWN, **extra}
     )
     return convert.targets([frame], view, "targets")
 
@@ -101,6 +103,26 @@ def test_the_digest_tells_other_targets_or_ids_apart() -> None:
     assert jobs_digest(a) == jobs_digest([(1, _targets(view, 0.45))])
     assert jobs_digest(a) != jobs_digest([(1, _targets(view, 0.46))])
     assert jobs_digest(a) != jobs_digest([(2, _targets(view, 0.45))])
+
+
+def test_the_digest_tells_other_weights_or_poles_apart() -> None:
+    """The same id and position with another blend weight or pole is another frame
+    (weights and poles are not in the packed target row)."""
+    view = _panda()
+
+    def digest(**extra: Any) -> bytes:
+        return jobs_digest([(1, _targets(view, 0.45, **extra))])
+
+    plain = digest()
+    assert digest(position_weight=1.0) == plain
+    variants = [
+        digest(position_weight=0.5),
+        digest(rotation_weight=0.5),
+        digest(pole={"position": {"x": 0.3, "y": 0.0, "z": 0.8}}),
+        digest(pole={"position": {"x": 0.3, "y": 0.2, "z": 0.8}}),
+        digest(pole={"position": {"x": 0.3, "y": 0.0, "z": 0.8}, "bone": "link3"}),
+    ]
+    assert len({plain, *variants}) == 1 + len(variants)
 
 
 def test_a_stored_stream_state_continues_the_stream_exactly() -> None:
