@@ -121,6 +121,8 @@ class RedisSessionStore(SessionStore):
         self._dirty: dict[str, tuple[Session, list[Any]]] = {}
         self._behind_task: asyncio.Task[None] | None = None
         self._behind_failed = False
+        # The sessions of the flush under way, and its end (``refresh`` waits for it).
+        self._flush_in_flight: tuple[set[str], asyncio.Event] | None = None
         self._count = 0
 
     def __len__(self) -> int:
@@ -413,6 +415,8 @@ class RedisSessionStore(SessionStore):
         ]
         if not batch:
             return
+        done = asyncio.Event()
+        self._flush_in_flight = ({s.id for _, _, s in batch}, done)
         try:
             results = await self._commit.execute(batch)
         except RedisError as e:
@@ -421,6 +425,9 @@ class RedisSessionStore(SessionStore):
             for _, _, s in batch:
                 s.version = RELOAD
             return
+        finally:
+            self._flush_in_flight = None
+            done.set()
         for (_, _, s), v in zip(batch, results, strict=True):
             if isinstance(v, Exception):
                 s.version = RELOAD
@@ -433,6 +440,18 @@ class RedisSessionStore(SessionStore):
             del self._sessions[session.id]
 
     async def refresh(self, session: Session) -> None:
+        # Written behind: frames this worker answered may not be in Redis yet; they go
+        # first, or the restore below would rewind the pose (a joint jump on the next
+        # frame) and the counters.
+        in_flight = self._flush_in_flight
+        if in_flight is not None and session.id in in_flight[0]:
+            await in_flight[1].wait()
+        pending = self._dirty.pop(session.id, None)
+        if pending is not None and session.version != RELOAD:
+            try:
+                await self._write(session, "", pending[1])
+            except StaleSession:  # another worker wrote first: reloaded from Redis
+                return
         p = self._p
         try:
             async with self.client.pipeline(transaction=False) as pipe:

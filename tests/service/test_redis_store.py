@@ -152,3 +152,22 @@ def test_a_batch_racing_another_worker_is_solved_again_from_its_frame(workers: W
     stored = _in_redis(workers, s)
     assert stored["counters"]["frames"] == 3
     assert stored["pose"]["q"] == pytest.approx(answer["result"]["q"])
+
+
+def test_written_behind_a_pose_change_keeps_the_frames_answered(workers: Workers) -> None:
+    """Frames answered but not yet flushed (a flush every 60 s) are written before a
+    PATCH reloads the session: the pose is the last answer's, not the one in Redis."""
+    (a,) = workers(1, redis_write_behind_ms=60_000)
+    s = create(a)
+    for i, y in enumerate((0.1, 0.11, 0.12)):
+        r = a.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(i, y=y), headers=s.headers)
+        assert r.status_code == 200, r.text
+    last_q = r.json()["results"][0]["q"]
+    assert last_q != pytest.approx(s.body["pose"]["q"])
+    r = a.patch(f"/v1/sessions/{s.id}", json={"max_iter": 7}, headers=s.headers)
+    assert r.status_code == 200, r.text
+    assert r.json()["pose"]["q"] == pytest.approx(last_q)
+    assert r.json()["counters"]["frames"] == 3
+    stored = _in_redis(workers, s)
+    assert stored["pose"]["q"] == pytest.approx(last_q)
+    assert stored["counters"]["frames"] == 3
