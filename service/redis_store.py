@@ -35,6 +35,7 @@ Redis to come back, and the next call after it does simply works.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hashlib
 import logging
 import time
@@ -121,6 +122,7 @@ class RedisSessionStore(SessionStore):
         self._dirty: dict[str, tuple[Session, list[Any]]] = {}
         self._behind_task: asyncio.Task[None] | None = None
         self._behind_failed = False
+        self._closing = asyncio.Event()  # close() ends the wait between flushes
         # The sessions of the flush under way, and its end (``refresh`` waits for it).
         self._flush_in_flight: tuple[set[str], asyncio.Event] | None = None
         self._count = 0
@@ -400,8 +402,10 @@ class RedisSessionStore(SessionStore):
 
     async def _flush_behind(self) -> None:
         try:
-            while self._dirty:
-                await asyncio.sleep(self.write_behind_s)
+            while self._dirty and not self._closing.is_set():
+                # The interval, cut short by close(): a flush itself is never cancelled.
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._closing.wait(), self.write_behind_s)
                 await self._flush_once()
         finally:
             self._behind_task = None
@@ -474,7 +478,13 @@ class RedisSessionStore(SessionStore):
             raise _unavailable(e) from None
 
     async def close(self) -> None:
-        if self._dirty:  # written behind and not yet flushed: now, before the exit
+        # Written behind: end the wait for the next flush, let a flush under way finish
+        # (its frames are in no other place), then write what is left, before the exit.
+        self._closing.set()
+        task = self._behind_task
+        if task is not None:
+            await task
+        if self._dirty:
             await self._flush_once()
         await self.client.aclose()
 
@@ -482,15 +492,3 @@ class RedisSessionStore(SessionStore):
 def _unavailable(e: RedisError) -> ServiceError:
     log.warning("Redis does not answer: %s: %s", type(e).__name__, e)
     return store_unavailable()
-
-
-def connect(url: str, timeout_s: float) -> aioredis.Redis:
-    """A client whose every call gives up after ``timeout_s`` (no call hangs when Redis
-    is gone) and that reconnects by itself on the next call."""
-    return aioredis.Redis.from_url(
-        url,
-        socket_timeout=timeout_s,
-        socket_connect_timeout=timeout_s,
-        health_check_interval=0,
-        retry_on_timeout=False,
-    )

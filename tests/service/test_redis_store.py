@@ -11,27 +11,37 @@ from __future__ import annotations
 
 import os
 import shutil
+import threading
+import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
+import redis
 from pydantic import SecretStr
 from starlette.testclient import TestClient
 
 from loadtest.cluster import RedisServer
 from service.config import Settings
+from service.main import create_app
 from service.redis_store import RedisSessionStore
+from service.stored_frames import unpack_stream
 
 from .helpers import Created, create, hand_frame
 
 
-@pytest.fixture(scope="module")
-def redis_url() -> Iterator[str]:
+def _need_redis() -> None:
+    """Skip without redis-server, except under CI=true, where that fails."""
     if shutil.which("redis-server") is None:
         reason = "redis-server not installed (.ci/run installs it)"
         if os.environ.get("CI") == "true":
             pytest.fail(f"{reason}; CI=true, so this is a failure, not a skip", pytrace=False)
         pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def redis_url() -> Iterator[str]:
+    _need_redis()
     server = RedisServer()
     try:
         yield server.url
@@ -171,3 +181,39 @@ def test_written_behind_a_pose_change_keeps_the_frames_answered(workers: Workers
     stored = _in_redis(workers, s)
     assert stored["pose"]["q"] == pytest.approx(last_q)
     assert stored["counters"]["frames"] == 3
+
+
+def test_written_behind_a_flush_under_way_at_shutdown_is_not_lost(warm_solver: float) -> None:
+    """Redis stalls (SIGSTOP) while a flush is under way, a frame is answered, and the
+    worker shuts down: the shutdown waits for that flush (Redis answers again within its
+    timeout), then writes the last frame."""
+    _need_redis()
+    server = RedisServer()  # its own: it is paused
+    try:
+        settings = Settings(
+            redis_url=SecretStr(server.url), redis_write_behind_ms=1000, redis_timeout_s=20
+        )
+        app = create_app(settings, warmup=lambda report: 0.0)
+        with TestClient(app) as a:
+            assert app.state.ik.runner.warmup.ready.wait(30)
+            s = create(a)
+            for i, y in enumerate((0.1, 0.11, 0.12)):
+                r = a.post(
+                    f"/v1/sessions/{s.id}/frames", json=hand_frame(i, y=y), headers=s.headers
+                )
+                assert r.status_code == 200, r.text
+            server.pause()  # before the first flush, 1 s after the first frame
+            time.sleep(1.5)  # the flush has started and waits for Redis
+            # One more frame, answered meanwhile: the shutdown's flush must follow the
+            # one under way (sent beside it, with the same version, it would be refused).
+            r = a.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(3, y=0.13), headers=s.headers)
+            assert r.status_code == 200, r.text
+            # The shutdown (lifespan end, in the with's exit) while Redis still stalls:
+            threading.Timer(3.0, server.resume).start()
+        with redis.Redis.from_url(server.url) as r:
+            state = r.hget(f"ik:s:{s.id}", "state")
+        assert isinstance(state, bytes)
+        assert unpack_stream(state, len(s.body["pose"]["q"])).frames == 4
+    finally:
+        server.resume()
+        server.stop()
