@@ -78,18 +78,18 @@ def _store(client: TestClient) -> RedisSessionStore:
     return store
 
 
-def _after_first_refresh(client: TestClient, race: Callable[[], None]) -> None:
-    """Run ``race`` (another worker's request) once, right after ``client``'s store
-    reloaded a session: the window between the reload and the write."""
+def _after_first_refresh(client: TestClient, race: Callable[[], None], times: int = 1) -> None:
+    """Run ``race`` (another worker's request) right after ``client``'s store reloaded a
+    session, the first ``times`` times: the window between the reload and the write."""
     store = _store(client)
     refresh = store.refresh
-    raced = False
+    raced = 0
 
     async def refresh_then_race(session: Any) -> None:
         nonlocal raced
         await refresh(session)
-        if not raced:
-            raced = True
+        if raced < times:
+            raced += 1
             race()  # blocks this loop; worker B runs on its own
 
     store.refresh = refresh_then_race  # type: ignore[method-assign]
@@ -122,6 +122,22 @@ def test_put_pose_racing_another_worker_is_applied_not_a_500(workers: Workers) -
     stored = _in_redis(workers, s)
     assert stored["pose"]["q"] == pytest.approx(q)
     assert stored["options"]["max_iter"] == 9  # B's change is kept too
+
+
+def test_a_change_that_always_loses_the_race_is_a_503_not_a_500(workers: Workers) -> None:
+    a, b = workers()
+    s = create(a)
+    n = len(s.body["pose"]["q"])
+    poses = iter([[0.1 * k] * n for k in range(1, 10)])
+    _after_first_refresh(
+        a,
+        lambda: b.put(f"/v1/sessions/{s.id}/pose", json={"q": next(poses)}, headers=s.headers),
+        times=100,
+    )
+    r = a.patch(f"/v1/sessions/{s.id}", json={"max_iter": 7}, headers=s.headers)
+    assert r.status_code == 503, r.text
+    assert r.json()["code"] == "store_unavailable" and r.headers["retry-after"] == "1"
+    assert _in_redis(workers, s)["options"]["max_iter"] != 7
 
 
 def _entry(s: Created, frame_id: int, y: float) -> dict[str, Any]:
