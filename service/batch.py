@@ -9,9 +9,15 @@ IK_MAX_FRAMES_PER_REQUEST entries and, when it goes to the frame threads, the cl
 share of them (service/work.py). Each session's entries are solved in the order given,
 each from the previous answer, under the session's lock.
 
+With a shared store (IK_REDIS_URL) each session's entries are committed as one request
+of frames is (service/redis_store.py): stored before they are answered, solved again when
+another worker committed the session first, and answered from the stored answers when
+the same entries (ids and targets) are sent again.
+
 Codes, per entry: invalid_format, unauthorized, forbidden, not_found, invalid_problem,
-rate_limited. For the whole batch: invalid_problem (``frames``: too many entries, or
-more work than IK_MAX_REQUEST_WORK_S), not_ready, server_busy, too_much_work.
+rate_limited, store_unavailable. For the whole batch: invalid_problem (``frames``: too
+many entries, or more work than IK_MAX_REQUEST_WORK_S), not_ready, server_busy,
+too_much_work.
 """
 
 from __future__ import annotations
@@ -40,9 +46,10 @@ from .errors import (
     invalid_problem,
     not_found,
     solver_error,
+    store_unavailable,
     validation_errors,
 )
-from .sessions import Session, SessionStore
+from .sessions import STALE_RETRIES, Session, SessionStore, StaleSession
 from .solving import Runner, rate_limited
 from .work import WorkClass
 
@@ -177,7 +184,7 @@ async def solve(
             admitted.append((k, entry))
     sessions = sorted({e.session.id: e.session for _, e in admitted}.values(), key=_by_id)
     locked: list[Session] = []
-    handed_over = False
+    handed_over = False  # the locks went to a solving thread (the caller was cancelled)
     try:
         for session in sessions:
             await session.lock.acquire()
@@ -188,9 +195,16 @@ async def solve(
                 outcomes[k] = not_found()
             else:
                 live.append((k, entry))
+        # A shared store (IK_REDIS_URL): a session's entries sent again (same ids, same
+        # targets) get the answers stored for them, as frames sent alone do.
+        live, replayed = _replay(store, live)
+        for k, frame in replayed:
+            outcomes[k] = frame
         work = [e for _, e in live]
         inline_us = runner.inline_budget_us
-        if may_inline and all(_budget_us(e.session) <= inline_us for e in work):
+        if not work:
+            solved: list[Outcome] = []
+        elif may_inline and all(_budget_us(e.session) <= inline_us for e in work):
             solved = await _solve_in_slices(work, t0, runner.metrics.frames, transport, inline_us)
         else:
             budget_us = sum(_budget_us(e.session) for e in work)
@@ -214,25 +228,99 @@ async def solve(
                     loop.call_soon_threadsafe(metrics.frames, batch, transport)
 
             fut = pool.submit(_solve_entries, work, t0, record, transport)
-            held = list(locked)
-
-            def done(_: asyncio.Future[Any]) -> None:
-                shares.give_back(client, cost_s)
-                for session in held:  # when the thread is done, never earlier
-                    session.lock.release()
-
-            fut.add_done_callback(done)
-            handed_over = True
-            solved = await asyncio.shield(fut)
+            fut.add_done_callback(lambda _: shares.give_back(client, cost_s))
+            try:
+                solved = await asyncio.shield(fut)
+            except asyncio.CancelledError:
+                if not fut.done():  # the thread still solves: its end releases the locks
+                    held = list(locked)
+                    fut.add_done_callback(lambda _: _release(held))
+                    handed_over = True
+                raise
+        for (k, _), outcome in zip(live, solved, strict=True):
+            outcomes[k] = outcome
+        # Stored before answered, each session's entries in one commit, under its lock.
+        groups = _by_session(live)
+        await asyncio.gather(
+            *(_commit(store, g, outcomes, t0, runner.metrics.frames, transport) for g in groups)
+        )
     finally:
         if not handed_over:
-            for session in locked:
-                session.lock.release()
-    for (k, _), outcome in zip(live, solved, strict=True):
-        outcomes[k] = outcome
+            _release(locked)
     for session in sessions:
         store.touch(session)
     return [o for o in outcomes if o is not None]
+
+
+def _release(sessions: Sequence[Session]) -> None:
+    for session in sessions:
+        session.lock.release()
+
+
+def _by_session(entries: Sequence[tuple[int, Entry]]) -> list[list[tuple[int, Entry]]]:
+    """The entries grouped by session, each group in the order given."""
+    groups: dict[str, list[tuple[int, Entry]]] = {}
+    for k, entry in entries:
+        groups.setdefault(entry.session.id, []).append((k, entry))
+    return list(groups.values())
+
+
+def _jobs(group: Sequence[tuple[int, Entry]]) -> list[convert.FrameJob]:
+    return [(entry.frame_id, entry.targets) for _, entry in group]
+
+
+def _replay(
+    store: SessionStore, live: Sequence[tuple[int, Entry]]
+) -> tuple[list[tuple[int, Entry]], list[tuple[int, convert.SolvedFrame]]]:
+    """Split the entries into those to solve and those answered before (a session's
+    entries of this batch, the same ids and targets: the store's stored answers)."""
+    to_solve: list[tuple[int, Entry]] = []
+    replayed: list[tuple[int, convert.SolvedFrame]] = []
+    for group in _by_session(live):
+        stored = store.stored_answer(group[0][1].session, _jobs(group))
+        if stored is not None and len(stored) == len(group):
+            replayed += [(k, frame) for (k, _), frame in zip(group, stored, strict=True)]
+        else:
+            to_solve += group
+    to_solve.sort(key=lambda item: item[0])  # the order given
+    return to_solve, replayed
+
+
+async def _commit(
+    store: SessionStore,
+    group: Sequence[tuple[int, Entry]],
+    outcomes: list[Outcome | None],
+    t0: float,
+    record: Callable[[list[convert.SolvedFrame], str], None],
+    transport: str,
+) -> None:
+    """Commit one session's solved entries (``store.commit``, as for frames sent alone).
+    When another worker committed the session first, it has been reloaded: its entries
+    are solved again from there (on the loop: a rare case), up to ``STALE_RETRIES``
+    times; a store error becomes each solved entry's own error."""
+    session = group[0][1].session
+    for _ in range(STALE_RETRIES):
+        solved = [(k, e) for k, e in group if isinstance(outcomes[k], convert.SolvedFrame)]
+        frames = [o for k, _ in solved if isinstance(o := outcomes[k], convert.SolvedFrame)]
+        if not solved:
+            return
+        try:
+            await store.commit(session, _jobs(solved), frames)
+            return
+        except StaleSession:
+            if session.closed:
+                break
+            again = _solve_entries([e for _, e in group], t0, record, transport)
+            for (k, _), outcome in zip(group, again, strict=True):
+                outcomes[k] = outcome
+        except ServiceError as e:
+            for k, _ in solved:
+                outcomes[k] = e
+            return
+    error = not_found() if session.closed else store_unavailable()
+    for k, _ in group:
+        if isinstance(outcomes[k], convert.SolvedFrame):
+            outcomes[k] = error
 
 
 def _by_id(session: Session) -> str:

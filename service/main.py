@@ -171,7 +171,8 @@ def default_store(settings: Settings, runner: Runner) -> SessionStore:
         return convert.apply_options(patch, convert.session_defaults(settings), settings)
 
     # Imported here: redis-py is the optional extra `redis`, needed only with a URL.
-    from .redis_store import RedisSessionStore, connect
+    from .redis_commit import connect
+    from .redis_store import RedisSessionStore
 
     log.info("sessions in Redis (IK_REDIS_URL)")
     return RedisSessionStore(

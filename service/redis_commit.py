@@ -3,7 +3,8 @@
 The script creates a session (checking the session and per-key caps) or commits its
 new state, version and answers if the version is still the one the worker started
 from; either way it renews every key's expiry. ``GroupCommit`` runs the script for
-every caller that arrives while a round trip is under way in one pipeline.
+every caller that arrives while a round trip is under way in one pipeline; ``connect``
+makes the client they use.
 """
 
 from __future__ import annotations
@@ -121,3 +122,15 @@ class GroupCommit:
                         fut.set_result(r)
         finally:
             self._flushing = False
+
+
+def connect(url: str, timeout_s: float) -> aioredis.Redis:
+    """A client whose every call gives up after ``timeout_s`` (no call hangs when Redis
+    is gone) and that reconnects by itself on the next call."""
+    return aioredis.Redis.from_url(
+        url,
+        socket_timeout=timeout_s,
+        socket_connect_timeout=timeout_s,
+        health_check_interval=0,
+        retry_on_timeout=False,
+    )

@@ -35,6 +35,7 @@ Redis to come back, and the next call after it does simply works.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hashlib
 import logging
 import time
@@ -121,6 +122,9 @@ class RedisSessionStore(SessionStore):
         self._dirty: dict[str, tuple[Session, list[Any]]] = {}
         self._behind_task: asyncio.Task[None] | None = None
         self._behind_failed = False
+        self._closing = asyncio.Event()  # close() ends the wait between flushes
+        # The sessions of the flush under way, and its end (``refresh`` waits for it).
+        self._flush_in_flight: tuple[set[str], asyncio.Event] | None = None
         self._count = 0
 
     def __len__(self) -> int:
@@ -268,7 +272,8 @@ class RedisSessionStore(SessionStore):
         session.solver.restore(StreamState(record.q, record.inverse_hessian))
         session.frames, session.solved = record.frames, record.solved
         session.version = int(stored[b"v"])
-        session.answers = {int(k): unpack_answer(v) for k, v in answers.items()}
+        followers = session.view.chain.followers
+        session.answers = {int(k): unpack_answer(v, followers) for k, v in answers.items()}
 
     async def remove(self, session_id: str) -> Session | None:
         session = self._sessions.pop(session_id, None)
@@ -397,8 +402,10 @@ class RedisSessionStore(SessionStore):
 
     async def _flush_behind(self) -> None:
         try:
-            while self._dirty:
-                await asyncio.sleep(self.write_behind_s)
+            while self._dirty and not self._closing.is_set():
+                # The interval, cut short by close(): a flush itself is never cancelled.
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._closing.wait(), self.write_behind_s)
                 await self._flush_once()
         finally:
             self._behind_task = None
@@ -412,6 +419,8 @@ class RedisSessionStore(SessionStore):
         ]
         if not batch:
             return
+        done = asyncio.Event()
+        self._flush_in_flight = ({s.id for _, _, s in batch}, done)
         try:
             results = await self._commit.execute(batch)
         except RedisError as e:
@@ -420,6 +429,9 @@ class RedisSessionStore(SessionStore):
             for _, _, s in batch:
                 s.version = RELOAD
             return
+        finally:
+            self._flush_in_flight = None
+            done.set()
         for (_, _, s), v in zip(batch, results, strict=True):
             if isinstance(v, Exception):
                 s.version = RELOAD
@@ -432,6 +444,18 @@ class RedisSessionStore(SessionStore):
             del self._sessions[session.id]
 
     async def refresh(self, session: Session) -> None:
+        # Written behind: frames this worker answered may not be in Redis yet; they go
+        # first, or the restore below would rewind the pose (a joint jump on the next
+        # frame) and the counters.
+        in_flight = self._flush_in_flight
+        if in_flight is not None and session.id in in_flight[0]:
+            await in_flight[1].wait()
+        pending = self._dirty.pop(session.id, None)
+        if pending is not None and session.version != RELOAD:
+            try:
+                await self._write(session, "", pending[1])
+            except StaleSession:  # another worker wrote first: reloaded from Redis
+                return
         p = self._p
         try:
             async with self.client.pipeline(transaction=False) as pipe:
@@ -454,7 +478,13 @@ class RedisSessionStore(SessionStore):
             raise _unavailable(e) from None
 
     async def close(self) -> None:
-        if self._dirty:  # written behind and not yet flushed: now, before the exit
+        # Written behind: end the wait for the next flush, let a flush under way finish
+        # (its frames are in no other place), then write what is left, before the exit.
+        self._closing.set()
+        task = self._behind_task
+        if task is not None:
+            await task
+        if self._dirty:
             await self._flush_once()
         await self.client.aclose()
 
@@ -462,15 +492,3 @@ class RedisSessionStore(SessionStore):
 def _unavailable(e: RedisError) -> ServiceError:
     log.warning("Redis does not answer: %s: %s", type(e).__name__, e)
     return store_unavailable()
-
-
-def connect(url: str, timeout_s: float) -> aioredis.Redis:
-    """A client whose every call gives up after ``timeout_s`` (no call hangs when Redis
-    is gone) and that reconnects by itself on the next call."""
-    return aioredis.Redis.from_url(
-        url,
-        socket_timeout=timeout_s,
-        socket_connect_timeout=timeout_s,
-        health_check_interval=0,
-        retry_on_timeout=False,
-    )

@@ -24,7 +24,13 @@ import schemas as S
 from solver.ik import IKOptions, IKSolver
 
 from .convert import ChainView, FrameJob, SolvedFrame
+from .errors import store_unavailable
 from .stored_frames import StoredAnswer
+
+# Times a change is made again when another worker committed the session first (a
+# shared store): the session is reloaded each time, so more than one retry means the
+# session is being fought over by several streams at once.
+STALE_RETRIES = 3
 
 
 def token_digest(token: str) -> bytes:
@@ -204,6 +210,21 @@ class SessionStore(abc.ABC):
     async def refresh(self, session: Session) -> None:
         """Reload what other workers may have changed (before a pose or options change)."""
         return None
+
+    async def change(self, session: Session, apply: Callable[[], None]) -> None:
+        """Reload ``session``, ``apply`` a pose or options change to it and write it
+        through; under the session's lock. When another worker committed in between
+        (``StaleSession``) the change is applied again to the reloaded session, up to
+        ``STALE_RETRIES`` times, then 503 ``store_unavailable`` (never a lost change)."""
+        for _ in range(STALE_RETRIES):
+            await self.refresh(session)
+            apply()
+            try:
+                await self.save(session)
+            except StaleSession:
+                continue
+            return
+        raise store_unavailable()
 
     async def check(self) -> None:
         """Raises ServiceError ``store_unavailable`` when the store does not answer."""

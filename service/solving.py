@@ -40,7 +40,7 @@ from .errors import (
     too_many_plans,
 )
 from .metrics import Metrics
-from .sessions import Session, SessionStore, StaleSession
+from .sessions import STALE_RETRIES, Session, SessionStore, StaleSession
 from .startup import Report, warm_solver
 from .work import CostShares, WorkClass, WorkPool
 
@@ -49,10 +49,6 @@ T = TypeVar("T")
 
 
 WarmupFn = Callable[[Report], float]
-# Times a request is solved again when another worker committed its session's frames
-# first (a shared store): the session is reloaded each time, so more than one retry
-# means the session is being fought over by several streams at once.
-STALE_RETRIES = 3
 
 
 def default_warmup(compile_processes: int) -> WarmupFn:

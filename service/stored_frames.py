@@ -21,8 +21,9 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from solver.ik import IKResult, IKStatus
+from solver.ik import FrameStep, IKResult, IKStatus
 from solver.ik.result import ResultLayout
+from solver.model.mimic import Followers
 from solver.optim import Termination
 
 from .convert import FrameJob, SolvedFrame
@@ -33,7 +34,8 @@ KEPT_ANSWERS = 64
 
 
 def jobs_digest(jobs: Sequence[FrameJob]) -> bytes:
-    """16 bytes that change when any frame's id or targets change."""
+    """16 bytes that change when any frame's id or targets change: each target's parts
+    (the packed row), its blend weights and its pole (which the row does not hold)."""
     h = hashlib.blake2b(digest_size=16)
     for frame_id, targets in jobs:
         h.update(str(frame_id).encode())
@@ -41,6 +43,15 @@ def jobs_digest(jobs: Sequence[FrameJob]) -> bytes:
             h.update(t.effector.encode("utf-8", "surrogatepass"))
             h.update(t.given.to_bytes(2, "little"))
             h.update(t.packed.tobytes())
+            h.update(np.array([t.position_weight, t.rotation_weight]).tobytes())
+            if t.pole is None:
+                h.update(b"\x00")
+            else:
+                h.update(b"\x01" + np.asarray(t.pole.point, dtype=np.float64).tobytes())
+                link = t.pole.link
+                h.update(
+                    b"\x00" if link is None else b"\x01" + link.encode("utf-8", "surrogatepass")
+                )
     return h.digest()
 
 
@@ -116,15 +127,17 @@ def _pack_frame(f: SolvedFrame) -> list[Any]:
         list(lay.dof_names),
         list(lay.effector_names),
         list(lay.tolerances),
+        None if f.step is None else [f.step.largest_rad, f.step.jumped],
     ]
 
 
-def _unpack_frame(row: list[Any]) -> SolvedFrame:
+def _unpack_frame(row: list[Any], followers: Followers) -> SolvedFrame:
     (fid, server_us, q, status, term, iters, evals, passes, restarts, solve_us) = row[:10]
-    errors, dof_names, effector_names, tolerances = row[10:]
+    errors, dof_names, effector_names, tolerances = row[10:14]
+    step = row[14] if len(row) > 14 else None  # answers stored before steps were
     n, m = len(dof_names), len(effector_names)
     layout = ResultLayout(
-        tuple(dof_names), tuple(effector_names), (tolerances[0], tolerances[1]), n, m
+        tuple(dof_names), tuple(effector_names), (tolerances[0], tolerances[1]), n, m, followers
     )
     # The output block as long as the layout says; past the errors it is NaN (a stored
     # answer keeps no BFGS matrix or pass log: nothing renders them).
@@ -144,16 +157,19 @@ def _unpack_frame(row: list[Any]) -> SolvedFrame:
         raw,
         layout,
     )
-    return SolvedFrame(fid, result, server_us)
+    frame_step = None if step is None else FrameStep(float(step[0]), bool(step[1]))
+    return SolvedFrame(fid, result, server_us, frame_step)
 
 
 def pack_answer(answer: StoredAnswer) -> bytes:
     return bytes(msgpack.packb([answer.digest, [_pack_frame(f) for f in answer.frames]]))
 
 
-def unpack_answer(data: bytes) -> StoredAnswer:
+def unpack_answer(data: bytes, followers: Followers) -> StoredAnswer:
+    """A stored answer; ``followers``: its chain's mimic joints (the chain's, not stored:
+    a session's chain never changes), rendered by name with each pose."""
     digest, rows = msgpack.unpackb(data)
-    return StoredAnswer(digest, tuple(_unpack_frame(r) for r in rows))
+    return StoredAnswer(digest, tuple(_unpack_frame(r, followers) for r in rows))
 
 
 def answer_key(jobs: Sequence[FrameJob]) -> int | None:

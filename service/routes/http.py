@@ -287,9 +287,13 @@ async def patch_session(
     async with session.lock:
         if session.closed:
             raise not_found()
-        await svc.store.refresh(session)
-        session.options = convert.apply_options(body, session.options, svc.settings, field="body")
-        await svc.store.save(session)
+
+        def apply() -> None:
+            session.options = convert.apply_options(
+                body, session.options, svc.settings, field="body"
+            )
+
+        await svc.store.change(session, apply)
     svc.store.touch(session)
     return _session_info(session, svc.store)
 
@@ -307,10 +311,12 @@ async def put_pose(
     async with session.lock:
         if session.closed:
             raise not_found()
-        await svc.store.refresh(session)
-        q = convert.pose_vector(body, session.view, session.solver.q, "body")
-        session.set_pose(q)
-        await svc.store.save(session)
+
+        def apply() -> None:
+            q = convert.pose_vector(body, session.view, session.solver.q, "body")
+            session.set_pose(q)
+
+        await svc.store.change(session, apply)
     svc.store.touch(session)
     return convert.pose_dict(session.view, session.solver.q)
 

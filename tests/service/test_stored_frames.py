@@ -4,6 +4,9 @@ state continues the stream exactly where it was."""
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any
+
 import numpy as np
 
 import schemas as S
@@ -21,6 +24,10 @@ from service.stored_frames import (
     unpack_stream,
 )
 from solver.ik import StreamState, Target
+from solver.model.forward import link_poses
+
+PANDA_URDF = (Path(__file__).resolve().parents[1] / "solver/data/panda_kinematic.urdf").read_text()
+FINGERS = ["panda_leftfinger", "panda_rightfinger"]
 
 DOWN = {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0}
 
@@ -30,23 +37,64 @@ def _panda() -> convert.ChainView:
     return convert.chain_from_spec(body.chain, Settings(), body.conventions, body.bones)
 
 
-def _targets(view: convert.ChainView, x: float) -> list[Target]:
+def _targets(view: convert.ChainView, x: float, **extra: Any) -> list[Target]:
+    position = {"x": x, "y": 0.1, "z": 0.45}
     frame = S.Target.model_validate(
-        {"effector": "tool", "position": {"x": x, "y": 0.1, "z": 0.45}, "orientation": DOWN}
+        {"effector": "tool", "position": position, "orientation": DOWN, **extra}
     )
     return convert.targets([frame], view, "targets")
 
 
+def _gripper() -> convert.ChainView:
+    """The Panda with its fingers: one mimic joint (panda_finger_joint2)."""
+    chain = {
+        "format": "urdf",
+        "urdf": PANDA_URDF,
+        "base_link": "panda_link0",
+        "tip_links": [*FINGERS, "panda_hand_tcp"],
+        "mode": "position",
+    }
+    body = S.SessionCreate.model_validate({"chain": chain})
+    return convert.chain_from_spec(body.chain, Settings(), body.conventions, body.bones)
+
+
+def _positions(view: convert.ChainView, q: np.ndarray) -> list[Target]:
+    poses = link_poses(view.chain, q)
+    frame = [
+        S.Target.model_validate(
+            {
+                "effector": link,
+                "position": dict(zip("xyz", poses[link][:3, 3].tolist(), strict=True)),
+            }
+        )
+        for link in [*FINGERS, "panda_hand_tcp"]
+    ]
+    return convert.targets(frame, view, "targets")
+
+
 def test_a_stored_answer_renders_as_the_solved_frame() -> None:
-    view = _panda()
+    """With everything a tracked frame's answer has: its step from the previous answer
+    (largest_step_rad, jumped) and the mimic joints' values by name."""
+    view = _gripper()
+    followers = view.chain.followers
+    assert followers.names  # the case under test: a chain with mimic joints
     solver = make_solver(view, convert.session_defaults(Settings()))
-    jobs = [(7, _targets(view, 0.45))]
-    solved = [SolvedFrame(7, solver.track(jobs[0][1]), 123.5)]
-    stored = unpack_answer(pack_answer(StoredAnswer(jobs_digest(jobs), tuple(solved))))
+    middle = (view.chain.lower + view.chain.upper) / 2
+    solver.track(_positions(view, middle))
+    jobs = [(7, _positions(view, middle + 0.05))]
+    tracked = solver.track(jobs[0][1])
+    solved = [SolvedFrame(7, tracked, 123.5, solver.last_step)]
+    assert solver.last_step.largest_rad > 0
+    packed = pack_answer(StoredAnswer(jobs_digest(jobs), tuple(solved)))
+    stored = unpack_answer(packed, followers)
     assert stored.digest == jobs_digest(jobs)
     (again,) = stored.frames
     for build in (convert.result_dict, convert.compact_result_dict):
-        assert build(again.result, 7, again.server_us) == build(solved[0].result, 7, 123.5)
+        expected = build(tracked, 7, 123.5, solved[0].step)
+        assert build(again.result, 7, again.server_us, again.step) == expected
+    full = convert.result_dict(again.result, 7, again.server_us, again.step)
+    assert set(followers.names) <= set(full["joints"])
+    assert full["largest_step_rad"] == solver.last_step.largest_rad
 
 
 def test_the_digest_tells_other_targets_or_ids_apart() -> None:
@@ -55,6 +103,26 @@ def test_the_digest_tells_other_targets_or_ids_apart() -> None:
     assert jobs_digest(a) == jobs_digest([(1, _targets(view, 0.45))])
     assert jobs_digest(a) != jobs_digest([(1, _targets(view, 0.46))])
     assert jobs_digest(a) != jobs_digest([(2, _targets(view, 0.45))])
+
+
+def test_the_digest_tells_other_weights_or_poles_apart() -> None:
+    """The same id and position with another blend weight or pole is another frame
+    (weights and poles are not in the packed target row)."""
+    view = _panda()
+
+    def digest(**extra: Any) -> bytes:
+        return jobs_digest([(1, _targets(view, 0.45, **extra))])
+
+    plain = digest()
+    assert digest(position_weight=1.0) == plain
+    variants = [
+        digest(position_weight=0.5),
+        digest(rotation_weight=0.5),
+        digest(pole={"position": {"x": 0.3, "y": 0.0, "z": 0.8}}),
+        digest(pole={"position": {"x": 0.3, "y": 0.2, "z": 0.8}}),
+        digest(pole={"position": {"x": 0.3, "y": 0.0, "z": 0.8}, "bone": "link3"}),
+    ]
+    assert len({plain, *variants}) == 1 + len(variants)
 
 
 def test_a_stored_stream_state_continues_the_stream_exactly() -> None:

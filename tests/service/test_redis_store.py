@@ -1,0 +1,235 @@
+"""Two in-process workers (TestClient apps) sharing sessions in a real redis-server.
+
+Races are made deterministic by letting worker B write between worker A's steps: a
+hook runs B's real request at the point where the race window is open.
+
+Without redis-server these tests skip, except under CI=true, where they fail (.ci/run
+installs it with apt-get).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+import redis
+from pydantic import SecretStr
+from starlette.testclient import TestClient
+
+from loadtest.cluster import RedisServer
+from service.config import Settings
+from service.main import create_app
+from service.redis_store import RedisSessionStore
+from service.stored_frames import unpack_stream
+
+from .helpers import Created, create, hand_frame
+
+
+def _need_redis() -> None:
+    """Skip without redis-server, except under CI=true, where that fails."""
+    if shutil.which("redis-server") is None:
+        reason = "redis-server not installed (.ci/run installs it)"
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"{reason}; CI=true, so this is a failure, not a skip", pytrace=False)
+        pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def redis_url() -> Iterator[str]:
+    _need_redis()
+    server = RedisServer()
+    try:
+        yield server.url
+    finally:
+        server.stop()
+
+
+Workers = Callable[..., list[TestClient]]
+
+
+@pytest.fixture
+def workers(make_client: Callable[..., TestClient], redis_url: str) -> Workers:
+    """``n`` apps on the same Redis (workers A, B, ...)."""
+
+    def make(n: int = 2, **settings: Any) -> list[TestClient]:
+        s = Settings(redis_url=SecretStr(redis_url), **settings)
+        return [make_client(s) for _ in range(n)]
+
+    return make
+
+
+def _in_redis(workers: Workers, s: Created) -> dict[str, Any]:
+    """The session as a worker that never held it loads it from Redis."""
+    (fresh,) = workers(1)
+    r = fresh.get(f"/v1/sessions/{s.id}", headers=s.headers)
+    assert r.status_code == 200, r.text
+    body: dict[str, Any] = r.json()
+    return body
+
+
+def _store(client: TestClient) -> RedisSessionStore:
+    store = client.app.state.ik.store  # type: ignore[attr-defined]
+    assert isinstance(store, RedisSessionStore)
+    return store
+
+
+def _after_first_refresh(client: TestClient, race: Callable[[], None], times: int = 1) -> None:
+    """Run ``race`` (another worker's request) right after ``client``'s store reloaded a
+    session, the first ``times`` times: the window between the reload and the write."""
+    store = _store(client)
+    refresh = store.refresh
+    raced = 0
+
+    async def refresh_then_race(session: Any) -> None:
+        nonlocal raced
+        await refresh(session)
+        if raced < times:
+            raced += 1
+            race()  # blocks this loop; worker B runs on its own
+
+    store.refresh = refresh_then_race  # type: ignore[method-assign]
+
+
+def test_patch_racing_another_worker_is_applied_not_a_500(workers: Workers) -> None:
+    a, b = workers()
+    s = create(a)
+    q = [0.1] * len(s.body["pose"]["q"])
+    _after_first_refresh(
+        a, lambda: b.put(f"/v1/sessions/{s.id}/pose", json={"q": q}, headers=s.headers)
+    )
+    r = a.patch(f"/v1/sessions/{s.id}", json={"max_iter": 7}, headers=s.headers)
+    assert r.status_code == 200, r.text
+    assert r.json()["options"]["max_iter"] == 7
+    stored = _in_redis(workers, s)
+    assert stored["options"]["max_iter"] == 7
+    assert stored["pose"]["q"] == pytest.approx(q)  # B's change is kept too
+
+
+def test_put_pose_racing_another_worker_is_applied_not_a_500(workers: Workers) -> None:
+    a, b = workers()
+    s = create(a)
+    q = [0.2] * len(s.body["pose"]["q"])
+    _after_first_refresh(
+        a, lambda: b.patch(f"/v1/sessions/{s.id}", json={"max_iter": 9}, headers=s.headers)
+    )
+    r = a.put(f"/v1/sessions/{s.id}/pose", json={"q": q}, headers=s.headers)
+    assert r.status_code == 200, r.text
+    stored = _in_redis(workers, s)
+    assert stored["pose"]["q"] == pytest.approx(q)
+    assert stored["options"]["max_iter"] == 9  # B's change is kept too
+
+
+def test_a_change_that_always_loses_the_race_is_a_503_not_a_500(workers: Workers) -> None:
+    a, b = workers()
+    s = create(a)
+    n = len(s.body["pose"]["q"])
+    poses = iter([[0.1 * k] * n for k in range(1, 10)])
+    _after_first_refresh(
+        a,
+        lambda: b.put(f"/v1/sessions/{s.id}/pose", json={"q": next(poses)}, headers=s.headers),
+        times=100,
+    )
+    r = a.patch(f"/v1/sessions/{s.id}", json={"max_iter": 7}, headers=s.headers)
+    assert r.status_code == 503, r.text
+    assert r.json()["code"] == "store_unavailable" and r.headers["retry-after"] == "1"
+    assert _in_redis(workers, s)["options"]["max_iter"] != 7
+
+
+def _entry(s: Created, frame_id: int, y: float) -> dict[str, Any]:
+    return {"session": s.id, "token": s.token, **hand_frame(frame_id, y=y)}
+
+
+def _batch(client: TestClient, entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    r = client.post("/v1/batch", json={"frames": entries})
+    assert r.status_code == 200, r.text
+    results: list[dict[str, Any]] = r.json()["results"]
+    return results
+
+
+def test_a_batch_is_stored_and_a_resent_batch_gets_its_stored_answers(workers: Workers) -> None:
+    a, b = workers()
+    s1, s2 = create(a), create(a)
+    sent = [_entry(s1, 1, 0.1), _entry(s2, 1, 0.1), _entry(s1, 2, 0.11)]
+    first = _batch(a, sent)
+    assert all("result" in r for r in first), first
+    stored = _in_redis(workers, s1)
+    assert stored["counters"]["frames"] == 2
+    assert stored["pose"]["q"] == pytest.approx(first[2]["result"]["q"])
+    # The same batch to another worker (a client retrying after a failover): the answers
+    # stored, not a second solve.
+    again = _batch(b, sent)
+    assert [r["result"]["q"] for r in again] == [r["result"]["q"] for r in first]
+    assert _in_redis(workers, s1)["counters"]["frames"] == 2
+
+
+def test_a_batch_racing_another_worker_is_solved_again_from_its_frame(workers: Workers) -> None:
+    a, b = workers()
+    s = create(a)
+    _batch(a, [_entry(s, 1, 0.1)])  # worker A holds the session
+    r = b.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(2, y=0.11), headers=s.headers)
+    assert r.status_code == 200, r.text
+    (answer,) = _batch(a, [_entry(s, 3, 0.12)])
+    assert "result" in answer, answer
+    stored = _in_redis(workers, s)
+    assert stored["counters"]["frames"] == 3
+    assert stored["pose"]["q"] == pytest.approx(answer["result"]["q"])
+
+
+def test_written_behind_a_pose_change_keeps_the_frames_answered(workers: Workers) -> None:
+    """Frames answered but not yet flushed (a flush every 60 s) are written before a
+    PATCH reloads the session: the pose is the last answer's, not the one in Redis."""
+    (a,) = workers(1, redis_write_behind_ms=60_000)
+    s = create(a)
+    for i, y in enumerate((0.1, 0.11, 0.12)):
+        r = a.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(i, y=y), headers=s.headers)
+        assert r.status_code == 200, r.text
+    last_q = r.json()["results"][0]["q"]
+    assert last_q != pytest.approx(s.body["pose"]["q"])
+    r = a.patch(f"/v1/sessions/{s.id}", json={"max_iter": 7}, headers=s.headers)
+    assert r.status_code == 200, r.text
+    assert r.json()["pose"]["q"] == pytest.approx(last_q)
+    assert r.json()["counters"]["frames"] == 3
+    stored = _in_redis(workers, s)
+    assert stored["pose"]["q"] == pytest.approx(last_q)
+    assert stored["counters"]["frames"] == 3
+
+
+def test_written_behind_a_flush_under_way_at_shutdown_is_not_lost(warm_solver: float) -> None:
+    """Redis stalls (SIGSTOP) while a flush is under way, a frame is answered, and the
+    worker shuts down: the shutdown waits for that flush (Redis answers again within its
+    timeout), then writes the last frame."""
+    _need_redis()
+    server = RedisServer()  # its own: it is paused
+    try:
+        settings = Settings(
+            redis_url=SecretStr(server.url), redis_write_behind_ms=1000, redis_timeout_s=20
+        )
+        app = create_app(settings, warmup=lambda report: 0.0)
+        with TestClient(app) as a:
+            assert app.state.ik.runner.warmup.ready.wait(30)
+            s = create(a)
+            for i, y in enumerate((0.1, 0.11, 0.12)):
+                r = a.post(
+                    f"/v1/sessions/{s.id}/frames", json=hand_frame(i, y=y), headers=s.headers
+                )
+                assert r.status_code == 200, r.text
+            server.pause()  # before the first flush, 1 s after the first frame
+            time.sleep(1.5)  # the flush has started and waits for Redis
+            # One more frame, answered meanwhile: the shutdown's flush must follow the
+            # one under way (sent beside it, with the same version, it would be refused).
+            r = a.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(3, y=0.13), headers=s.headers)
+            assert r.status_code == 200, r.text
+            # The shutdown (lifespan end, in the with's exit) while Redis still stalls:
+            threading.Timer(3.0, server.resume).start()
+        with redis.Redis.from_url(server.url) as r:
+            state = r.hget(f"ik:s:{s.id}", "state")
+        assert isinstance(state, bytes)
+        assert unpack_stream(state, len(s.body["pose"]["q"])).frames == 4
+    finally:
+        server.resume()
+        server.stop()
