@@ -53,6 +53,12 @@ class Call(Generic[T]):
     params: dict[str, str] = field(default_factory=dict)
     headers: dict[str, str] = field(default_factory=dict)
 
+    def request(self, http: httpx.Client | httpx.AsyncClient) -> httpx.Request:
+        """The request, built by the client that sends it (its base URL and headers)."""
+        return http.build_request(
+            self.method, self.path, json=self.json, params=self.params, headers=self.headers
+        )
+
     def result(self, response: httpx.Response) -> T:
         raise_for_error(response)
         return self.parse(response)

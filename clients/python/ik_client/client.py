@@ -1,11 +1,11 @@
 """``Client`` (blocking) and ``AsyncClient`` (asyncio): the same calls, over httpx.
 
 Every call is written once, in calls.py (its signature, documentation, request and
-answer); each client binds them to its transport, so ``Client.frame`` returns what
-``AsyncClient.frame`` awaits. Every call returns a typed answer or raises a
-``ServiceError`` subclass carrying the server's ``code``, ``field`` and
-``retry_after_s``. ``stream()`` opens the session's WebSocket (``Stream`` /
-``AsyncStream``).
+answer), and listed once, in ``_BaseClient``; each client only sends (``_send``: httpx's
+blocking or asyncio transport), so ``Client.frame`` returns what ``AsyncClient.frame``
+awaits. Every call returns a typed answer or raises a ``ServiceError`` subclass carrying
+the server's ``code``, ``field`` and ``retry_after_s``. ``stream()`` opens the session's
+WebSocket (``Stream`` / ``AsyncStream``).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import abc
 import functools
 from collections.abc import Callable, Coroutine
-from typing import Any, Concatenate, Generic, ParamSpec, TypeVar
+from typing import Any, Generic, ParamSpec, TypeVar, overload
 
 import httpx
 
@@ -25,12 +25,41 @@ from .types import Encoding
 T = TypeVar("T")
 P = ParamSpec("P")
 HTTP = TypeVar("HTTP", httpx.Client, httpx.AsyncClient)
+S = TypeVar("S", Stream, AsyncStream)
 DEFAULT_TIMEOUT_S = 30.0
 DEFAULT_RECONNECT = Reconnect()
 
 
-class _BaseClient(abc.ABC, Generic[HTTP]):
-    """What both clients hold: the service's URL and an httpx client (``HTTP``).
+class _Endpoint(Generic[P, T]):
+    """A client method for the call ``build`` describes (calls.py): on a ``Client`` it
+    sends the call and returns the answer; on an ``AsyncClient`` it returns a coroutine of
+    it. Its name, docstring and parameters are ``build``'s."""
+
+    def __init__(self, build: Callable[P, Call[T]]) -> None:
+        self.build = build
+        self.__doc__ = build.__doc__
+        self.__wrapped__ = build  # help() and inspect.signature show the call's parameters
+
+    @overload
+    def __get__(self, client: None, owner: type) -> _Endpoint[P, T]: ...
+    @overload
+    def __get__(self, client: Client, owner: type) -> Callable[P, T]: ...
+    @overload
+    def __get__(self, client: AsyncClient, owner: type) -> Callable[P, Coroutine[Any, Any, T]]: ...
+    def __get__(self, client: Client | AsyncClient | None, owner: type) -> Any:
+        if client is None:
+            return self
+
+        @functools.wraps(self.build)
+        def method(*args: P.args, **kwargs: P.kwargs) -> Any:
+            return client._send(self.build(*args, **kwargs))
+
+        return method
+
+
+class _BaseClient(abc.ABC, Generic[HTTP, S]):
+    """What both clients hold: the service's URL and an httpx client (``HTTP``), and how
+    they open a session's WebSocket (``S``: ``Stream`` or ``AsyncStream``).
 
     Args:
         base_url: The service, e.g. ``http://127.0.0.1:8000``.
@@ -38,6 +67,8 @@ class _BaseClient(abc.ABC, Generic[HTTP]):
         timeout_s: Per-request timeout [s].
         **httpx_options: Passed on to the httpx client (e.g. ``transport``, ``verify``).
     """
+
+    _stream_type: type[S]
 
     def __init__(
         self,
@@ -56,39 +87,37 @@ class _BaseClient(abc.ABC, Generic[HTTP]):
     @abc.abstractmethod
     def _http_client(self, **options: Any) -> HTTP: ...
 
+    create_session = _Endpoint(calls.create_session)
+    get_session = _Endpoint(calls.get_session)
+    patch_session = _Endpoint(calls.patch_session)
+    set_pose = _Endpoint(calls.set_pose)
+    delete_session = _Endpoint(calls.delete_session)
+    frame = _Endpoint(calls.frame)
+    clip = _Endpoint(calls.clip)
+    batch = _Endpoint(calls.batch)
+    solve = _Endpoint(calls.solve)
 
-def _blocking(build: Callable[P, Call[T]]) -> Callable[Concatenate[Client, P], T]:
-    """``Client``'s method for the call ``build`` describes: send it, return the answer."""
-
-    @functools.wraps(build)
-    def method(self: Client, /, *args: P.args, **kwargs: P.kwargs) -> T:
-        call = build(*args, **kwargs)
-        response = self._http.request(
-            call.method, call.path, json=call.json, params=call.params, headers=call.headers
+    def stream(
+        self,
+        session: SessionRef,
+        *,
+        encoding: Encoding = Encoding.JSON,
+        compact: bool = False,
+        reconnect: Reconnect = DEFAULT_RECONNECT,
+        timeout_s: float | None = DEFAULT_TIMEOUT_S,
+    ) -> S:
+        """The session's WebSocket; open it with ``with`` (``Stream``) or ``async with``
+        (``AsyncStream``). ``timeout_s`` bounds each wait for an answer."""
+        url = calls.ws_url(self.base_url, session, compact)
+        return self._stream_type(
+            url, session.token, encoding=encoding, reconnect=reconnect, timeout_s=timeout_s
         )
-        return call.result(response)
-
-    return method
 
 
-def _awaited(
-    build: Callable[P, Call[T]],
-) -> Callable[Concatenate[AsyncClient, P], Coroutine[Any, Any, T]]:
-    """``AsyncClient``'s method for the call ``build`` describes."""
-
-    @functools.wraps(build)
-    async def method(self: AsyncClient, /, *args: P.args, **kwargs: P.kwargs) -> T:
-        call = build(*args, **kwargs)
-        response = await self._http.request(
-            call.method, call.path, json=call.json, params=call.params, headers=call.headers
-        )
-        return call.result(response)
-
-    return method
-
-
-class Client(_BaseClient[httpx.Client]):
+class Client(_BaseClient[httpx.Client, Stream]):
     """The IK service over HTTP, blocking (arguments: ``_BaseClient``)."""
+
+    _stream_type = Stream
 
     def _http_client(self, **options: Any) -> httpx.Client:
         return httpx.Client(**options)
@@ -102,34 +131,14 @@ class Client(_BaseClient[httpx.Client]):
     def close(self) -> None:
         self._http.close()
 
-    create_session = _blocking(calls.create_session)
-    get_session = _blocking(calls.get_session)
-    patch_session = _blocking(calls.patch_session)
-    set_pose = _blocking(calls.set_pose)
-    delete_session = _blocking(calls.delete_session)
-    frame = _blocking(calls.frame)
-    clip = _blocking(calls.clip)
-    batch = _blocking(calls.batch)
-    solve = _blocking(calls.solve)
-
-    def stream(
-        self,
-        session: SessionRef,
-        *,
-        encoding: Encoding = Encoding.JSON,
-        compact: bool = False,
-        reconnect: Reconnect = DEFAULT_RECONNECT,
-        timeout_s: float | None = DEFAULT_TIMEOUT_S,
-    ) -> Stream:
-        """The session's WebSocket; open it with ``with``."""
-        url = calls.ws_url(self.base_url, session, compact)
-        return Stream(
-            url, session.token, encoding=encoding, reconnect=reconnect, timeout_s=timeout_s
-        )
+    def _send(self, call: Call[T]) -> T:
+        return call.result(self._http.send(call.request(self._http)))
 
 
-class AsyncClient(_BaseClient[httpx.AsyncClient]):
+class AsyncClient(_BaseClient[httpx.AsyncClient, AsyncStream]):
     """The IK service over HTTP, asyncio; the same calls as ``Client``, awaited."""
+
+    _stream_type = AsyncStream
 
     def _http_client(self, **options: Any) -> httpx.AsyncClient:
         return httpx.AsyncClient(**options)
@@ -143,24 +152,5 @@ class AsyncClient(_BaseClient[httpx.AsyncClient]):
     async def close(self) -> None:
         await self._http.aclose()
 
-    create_session = _awaited(calls.create_session)
-    get_session = _awaited(calls.get_session)
-    patch_session = _awaited(calls.patch_session)
-    set_pose = _awaited(calls.set_pose)
-    delete_session = _awaited(calls.delete_session)
-    frame = _awaited(calls.frame)
-    clip = _awaited(calls.clip)
-    batch = _awaited(calls.batch)
-    solve = _awaited(calls.solve)
-
-    def stream(
-        self,
-        session: SessionRef,
-        *,
-        encoding: Encoding = Encoding.JSON,
-        compact: bool = False,
-        reconnect: Reconnect = DEFAULT_RECONNECT,
-    ) -> AsyncStream:
-        """The session's WebSocket; open it with ``async with``."""
-        url = calls.ws_url(self.base_url, session, compact)
-        return AsyncStream(url, session.token, encoding=encoding, reconnect=reconnect)
+    async def _send(self, call: Call[T]) -> T:
+        return call.result(await self._http.send(call.request(self._http)))
