@@ -111,6 +111,13 @@ def _on_session(
     return Call(method, f"/v1/sessions/{session.id}{subpath}", parse, headers=headers, **request)
 
 
+def _post_frames(
+    session: SessionRef, body: Any, compact: bool, parse: Callable[[httpx.Response], T]
+) -> Call[T]:
+    """``POST /v1/sessions/{id}/frames``: one frame or a clip."""
+    return _on_session(session, "POST", "/frames", parse, json=body, params=_results(compact))
+
+
 def _session_info(response: httpx.Response) -> SessionInfo:
     return SessionInfo.from_json(response.json())
 
@@ -170,13 +177,9 @@ def frame(
 ) -> Call[FrameResult]:
     """Solve one frame from the session's pose (``compact``: no joints by name and no
     per-effector errors)."""
-    return _on_session(
-        session,
-        "POST",
-        "/frames",
-        lambda r: FrameResult.from_json(r.json()["results"][0]),
-        json=_without_none(id=id, targets=targets),
-        params=_results(compact),
+    body = _without_none(id=id, targets=targets)
+    return _post_frames(
+        session, body, compact, lambda r: FrameResult.from_json(r.json()["results"][0])
     )
 
 
@@ -189,14 +192,8 @@ def clip(
 ) -> Call[ClipResult]:
     """Solve frames in order, each from the previous answer, or with ``plan`` as a
     whole (the smoothest joint path; the answer's ``plan`` says how smooth)."""
-    return _on_session(
-        session,
-        "POST",
-        "/frames",
-        lambda r: ClipResult.from_json(r.json()),
-        json={"frames": frames, "plan": plan},
-        params=_results(compact),
-    )
+    body = {"frames": frames, "plan": plan}
+    return _post_frames(session, body, compact, lambda r: ClipResult.from_json(r.json()))
 
 
 def batch(frames: list[BatchFrame], *, compact: bool = False) -> Call[list[BatchEntryResult]]:
