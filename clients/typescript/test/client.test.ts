@@ -21,10 +21,13 @@ import {
   ErrorCode,
   InvalidRequest,
   NotFound,
+  RetryLater,
+  ServerFault,
   SessionGone,
   Status,
   StreamAuthError,
   Termination,
+  serviceError,
   type ClipRequest,
   type CompactFrameResult,
   type DofInfo,
@@ -236,6 +239,18 @@ describe("types", () => {
     const result = components["FrameResult"]?.properties ?? {};
     assert.deepEqual(Object.values(Termination).sort(), [...(result["termination"]?.enum ?? [])].sort());
     assert.deepEqual(Object.values(Status).sort(), [...(result["status"]?.enum ?? [])].sort());
+  });
+});
+
+describe("errors", () => {
+  test("each error code has exactly one exception class", () => {
+    const kinds = [InvalidRequest, AuthError, NotFound, RetryLater, ServerFault];
+    const listed = kinds.flatMap((Class) => [...Class.codes]);
+    assert.deepEqual(listed.sort(), Object.values(ErrorCode).sort());
+    for (const Class of kinds) {
+      for (const code of Class.codes) assert.ok(serviceError(code, "") instanceof Class, code);
+    }
+    assert.ok(serviceError("a_code_of_tomorrow", "") instanceof ServerFault);
   });
 });
 
