@@ -104,11 +104,14 @@ def _on_session(
     method: str,
     subpath: str,
     parse: Callable[[httpx.Response], T],
-    **request: Any,
+    *,
+    json: Any = None,
+    params: dict[str, str] | None = None,
 ) -> Call[T]:
     """A call on ``/v1/sessions/{id}{subpath}``, with the session's token."""
+    path = f"/v1/sessions/{session.id}{subpath}"
     headers = {"Authorization": f"Bearer {session.token}"}
-    return Call(method, f"/v1/sessions/{session.id}{subpath}", parse, headers=headers, **request)
+    return Call(method, path, parse, json=json, params=params or {}, headers=headers)
 
 
 def _post_frames(
@@ -122,7 +125,7 @@ def _session_info(response: httpx.Response) -> SessionInfo:
     return SessionInfo.from_json(response.json())
 
 
-# --- the calls: the clients' methods (client.py binds each to its transport) ---------------
+# --- the calls: the clients' methods (listed once in client.py's _BaseClient) --------------
 def create_session(
     chain: Chain,
     *,

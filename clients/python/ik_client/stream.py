@@ -18,6 +18,7 @@ budget) hold all of that without I/O; ``AsyncStream`` (websockets' asyncio clien
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import time
 from collections import OrderedDict
@@ -259,8 +260,12 @@ class AsyncStream(_BaseStream[AsyncConnection]):
     by one task at a time.
     """
 
+    @functools.cached_property
+    def _lock(self) -> asyncio.Lock:
+        """One sender or one reconnect at a time."""
+        return asyncio.Lock()
+
     async def __aenter__(self) -> AsyncStream:
-        self._lock = asyncio.Lock()  # one sender or one reconnect at a time
         self._connection = await self._open()
         return self
 
