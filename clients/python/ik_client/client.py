@@ -32,8 +32,9 @@ DEFAULT_RECONNECT = Reconnect()
 
 class _Endpoint(Generic[P, T]):
     """A client method for the call ``build`` describes (calls.py): on a ``Client`` it
-    sends the call and returns the answer; on an ``AsyncClient`` it returns a coroutine of
-    it. Its name, docstring and parameters are ``build``'s."""
+    sends the call and returns the answer; on an ``AsyncClient`` it is a coroutine
+    function that does the same, awaited. Its name, docstring and parameters are
+    ``build``'s."""
 
     def __init__(self, build: Callable[P, Call[T]]) -> None:
         self.build = build
@@ -49,12 +50,18 @@ class _Endpoint(Generic[P, T]):
     def __get__(self, client: Client | AsyncClient | None, owner: type) -> Any:
         if client is None:
             return self
+        build = self.build
+        if isinstance(client, AsyncClient):
 
-        @functools.wraps(self.build)
-        def method(*args: P.args, **kwargs: P.kwargs) -> Any:
-            return client._send(self.build(*args, **kwargs))
+            async def awaited(*args: P.args, **kwargs: P.kwargs) -> T:
+                return await client._send(build(*args, **kwargs))
 
-        return method
+            return functools.wraps(build)(awaited)
+
+        def blocking(*args: P.args, **kwargs: P.kwargs) -> T:
+            return client._send(build(*args, **kwargs))
+
+        return functools.wraps(build)(blocking)
 
 
 class _BaseClient(abc.ABC, Generic[HTTP, S]):
