@@ -1,7 +1,7 @@
 /**
  * What the service takes and gives, typed after its OpenAPI schema (`/openapi.json`):
  * each interface carries the name of the schema component it mirrors, and
- * test/schema.test.ts checks their property names against a live server's schema.
+ * test/client.test.ts checks their property names against a live server's schema.
  */
 
 /** How the optimizer's last pass ended (docs/api.md, Termination codes). */
