@@ -1,6 +1,7 @@
-"""The HTTP calls, described once: method, path, body and how to read the answer. The
-sync and async clients only send them (httpx's own split: one request model, two
-transports)."""
+"""The HTTP calls, described once: each call's signature and documentation, its method,
+path and body, and how to read its answer. ``Client`` and ``AsyncClient`` (client.py)
+bind every call to their transport and only send it (httpx's own split: one request
+model, two transports)."""
 
 from __future__ import annotations
 
@@ -52,6 +53,12 @@ class Call(Generic[T]):
     params: dict[str, str] = field(default_factory=dict)
     headers: dict[str, str] = field(default_factory=dict)
 
+    def request(self, http: httpx.Client | httpx.AsyncClient) -> httpx.Request:
+        """The request, built by the client that sends it (its base URL and headers)."""
+        return http.build_request(
+            self.method, self.path, json=self.json, params=self.params, headers=self.headers
+        )
+
     def result(self, response: httpx.Response) -> T:
         raise_for_error(response)
         return self.parse(response)
@@ -84,10 +91,6 @@ def raise_for_error(response: httpx.Response) -> None:
     )
 
 
-def _auth(session: SessionRef) -> dict[str, str]:
-    return {"Authorization": f"Bearer {session.token}"}
-
-
 def _results(compact: bool) -> dict[str, str]:
     return {"results": "compact"} if compact else {}
 
@@ -96,13 +99,43 @@ def _without_none(**values: Any) -> dict[str, Any]:
     return {k: v for k, v in values.items() if v is not None}
 
 
+def _on_session(
+    session: SessionRef,
+    method: str,
+    subpath: str,
+    parse: Callable[[httpx.Response], T],
+    *,
+    json: Any = None,
+    params: dict[str, str] | None = None,
+) -> Call[T]:
+    """A call on ``/v1/sessions/{id}{subpath}``, with the session's token."""
+    path = f"/v1/sessions/{session.id}{subpath}"
+    headers = {"Authorization": f"Bearer {session.token}"}
+    return Call(method, path, parse, json=json, params=params or {}, headers=headers)
+
+
+def _post_frames(
+    session: SessionRef, body: Any, compact: bool, parse: Callable[[httpx.Response], T]
+) -> Call[T]:
+    """``POST /v1/sessions/{id}/frames``: one frame or a clip."""
+    return _on_session(session, "POST", "/frames", parse, json=body, params=_results(compact))
+
+
+def _session_info(response: httpx.Response) -> SessionInfo:
+    return SessionInfo.from_json(response.json())
+
+
+# --- the calls: the clients' methods (listed once in client.py's _BaseClient) --------------
 def create_session(
     chain: Chain,
-    options: SolverOptionsPatch | None,
-    initial_pose: PoseIn | None,
+    *,
+    options: SolverOptionsPatch | None = None,
+    initial_pose: PoseIn | None = None,
     conventions: Conventions | None = None,
     bones: BoneOutput | None = None,
 ) -> Call[Session]:
+    """A new session on ``chain`` (e.g. ``{"format": "example", "name": "panda_arm"}``),
+    speaking ``conventions`` (e.g. ``{"preset": "unity"}``), answering with ``bones``."""
     body = _without_none(
         chain=chain,
         options=options,
@@ -114,63 +147,62 @@ def create_session(
 
 
 def get_session(session: SessionRef) -> Call[SessionInfo]:
-    return Call(
-        "GET",
-        f"/v1/sessions/{session.id}",
-        lambda r: SessionInfo.from_json(r.json()),
-        headers=_auth(session),
-    )
+    """The session's chain summary, options, pose and counters."""
+    return _on_session(session, "GET", "", _session_info)
 
 
 def patch_session(session: SessionRef, options: SolverOptionsPatch) -> Call[SessionInfo]:
-    return Call(
-        "PATCH",
-        f"/v1/sessions/{session.id}",
-        lambda r: SessionInfo.from_json(r.json()),
-        json=options,
-        headers=_auth(session),
-    )
+    """Change solver options; the options left out keep their value."""
+    return _on_session(session, "PATCH", "", _session_info, json=options)
 
 
-def set_pose(session: SessionRef, pose: PoseIn) -> Call[Pose]:
-    return Call(
-        "PUT",
-        f"/v1/sessions/{session.id}/pose",
-        lambda r: Pose.from_json(r.json()),
-        json=pose,
-        headers=_auth(session),
-    )
+def set_pose(
+    session: SessionRef,
+    *,
+    q: list[float] | None = None,
+    joints: dict[str, float] | None = None,
+) -> Call[Pose]:
+    """Set the pose the next frame starts from: every DOF (``q``) or some by name."""
+    pose = _pose_in(q, joints)
+    return _on_session(session, "PUT", "/pose", lambda r: Pose.from_json(r.json()), json=pose)
 
 
 def delete_session(session: SessionRef) -> Call[None]:
-    return Call("DELETE", f"/v1/sessions/{session.id}", lambda r: None, headers=_auth(session))
+    return _on_session(session, "DELETE", "", lambda r: None)
 
 
 def frame(
-    session: SessionRef, targets: list[Target], id: int | None, compact: bool
+    session: SessionRef,
+    targets: list[Target],
+    *,
+    id: int | None = None,
+    compact: bool = False,
 ) -> Call[FrameResult]:
-    return Call(
-        "POST",
-        f"/v1/sessions/{session.id}/frames",
-        lambda r: FrameResult.from_json(r.json()["results"][0]),
-        json=_without_none(id=id, targets=targets),
-        params=_results(compact),
-        headers=_auth(session),
+    """Solve one frame from the session's pose (``compact``: no joints by name and no
+    per-effector errors)."""
+    body = _without_none(id=id, targets=targets)
+    return _post_frames(
+        session, body, compact, lambda r: FrameResult.from_json(r.json()["results"][0])
     )
 
 
-def clip(session: SessionRef, frames: list[Frame], plan: bool, compact: bool) -> Call[ClipResult]:
-    return Call(
-        "POST",
-        f"/v1/sessions/{session.id}/frames",
-        lambda r: ClipResult.from_json(r.json()),
-        json={"frames": frames, "plan": plan},
-        params=_results(compact),
-        headers=_auth(session),
-    )
+def clip(
+    session: SessionRef,
+    frames: list[Frame],
+    *,
+    plan: bool = False,
+    compact: bool = False,
+) -> Call[ClipResult]:
+    """Solve frames in order, each from the previous answer, or with ``plan`` as a
+    whole (the smoothest joint path; the answer's ``plan`` says how smooth)."""
+    body = {"frames": frames, "plan": plan}
+    return _post_frames(session, body, compact, lambda r: ClipResult.from_json(r.json()))
 
 
-def batch(frames: list[BatchFrame], compact: bool) -> Call[list[BatchEntryResult]]:
+def batch(frames: list[BatchFrame], *, compact: bool = False) -> Call[list[BatchEntryResult]]:
+    """One frame for each of several sessions (a game server's characters) in one
+    request; one answer per entry, in order, each a result or its own error (an
+    entry's error is not raised: the other entries were solved)."""
     return Call(
         "POST",
         "/v1/batch",
@@ -183,15 +215,17 @@ def batch(frames: list[BatchFrame], compact: bool) -> Call[list[BatchEntryResult
 def solve(
     chain: Chain,
     targets: list[Target],
-    seed: PoseIn | None,
-    options: SolverOptionsPatch | None,
-    id: int | None,
+    *,
+    seed: PoseIn | None = None,
+    options: SolverOptionsPatch | None = None,
+    id: int | None = None,
 ) -> Call[FrameResult]:
+    """A stateless one-shot solve (no session)."""
     body = _without_none(chain=chain, targets=targets, seed=seed, options=options, id=id)
     return Call("POST", "/v1/solve", lambda r: FrameResult.from_json(r.json()), json=body)
 
 
-def pose_in(q: list[float] | None, joints: dict[str, float] | None) -> PoseIn:
+def _pose_in(q: list[float] | None, joints: dict[str, float] | None) -> PoseIn:
     """``PoseIn`` from exactly one of ``q`` and ``joints`` (the server also checks)."""
     if (q is None) == (joints is None):
         raise ValueError("give exactly one of q and joints")

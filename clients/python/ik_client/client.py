@@ -1,55 +1,81 @@
 """``Client`` (blocking) and ``AsyncClient`` (asyncio): the same calls, over httpx.
 
-Every call returns a typed answer or raises a ``ServiceError`` subclass carrying the
-server's ``code``, ``field`` and ``retry_after_s``. ``stream()`` opens the session's
+Every call is written once, in calls.py (its signature, documentation, request and
+answer), and listed once, in ``_BaseClient``; each client only sends (``_send``: httpx's
+blocking or asyncio transport), so ``Client.frame`` returns what ``AsyncClient.frame``
+awaits. Every call returns a typed answer or raises a ``ServiceError`` subclass carrying
+the server's ``code``, ``field`` and ``retry_after_s``. ``stream()`` opens the session's
 WebSocket (``Stream`` / ``AsyncStream``).
 """
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+import abc
+import functools
+from collections.abc import Callable, Coroutine
+from typing import Any, Generic, ParamSpec, TypeVar, overload
 
 import httpx
 
 from . import calls
 from .calls import Call, SessionRef
 from .stream import AsyncStream, Reconnect, Stream
-from .types import (
-    BatchEntryResult,
-    BatchFrame,
-    BoneOutput,
-    Chain,
-    ClipResult,
-    Conventions,
-    Encoding,
-    Frame,
-    FrameResult,
-    Pose,
-    PoseIn,
-    Session,
-    SessionInfo,
-    SolverOptionsPatch,
-    Target,
-)
+from .types import Encoding
 
 T = TypeVar("T")
+P = ParamSpec("P")
+HTTP = TypeVar("HTTP", httpx.Client, httpx.AsyncClient)
+S = TypeVar("S", Stream, AsyncStream)
 DEFAULT_TIMEOUT_S = 30.0
 DEFAULT_RECONNECT = Reconnect()
 
 
-def _headers(api_key: str | None) -> dict[str, str]:
-    return {"X-API-Key": api_key} if api_key is not None else {}
+class _Endpoint(Generic[P, T]):
+    """A client method for the call ``build`` describes (calls.py): on a ``Client`` it
+    sends the call and returns the answer; on an ``AsyncClient`` it is a coroutine
+    function that does the same, awaited. Its name, docstring and parameters are
+    ``build``'s."""
+
+    def __init__(self, build: Callable[P, Call[T]]) -> None:
+        self.build = build
+        self.__doc__ = build.__doc__
+        self.__wrapped__ = build  # help() and inspect.signature show the call's parameters
+
+    @overload
+    def __get__(self, client: None, owner: type) -> _Endpoint[P, T]: ...
+    @overload
+    def __get__(self, client: Client, owner: type) -> Callable[P, T]: ...
+    @overload
+    def __get__(self, client: AsyncClient, owner: type) -> Callable[P, Coroutine[Any, Any, T]]: ...
+    def __get__(self, client: Client | AsyncClient | None, owner: type) -> Any:
+        if client is None:
+            return self
+        build = self.build
+        if isinstance(client, AsyncClient):
+
+            async def awaited(*args: P.args, **kwargs: P.kwargs) -> T:
+                return await client._send(build(*args, **kwargs))
+
+            return functools.wraps(build)(awaited)
+
+        def blocking(*args: P.args, **kwargs: P.kwargs) -> T:
+            return client._send(build(*args, **kwargs))
+
+        return functools.wraps(build)(blocking)
 
 
-class Client:
-    """The IK service over HTTP, blocking.
+class _BaseClient(abc.ABC, Generic[HTTP, S]):
+    """What both clients hold: the service's URL and an httpx client (``HTTP``), and how
+    they open a session's WebSocket (``S``: ``Stream`` or ``AsyncStream``).
 
     Args:
         base_url: The service, e.g. ``http://127.0.0.1:8000``.
         api_key: Sent as ``X-API-Key`` when the server has API keys (``IK_API_KEYS``).
         timeout_s: Per-request timeout [s].
-        **httpx_options: Passed on to ``httpx.Client`` (e.g. ``transport``, ``verify``).
+        **httpx_options: Passed on to the httpx client (e.g. ``transport``, ``verify``).
     """
+
+    _stream_type: type[S]
 
     def __init__(
         self,
@@ -60,9 +86,48 @@ class Client:
         **httpx_options: Any,
     ) -> None:
         self.base_url = base_url
-        self._http = httpx.Client(
-            base_url=base_url, headers=_headers(api_key), timeout=timeout_s, **httpx_options
+        headers = {"X-API-Key": api_key} if api_key is not None else {}
+        self._http: HTTP = self._http_client(
+            base_url=base_url, headers=headers, timeout=timeout_s, **httpx_options
         )
+
+    @abc.abstractmethod
+    def _http_client(self, **options: Any) -> HTTP: ...
+
+    create_session = _Endpoint(calls.create_session)
+    get_session = _Endpoint(calls.get_session)
+    patch_session = _Endpoint(calls.patch_session)
+    set_pose = _Endpoint(calls.set_pose)
+    delete_session = _Endpoint(calls.delete_session)
+    frame = _Endpoint(calls.frame)
+    clip = _Endpoint(calls.clip)
+    batch = _Endpoint(calls.batch)
+    solve = _Endpoint(calls.solve)
+
+    def stream(
+        self,
+        session: SessionRef,
+        *,
+        encoding: Encoding = Encoding.JSON,
+        compact: bool = False,
+        reconnect: Reconnect = DEFAULT_RECONNECT,
+        timeout_s: float | None = DEFAULT_TIMEOUT_S,
+    ) -> S:
+        """The session's WebSocket; open it with ``with`` (``Stream``) or ``async with``
+        (``AsyncStream``). ``timeout_s`` bounds each wait for an answer."""
+        url = calls.ws_url(self.base_url, session, compact)
+        return self._stream_type(
+            url, session.token, encoding=encoding, reconnect=reconnect, timeout_s=timeout_s
+        )
+
+
+class Client(_BaseClient[httpx.Client, Stream]):
+    """The IK service over HTTP, blocking (arguments: ``_BaseClient``)."""
+
+    _stream_type = Stream
+
+    def _http_client(self, **options: Any) -> httpx.Client:
+        return httpx.Client(**options)
 
     def __enter__(self) -> Client:
         return self
@@ -73,118 +138,17 @@ class Client:
     def close(self) -> None:
         self._http.close()
 
-    def _do(self, call: Call[T]) -> T:
-        response = self._http.request(
-            call.method, call.path, json=call.json, params=call.params, headers=call.headers
-        )
-        return call.result(response)
-
-    def create_session(
-        self,
-        chain: Chain,
-        *,
-        options: SolverOptionsPatch | None = None,
-        initial_pose: PoseIn | None = None,
-        conventions: Conventions | None = None,
-        bones: BoneOutput | None = None,
-    ) -> Session:
-        """A new session on ``chain`` (e.g. ``{"format": "example", "name": "panda_arm"}``),
-        speaking ``conventions`` (e.g. ``{"preset": "unity"}``), answering with ``bones``."""
-        return self._do(calls.create_session(chain, options, initial_pose, conventions, bones))
-
-    def get_session(self, session: SessionRef) -> SessionInfo:
-        return self._do(calls.get_session(session))
-
-    def patch_session(self, session: SessionRef, options: SolverOptionsPatch) -> SessionInfo:
-        """Change solver options; the options left out keep their value."""
-        return self._do(calls.patch_session(session, options))
-
-    def set_pose(
-        self,
-        session: SessionRef,
-        *,
-        q: list[float] | None = None,
-        joints: dict[str, float] | None = None,
-    ) -> Pose:
-        """Set the pose the next frame starts from: every DOF (``q``) or some by name."""
-        return self._do(calls.set_pose(session, calls.pose_in(q, joints)))
-
-    def delete_session(self, session: SessionRef) -> None:
-        self._do(calls.delete_session(session))
-
-    def frame(
-        self,
-        session: SessionRef,
-        targets: list[Target],
-        *,
-        id: int | None = None,
-        compact: bool = False,
-    ) -> FrameResult:
-        """Solve one frame from the session's pose (``compact``: no joints by name and no
-        per-effector errors)."""
-        return self._do(calls.frame(session, targets, id, compact))
-
-    def clip(
-        self,
-        session: SessionRef,
-        frames: list[Frame],
-        *,
-        plan: bool = False,
-        compact: bool = False,
-    ) -> ClipResult:
-        """Solve frames in order, each from the previous answer, or with ``plan`` as a
-        whole (the smoothest joint path; the answer's ``plan`` says how smooth)."""
-        return self._do(calls.clip(session, frames, plan, compact))
-
-    def batch(self, frames: list[BatchFrame], *, compact: bool = False) -> list[BatchEntryResult]:
-        """One frame for each of several sessions (a game server's characters) in one
-        request; one answer per entry, in order, each a result or its own error (an
-        entry's error is not raised: the other entries were solved)."""
-        return self._do(calls.batch(frames, compact))
-
-    def solve(
-        self,
-        chain: Chain,
-        targets: list[Target],
-        *,
-        seed: PoseIn | None = None,
-        options: SolverOptionsPatch | None = None,
-        id: int | None = None,
-    ) -> FrameResult:
-        """A stateless one-shot solve (no session)."""
-        return self._do(calls.solve(chain, targets, seed, options, id))
-
-    def stream(
-        self,
-        session: SessionRef,
-        *,
-        encoding: Encoding = Encoding.JSON,
-        compact: bool = False,
-        reconnect: Reconnect = DEFAULT_RECONNECT,
-        timeout_s: float | None = DEFAULT_TIMEOUT_S,
-    ) -> Stream:
-        """The session's WebSocket; open it with ``with``."""
-        url = calls.ws_url(self.base_url, session, compact)
-        return Stream(
-            url, session.token, encoding=encoding, reconnect=reconnect, timeout_s=timeout_s
-        )
+    def _send(self, call: Call[T]) -> T:
+        return call.result(self._http.send(call.request(self._http)))
 
 
-class AsyncClient:
+class AsyncClient(_BaseClient[httpx.AsyncClient, AsyncStream]):
     """The IK service over HTTP, asyncio; the same calls as ``Client``, awaited."""
 
-    def __init__(
-        self,
-        base_url: str,
-        *,
-        api_key: str | None = None,
-        timeout_s: float = DEFAULT_TIMEOUT_S,
-        **httpx_options: Any,
-    ) -> None:
-        self.base_url = base_url
-        self._http = httpx.AsyncClient(
-            base_url=base_url, headers=_headers(api_key), timeout=timeout_s, **httpx_options
-        )
+    _stream_type = AsyncStream
+
+    def _http_client(self, **options: Any) -> httpx.AsyncClient:
+        return httpx.AsyncClient(**options)
 
     async def __aenter__(self) -> AsyncClient:
         return self
@@ -195,88 +159,5 @@ class AsyncClient:
     async def close(self) -> None:
         await self._http.aclose()
 
-    async def _do(self, call: Call[T]) -> T:
-        response = await self._http.request(
-            call.method, call.path, json=call.json, params=call.params, headers=call.headers
-        )
-        return call.result(response)
-
-    async def create_session(
-        self,
-        chain: Chain,
-        *,
-        options: SolverOptionsPatch | None = None,
-        initial_pose: PoseIn | None = None,
-        conventions: Conventions | None = None,
-        bones: BoneOutput | None = None,
-    ) -> Session:
-        return await self._do(
-            calls.create_session(chain, options, initial_pose, conventions, bones)
-        )
-
-    async def get_session(self, session: SessionRef) -> SessionInfo:
-        return await self._do(calls.get_session(session))
-
-    async def patch_session(self, session: SessionRef, options: SolverOptionsPatch) -> SessionInfo:
-        return await self._do(calls.patch_session(session, options))
-
-    async def set_pose(
-        self,
-        session: SessionRef,
-        *,
-        q: list[float] | None = None,
-        joints: dict[str, float] | None = None,
-    ) -> Pose:
-        return await self._do(calls.set_pose(session, calls.pose_in(q, joints)))
-
-    async def delete_session(self, session: SessionRef) -> None:
-        await self._do(calls.delete_session(session))
-
-    async def frame(
-        self,
-        session: SessionRef,
-        targets: list[Target],
-        *,
-        id: int | None = None,
-        compact: bool = False,
-    ) -> FrameResult:
-        return await self._do(calls.frame(session, targets, id, compact))
-
-    async def clip(
-        self,
-        session: SessionRef,
-        frames: list[Frame],
-        *,
-        plan: bool = False,
-        compact: bool = False,
-    ) -> ClipResult:
-        return await self._do(calls.clip(session, frames, plan, compact))
-
-    async def batch(
-        self, frames: list[BatchFrame], *, compact: bool = False
-    ) -> list[BatchEntryResult]:
-        """As ``Client.batch``."""
-        return await self._do(calls.batch(frames, compact))
-
-    async def solve(
-        self,
-        chain: Chain,
-        targets: list[Target],
-        *,
-        seed: PoseIn | None = None,
-        options: SolverOptionsPatch | None = None,
-        id: int | None = None,
-    ) -> FrameResult:
-        return await self._do(calls.solve(chain, targets, seed, options, id))
-
-    def stream(
-        self,
-        session: SessionRef,
-        *,
-        encoding: Encoding = Encoding.JSON,
-        compact: bool = False,
-        reconnect: Reconnect = DEFAULT_RECONNECT,
-    ) -> AsyncStream:
-        """The session's WebSocket; open it with ``async with``."""
-        url = calls.ws_url(self.base_url, session, compact)
-        return AsyncStream(url, session.token, encoding=encoding, reconnect=reconnect)
+    async def _send(self, call: Call[T]) -> T:
+        return call.result(await self._http.send(call.request(self._http)))

@@ -10,7 +10,8 @@ the server closes raises a ``StreamClosed`` subclass chosen by the close code, w
 from __future__ import annotations
 
 import enum
-from typing import Any
+from dataclasses import KW_ONLY, dataclass
+from typing import Any, ClassVar
 
 
 class ErrorCode(enum.StrEnum):
@@ -78,8 +79,10 @@ class IKClientError(Exception):
     """Base of every error this client raises."""
 
 
+@dataclass(eq=False)  # an exception equals only itself
 class ServiceError(IKClientError):
-    """An error the service answered with.
+    """An error the service answered with; its subclass says what a caller can do about
+    it, and lists the ``codes`` it stands for.
 
     Attributes:
         code: The stable code (an ``ErrorCode``, or the server's string for a code this
@@ -94,75 +97,78 @@ class ServiceError(IKClientError):
         detail: The HTTP body's ``detail`` as sent (a list for ``invalid_format``).
     """
 
-    def __init__(
-        self,
-        code: ErrorCode | str,
-        message: str,
-        *,
-        field: str | None = None,
-        retry_after_s: float | None = None,
-        status_code: int | None = None,
-        id: int | None = None,
-        detail: Any = None,
-    ) -> None:
-        super().__init__(f"{code}: {message}")
-        self.code = code
-        self.message = message
-        self.field = field
-        self.retry_after_s = retry_after_s
-        self.status_code = status_code
-        self.id = id
-        self.detail = detail
+    codes: ClassVar[frozenset[ErrorCode]] = frozenset()
+
+    code: ErrorCode | str
+    message: str
+    _: KW_ONLY
+    field: str | None = None
+    retry_after_s: float | None = None
+    status_code: int | None = None
+    id: int | None = None
+    detail: Any = None
+
+    def __post_init__(self) -> None:
+        super().__init__(f"{self.code}: {self.message}")
 
 
 class InvalidRequest(ServiceError):
-    """invalid_format, invalid_problem, id_reuse, payload_too_large, method_not_allowed,
-    http_error: the request is wrong; ``field`` says where."""
+    """The request is wrong; ``field`` says where."""
+
+    codes = frozenset(
+        {
+            ErrorCode.INVALID_FORMAT,
+            ErrorCode.INVALID_PROBLEM,
+            ErrorCode.ID_REUSE,
+            ErrorCode.PAYLOAD_TOO_LARGE,
+            ErrorCode.METHOD_NOT_ALLOWED,
+            ErrorCode.HTTP_ERROR,
+        }
+    )
 
 
 class AuthError(ServiceError):
-    """unauthorized, forbidden, forbidden_origin: no or wrong token or API key, or a
-    browser origin the server does not allow."""
+    """No or wrong token or API key, or a browser origin the server does not allow."""
+
+    codes = frozenset({ErrorCode.UNAUTHORIZED, ErrorCode.FORBIDDEN, ErrorCode.FORBIDDEN_ORIGIN})
 
 
 class NotFound(ServiceError):
-    """not_found: the session never existed, expired or was deleted."""
+    """The session never existed, expired or was deleted."""
+
+    codes = frozenset({ErrorCode.NOT_FOUND})
 
 
 class RetryLater(ServiceError):
-    """rate_limited, not_ready, plans_busy, too_many_plans, too_many_sessions,
-    key_session_limit, warmup_failed, too_many_websockets, shutting_down,
-    store_unavailable: try again
-    (after ``retry_after_s`` when given)."""
+    """Try again (after ``retry_after_s`` when given)."""
+
+    codes = frozenset(
+        {
+            ErrorCode.TOO_MANY_SESSIONS,
+            ErrorCode.KEY_SESSION_LIMIT,
+            ErrorCode.RATE_LIMITED,
+            ErrorCode.NOT_READY,
+            ErrorCode.WARMUP_FAILED,
+            ErrorCode.PLANS_BUSY,
+            ErrorCode.TOO_MANY_PLANS,
+            ErrorCode.SERVER_BUSY,
+            ErrorCode.TOO_MUCH_WORK,
+            ErrorCode.TOO_MANY_WEBSOCKETS,
+            ErrorCode.SHUTTING_DOWN,
+            ErrorCode.STORE_UNAVAILABLE,
+        }
+    )
 
 
 class ServerFault(ServiceError):
-    """internal_error, slow_reader, or a code this client does not know."""
+    """The server failed, or it sent a code this client does not know."""
+
+    codes = frozenset({ErrorCode.INTERNAL_ERROR, ErrorCode.SLOW_READER})
 
 
+_SERVICE_ERRORS = (InvalidRequest, AuthError, NotFound, RetryLater, ServerFault)
 _ERROR_CLASSES: dict[str, type[ServiceError]] = {
-    ErrorCode.INVALID_FORMAT: InvalidRequest,
-    ErrorCode.INVALID_PROBLEM: InvalidRequest,
-    ErrorCode.ID_REUSE: InvalidRequest,
-    ErrorCode.PAYLOAD_TOO_LARGE: InvalidRequest,
-    ErrorCode.METHOD_NOT_ALLOWED: InvalidRequest,
-    ErrorCode.HTTP_ERROR: InvalidRequest,
-    ErrorCode.UNAUTHORIZED: AuthError,
-    ErrorCode.FORBIDDEN: AuthError,
-    ErrorCode.FORBIDDEN_ORIGIN: AuthError,
-    ErrorCode.NOT_FOUND: NotFound,
-    ErrorCode.TOO_MANY_SESSIONS: RetryLater,
-    ErrorCode.KEY_SESSION_LIMIT: RetryLater,
-    ErrorCode.RATE_LIMITED: RetryLater,
-    ErrorCode.NOT_READY: RetryLater,
-    ErrorCode.WARMUP_FAILED: RetryLater,
-    ErrorCode.PLANS_BUSY: RetryLater,
-    ErrorCode.TOO_MANY_PLANS: RetryLater,
-    ErrorCode.SERVER_BUSY: RetryLater,
-    ErrorCode.TOO_MUCH_WORK: RetryLater,
-    ErrorCode.TOO_MANY_WEBSOCKETS: RetryLater,
-    ErrorCode.SHUTTING_DOWN: RetryLater,
-    ErrorCode.STORE_UNAVAILABLE: RetryLater,
+    code: kind for kind in _SERVICE_ERRORS for code in kind.codes
 }
 
 
@@ -183,12 +189,16 @@ class StreamClosed(IKClientError):
     """The WebSocket closed and the stream cannot go on (a reconnect cannot help, or the
     bounded reconnect attempts ran out).
 
+    Its subclasses list the ``close_codes`` they stand for.
+
     Attributes:
         close_code: The WebSocket close code (1006 when the connection dropped).
         reason: The server's close reason, its error code (e.g. ``not_found``); empty
             when none was sent.
         meaning: What the code means, from the server's table.
     """
+
+    close_codes: ClassVar[frozenset[CloseCode]] = frozenset()
 
     def __init__(self, close_code: int, reason: str = "") -> None:
         self.close_code = close_code
@@ -200,54 +210,65 @@ class StreamClosed(IKClientError):
 
 
 class StreamAuthError(StreamClosed):
-    """4401 / 4403: no token, or the wrong one."""
+    """No token, or the wrong one."""
+
+    close_codes = frozenset({CloseCode.UNAUTHORIZED, CloseCode.FORBIDDEN})
 
 
 class SessionGone(StreamClosed):
-    """4404: the session does not exist (any more); create a new one."""
+    """The session does not exist (any more); create a new one."""
+
+    close_codes = frozenset({CloseCode.NOT_FOUND})
 
 
 class MessageTooBig(StreamClosed):
-    """1009: a message was larger than the server accepts."""
+    """A message was larger than the server accepts."""
+
+    close_codes = frozenset({CloseCode.MESSAGE_TOO_BIG})
 
 
 class SlowReader(StreamClosed):
-    """1008: the client did not read its answers in time (or a bad handshake query)."""
+    """The client did not read its answers in time (or a bad handshake query)."""
+
+    close_codes = frozenset({CloseCode.SLOW_READER})
 
 
 class ServerRestarting(StreamClosed):
-    """1012: the server shut down; raised only when reconnecting did not succeed."""
+    """The server shut down; raised only when reconnecting did not succeed."""
+
+    close_codes = frozenset({CloseCode.SERVICE_RESTART})
 
 
 class TooManyWebSockets(StreamClosed):
-    """1013: the server holds its maximum of WebSockets; retry later."""
+    """The server holds its maximum of WebSockets; retry later."""
+
+    close_codes = frozenset({CloseCode.TRY_AGAIN_LATER})
 
 
 class ConnectionLost(StreamClosed):
-    """1006 or 1011: the connection dropped, or the server failed; raised only when
-    reconnecting did not succeed."""
+    """The connection dropped, or the server failed; raised only when reconnecting did
+    not succeed."""
+
+    close_codes = frozenset({CloseCode.ABNORMAL, CloseCode.INTERNAL_ERROR})
 
 
 _CLOSE_CLASSES: dict[int, type[StreamClosed]] = {
-    CloseCode.UNAUTHORIZED: StreamAuthError,
-    CloseCode.FORBIDDEN: StreamAuthError,
-    CloseCode.NOT_FOUND: SessionGone,
-    CloseCode.MESSAGE_TOO_BIG: MessageTooBig,
-    CloseCode.SLOW_READER: SlowReader,
-    CloseCode.SERVICE_RESTART: ServerRestarting,
-    CloseCode.TRY_AGAIN_LATER: TooManyWebSockets,
-    CloseCode.ABNORMAL: ConnectionLost,
-    CloseCode.INTERNAL_ERROR: ConnectionLost,
+    code: kind
+    for kind in (
+        StreamAuthError,
+        SessionGone,
+        MessageTooBig,
+        SlowReader,
+        ServerRestarting,
+        TooManyWebSockets,
+        ConnectionLost,
+    )
+    for code in kind.close_codes
 }
 
 # Closes after which reconnecting and resending can succeed.
-RECONNECTABLE = frozenset(
-    {
-        CloseCode.ABNORMAL,
-        CloseCode.INTERNAL_ERROR,
-        CloseCode.SERVICE_RESTART,
-        CloseCode.TRY_AGAIN_LATER,
-    }
+RECONNECTABLE: frozenset[int] = frozenset().union(
+    *(kind.close_codes for kind in (ServerRestarting, TooManyWebSockets, ConnectionLost))
 )
 
 

@@ -10,18 +10,21 @@ the caller got, and each message gets exactly one. A server that keeps answers (
 in Redis, docs/operations.md) answers a message it had solved, and whose answer was lost
 in the drop, with that stored answer (on another worker too): it is never solved twice.
 
-``_Pipeline`` holds all of that without I/O; ``AsyncStream`` (websockets' asyncio client)
-and ``Stream`` (its threading client) only move bytes.
+``_Pipeline`` (ids, encodings, what waits for an answer) and ``_Retries`` (the reconnect
+budget) hold all of that without I/O; ``AsyncStream`` (websockets' asyncio client) and
+``Stream`` (its threading client) only move bytes and wait.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import time
 from collections import OrderedDict
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import msgpack
 from websockets.asyncio.client import ClientConnection as AsyncConnection
@@ -155,6 +158,34 @@ def _close_of(exc: ConnectionClosed) -> tuple[int, str]:
     return 1006, ""
 
 
+class _Retries:
+    """A stream's reconnect budget, without I/O: which closes a reconnect can mend, the
+    wait before each attempt (``Reconnect``), and the error raised when none is left."""
+
+    def __init__(self, policy: Reconnect) -> None:
+        self.policy = policy
+        self.tries = 0  # reconnects since the last answer
+        self._last: ConnectionClosed | None = None
+
+    def closed(self, exc: ConnectionClosed) -> None:
+        """Note a close; raise it as a ``StreamClosed`` when reconnecting cannot mend it."""
+        code, reason = _close_of(exc)
+        if code not in RECONNECTABLE:
+            raise stream_closed(code, reason) from exc
+        self._last = exc
+
+    def delays(self) -> Iterator[float]:
+        """The wait before each reconnect attempt left [s]; then the last close, raised.
+        An attempt counts when it starts (a server that accepts and closes again uses
+        the budget up)."""
+        while self.tries < self.policy.attempts:
+            delay = self.policy.delay_s(self.tries)
+            self.tries += 1
+            yield delay
+        assert self._last is not None, "closed() notes the close before any attempt"
+        raise stream_closed(*_close_of(self._last)) from self._last
+
+
 def _expect_frame(answer: Answer) -> FrameResult:
     if not isinstance(answer, FrameAnswer):
         raise IKClientError(f"expected a frame result, got {answer!r}")
@@ -173,28 +204,38 @@ def _expect_clip(answer: Answer) -> ClipResult:
     return answer.clip
 
 
-class AsyncStream:
-    """A session's WebSocket (asyncio). Use as ``async with client.stream(session) as s``.
+Connection = TypeVar("Connection", SyncConnection, AsyncConnection)
 
-    ``send_frame`` / ``send_clip`` / ``send_ping`` return the message's id; ``receive``
-    returns the next answer (in the order sent) or raises its ``ServiceError``. ``frame``,
-    ``clip`` and ``ping`` send one message and wait for its answer. Sends may come from
-    several tasks; answers are read by one task at a time.
-    """
 
-    def __init__(self, url: str, token: str, *, encoding: Encoding, reconnect: Reconnect) -> None:
+class _BaseStream(Generic[Connection]):
+    """What both streams hold: the URL and token, the pipeline, the reconnect budget and
+    the current websockets connection (``Connection``, threading or asyncio)."""
+
+    def __init__(
+        self,
+        url: str,
+        token: str,
+        *,
+        encoding: Encoding,
+        reconnect: Reconnect,
+        timeout_s: float | None = 30.0,
+    ) -> None:
         self.url = url
         self.reconnects = 0  # connections made after the first
-        self._headers = {"Authorization": f"Bearer {token}"}
+        self.timeout_s = timeout_s
         self._pipeline = _Pipeline(encoding)
-        self._reconnect = reconnect
-        self._connection: AsyncConnection | None = None
-        self._lock = asyncio.Lock()  # one sender or one reconnect at a time
-        self._tries = 0  # reconnects since the last answer
+        self._retries = _Retries(reconnect)
+        self._connection: Connection | None = None
+        self._connect_options: dict[str, Any] = {
+            "additional_headers": {"Authorization": f"Bearer {token}"},
+            "open_timeout": OPEN_TIMEOUT_S,
+            "max_size": MAX_ANSWER_BYTES,
+        }
 
     @property
-    def connection(self) -> AsyncConnection:
-        """The current websockets connection (a test drops it with ``transport.abort()``)."""
+    def connection(self) -> Connection:
+        """The current websockets connection (a test drops it: ``transport.abort()``
+        for asyncio's, ``socket.shutdown`` for the threading one)."""
         if self._connection is None:
             raise IKClientError("the stream is not open")
         return self._connection
@@ -203,6 +244,26 @@ class AsyncStream:
     def in_flight(self) -> int:
         """Messages sent that have no answer yet."""
         return self._pipeline.in_flight
+
+    def _answer(self, data: str | bytes) -> Answer:
+        self._retries.tries = 0
+        return self._pipeline.answer(data)
+
+
+class AsyncStream(_BaseStream[AsyncConnection]):
+    """A session's WebSocket (asyncio). Use as ``async with client.stream(session) as s``.
+
+    ``send_frame`` / ``send_clip`` / ``send_ping`` return the message's id; ``receive``
+    returns the next answer (in the order sent) or raises its ``ServiceError``, waiting
+    at most ``timeout_s`` (``TimeoutError``). ``frame``, ``clip`` and ``ping`` send one
+    message and wait for its answer. Sends may come from several tasks; answers are read
+    by one task at a time.
+    """
+
+    @functools.cached_property
+    def _lock(self) -> asyncio.Lock:
+        """One sender or one reconnect at a time."""
+        return asyncio.Lock()
 
     async def __aenter__(self) -> AsyncStream:
         self._connection = await self._open()
@@ -228,12 +289,12 @@ class AsyncStream:
         while True:
             connection = self.connection
             try:
-                data = await connection.recv()
+                # Cancelling recv() loses nothing (websockets' guarantee).
+                data = await asyncio.wait_for(connection.recv(), self.timeout_s)
             except ConnectionClosed as exc:
                 await self._recover(connection, exc)
                 continue
-            self._tries = 0
-            return self._pipeline.answer(data)
+            return self._answer(data)
 
     async def frame(self, targets: list[Target]) -> FrameResult:
         await self.send_frame(targets)
@@ -248,12 +309,7 @@ class AsyncStream:
         return _expect_pong(await self.receive())
 
     async def _open(self) -> AsyncConnection:
-        return await async_connect(
-            self.url,
-            additional_headers=self._headers,
-            open_timeout=OPEN_TIMEOUT_S,
-            max_size=MAX_ANSWER_BYTES,
-        )
+        return await async_connect(self.url, **self._connect_options)
 
     async def _send(self, body: dict[str, Any]) -> int:
         async with self._lock:
@@ -270,65 +326,30 @@ class AsyncStream:
 
     async def _recover(self, failed: AsyncConnection, exc: ConnectionClosed) -> None:
         """Reconnect and resend what is waiting, or raise the close as a ``StreamClosed``."""
-        code, reason = _close_of(exc)
-        if code not in RECONNECTABLE:
-            raise stream_closed(code, reason) from exc
+        self._retries.closed(exc)
         async with self._lock:
             if self._connection is not failed:
                 return  # another task has reconnected already
-            while self._tries < self._reconnect.attempts:
-                await asyncio.sleep(self._reconnect.delay_s(self._tries))
-                self._tries += 1
+            for delay in self._retries.delays():
+                await asyncio.sleep(delay)
                 try:
                     connection = await self._open()
                     for data in self._pipeline.resend():
                         await connection.send(data)
                 except ConnectionClosed as again:
-                    code, reason = _close_of(again)
-                    if code not in RECONNECTABLE:
-                        raise stream_closed(code, reason) from again
+                    self._retries.closed(again)
                     continue
                 except (OSError, InvalidHandshake, TimeoutError):
                     continue
                 self._connection = connection
                 self.reconnects += 1
                 return
-            raise stream_closed(code, reason) from exc
 
 
-class Stream:
+class Stream(_BaseStream[SyncConnection]):
     """A session's WebSocket (blocking; one thread at a time). Use as
     ``with client.stream(session) as s``; the same calls as ``AsyncStream``.
     ``receive`` waits at most ``timeout_s`` (``TimeoutError``)."""
-
-    def __init__(
-        self,
-        url: str,
-        token: str,
-        *,
-        encoding: Encoding,
-        reconnect: Reconnect,
-        timeout_s: float | None = 30.0,
-    ) -> None:
-        self.url = url
-        self.reconnects = 0
-        self.timeout_s = timeout_s
-        self._headers = {"Authorization": f"Bearer {token}"}
-        self._pipeline = _Pipeline(encoding)
-        self._reconnect = reconnect
-        self._connection: SyncConnection | None = None
-        self._tries = 0  # reconnects since the last answer
-
-    @property
-    def connection(self) -> SyncConnection:
-        """The current websockets connection (a test drops it with ``socket.shutdown``)."""
-        if self._connection is None:
-            raise IKClientError("the stream is not open")
-        return self._connection
-
-    @property
-    def in_flight(self) -> int:
-        return self._pipeline.in_flight
 
     def __enter__(self) -> Stream:
         self._connection = self._open()
@@ -357,8 +378,7 @@ class Stream:
             except ConnectionClosed as exc:
                 self._recover(exc)
                 continue
-            self._tries = 0
-            return self._pipeline.answer(data)
+            return self._answer(data)
 
     def frame(self, targets: list[Target]) -> FrameResult:
         self.send_frame(targets)
@@ -373,12 +393,7 @@ class Stream:
         return _expect_pong(self.receive())
 
     def _open(self) -> SyncConnection:
-        connection = sync_connect(
-            self.url,
-            additional_headers=self._headers,
-            open_timeout=OPEN_TIMEOUT_S,
-            max_size=MAX_ANSWER_BYTES,
-        )
+        connection: SyncConnection = sync_connect(self.url, **self._connect_options)
         # websockets 17.1 warns about a connection not entered as a context manager;
         # this one lives as long as the stream, which closes it (its exit is close()).
         return connection.__enter__()
@@ -392,24 +407,19 @@ class Stream:
         return message_id
 
     def _recover(self, exc: ConnectionClosed) -> None:
-        code, reason = _close_of(exc)
-        if code not in RECONNECTABLE:
-            raise stream_closed(code, reason) from exc
-        while self._tries < self._reconnect.attempts:
-            time.sleep(self._reconnect.delay_s(self._tries))
-            self._tries += 1
+        """Reconnect and resend what is waiting, or raise the close as a ``StreamClosed``."""
+        self._retries.closed(exc)
+        for delay in self._retries.delays():
+            time.sleep(delay)
             try:
                 connection = self._open()
                 for data in self._pipeline.resend():
                     connection.send(data)
             except ConnectionClosed as again:
-                code, reason = _close_of(again)
-                if code not in RECONNECTABLE:
-                    raise stream_closed(code, reason) from again
+                self._retries.closed(again)
                 continue
             except (OSError, InvalidHandshake, TimeoutError):
                 continue
             self._connection = connection
             self.reconnects += 1
             return
-        raise stream_closed(code, reason) from exc

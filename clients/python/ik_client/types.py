@@ -382,22 +382,6 @@ class SessionCounters:
     not_solved: int
 
 
-def _dofs(d: dict[str, Any]) -> list[Dof]:
-    return [Dof(x["name"], x["lower"], x["upper"]) for x in d["dof"]]
-
-
-def _effectors(d: dict[str, Any]) -> list[Effector]:
-    return [Effector(x["name"], EffectorMode(x["mode"])) for x in d["effectors"]]
-
-
-def _followers(d: dict[str, Any]) -> list[Follower]:
-    return [Follower(x["name"], x["leader"], x["multiplier"], x["offset"]) for x in d["followers"]]
-
-
-def _warnings(d: dict[str, Any]) -> list[ModelWarning]:
-    return [ModelWarning(x["code"], x["joint"], x["field"], x["message"]) for x in d["warnings"]]
-
-
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ConventionsOut:
     """Schema ``ConventionsOut``: the coordinates a session speaks."""
@@ -412,12 +396,11 @@ class ConventionsOut:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Session:
-    """Schema ``SessionCreated``: a new session. ``token`` is shown only once; every call
-    on the session takes this object (or any object with ``id`` and ``token``)."""
+class _SessionSummary:
+    """What ``Session`` and ``SessionInfo`` both carry: the chain's summary, the options,
+    the pose and the conventions."""
 
     id: str
-    token: str
     n_dof: int
     dof: list[Dof]
     effectors: list[Effector]
@@ -428,60 +411,57 @@ class Session:
     idle_ttl_s: float
     conventions: ConventionsOut
 
-    @classmethod
-    def from_json(cls, d: dict[str, Any]) -> Session:
-        return cls(
-            id=d["id"],
-            token=d["token"],
-            n_dof=d["n_dof"],
-            dof=_dofs(d),
-            effectors=_effectors(d),
-            followers=_followers(d),
-            warnings=_warnings(d),
-            options=SolverOptions.from_json(d["options"]),
-            pose=Pose.from_json(d["pose"]),
-            idle_ttl_s=d["idle_ttl_s"],
-            conventions=ConventionsOut.from_json(d["conventions"]),
-        )
+    @staticmethod
+    def _summary(d: dict[str, Any]) -> dict[str, Any]:
+        return {
+            "id": d["id"],
+            "n_dof": d["n_dof"],
+            "dof": [Dof(x["name"], x["lower"], x["upper"]) for x in d["dof"]],
+            "effectors": [Effector(x["name"], EffectorMode(x["mode"])) for x in d["effectors"]],
+            "followers": [
+                Follower(x["name"], x["leader"], x["multiplier"], x["offset"])
+                for x in d["followers"]
+            ],
+            "warnings": [
+                ModelWarning(x["code"], x["joint"], x["field"], x["message"]) for x in d["warnings"]
+            ],
+            "options": SolverOptions.from_json(d["options"]),
+            "pose": Pose.from_json(d["pose"]),
+            "idle_ttl_s": d["idle_ttl_s"],
+            "conventions": ConventionsOut.from_json(d["conventions"]),
+        }
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SessionInfo:
+class Session(_SessionSummary):
+    """Schema ``SessionCreated``: a new session. ``token`` is shown only once; every call
+    on the session takes this object (or any object with ``id`` and ``token``)."""
+
+    token: str
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> Session:
+        return cls(token=d["token"], **cls._summary(d))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SessionInfo(_SessionSummary):
     """Schema ``SessionInfo``: a session's chain summary, options, pose and counters."""
 
-    id: str
-    n_dof: int
-    dof: list[Dof]
-    effectors: list[Effector]
-    followers: list[Follower]
-    warnings: list[ModelWarning]
-    options: SolverOptions
-    pose: Pose
     counters: SessionCounters
     created_at: float
     idle_s: float
-    idle_ttl_s: float
     websockets: int
-    conventions: ConventionsOut
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> SessionInfo:
         c = d["counters"]
         return cls(
-            id=d["id"],
-            n_dof=d["n_dof"],
-            dof=_dofs(d),
-            effectors=_effectors(d),
-            followers=_followers(d),
-            warnings=_warnings(d),
-            options=SolverOptions.from_json(d["options"]),
-            pose=Pose.from_json(d["pose"]),
             counters=SessionCounters(c["frames"], c["solved"], c["not_solved"]),
             created_at=d["created_at"],
             idle_s=d["idle_s"],
-            idle_ttl_s=d["idle_ttl_s"],
             websockets=d["websockets"],
-            conventions=ConventionsOut.from_json(d["conventions"]),
+            **cls._summary(d),
         )
 
 

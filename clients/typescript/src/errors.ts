@@ -67,9 +67,6 @@ export const CLOSE_CODE_MEANINGS: Readonly<Record<number, string>> = {
   4404: "no such session (never existed, expired or deleted)",
 };
 
-/** Closes after which reconnecting and resending can succeed. */
-export const RECONNECTABLE: ReadonlySet<number> = new Set([1006, 1011, 1012, 1013]);
-
 /** Base of every error this client raises. */
 export class IKClientError extends Error {
   override name = "IKClientError";
@@ -86,9 +83,11 @@ export interface ServiceErrorInit {
   detail?: unknown;
 }
 
-/** An error the service answered with: `code`, `field`, `retryAfterS`. */
+/** An error the service answered with: `code`, `field`, `retryAfterS`. Its subclass says
+ * what a caller can do about it, and lists the `codes` it stands for. */
 export class ServiceError extends IKClientError {
   override name = "ServiceError";
+  static readonly codes: readonly ErrorCode[] = [];
   readonly field: string | null;
   readonly retryAfterS: number | null;
   readonly status: number | undefined;
@@ -109,62 +108,73 @@ export class ServiceError extends IKClientError {
   }
 }
 
-/** invalid_format, invalid_problem, id_reuse, payload_too_large, method_not_allowed, http_error. */
+/** The request is wrong; `field` says where. */
 export class InvalidRequest extends ServiceError {
   override name = "InvalidRequest";
+  static override readonly codes: readonly ErrorCode[] = [
+    ErrorCode.InvalidFormat,
+    ErrorCode.InvalidProblem,
+    ErrorCode.IdReuse,
+    ErrorCode.PayloadTooLarge,
+    ErrorCode.MethodNotAllowed,
+    ErrorCode.HttpError,
+  ];
 }
-/** unauthorized, forbidden, forbidden_origin: no or wrong token or API key, or a browser origin not allowed. */
+/** No or wrong token or API key, or a browser origin not allowed. */
 export class AuthError extends ServiceError {
   override name = "AuthError";
+  static override readonly codes: readonly ErrorCode[] = [
+    ErrorCode.Unauthorized,
+    ErrorCode.Forbidden,
+    ErrorCode.ForbiddenOrigin,
+  ];
 }
-/** not_found: the session never existed, expired or was deleted. */
+/** The session never existed, expired or was deleted. */
 export class NotFound extends ServiceError {
   override name = "NotFound";
+  static override readonly codes: readonly ErrorCode[] = [ErrorCode.NotFound];
 }
-/** rate_limited, not_ready, plans_busy, too_many_plans, too_many_sessions, key_session_limit,
- * warmup_failed, too_many_websockets, shutting_down, store_unavailable: wait (`retryAfterS` when given). */
+/** Wait, and try again (after `retryAfterS` when given). */
 export class RetryLater extends ServiceError {
   override name = "RetryLater";
+  static override readonly codes: readonly ErrorCode[] = [
+    ErrorCode.TooManySessions,
+    ErrorCode.KeySessionLimit,
+    ErrorCode.RateLimited,
+    ErrorCode.NotReady,
+    ErrorCode.WarmupFailed,
+    ErrorCode.PlansBusy,
+    ErrorCode.TooManyPlans,
+    ErrorCode.ServerBusy,
+    ErrorCode.TooMuchWork,
+    ErrorCode.TooManyWebSockets,
+    ErrorCode.ShuttingDown,
+    ErrorCode.StoreUnavailable,
+  ];
 }
-/** internal_error, slow_reader, or a code this client does not know. */
+/** The server failed, or it sent a code this client does not know. */
 export class ServerFault extends ServiceError {
   override name = "ServerFault";
+  static override readonly codes: readonly ErrorCode[] = [ErrorCode.InternalError, ErrorCode.SlowReader];
 }
 
-const ERROR_CLASSES: Record<string, typeof ServiceError> = {
-  invalid_format: InvalidRequest,
-  invalid_problem: InvalidRequest,
-  id_reuse: InvalidRequest,
-  payload_too_large: InvalidRequest,
-  method_not_allowed: InvalidRequest,
-  http_error: InvalidRequest,
-  unauthorized: AuthError,
-  forbidden: AuthError,
-  forbidden_origin: AuthError,
-  not_found: NotFound,
-  too_many_sessions: RetryLater,
-  key_session_limit: RetryLater,
-  rate_limited: RetryLater,
-  not_ready: RetryLater,
-  warmup_failed: RetryLater,
-  plans_busy: RetryLater,
-  too_many_plans: RetryLater,
-  server_busy: RetryLater,
-  too_much_work: RetryLater,
-  too_many_websockets: RetryLater,
-  shutting_down: RetryLater,
-  store_unavailable: RetryLater,
-};
+const ERROR_CLASSES = new Map<string, typeof ServiceError>(
+  [InvalidRequest, AuthError, NotFound, RetryLater, ServerFault].flatMap((Class) =>
+    Class.codes.map((code) => [code, Class] as const),
+  ),
+);
 
 /** The `ServiceError` subclass for `code`. */
 export function serviceError(code: string, message: string, init: ServiceErrorInit = {}): ServiceError {
-  const Class = ERROR_CLASSES[code] ?? ServerFault;
+  const Class = ERROR_CLASSES.get(code) ?? ServerFault;
   return new Class(code, message, init);
 }
 
-/** The WebSocket closed and the stream cannot go on; `reason` is the server's error code. */
+/** The WebSocket closed and the stream cannot go on; `reason` is the server's error code.
+ * Its subclasses list the `closeCodes` they stand for. */
 export class StreamClosed extends IKClientError {
   override name = "StreamClosed";
+  static readonly closeCodes: readonly CloseCode[] = [];
   readonly meaning: string;
 
   constructor(
@@ -177,49 +187,54 @@ export class StreamClosed extends IKClientError {
   }
 }
 
-/** 4401 / 4403: no token, or the wrong one. */
+/** No token, or the wrong one. */
 export class StreamAuthError extends StreamClosed {
   override name = "StreamAuthError";
+  static override readonly closeCodes: readonly CloseCode[] = [CloseCode.Unauthorized, CloseCode.Forbidden];
 }
-/** 4404: the session does not exist (any more); create a new one. */
+/** The session does not exist (any more); create a new one. */
 export class SessionGone extends StreamClosed {
   override name = "SessionGone";
+  static override readonly closeCodes: readonly CloseCode[] = [CloseCode.NotFound];
 }
-/** 1009: a message was larger than the server accepts. */
+/** A message was larger than the server accepts. */
 export class MessageTooBig extends StreamClosed {
   override name = "MessageTooBig";
+  static override readonly closeCodes: readonly CloseCode[] = [CloseCode.MessageTooBig];
 }
-/** 1008: the client did not read its answers in time (or a bad handshake query). */
+/** The client did not read its answers in time (or a bad handshake query). */
 export class SlowReader extends StreamClosed {
   override name = "SlowReader";
+  static override readonly closeCodes: readonly CloseCode[] = [CloseCode.SlowReader];
 }
-/** 1012: the server shut down; only when reconnecting did not succeed. */
+/** The server shut down; only when reconnecting did not succeed. */
 export class ServerRestarting extends StreamClosed {
   override name = "ServerRestarting";
+  static override readonly closeCodes: readonly CloseCode[] = [CloseCode.ServiceRestart];
 }
-/** 1013: the server holds its maximum of WebSockets. */
+/** The server holds its maximum of WebSockets. */
 export class TooManyWebSockets extends StreamClosed {
   override name = "TooManyWebSockets";
+  static override readonly closeCodes: readonly CloseCode[] = [CloseCode.TryAgainLater];
 }
-/** 1006 / 1011: the connection dropped or the server failed; reconnecting did not help. */
+/** The connection dropped or the server failed; reconnecting did not help. */
 export class ConnectionLost extends StreamClosed {
   override name = "ConnectionLost";
+  static override readonly closeCodes: readonly CloseCode[] = [CloseCode.Abnormal, CloseCode.InternalError];
 }
 
-const CLOSE_CLASSES: Record<number, typeof StreamClosed> = {
-  4401: StreamAuthError,
-  4403: StreamAuthError,
-  4404: SessionGone,
-  1009: MessageTooBig,
-  1008: SlowReader,
-  1012: ServerRestarting,
-  1013: TooManyWebSockets,
-  1006: ConnectionLost,
-  1011: ConnectionLost,
-};
+const RECONNECTING = [ServerRestarting, TooManyWebSockets, ConnectionLost];
+const CLOSE_CLASSES = new Map<number, typeof StreamClosed>(
+  [StreamAuthError, SessionGone, MessageTooBig, SlowReader, ...RECONNECTING].flatMap((Class) =>
+    Class.closeCodes.map((code) => [code, Class] as const),
+  ),
+);
+
+/** Closes after which reconnecting and resending can succeed. */
+export const RECONNECTABLE: ReadonlySet<number> = new Set(RECONNECTING.flatMap((Class) => Class.closeCodes));
 
 /** The `StreamClosed` subclass for `closeCode`. */
 export function streamClosed(closeCode: number, reason = ""): StreamClosed {
-  const Class = CLOSE_CLASSES[closeCode] ?? StreamClosed;
+  const Class = CLOSE_CLASSES.get(closeCode) ?? StreamClosed;
   return new Class(closeCode, reason);
 }

@@ -1,7 +1,7 @@
 /**
  * What the service takes and gives, typed after its OpenAPI schema (`/openapi.json`):
  * each interface carries the name of the schema component it mirrors, and
- * test/schema.test.ts checks their property names against a live server's schema.
+ * test/client.test.ts checks their property names against a live server's schema.
  */
 
 /** How the optimizer's last pass ended (docs/api.md, Termination codes). */
@@ -124,21 +124,8 @@ export type PoseIn =
   | { q: number[]; joints?: null }
   | { joints: Record<string, number>; q?: null };
 
-/** Schema `OptionsPatch`: solver options to change; left out: unchanged. */
-export interface OptionsPatch {
-  position_tolerance_m?: number | null;
-  rotation_tolerance_rad?: number | null;
-  time_budget_us?: number | null;
-  max_iter?: number | null;
-  max_restarts?: number | null;
-  restart_radius_rad?: number | null;
-  max_step_rad?: number | null;
-  posture_weight?: number | null;
-  limit_weight?: number | null;
-  limit_margin?: number | null;
-  continuity?: Continuity | null;
-  max_joint_step_rad?: number | null;
-}
+/** Schema `OptionsPatch`: solver options to change (`SolverOptions`'s); left out: unchanged. */
+export type OptionsPatch = { [Option in keyof SolverOptions]?: SolverOptions[Option] | null };
 
 /** Schema `OriginSpec`. */
 export interface OriginSpec {
@@ -161,16 +148,20 @@ export interface JointSpec {
   terminator?: boolean;
 }
 
-/** Schema `EffectorSpec`. */
-export interface EffectorSpec {
-  name: string;
-  link: string;
+/** What an effector on a link (`EffectorSpec`) and on a bone (`BoneEffectorSpec`) both set. */
+export interface EffectorSettings {
   tip_offset?: Vec3;
   tip_rotation?: Quaternion;
   mode?: EffectorMode;
   aim_axis?: Vec3;
   position_weight?: number;
   rotation_weight?: number;
+}
+
+/** Schema `EffectorSpec`. */
+export interface EffectorSpec extends EffectorSettings {
+  name: string;
+  link: string;
 }
 
 /** Schema `HierarchyChain`: joints and effectors as JSON. */
@@ -196,15 +187,9 @@ export interface ExampleChain {
 }
 
 /** Schema `BoneEffectorSpec`: an effector on a skeleton bone (named after it by default). */
-export interface BoneEffectorSpec {
+export interface BoneEffectorSpec extends EffectorSettings {
   bone: string;
   name?: string | null;
-  tip_offset?: Vec3;
-  tip_rotation?: Quaternion;
-  mode?: EffectorMode;
-  aim_axis?: Vec3;
-  position_weight?: number;
-  rotation_weight?: number;
 }
 
 /** Schema `BoneSettingsSpec`: one bone's axes (intrinsic order), limits [rad], terminator. */
@@ -216,7 +201,7 @@ export interface BoneSettingsSpec {
 }
 
 /** What skeleton chains (glTF, BVH) share (docs/engines.md, Skeleton formats). */
-interface SkeletonSettings {
+export interface SkeletonSettings {
   effectors: BoneEffectorSpec[];
   moving?: string[] | null;
   bones?: Record<string, BoneSettingsSpec>;
@@ -368,10 +353,10 @@ export interface SolverOptions {
   max_joint_step_rad: number;
 }
 
-/** Schema `SessionCreated`: `token` is shown only here. */
-export interface SessionCreated {
+/** What `SessionCreated` and `SessionInfo` both carry: the chain's summary, the options,
+ * the pose and the conventions. */
+export interface SessionSummary {
   id: string;
-  token: string;
   n_dof: number;
   dof: DofInfo[];
   effectors: EffectorInfo[];
@@ -381,6 +366,11 @@ export interface SessionCreated {
   pose: Pose;
   idle_ttl_s: number;
   conventions: ConventionsOut;
+}
+
+/** Schema `SessionCreated`: `token` is shown only here. */
+export interface SessionCreated extends SessionSummary {
+  token: string;
 }
 
 /** Schema `SessionCounters`. */
@@ -391,21 +381,11 @@ export interface SessionCounters {
 }
 
 /** Schema `SessionInfo`. */
-export interface SessionInfo {
-  id: string;
-  n_dof: number;
-  dof: DofInfo[];
-  effectors: EffectorInfo[];
-  followers: FollowerInfo[];
-  warnings: ModelWarning[];
-  options: SolverOptions;
-  pose: Pose;
+export interface SessionInfo extends SessionSummary {
   counters: SessionCounters;
   created_at: number;
   idle_s: number;
-  idle_ttl_s: number;
   websockets: number;
-  conventions: ConventionsOut;
 }
 
 /** Schema `ErrorBody`: every HTTP error. */
