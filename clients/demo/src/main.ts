@@ -59,8 +59,9 @@ interface DemoState {
   /** Round trips [ms] (last 600 frames), as the readout's percentiles use them. */
   roundTripsMs: number[];
   /** Since the last `resetStats()`: each answer's round trip [ms], server_us, solve_us;
-   * answers solved; frames drawn; timer ticks that sent nothing because `MAX_IN_FLIGHT`
-   * frames were waiting (`held`) or that the timer missed (`missed`, a busy main thread). */
+   * answers solved; frames drawn; the worker's timer ticks that sent nothing because 4
+   * frames were waiting (`held`), and its deadlines missed (`missed`: it fired over a
+   * period late, a busy machine). */
   samples: {
     roundTripMs: number[];
     serverUs: number[];
@@ -116,8 +117,8 @@ const state: DemoState = {
 // --- scene ---------------------------------------------------------------------------------
 const view = document.getElementById("view")!;
 // No antialiasing, and a frame is drawn only when something moved: without a GPU
-// (headless Chromium renders WebGL in software) drawing every animation frame would take
-// the main thread from the socket.
+// (headless Chromium renders WebGL in software) a drawn frame costs 20-30 ms of CPU, which
+// the server and the solve worker share on a small machine.
 const renderer = new THREE.WebGLRenderer({ antialias: false });
 renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
 let needsRender = true;
