@@ -182,8 +182,12 @@ def test_dragging_a_hand_target_moves_the_hand(demo: DemoPage) -> None:
 
     readout = {
         row: demo.page.inner_text(f"#r-{row}")
-        for row in ("frames", "termination", "round-trip", "solve", "server", "step")
+        for row in ("frames", "termination", "round-trip", "solve", "server", "step", "rates")
     }
+    # Solves and drawn frames are counted apart (the solve loop does not wait for drawing).
+    rates = re.fullmatch(r"(\d+) solves/s, (\d+) drawn frames/s", readout["rates"])
+    assert rates, readout
+    assert after["samples"]["drawn"] > 0 and after["samples"]["roundTripMs"], after["samples"]
     solved, answered = map(int, readout["frames"].split(" / "))
     assert solved > 0 and answered >= solved
     assert re.fullmatch(r"\d+\.\d\d ms", readout["round-trip"]), readout
