@@ -1,15 +1,18 @@
-"""/demo's frame loop as a browser sees it: round trips of a 2-arm + 2-leg character.
+"""/demo's solve loop as a browser sees it: solves and drawn frames of a 2-arm + 2-leg
+character, and their round trips.
 
 Starts a ``python -m service`` on 127.0.0.1, opens /demo in Debian's headless Chromium
 (Playwright, the flags of tests/live/test_docs_browser.py), moves all four targets along
-circles (the page's ``ikDemo.startMotion``: 0.12 m, 0.5 Hz, every animation frame) and,
-for each socket setting (JSON or MessagePack, full or compact results), reads the frames
-the page answered in ``--seconds``: solves per second, the share solved, and the round
-trip (sent to handled, in the page, ``performance.now()``), server_us and solve_us.
+circles (the page's ``ikDemo.startMotion``: 0.12 m, 0.5 Hz, moved at each tick of the
+solve loop) and, for each socket setting (JSON or MessagePack, full or compact results),
+reads what the page did in ``--seconds``: answers per second, frames drawn per second,
+the share solved, and the round trip (sent to handled, in the page,
+``performance.now()``), server_us and solve_us.
 
-The page sends one frame per animation frame while none is in flight, so solves per
-second is bounded by the browser's frame rate (60 in headless Chromium): holding 60
-frames/s means answering every animation frame.
+The page sends the targets on a 60 Hz timer, apart from drawing (at most 4 frames
+without an answer; a tick with 4 waiting sends nothing and counts as held), and each
+drawn frame shows the newest answer: holding 60 solves/s means answering every tick,
+whatever the drawn frame rate.
 
     OPENBLAS_NUM_THREADS=1 python -m bench.demo_browser --seconds 20
 """
@@ -47,6 +50,7 @@ def wait(page: Any, predicate: str, timeout_s: float = 60.0) -> None:
 
 
 def measure(page: Any, encoding: str, compact: bool, seconds: float) -> dict[str, float]:
+    """One row: switch the socket, let it settle 1 s, count for ``seconds``."""
     page.evaluate("([e, c]) => window.ikDemo.setEncoding(e, c)", [encoding, compact])
     wait(
         page,
@@ -70,6 +74,9 @@ def measure(page: Any, encoding: str, compact: bool, seconds: float) -> dict[str
     return {
         "frames": len(rtt),
         "per_s": len(rtt) / elapsed_s,
+        "drawn_per_s": samples["drawn"] / elapsed_s,
+        "held": samples["held"],
+        "missed": samples["missed"],
         "solved_pct": 100 * samples["solved"] / max(1, len(rtt)),
         "rtt_p50": percentile(rtt, 50),
         "rtt_p99": percentile(rtt, 99),
@@ -123,16 +130,22 @@ def main(argv: list[str] | None = None) -> int:
     print(f"# 4 targets moving (2 hands, 2 feet; 19 DOF), {args.seconds:.0f} s per row")
     print()
     print(
-        "| encoding | results | frames | solves/s | solved | round trip p50 | p99 | max "
-        "| server_us p50 | solve_us p50 |"
+        "| encoding | results | frames | solves/s | drawn fps | solved | round trip p50 | p99 "
+        "| max | server_us p50 | solve_us p50 |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for encoding, compact, r in rows:
         print(
             f"| {encoding} | {'compact' if compact else 'full'} | {r['frames']} "
-            f"| {r['per_s']:.1f} | {r['solved_pct']:.1f}% | {r['rtt_p50']:.2f} ms "
-            f"| {r['rtt_p99']:.2f} ms | {r['rtt_max']:.2f} ms | {r['server_p50']:.0f} "
-            f"| {r['solve_p50']:.0f} |"
+            f"| {r['per_s']:.1f} | {r['drawn_per_s']:.1f} | {r['solved_pct']:.1f}% "
+            f"| {r['rtt_p50']:.2f} ms | {r['rtt_p99']:.2f} ms | {r['rtt_max']:.2f} ms "
+            f"| {r['server_p50']:.0f} | {r['solve_p50']:.0f} |"
+        )
+    print()
+    for encoding, compact, r in rows:
+        print(
+            f"# {encoding} {'compact' if compact else 'full'}: timer ticks held (4 frames "
+            f"waiting) {r['held']}, missed (timer late by a period) {r['missed']}"
         )
     return 0
 

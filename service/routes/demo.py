@@ -1,7 +1,8 @@
 """/demo: a character and draggable targets in the browser, solved over the WebSocket.
 
 Everything the page loads comes from the service: ``service/demo_assets/`` holds the
-page's script (``demo.js``: the page, the TypeScript client and three.js, bundled by
+page's scripts (``demo.js``: the page, the TypeScript client and three.js;
+``demo-worker.js``: its solve loop, a worker that owns the WebSocket; both bundled by
 esbuild from ``clients/demo/``; versions, licences and sha256 in that folder's README),
 its stylesheet and the character's skeleton (``character.gltf``, made for the demo). No
 CDN, no build step at install or start: a fresh clone serves the page offline.
@@ -88,6 +89,7 @@ _PAGE: Final = """<!doctype html>
   <table id="readout">
     <tr><th>status</th><td id="r-status">starting</td></tr>
     <tr><th>frames solved</th><td id="r-frames">0</td></tr>
+    <tr><th>rates</th><td id="r-rates"></td></tr>
     <tr><th>termination</th><td id="r-termination"></td></tr>
     <tr><th>solve_us</th><td id="r-solve"></td></tr>
     <tr><th>server_us</th><td id="r-server"></td></tr>

@@ -100,7 +100,9 @@ class DemoPage:
             if state and test(state):
                 return state
             self.page.wait_for_timeout(100)
-        raise AssertionError(f"timed out waiting for {what}; page state: {self.state()}")
+        # The page state without its per-frame series (thousands of numbers).
+        brief = {k: v for k, v in self.state().items() if k not in ("samples", "roundTripsMs")}
+        raise AssertionError(f"timed out waiting for {what}; page state: {brief}")
 
     def drag(self, handle: str, dx_px: float, dy_px: float) -> None:
         start = self.page.evaluate("(name) => window.ikDemo.screenOf(name)", handle)
@@ -180,8 +182,12 @@ def test_dragging_a_hand_target_moves_the_hand(demo: DemoPage) -> None:
 
     readout = {
         row: demo.page.inner_text(f"#r-{row}")
-        for row in ("frames", "termination", "round-trip", "solve", "server", "step")
+        for row in ("frames", "termination", "round-trip", "solve", "server", "step", "rates")
     }
+    # Solves and drawn frames are counted apart (the solve loop does not wait for drawing).
+    rates = re.fullmatch(r"(\d+) solves/s, (\d+) drawn frames/s", readout["rates"])
+    assert rates, readout
+    assert after["samples"]["drawn"] > 0 and after["samples"]["roundTripMs"], after["samples"]
     solved, answered = map(int, readout["frames"].split(" / "))
     assert solved > 0 and answered >= solved
     assert re.fullmatch(r"\d+\.\d\d ms", readout["round-trip"]), readout
@@ -189,6 +195,53 @@ def test_dragging_a_hand_target_moves_the_hand(demo: DemoPage) -> None:
     assert readout["termination"], readout
     assert after["last"]["round_trip_ms"] > 0
     _screenshot(demo.page, "demo-drag")
+    demo.assert_clean()
+
+
+def test_dragging_the_pole_target_swings_the_knee_towards_it(demo: DemoPage) -> None:
+    """The pole handle goes with the left foot's target (`pole`, bone shin_L): with the
+    knee bent, dragging the handle to one side swings the knee (shin_L's origin, as the
+    page's scene graph has it after applying the answers) towards it, and the foot stays
+    on its target."""
+    demo.open()
+    demo.wait_for("solved frames", lambda s: s["ready"] and s["solved"] >= 5)
+    # Lift the foot: a straight leg has no bend for the pole to choose.
+    demo.drag("foot_L", 0, -100)
+    lifted = demo.wait_for(
+        "the foot to follow its lifted target",
+        lambda s: (
+            s["targets"]["foot_L"][1] > 0.25
+            and distance(s["effectors"]["foot_L"], s["targets"]["foot_L"]) < 0.01
+        ),
+    )
+    assert lifted["poles"], "this server's Target has a pole field: the page must send it"
+    knee_before, pole_before = lifted["poleBone"], lifted["targets"]["pole_knee_L"]
+
+    # The handle to the character's left (screen right from this camera).
+    demo.drag("pole_knee_L", 200, 0)
+    moved = demo.wait_for(
+        "the pole target to move",
+        lambda s: distance(s["targets"]["pole_knee_L"], pole_before) > 0.3,
+    )
+    pole = moved["targets"]["pole_knee_L"]
+    sideways = [p - q for p, q in zip(pole, pole_before, strict=True)]
+    length = math.hypot(*sideways)
+
+    def towards_pole(state: dict[str, Any]) -> float:
+        """How far the knee moved along the pole's move [m]."""
+        moved_by = [p - q for p, q in zip(state["poleBone"], knee_before, strict=True)]
+        return sum(m * d for m, d in zip(moved_by, sideways, strict=True)) / length
+
+    after = demo.wait_for(
+        "the knee to swing towards the pole",
+        lambda s: s["frames"] >= moved["frames"] + 10 and towards_pole(s) > 0.1,
+    )
+    # Closer to the pole than before, and the foot still on its target: the pole chose
+    # the bend, it did not pull the foot off.
+    assert distance(after["poleBone"], pole) < distance(knee_before, pole) - 0.1
+    assert distance(after["effectors"]["foot_L"], after["targets"]["foot_L"]) < 0.01
+    assert "sent with foot_L" in demo.page.inner_text("#r-pole")
+    _screenshot(demo.page, "demo-pole")
     demo.assert_clean()
 
 

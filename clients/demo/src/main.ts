@@ -1,11 +1,17 @@
 /**
  * /demo: a character whose hands and feet follow draggable targets, solved by the service
- * over a session's WebSocket (the TypeScript client's `Stream`), one frame per animation
- * frame while the socket is free.
+ * over a session's WebSocket (the TypeScript client's `Stream`).
+ *
+ * Solving and drawing run apart, as in a game: a worker (worker.ts) owns the socket and
+ * sends the targets the page last posted on a 60 Hz timer (pipelined, at most 4 frames
+ * without an answer), and each animation frame here draws the newest answer. Without a
+ * GPU (headless Chromium renders WebGL in software) the page draws 30-50 frames/s; the
+ * solves do not wait for it.
  *
  * `window.ikDemo` exposes the page's state for tests and the browser benchmark
- * (tests/live/test_demo_browser.py, bench/demo_browser.py): answered frames, round
- * trips, where the effectors are in the scene graph, and the handles' screen positions.
+ * (tests/live/test_demo_browser.py, bench/demo_browser.py): answered and drawn frames,
+ * round trips, where the effectors (and the knee the pole pulls) are in the scene graph,
+ * and the handles' screen positions.
  */
 
 import * as THREE from "three";
@@ -19,15 +25,16 @@ import {
   type CreateSessionOptions,
   type Encoding,
   type Frame,
+  type FrameResults,
   type SessionCreated,
-  type Stream,
-  StreamClosed,
   type Target,
 } from "../../typescript/src/index.js";
 import { Character, EFFECTORS, type EffectorName } from "./character.js";
 import { ExampleChain } from "./examples.js";
 import { drawPaths } from "./paths.js";
 import { Readout, largestStep } from "./readout.js";
+import { type FromWorker, type LoopCounters, type Motion, type ToWorker, type Vec, absoluteNow, motionOffset } from "./protocol.js";
+import { RateMeter } from "./timing.js";
 
 const API_KEY_STORAGE = "ik-demo-api-key";
 const MAX_RECORDED_FRAMES = 600; // the server's default IK_MAX_FRAMES_PER_REQUEST
@@ -37,8 +44,6 @@ const HANDLE_COLOURS: Record<EffectorName, number> = {
   foot_L: 0xf58231,
   foot_R: 0x3cb44b,
 };
-
-type Vec = [number, number, number];
 
 /** What the page exposes as `window.ikDemo.state`. */
 interface DemoState {
@@ -53,16 +58,36 @@ interface DemoState {
   solved: number;
   /** Round trips [ms] (last 600 frames), as the readout's percentiles use them. */
   roundTripsMs: number[];
-  /** Every frame since the last `resetStats()`: round trip [ms], server_us, solve_us, success. */
-  samples: { roundTripMs: number[]; serverUs: number[]; solveUs: number[]; solved: number; since: number };
+  /** Since the last `resetStats()`: each answer's round trip [ms], server_us, solve_us;
+   * answers solved; frames drawn; the worker's timer ticks that sent nothing because 4
+   * frames were waiting (`held`), and its deadlines missed (`missed`: it fired over a
+   * period late, a busy machine). */
+  samples: {
+    roundTripMs: number[];
+    serverUs: number[];
+    solveUs: number[];
+    solved: number;
+    drawn: number;
+    held: number;
+    missed: number;
+    since: number;
+  };
   last: { termination: string; solve_us: number; server_us: number; round_trip_ms: number; largest_step_rad: number } | null;
   /** Effector bones' world positions, read off the scene graph after applying the answer. */
   effectors: Record<string, Vec>;
+  /** The same for the bone the pole target pulls (the left knee: `shin_L`'s origin). */
+  poleBone: Vec | null;
   targets: Record<string, Vec>;
   errors: string[];
-  /** The loop's view of its socket: a frame in flight, reconnects, animation frames. */
-  socket: { open: boolean; inFlight: boolean; reconnects: number; ticks: number };
+  /** The solve worker's view of its socket: frames without an answer, reconnects, timer ticks. */
+  socket: { open: boolean; inFlight: number; reconnects: number; ticks: number };
+  /** Over the last second: answers handled and frames drawn, per second. */
+  rates: { solvesPerS: number; drawnPerS: number };
   clip: { recorded: number; planned: number; largest_step_rad: number; tracked_largest_step_rad: number } | null;
+}
+
+function emptySamples(): DemoState["samples"] {
+  return { roundTripMs: [], serverUs: [], solveUs: [], solved: 0, drawn: 0, held: 0, missed: 0, since: performance.now() };
 }
 
 const body = document.body;
@@ -78,20 +103,22 @@ const state: DemoState = {
   frames: 0,
   solved: 0,
   roundTripsMs: [],
-  samples: { roundTripMs: [], serverUs: [], solveUs: [], solved: 0, since: performance.now() },
+  samples: emptySamples(),
   last: null,
   effectors: {},
+  poleBone: null,
   targets: {},
   errors: [],
-  socket: { open: false, inFlight: false, reconnects: 0, ticks: 0 },
+  socket: { open: false, inFlight: 0, reconnects: 0, ticks: 0 },
+  rates: { solvesPerS: 0, drawnPerS: 0 },
   clip: null,
 };
 
 // --- scene ---------------------------------------------------------------------------------
 const view = document.getElementById("view")!;
 // No antialiasing, and a frame is drawn only when something moved: without a GPU
-// (headless Chromium renders WebGL in software) drawing every animation frame would take
-// the main thread from the socket.
+// (headless Chromium renders WebGL in software) a drawn frame costs 20-30 ms of CPU, which
+// the server and the solve worker share on a small machine.
 const renderer = new THREE.WebGLRenderer({ antialias: false });
 renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
 let needsRender = true;
@@ -134,9 +161,6 @@ function addHandle(name: string, colour: number, at: THREE.Vector3, opacity = 0.
   return mesh;
 }
 
-// Pole targets (which way a knee or elbow points) are being added to the API on another
-// branch; until the field exists this handle is drawn and can be dragged, but it is not
-// sent (the readout says so).
 // The pole target (which way the left knee points): a target's `pole` field, sent only when
 // the server's schema has it (it came with a later version of the API); otherwise the
 // handle is drawn but not sent, and the readout says so.
@@ -179,6 +203,7 @@ renderer.domElement.addEventListener("pointermove", (event) => {
   const at = raycaster.ray.intersectPlane(dragPlane, new THREE.Vector3());
   if (at !== null) dragging.position.copy(at);
   needsRender = true;
+  postTargets();
 });
 renderer.domElement.addEventListener("pointerup", () => {
   dragging = null;
@@ -242,11 +267,13 @@ let character: Character;
 let examples = new Map<string, ExampleChain>();
 let model: Model;
 let client: Client;
+let apiKeyInUse: string | undefined;
 let session: SessionCreated;
-let stream: Stream<CompactFrameResult> | null = null;
-let inFlight = false;
 let previousQ: number[] | null = null;
+let newest: CompactFrameResult | null = null; // the newest answer, until it is drawn
 const readout = new Readout();
+const solveRate = new RateMeter();
+const drawRate = new RateMeter();
 
 function apiKey(): Promise<string> {
   const form = document.getElementById("api-key") as HTMLFormElement;
@@ -273,6 +300,7 @@ async function createSession(): Promise<void> {
     client = new Client(window.location.origin + root, key === undefined ? {} : { apiKey: key });
     try {
       session = await client.createSession(model.chain, model.sessionOptions);
+      apiKeyInUse = key;
       return;
     } catch (error) {
       if (!(error instanceof AuthError)) throw error;
@@ -282,40 +310,112 @@ async function createSession(): Promise<void> {
   }
 }
 
-// Bumped by every change of socket: an open that finishes after a newer one started (two
-// switches flipped at once) closes its socket instead of replacing the newer one, which
-// would leave a frame in flight on a socket nobody reads.
-let streamGeneration = 0;
+// --- the solve worker ------------------------------------------------------------------------
+const worker = new Worker(`${assets}/demo-worker.js`, { type: "module" });
+// Bumped by every change of socket: what the worker says about an older one (an answer
+// still on its way, an error) is dropped.
+let generation = 0;
+let streamOpen = false;
+let counters: LoopCounters = { ticks: 0, held: 0, missed: 0, inFlight: 0, reconnects: 0 };
+let countersAtReset = { held: 0, missed: 0 };
+let pendingClip: { resolve: (clip: FrameResults<CompactFrameResult>) => void; reject: (e: Error) => void } | null = null;
 
-function dropStream(): void {
-  streamGeneration += 1;
-  const old = stream;
-  stream = null;
-  old?.close();
-  inFlight = false;
+function toWorker(message: ToWorker): void {
+  worker.postMessage(message);
 }
 
-async function openStream(): Promise<void> {
-  dropStream();
-  const generation = streamGeneration;
-  const opened = await client.stream(session, { encoding: state.encoding, compact: state.compact });
-  if (generation !== streamGeneration) {
-    opened.close();
-    return;
+worker.onmessage = (event: MessageEvent<FromWorker>) => {
+  const message = event.data;
+  if (message.generation !== generation) return; // about a socket the page has since replaced
+  switch (message.kind) {
+    case "opened":
+      streamOpen = true;
+      readout.status(`solving (${state.encoding}${state.compact ? ", compact" : ""})`);
+      break;
+    case "answer":
+      answered(message);
+      break;
+    case "clip":
+      pendingClip?.resolve(message.clip);
+      pendingClip = null;
+      break;
+    case "error":
+      if (message.closed) streamOpen = false;
+      pendingClip?.reject(new Error(message.message));
+      pendingClip = null;
+      reportError(message.message);
+      break;
   }
-  stream = opened;
-  inFlight = false;
-  readout.status(`solving (${state.encoding}${state.compact ? ", compact" : ""})`);
+};
+worker.onerror = (event) => reportError(`solve worker: ${event.message}`);
+
+function dropStream(): void {
+  generation += 1;
+  streamOpen = false;
+  newest = null;
+  counters = { ticks: 0, held: 0, missed: 0, inFlight: 0, reconnects: 0 };
+  countersAtReset = { held: 0, missed: 0 };
+  toWorker({ kind: "close" });
+}
+
+function openStream(): void {
+  dropStream();
+  postTargets();
+  toWorker({
+    kind: "open",
+    generation,
+    baseUrl: window.location.origin + root,
+    apiKey: apiKeyInUse,
+    session,
+    encoding: state.encoding,
+    compact: state.compact,
+  });
 }
 
 function targets(): Target[] {
   return model.effectors.map((name) => model.target(name, handles.get(name)!.position));
 }
 
+/** Give the worker the targets as the handles stand (it sends them at its next ticks). */
+function postTargets(): void {
+  toWorker({ kind: "targets", targets: targets() });
+}
+
 function show(result: CompactFrameResult): void {
   model.show(result);
   needsRender = true;
   for (const name of model.effectors) state.effectors[name] = model.worldPosition(name).toArray() as Vec;
+  state.poleBone = handles.has(POLE) ? (character.worldPosition(POLE_BONE).toArray() as Vec) : null;
+}
+
+/** An answer from the worker: counted now, drawn at the next animation frame. */
+function answered(answer: Extract<FromWorker, { kind: "answer" }>): void {
+  const { result, roundTripMs } = answer;
+  const step = largestStep(previousQ, result.q);
+  previousQ = result.q;
+  if (!replaying) newest = result; // a later answer replaces it before it is drawn
+  counters = answer.counters;
+  solveRate.mark(answer.answeredAtMs);
+  readout.frame(result, roundTripMs, step);
+  state.frames = readout.frames;
+  state.solved = readout.solved;
+  state.roundTripsMs = readout.roundTripsMs;
+  state.samples.roundTripMs.push(roundTripMs);
+  state.samples.serverUs.push(result.server_us);
+  state.samples.solveUs.push(result.solve_us);
+  if (result.success) state.samples.solved += 1;
+  state.last = {
+    termination: result.termination,
+    solve_us: result.solve_us,
+    server_us: result.server_us,
+    round_trip_ms: roundTripMs,
+    largest_step_rad: step,
+  };
+  if (recording !== null) {
+    recording.frames.push({ targets: answer.sent });
+    recording.tracked.push(result.q);
+    if (recording.frames.length >= MAX_RECORDED_FRAMES) stopRecording();
+  }
 }
 
 // --- recording and planned replay ----------------------------------------------------------------
@@ -347,15 +447,18 @@ replayButton.addEventListener("click", () => {
 });
 
 async function replayPlanned(): Promise<void> {
-  if (recorded === null || stream === null) return;
+  if (recorded === null || !streamOpen) return;
+  const { frames, startQ } = recorded;
   replaying = true;
   replayButton.disabled = true;
   readout.status("planning the recorded clip");
   try {
-    while (inFlight) await new Promise((r) => setTimeout(r, 5));
-    // The plan starts where the recording started.
-    await client.setPose(session, { q: recorded.startQ });
-    const clip = await stream.clip(recorded.frames, { plan: true });
+    // On the worker's socket, once its frames in flight are answered, from the pose the
+    // recording started at.
+    const clip = await new Promise<FrameResults<CompactFrameResult>>((resolve, reject) => {
+      pendingClip = { resolve, reject };
+      toWorker({ kind: "clip", frames, startQ });
+    });
     const planned = clip.results.map((r) => r.q);
     drawPaths(document.getElementById("paths") as HTMLCanvasElement, recorded.tracked, planned);
     const plan = clip.plan;
@@ -380,83 +483,59 @@ async function replayPlanned(): Promise<void> {
   }
 }
 
-// --- the frame loop ------------------------------------------------------------------------
-async function solveOnce(current: Stream<CompactFrameResult>): Promise<void> {
-  const sent = targets();
-  const started = performance.now();
-  const result = await current.frame(sent);
-  const roundTripMs = performance.now() - started;
-  if (current !== stream) return; // answered on a socket the page has since replaced
-  const step = largestStep(previousQ, result.q);
-  previousQ = result.q;
-  show(result);
-  readout.frame(result, roundTripMs, step);
-  state.frames = readout.frames;
-  state.solved = readout.solved;
-  state.roundTripsMs = readout.roundTripsMs;
-  state.samples.roundTripMs.push(roundTripMs);
-  state.samples.serverUs.push(result.server_us);
-  state.samples.solveUs.push(result.solve_us);
-  if (result.success) state.samples.solved += 1;
-  state.last = {
-    termination: result.termination,
-    solve_us: result.solve_us,
-    server_us: result.server_us,
-    round_trip_ms: roundTripMs,
-    largest_step_rad: step,
-  };
-  if (recording !== null) {
-    recording.frames.push({ targets: sent });
-    recording.tracked.push(result.q);
-    if (recording.frames.length >= MAX_RECORDED_FRAMES) stopRecording();
-  }
-}
-
+// --- drawing (animation frames) -------------------------------------------------------------
 function reportError(error: unknown): void {
   const text = error instanceof Error ? error.message : String(error);
   state.errors.push(text);
   readout.status(`error: ${text}`);
 }
 
-let motion: ((t: number) => void) | null = null;
+// The scripted drag (`startMotion`) in scene coordinates, and where each handle rests.
+let motion: Motion | null = null;
+const rests = new Map<string, THREE.Vector3>();
 
-function tick(now: number): void {
-  requestAnimationFrame(tick); // first: a throw below must not end the loop
-  motion?.(now / 1000);
-  for (const [name, handle] of handles) state.targets[name] = handle.position.toArray() as Vec;
-  state.socket = { open: stream !== null, inFlight, reconnects: stream?.reconnects ?? 0, ticks: state.socket.ticks + 1 };
-  if (needsRender) renderer.render(scene, camera);
-  needsRender = false;
-  // Sent after drawing, so that the answer finds the main thread free (a frame drawn
-  // after sending would sit between the answer's arrival and its handling).
-  const current = stream;
-  if (current !== null && !inFlight && !replaying) {
-    inFlight = true;
-    solveOnce(current)
-      .catch((error: unknown) => {
-        if (current !== stream) return;
-        reportError(error);
-        // The client has already tried to reconnect: this socket is over (a switch or a
-        // reload opens a new one).
-        if (error instanceof StreamClosed) stream = null;
-      })
-      .finally(() => {
-        if (current === stream) inFlight = false;
-      });
+/** One animation frame: move the scripted handles, apply the newest answer, draw if
+ * anything moved, update the readout. */
+function draw(now: number): void {
+  requestAnimationFrame(draw); // first: a throw below must not end the loop
+  if (motion !== null) {
+    const at = absoluteNow();
+    for (const [name, rest] of rests) {
+      const offset = motionOffset(motion, name, at);
+      if (offset !== null) handles.get(name)?.position.copy(rest).add(new THREE.Vector3(...offset));
+    }
+    needsRender = true;
   }
+  if (newest !== null) {
+    show(newest);
+    newest = null;
+  }
+  for (const [name, handle] of handles) state.targets[name] = handle.position.toArray() as Vec;
+  if (needsRender) {
+    renderer.render(scene, camera);
+    drawRate.mark(performance.timeOrigin + now);
+    state.samples.drawn += 1;
+  }
+  needsRender = false;
+  state.socket = { open: streamOpen, inFlight: counters.inFlight, reconnects: counters.reconnects, ticks: counters.ticks };
+  state.samples.held = counters.held - countersAtReset.held;
+  state.samples.missed = counters.missed - countersAtReset.missed;
+  const at = absoluteNow();
+  state.rates = { solvesPerS: solveRate.perSecond(at), drawnPerS: drawRate.perSecond(at) };
+  readout.render(state.rates.solvesPerS, state.rates.drawnPerS);
 }
 
 function wireSwitches(): void {
   for (const radio of document.querySelectorAll<HTMLInputElement>("input[name=encoding]")) {
     radio.addEventListener("change", () => {
       state.encoding = radio.value as Encoding;
-      void openStream().catch(reportError);
+      openStream();
     });
   }
   const compact = document.getElementById("compact") as HTMLInputElement;
   compact.addEventListener("change", () => {
     state.compact = compact.checked;
-    void openStream().catch(reportError);
+    openStream();
   });
   const select = document.getElementById("model") as HTMLSelectElement;
   select.add(new Option("stick figure (character.gltf)", "character"));
@@ -471,18 +550,39 @@ function screenOf(name: string): { x: number; y: number } {
   return { x: rect.left + ((p.x + 1) / 2) * rect.width, y: rect.top + ((1 - p.y) / 2) * rect.height };
 }
 
-/** Move the targets along circles (the browser benchmark's steady drag). */
+const UP = new THREE.Vector3(0, 1, 0);
+const FORWARD = new THREE.Vector3(0, 0, 1);
+
+/** Move the targets along circles (the browser benchmark's steady drag): up from where
+ * they rest (limbs hang straight: nothing below is in reach) and forward, the right ones
+ * half a turn behind. The worker moves the targets it sends; the page, the handles. */
 function startMotion(radiusM = 0.12, hz = 0.5): void {
-  const rest = new Map([...handles].map(([name, h]) => [name, h.position.clone()]));
-  motion = (t) => {
-    for (const name of model.effectors) {
-      const r = rest.get(name)!;
-      const phase = 2 * Math.PI * hz * t + (name.endsWith("R") ? Math.PI : 0);
-      // Up from the rest pose (limbs hang straight: nothing below it is in reach).
-      handles.get(name)!.position.set(r.x, r.y + radiusM * (1 - Math.cos(phase)), r.z + radiusM * Math.sin(phase));
-    }
-    needsRender = true;
+  const startMs = absoluteNow();
+  const inScene: Motion = { startMs, radiusM, hz, circles: {} };
+  const sent: Motion = { startMs, radiusM, hz, circles: {} };
+  // A direction in the frame targets are sent in (the example chains' is not the scene's).
+  const along = (name: string, rest: THREE.Vector3, direction: THREE.Vector3): Vec => {
+    const from = model.target(name, rest).position!;
+    const to = model.target(name, rest.clone().add(direction)).position!;
+    return [to.x - from.x, to.y - from.y, to.z - from.z];
   };
+  rests.clear();
+  for (const name of model.effectors) {
+    const rest = handles.get(name)!.position.clone();
+    rests.set(name, rest);
+    const phase = name.endsWith("R") ? Math.PI : 0;
+    inScene.circles[name] = { up: UP.toArray(), forward: FORWARD.toArray(), phase };
+    sent.circles[name] = { up: along(name, rest, UP), forward: along(name, rest, FORWARD), phase };
+  }
+  postTargets(); // the rests, which the worker moves
+  motion = inScene;
+  toWorker({ kind: "motion", motion: sent });
+}
+
+function stopMotion(): void {
+  motion = null;
+  toWorker({ kind: "motion", motion: null });
+  postTargets();
 }
 
 function resetStats(): void {
@@ -490,7 +590,8 @@ function resetStats(): void {
   state.frames = 0;
   state.solved = 0;
   state.roundTripsMs = readout.roundTripsMs;
-  state.samples = { roundTripMs: [], serverUs: [], solveUs: [], solved: 0, since: performance.now() };
+  state.samples = emptySamples();
+  countersAtReset = { held: counters.held, missed: counters.missed };
 }
 
 const HANDLE_PALETTE = [0xe6194b, 0x4363d8, 0xf58231, 0x3cb44b];
@@ -498,6 +599,7 @@ const HANDLE_PALETTE = [0xe6194b, 0x4363d8, 0xf58231, 0x3cb44b];
 /** Show `name` (the character or an example chain) on a session of its own. */
 async function switchModel(name: string): Promise<void> {
   dropStream();
+  if (motion !== null) stopMotion();
   if (model !== undefined) scene.remove(model.root);
   for (const handle of handles.values()) scene.remove(handle);
   handles.clear();
@@ -533,11 +635,12 @@ async function switchModel(name: string): Promise<void> {
     document.getElementById("r-pole")!.textContent = "";
   }
   state.effectors = {};
+  state.poleBone = null;
   state.targets = {};
   state.model = name;
   readout.reset();
   needsRender = true;
-  await openStream();
+  openStream();
 }
 
 async function main(): Promise<void> {
@@ -547,7 +650,7 @@ async function main(): Promise<void> {
     if (box.checked !== compact) box.click();
   };
   Object.assign(window, {
-    ikDemo: { state, screenOf, startMotion, stopMotion: () => (motion = null), resetStats, setEncoding },
+    ikDemo: { state, screenOf, startMotion, stopMotion, resetStats, setEncoding },
   });
   character = await Character.load(`${assets}/character.gltf`);
   examples = await ExampleChain.load(`${root}/demo/examples.json`);
@@ -556,7 +659,7 @@ async function main(): Promise<void> {
   wireSwitches();
   await switchModel("character");
   state.ready = true;
-  requestAnimationFrame(tick);
+  requestAnimationFrame(draw);
 }
 
 main().catch(reportError);

@@ -1,4 +1,5 @@
-/** The per-frame readout: what the last answer said, and round trips over the last frames. */
+/** The per-frame readout: what the newest answer said, round trips over the last frames, and
+ * how many frames per second are solved and drawn. */
 
 import type { CompactFrameResult } from "../../typescript/src/index.js";
 
@@ -6,6 +7,12 @@ const WINDOW = 600; // frames kept for the percentiles (10 s at 60 frames/s)
 
 function cell(id: string): HTMLElement {
   return document.getElementById(id)!;
+}
+
+/** Set a cell's text only when it changes (an unchanged cell costs no layout). */
+function write(id: string, text: string): void {
+  const element = cell(id);
+  if (element.textContent !== text) element.textContent = text;
 }
 
 /** The q-th quantile (0..1) of `values`, nearest rank. */
@@ -21,10 +28,21 @@ export function largestStep(previous: readonly number[] | null, q: readonly numb
   return q.reduce((largest, value, i) => Math.max(largest, Math.abs(value - previous[i]!)), 0);
 }
 
+/** The newest answer and what the readout shows with it. */
+interface Shown {
+  result: CompactFrameResult;
+  roundTripMs: number;
+  stepRad: number;
+}
+
+/** Counts every answer as it arrives (`frame`) and writes the table when a frame is
+ * drawn (`render`): the DOM changes at most once per drawn frame, whatever the solve
+ * rate, and what it shows is the newest answer. */
 export class Readout {
   frames = 0;
   solved = 0;
   roundTripsMs: number[] = [];
+  private newest: Shown | null = null;
 
   status(text: string): void {
     cell("r-status").textContent = text;
@@ -35,6 +53,15 @@ export class Readout {
     if (result.success) this.solved += 1;
     this.roundTripsMs.push(roundTripMs);
     if (this.roundTripsMs.length > WINDOW) this.roundTripsMs.shift();
+    this.newest = { result, roundTripMs, stepRad };
+  }
+
+  /** Write the newest answer (if one came since the last call) and the two rates. */
+  render(solvesPerS: number, drawnPerS: number): void {
+    write("r-rates", `${solvesPerS.toFixed(0)} solves/s, ${drawnPerS.toFixed(0)} drawn frames/s`);
+    if (this.newest === null) return;
+    const { result, roundTripMs, stepRad } = this.newest;
+    this.newest = null;
     cell("r-frames").textContent = `${this.solved} / ${this.frames}`;
     cell("r-termination").textContent = `${result.termination} (${result.status})`;
     cell("r-solve").textContent = `${result.solve_us.toFixed(0)} us`;
@@ -50,5 +77,6 @@ export class Readout {
     this.frames = 0;
     this.solved = 0;
     this.roundTripsMs = [];
+    this.newest = null;
   }
 }
