@@ -39,7 +39,43 @@ class EffectorErrorOut(StrictModel):
     within_tolerance: bool = Field(description="Both errors within the tolerances")
 
 
-class FrameResult(StrictModel):
+class _FrameOutcome(StrictModel):
+    """The fields every frame result has, full or compact (in the order /docs shows
+    them; ``FrameResult`` adds ``joints`` and ``effectors`` after them). Neither result
+    is the other's subclass, so that ``isinstance`` tells a compact one from a full one."""
+
+    id: int | None = Field(description="The client's frame id, echoed (null if none was sent)")
+    success: bool = Field(description="Every targeted effector is within the tolerances")
+    status: IKStatusName = Field(
+        description="solved | not_reached (converged outside tolerance: unreachable or a "
+        "local minimum; closest pose returned) | budget_exhausted (time or iterations ran "
+        "out; best pose returned) | nonfinite (the model produced NaN/inf)"
+    )
+    termination: TerminationName = Field(description="How the optimizer's last pass ended")
+    q: list[float] = Field(description="Joint values in the session's DOF order [rad] or [m]")
+    iterations: int = Field(description="Optimizer iterations, all passes")
+    function_evals: int = Field(description="Objective evaluations")
+    passes: int = Field(description="Optimizer passes (H resets and restarts start new ones)")
+    restarts: int = Field(description="Random restarts")
+    solve_us: float = Field(description="Time in the compiled solver [us]")
+    server_us: float = Field(
+        description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
+    )
+    largest_step_rad: float | None = Field(
+        description="Largest change of any joint from the previous answer of the session "
+        "(a planned clip: from the frame before) [rad] or [m]; null for one-shot solves"
+    )
+    jumped: bool = Field(
+        description="`largest_step_rad` is over the session's `max_joint_step_rad` (never "
+        "under `continuity: smooth`)"
+    )
+    bones: BonesOut | None = Field(
+        default=None,
+        description="Bone rotations and transforms, when asked for (skeleton chains)",
+    )
+
+
+class FrameResult(_FrameOutcome):
     """The answer to one frame. A frame that did not reach its target is still a result
     (``success: false``), not an error."""
 
@@ -74,14 +110,6 @@ class FrameResult(StrictModel):
         }
     )
 
-    id: int | None = Field(description="The client's frame id, echoed (null if none was sent)")
-    success: bool = Field(description="Every targeted effector is within the tolerances")
-    status: IKStatusName = Field(
-        description="solved | not_reached (converged outside tolerance: unreachable or a "
-        "local minimum; closest pose returned) | budget_exhausted (time or iterations ran "
-        "out; best pose returned) | nonfinite (the model produced NaN/inf)"
-    )
-    termination: TerminationName = Field(description="How the optimizer's last pass ended")
     joints: dict[str, float] = Field(
         description="Joint values by DOF name [rad] or [m], then the mimic joints' values "
         "(the session's `followers`: multiplier x leader + offset)"
@@ -90,26 +118,6 @@ class FrameResult(StrictModel):
         description="The DOFs' values as an array, in the session's DOF order (no mimic joints)"
     )
     effectors: list[EffectorErrorOut] = Field(description="Errors of the targeted effectors")
-    iterations: int = Field(description="Optimizer iterations, all passes")
-    function_evals: int = Field(description="Objective evaluations")
-    passes: int = Field(description="Optimizer passes (H resets and restarts start new ones)")
-    restarts: int = Field(description="Random restarts")
-    solve_us: float = Field(description="Time in the compiled solver [us]")
-    server_us: float = Field(
-        description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
-    )
-    largest_step_rad: float | None = Field(
-        description="Largest change of any joint from the previous answer of the session "
-        "(a planned clip: from the frame before) [rad] or [m]; null for one-shot solves"
-    )
-    jumped: bool = Field(
-        description="`largest_step_rad` is over the session's `max_joint_step_rad` (never "
-        "under `continuity: smooth`)"
-    )
-    bones: BonesOut | None = Field(
-        default=None,
-        description="Bone rotations and transforms, when asked for (skeleton chains)",
-    )
 
 
 class PlanSummary(StrictModel):
@@ -142,7 +150,7 @@ class ResultView(enum.StrEnum):
     COMPACT = "compact"  # CompactFrameResult: no ``joints`` by name, no ``effectors``
 
 
-class CompactFrameResult(StrictModel):
+class CompactFrameResult(_FrameOutcome):
     """A frame result without ``joints`` (the same values as ``q``, by name) and without
     ``effectors`` (per-effector errors): what ``?results=compact`` answers. ``success``
     and ``status`` still say whether every targeted effector is within tolerance."""
@@ -167,32 +175,6 @@ class CompactFrameResult(StrictModel):
                 }
             ]
         }
-    )
-
-    id: int | None = Field(description="The client's frame id, echoed (null if none was sent)")
-    success: bool = Field(description="Every targeted effector is within the tolerances")
-    status: IKStatusName = Field(description="As in FrameResult")
-    termination: TerminationName = Field(description="How the optimizer's last pass ended")
-    q: list[float] = Field(description="Joint values in the session's DOF order [rad] or [m]")
-    iterations: int = Field(description="Optimizer iterations, all passes")
-    function_evals: int = Field(description="Objective evaluations")
-    passes: int = Field(description="Optimizer passes (H resets and restarts start new ones)")
-    restarts: int = Field(description="Random restarts")
-    solve_us: float = Field(description="Time in the compiled solver [us]")
-    server_us: float = Field(
-        description="Request (HTTP) or message (WebSocket) received to this result ready [us]"
-    )
-    largest_step_rad: float | None = Field(
-        description="Largest change of any joint from the previous answer of the session "
-        "(a planned clip: from the frame before) [rad] or [m]; null for one-shot solves"
-    )
-    jumped: bool = Field(
-        description="`largest_step_rad` is over the session's `max_joint_step_rad` (never "
-        "under `continuity: smooth`)"
-    )
-    bones: BonesOut | None = Field(
-        default=None,
-        description="Bone rotations and transforms, when asked for (skeleton chains)",
     )
 
 

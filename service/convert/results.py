@@ -74,6 +74,14 @@ def result_dict(
         "joints": joints,
         "q": values,
         "effectors": effectors,
+        **_effort(r, server_us, step),
+    }
+
+
+def _effort(r: IKResult, server_us: float, step: FrameStep | None) -> dict[str, Any]:
+    """The fields a full and a compact result share after ``q``: the solver's counters,
+    the times and the step from the previous answer (in the order both answers send)."""
+    return {
         "iterations": r.iterations,
         "function_evals": r.function_evals,
         "passes": r.passes,
@@ -120,14 +128,7 @@ def compact_result_dict(
         "status": r.status.value,
         "termination": r.termination.value,
         "q": r.q.tolist(),
-        "iterations": r.iterations,
-        "function_evals": r.function_evals,
-        "passes": r.passes,
-        "restarts": r.restarts,
-        "solve_us": r.solve_us,
-        "server_us": server_us,
-        "largest_step_rad": None if step is None else step.largest_rad,
-        "jumped": False if step is None else step.jumped,
+        **_effort(r, server_us, step),
     }
 
 
