@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import enum
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -37,6 +37,36 @@ class EffectorErrorOut(StrictModel):
         description="Orientation (pose) or aim-direction (aim) error [rad]; null for position"
     )
     within_tolerance: bool = Field(description="Both errors within the tolerances")
+
+
+# The examples /docs shows: a full result, and the same without what compact leaves out.
+_EXAMPLE_RESULT: dict[str, Any] = {
+    "id": 1,
+    "success": True,
+    "status": "solved",
+    "termination": "goal_reached",
+    "joints": {"shoulder.z": 0.3217, "shoulder.y": 0.1301, "elbow": 1.9611},
+    "q": [0.3217, 0.1301, 1.9611],
+    "effectors": [
+        {
+            "name": "hand",
+            "position_error_m": 3.1e-05,
+            "rotation_error_rad": None,
+            "within_tolerance": True,
+        }
+    ],
+    "iterations": 12,
+    "function_evals": 15,
+    "passes": 1,
+    "restarts": 0,
+    "solve_us": 21.4,
+    "server_us": 160.2,
+    "largest_step_rad": 0.0123,
+    "jumped": False,
+}
+_EXAMPLE_COMPACT: dict[str, Any] = {
+    k: v for k, v in _EXAMPLE_RESULT.items() if k not in ("joints", "effectors")
+}
 
 
 class _FrameOutcome(StrictModel):
@@ -79,36 +109,7 @@ class FrameResult(_FrameOutcome):
     """The answer to one frame. A frame that did not reach its target is still a result
     (``success: false``), not an error."""
 
-    model_config = ConfigDict(
-        json_schema_extra={
-            "examples": [
-                {
-                    "id": 1,
-                    "success": True,
-                    "status": "solved",
-                    "termination": "goal_reached",
-                    "joints": {"shoulder.z": 0.3217, "shoulder.y": 0.1301, "elbow": 1.9611},
-                    "q": [0.3217, 0.1301, 1.9611],
-                    "effectors": [
-                        {
-                            "name": "hand",
-                            "position_error_m": 3.1e-05,
-                            "rotation_error_rad": None,
-                            "within_tolerance": True,
-                        }
-                    ],
-                    "iterations": 12,
-                    "function_evals": 15,
-                    "passes": 1,
-                    "restarts": 0,
-                    "solve_us": 21.4,
-                    "server_us": 160.2,
-                    "largest_step_rad": 0.0123,
-                    "jumped": False,
-                }
-            ]
-        }
-    )
+    model_config = ConfigDict(json_schema_extra={"examples": [_EXAMPLE_RESULT]})
 
     joints: dict[str, float] = Field(
         description="Joint values by DOF name [rad] or [m], then the mimic joints' values "
@@ -155,27 +156,7 @@ class CompactFrameResult(_FrameOutcome):
     ``effectors`` (per-effector errors): what ``?results=compact`` answers. ``success``
     and ``status`` still say whether every targeted effector is within tolerance."""
 
-    model_config = ConfigDict(
-        json_schema_extra={
-            "examples": [
-                {
-                    "id": 1,
-                    "success": True,
-                    "status": "solved",
-                    "termination": "goal_reached",
-                    "q": [0.3217, 0.1301, 1.9611],
-                    "iterations": 12,
-                    "function_evals": 15,
-                    "passes": 1,
-                    "restarts": 0,
-                    "solve_us": 21.4,
-                    "server_us": 160.2,
-                    "largest_step_rad": 0.0123,
-                    "jumped": False,
-                }
-            ]
-        }
-    )
+    model_config = ConfigDict(json_schema_extra={"examples": [_EXAMPLE_COMPACT]})
 
 
 class FramesQuery(BaseModel):
