@@ -74,14 +74,6 @@ def result_dict(
         "joints": joints,
         "q": values,
         "effectors": effectors,
-        **_effort(r, server_us, step),
-    }
-
-
-def _effort(r: IKResult, server_us: float, step: FrameStep | None) -> dict[str, Any]:
-    """The fields a full and a compact result share after ``q``: the solver's counters,
-    the times and the step from the previous answer (in the order both answers send)."""
-    return {
         "iterations": r.iterations,
         "function_evals": r.function_evals,
         "passes": r.passes,
@@ -121,14 +113,25 @@ def compact_result_dict(
     """A CompactFrameResult (``?results=compact``): no ``joints`` by name and no
     per-effector errors, which a stream reading ``q`` does not need. About a third of
     a panda answer's bytes and less work to build and encode; tests check the shape
-    against ``schemas.CompactFrameResult``."""
+    against ``schemas.CompactFrameResult``.
+
+    Its fields after ``q`` are ``result_dict``'s, written out in both: a helper
+    building them once costs an extra dict and its unpacking per frame (compact
+    rendering 1.04 -> 1.36 us, full 3.46 -> 3.83 us, CPU time, paired in one run)."""
     return {
         "id": frame_id,
         "success": r.success,
         "status": r.status.value,
         "termination": r.termination.value,
         "q": r.q.tolist(),
-        **_effort(r, server_us, step),
+        "iterations": r.iterations,
+        "function_evals": r.function_evals,
+        "passes": r.passes,
+        "restarts": r.restarts,
+        "solve_us": r.solve_us,
+        "server_us": server_us,
+        "largest_step_rad": None if step is None else step.largest_rad,
+        "jumped": False if step is None else step.jumped,
     }
 
 
