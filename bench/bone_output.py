@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 import orjson  # noqa: E402
 
 import schemas as S  # noqa: E402
-from bench.skeleton import assets_dir  # noqa: E402
+from bench.skeleton import assets_dir, smooth_poses  # noqa: E402
 from service import convert  # noqa: E402
 from service.config import Settings  # noqa: E402
 from service.solving import make_solver  # noqa: E402
@@ -48,13 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     view = convert.chain_from_spec(spec, settings, S.Conventions(preset="unity"))
     solver = make_solver(view, convert.session_defaults(settings))
     chain = view.chain
-    rng = np.random.default_rng(args.seed)
-    amplitude = rng.uniform(-0.3, 0.3, chain.n_dof)
-    phase = rng.uniform(0.0, 2.0 * np.pi, chain.n_dof)
-    t = np.arange(args.frames)[:, None] / args.frames
-    path = amplitude * (np.sin(2.0 * np.pi * t + phase) - np.sin(phase))
     results = [
-        solver.track(pose_targets(chain, np.clip(q, chain.lower, chain.upper))) for q in path
+        solver.track(pose_targets(chain, q))
+        for q in smooth_poses(chain, args.frames, 0.3, args.seed)
     ]
     outputs = {
         "no bones": None,

@@ -35,7 +35,7 @@ from solver.ik import (  # noqa: E402
     default_pole_link,
     pose_targets,
 )
-from solver.model import Effector, EffectorMode  # noqa: E402
+from solver.model import Chain, Effector, EffectorMode  # noqa: E402
 from solver.model.bvh import read_bvh  # noqa: E402
 from solver.model.forward import link_poses  # noqa: E402
 from solver.model.gltf import read_gltf  # noqa: E402
@@ -64,6 +64,18 @@ def per_call_us(fn: object, repeat: int) -> float:
     for _ in range(repeat):
         fn()  # type: ignore[operator]
     return (time.perf_counter() - start) / repeat * 1e6
+
+
+def smooth_poses(chain: Chain, frames: int, amplitude_rad: float, seed: int) -> list[np.ndarray]:
+    """A smooth joint path from the rest pose: each joint a sine over ``frames`` frames
+    with a random amplitude within ``amplitude_rad`` and a random phase, starting at 0;
+    each pose clipped into the limits (so every target it gives is within reach)."""
+    rng = np.random.default_rng(seed)
+    amplitude = rng.uniform(-amplitude_rad, amplitude_rad, chain.n_dof)
+    phase = rng.uniform(0.0, 2.0 * np.pi, chain.n_dof)
+    t = np.arange(frames)[:, None] / frames
+    path = amplitude * (np.sin(2.0 * np.pi * t + phase) - np.sin(phase))
+    return [np.clip(q, chain.lower, chain.upper) for q in path]
 
 
 def weighted(targets: list[Target]) -> list[Target]:
@@ -117,12 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     for label, moving in (("every bone moves", None), ("limbs only", LIMBS)):
         built = chain_from_skeleton(skeleton, SkeletonSettings(effectors=effectors, moving=moving))
         chain = built.chain
-        rng = np.random.default_rng(args.seed)
-        amplitude = rng.uniform(-0.4, 0.4, chain.n_dof)
-        phase = rng.uniform(0.0, 2.0 * np.pi, chain.n_dof)
-        t = np.arange(args.frames)[:, None] / args.frames
-        path = amplitude * (np.sin(2.0 * np.pi * t + phase) - np.sin(phase))
-        poses = [np.clip(q, chain.lower, chain.upper) for q in path]
+        poses = smooth_poses(chain, args.frames, 0.4, args.seed)
         plain = [pose_targets(chain, q) for q in poses]
         bent = [default_pole_link(chain, i) for i in range(len(effectors))]
         forward = np.array([0.0, 0.0, 0.3])  # glTF's front (+z), 0.3 m

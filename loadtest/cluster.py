@@ -16,9 +16,8 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
-from types import TracebackType
 
-from .service_process import ROOT, ServiceProcess, free_port
+from .service_process import ROOT, ServiceProcess, StoppedOnExit, free_port
 
 HAPROXY_CFG = ROOT / "deploy" / "haproxy.cfg"
 START_LIMIT_S = 10.0
@@ -118,7 +117,7 @@ class Balancer:
         self._dir.cleanup()
 
 
-class Cluster:
+class Cluster(StoppedOnExit):
     """Redis, ``n`` workers with IK_REDIS_URL, and HAProxy in front; ``base`` is the
     balancer's URL. Workers keep their ports across restarts (the balancer's list)."""
 
@@ -172,14 +171,3 @@ class Cluster:
         for w in self.workers:
             w.stop()
         self.redis.stop()
-
-    def __enter__(self) -> Cluster:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.stop()

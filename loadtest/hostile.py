@@ -218,56 +218,18 @@ async def _raw(port: int) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
     return await asyncio.open_connection("127.0.0.1", port, local_addr=(ABUSER_ADDRESS, 0))
 
 
-async def slowloris(base: str, http: httpx.AsyncClient, row: Row, stop: asyncio.Event) -> None:
-    """1,000 connections sending a header line every second, never finishing; each
-    reconnects when dropped."""
-    port = int(base.rsplit(":", 1)[1])
-
-    async def one() -> None:
-        while not stop.is_set():
-            try:
-                _, w = await _raw(port)
-                try:
-                    w.write(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
-                    while not stop.is_set():
-                        await asyncio.sleep(1.0)
-                        w.write(b"X-a: b\r\n")
-                        await w.drain()
-                finally:
-                    w.close()
-            except OSError:
-                await asyncio.sleep(0.2)
-
-    await _all(stop, [one() for _ in range(1000)])
-
-
-async def big_headers(base: str, http: httpx.AsyncClient, row: Row, stop: asyncio.Event) -> None:
-    """20 connections each sending 10 MiB of one unterminated header, again and again."""
-    port = int(base.rsplit(":", 1)[1])
-    chunk = b"a" * 65536
-
-    async def one() -> None:
-        while not stop.is_set():
-            try:
-                _, w = await _raw(port)
-                try:
-                    w.write(b"GET /healthz HTTP/1.1\r\nHost: x\r\nX-Big: ")
-                    for _ in range(160):  # 10 MiB
-                        w.write(chunk)
-                        await w.drain()
-                        if stop.is_set():
-                            break
-                finally:
-                    w.close()
-            except OSError:
-                await asyncio.sleep(0.05)
-
-    await _all(stop, [one() for _ in range(20)])
-
-
-async def idle_sockets(base: str, http: httpx.AsyncClient, row: Row, stop: asyncio.Event) -> None:
-    """1,000 connections that send nothing; each reconnects 0.5 s after it is dropped
-    (``IDLE_RECONNECT_S``; 0 makes it a connect storm, see bench/RESULTS.md)."""
+async def _connections(
+    base: str,
+    stop: asyncio.Event,
+    n: int,
+    abuse: Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]],
+    *,
+    retry_s: float,
+    pause_s: float = 0.0,
+) -> None:
+    """``n`` raw connections from the abuser's address, each doing ``abuse`` over and
+    over until ``stop``: a new connection each time, closed after it; ``retry_s`` after
+    a connection that failed or was dropped, ``pause_s`` after one that ``abuse`` ended."""
     port = int(base.rsplit(":", 1)[1])
 
     async def one() -> None:
@@ -275,14 +237,55 @@ async def idle_sockets(base: str, http: httpx.AsyncClient, row: Row, stop: async
             try:
                 r, w = await _raw(port)
                 try:
-                    await r.read()  # until the server closes it
+                    await abuse(r, w)
                 finally:
                     w.close()
             except OSError:
-                pass
-            await asyncio.sleep(IDLE_RECONNECT_S)
+                await asyncio.sleep(retry_s)
+                continue
+            if pause_s > 0.0:
+                await asyncio.sleep(pause_s)
 
-    await _all(stop, [one() for _ in range(1000)])
+    await _all(stop, [one() for _ in range(n)])
+
+
+async def slowloris(base: str, http: httpx.AsyncClient, row: Row, stop: asyncio.Event) -> None:
+    """1,000 connections sending a header line every second, never finishing; each
+    reconnects when dropped."""
+
+    async def abuse(_reader: asyncio.StreamReader, w: asyncio.StreamWriter) -> None:
+        w.write(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
+        while not stop.is_set():
+            await asyncio.sleep(1.0)
+            w.write(b"X-a: b\r\n")
+            await w.drain()
+
+    await _connections(base, stop, 1000, abuse, retry_s=0.2)
+
+
+async def big_headers(base: str, http: httpx.AsyncClient, row: Row, stop: asyncio.Event) -> None:
+    """20 connections each sending 10 MiB of one unterminated header, again and again."""
+    chunk = b"a" * 65536
+
+    async def abuse(_reader: asyncio.StreamReader, w: asyncio.StreamWriter) -> None:
+        w.write(b"GET /healthz HTTP/1.1\r\nHost: x\r\nX-Big: ")
+        for _ in range(160):  # 10 MiB
+            w.write(chunk)
+            await w.drain()
+            if stop.is_set():
+                break
+
+    await _connections(base, stop, 20, abuse, retry_s=0.05)
+
+
+async def idle_sockets(base: str, http: httpx.AsyncClient, row: Row, stop: asyncio.Event) -> None:
+    """1,000 connections that send nothing; each reconnects 0.5 s after it is dropped
+    (``IDLE_RECONNECT_S``; 0 makes it a connect storm, see bench/RESULTS.md)."""
+
+    async def abuse(r: asyncio.StreamReader, _writer: asyncio.StreamWriter) -> None:
+        await r.read()  # until the server closes it
+
+    await _connections(base, stop, 1000, abuse, retry_s=IDLE_RECONNECT_S, pause_s=IDLE_RECONNECT_S)
 
 
 async def ping_flood(base: str, http: httpx.AsyncClient, row: Row, stop: asyncio.Event) -> None:

@@ -21,6 +21,7 @@ import urllib.request
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
+from typing import Self
 
 ROOT = Path(__file__).resolve().parents[1]
 # The first start of a fresh checkout compiles the solver: minutes, more on busy cores
@@ -93,7 +94,26 @@ def thread_count(pid: int) -> int:
     return _status_kb(pid, "Threads")
 
 
-class ServiceProcess:
+class StoppedOnExit:
+    """A process (or a group of them) that ``with`` stops on the way out, whatever
+    happened inside: ``stop`` is the subclass's."""
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+    def stop(self) -> object:
+        raise NotImplementedError
+
+
+class ServiceProcess(StoppedOnExit):
     """``python -m service`` on 127.0.0.1 and a free port; ``base`` is its URL.
 
     Args:
@@ -192,14 +212,3 @@ class ServiceProcess:
         if self._log is not None:
             self._log.close()
         return int(self.proc.returncode)
-
-    def __enter__(self) -> ServiceProcess:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.stop()

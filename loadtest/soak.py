@@ -24,11 +24,12 @@ import re
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import httpx
-from ik_client import Chain, Client, Frame, ServiceError, Target
+from ik_client import Chain, Client, Frame, ServiceError, Session, Target
 
 from .service_process import ROOT, ServiceProcess, rss_mb, thread_count
 
@@ -65,66 +66,75 @@ class Shared:
             self.errors[what] = self.errors.get(what, 0) + 1
 
 
-def ws_client(base: str, shared: Shared, rate: float, churn_s: float) -> None:
-    """A game client through ``ik_client``: a session, its WebSocket stream at ``rate``,
-    and every ``churn_s`` the socket closed, the session deleted, and over again."""
-    period = 1.0 / rate
+def _churn(base: str, shared: Shared, use: Callable[[Client, Session], None]) -> None:
+    """Sessions one after the other until the soak stops: each created (and counted),
+    used, deleted; any error is counted and the client starts over."""
     with Client(base, timeout_s=30.0) as client:
         while not shared.stop.is_set():
             try:
                 session = client.create_session(PANDA)
                 with shared.lock:
                     shared.sessions += 1
-                with client.stream(session, timeout_s=30.0) as stream:
-                    until = time.monotonic() + churn_s
-                    i = 0
-                    while time.monotonic() < until and not shared.stop.is_set():
-                        t0 = time.perf_counter()
-                        try:
-                            stream.frame([_target(i * 0.05)])
-                        except ServiceError as e:
-                            shared.error(str(e.code))
-                        shared.rtt(time.monotonic(), time.perf_counter() - t0)
-                        i += 1
-                        time.sleep(max(0.0, period - (time.perf_counter() - t0)))
+                use(client, session)
                 client.delete_session(session)
             except Exception as e:  # counted, and the client starts over
                 shared.error(type(e).__name__)
                 time.sleep(0.1)
 
 
+def _paced(shared: Shared, rate: float, churn_s: float, send: Callable[[int], int]) -> None:
+    """``send(i)`` at ``rate`` calls a second for ``churn_s`` (``i``: the frames sent so
+    far; ``send`` returns how many it sent), each call's round trip recorded."""
+    period = 1.0 / rate
+    until = time.monotonic() + churn_s
+    i = 0
+    while time.monotonic() < until and not shared.stop.is_set():
+        t0 = time.perf_counter()
+        i += send(i)
+        shared.rtt(time.monotonic(), time.perf_counter() - t0)
+        time.sleep(max(0.0, period - (time.perf_counter() - t0)))
+
+
+def ws_client(base: str, shared: Shared, rate: float, churn_s: float) -> None:
+    """A game client through ``ik_client``: a session, its WebSocket stream at ``rate``,
+    and every ``churn_s`` the socket closed, the session deleted, and over again."""
+
+    def use(client: Client, session: Session) -> None:
+        with client.stream(session, timeout_s=30.0) as stream:
+
+            def send(i: int) -> int:
+                try:
+                    stream.frame([_target(i * 0.05)])
+                except ServiceError as e:
+                    shared.error(str(e.code))
+                return 1
+
+            _paced(shared, rate, churn_s, send)
+
+    _churn(base, shared, use)
+
+
 def http_client(base: str, shared: Shared, rate: float, churn_s: float) -> None:
     """The same over HTTP: one frame per request, a 5-frame clip every tenth."""
-    period = 1.0 / rate
-    with Client(base, timeout_s=30.0) as client:
-        while not shared.stop.is_set():
+
+    def use(client: Client, session: Session) -> None:
+        def send(i: int) -> int:
+            n = 5 if i % 10 == 9 else 1
             try:
-                session = client.create_session(PANDA)
-                with shared.lock:
-                    shared.sessions += 1
-                until = time.monotonic() + churn_s
-                i = 0
-                while time.monotonic() < until and not shared.stop.is_set():
-                    t0 = time.perf_counter()
-                    n = 5 if i % 10 == 9 else 1
-                    try:
-                        if n == 1:
-                            client.frame(session, [_target(i * 0.05)], id=i)
-                        else:
-                            frames: list[Frame] = [
-                                {"id": i + k, "targets": [_target((i + k) * 0.05)]}
-                                for k in range(n)
-                            ]
-                            client.clip(session, frames)
-                    except ServiceError as e:
-                        shared.error(f"http_{e.status_code}")
-                    shared.rtt(time.monotonic(), time.perf_counter() - t0)
-                    i += n
-                    time.sleep(max(0.0, period - (time.perf_counter() - t0)))
-                client.delete_session(session)
-            except Exception as e:
-                shared.error(type(e).__name__)
-                time.sleep(0.1)
+                if n == 1:
+                    client.frame(session, [_target(i * 0.05)], id=i)
+                else:
+                    frames: list[Frame] = [
+                        {"id": i + k, "targets": [_target((i + k) * 0.05)]} for k in range(n)
+                    ]
+                    client.clip(session, frames)
+            except ServiceError as e:
+                shared.error(f"http_{e.status_code}")
+            return n
+
+        _paced(shared, rate, churn_s, send)
+
+    _churn(base, shared, use)
 
 
 def _metric(text: str, name: str) -> float:

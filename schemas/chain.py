@@ -39,6 +39,19 @@ class OriginSpec(StrictModel):
     rotation: Quaternion = Field(default=IDENTITY, description="Orientation (unit quaternion)")
 
 
+# The elbow of EXAMPLE_ARM (below), also JointSpec's example in /docs.
+_EXAMPLE_ELBOW: dict[str, Any] = {
+    "name": "elbow",
+    "parent": "upper_arm",
+    "child": "forearm",
+    "kind": "revolute",
+    "origin": {"translation": {"x": 0.0, "y": 0.0, "z": 0.4}},
+    "axis": {"x": 0.0, "y": 1.0, "z": 0.0},
+    "lower": [0.0],
+    "upper": [2.6],
+}
+
+
 class JointSpec(StrictModel):
     """A joint from ``parent`` link to ``child`` link.
 
@@ -50,22 +63,7 @@ class JointSpec(StrictModel):
     Tr(-pivot)``.
     """
 
-    model_config = ConfigDict(
-        json_schema_extra={
-            "examples": [
-                {
-                    "name": "elbow",
-                    "parent": "upper_arm",
-                    "child": "forearm",
-                    "kind": "revolute",
-                    "origin": {"translation": {"x": 0.0, "y": 0.0, "z": 0.4}},
-                    "axis": {"x": 0.0, "y": 1.0, "z": 0.0},
-                    "lower": [0.0],
-                    "upper": [2.6],
-                }
-            ]
-        }
-    )
+    model_config = ConfigDict(json_schema_extra={"examples": [_EXAMPLE_ELBOW]})
 
     name: Name = Field(description="Unique joint name")
     parent: Name = Field(description="Parent link name")
@@ -322,16 +320,7 @@ EXAMPLE_ARM: dict[str, Any] = {
             "lower": [-3.1, -1.5],
             "upper": [3.1, 1.5],
         },
-        {
-            "name": "elbow",
-            "parent": "upper_arm",
-            "child": "forearm",
-            "kind": "revolute",
-            "origin": {"translation": {"x": 0.0, "y": 0.0, "z": 0.4}},
-            "axis": {"x": 0.0, "y": 1.0, "z": 0.0},
-            "lower": [0.0],
-            "upper": [2.6],
-        },
+        _EXAMPLE_ELBOW,
         {
             "name": "wrist",
             "parent": "forearm",

@@ -1,12 +1,16 @@
-"""JSON responses rendered with orjson (FastAPI's ORJSONResponse is deprecated)."""
+"""JSON responses rendered with orjson (FastAPI's ORJSONResponse is deprecated), and
+static files served with the caching their URLs allow."""
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import msgpack
 import orjson
-from starlette.responses import JSONResponse
+from starlette.responses import JSONResponse, Response
+from starlette.staticfiles import StaticFiles
+from starlette.types import Scope
 
 
 def encodable(content: Any) -> Any:
@@ -59,3 +63,24 @@ class ORJSONResponse(JSONResponse):
 
     def render(self, content: Any) -> bytes:
         return dumps(content)
+
+
+class CachedStaticFiles(StaticFiles):
+    """Static files, each response with the ``Cache-Control`` given: ``"no-cache"``
+    for URLs that carry no version (revalidated on every load), a year and immutable
+    for versioned ones."""
+
+    def __init__(self, *, cache_control: str, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.cache_control = cache_control
+
+    def file_response(
+        self,
+        full_path: str | os.PathLike[str],
+        stat_result: os.stat_result,
+        scope: Scope,
+        status_code: int = 200,
+    ) -> Response:
+        response = super().file_response(full_path, stat_result, scope, status_code)
+        response.headers["Cache-Control"] = self.cache_control
+        return response

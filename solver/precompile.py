@@ -17,8 +17,8 @@ import numpy as np
 from numba.core import event
 
 from .ik import Continuity, IKData, IKOptions, IKSolver, Target, pose_targets
-from .model import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
-from .model.examples import panda_arm
+from .model import EffectorMode
+from .model.examples import bolt, panda_arm
 from .path import plan_path
 from .path.kernels import dp_step, frame_nodes, project_onto
 
@@ -96,15 +96,7 @@ def _loaded(
 
 def _no_variables() -> None:
     # A chain with no variables takes its own compiled path (errors only).
-    bolt = Joint(
-        name="bolt",
-        parent="base",
-        child="tip",
-        kind=JointKind.FIXED,
-        origin=Transform(np.array([0.0, 0.0, 1.0])),
-    )
-    fixed = IKSolver(build_chain([bolt], [Effector(name="tip", link="tip")]))
-    fixed.solve([Target(effector="tip", position=np.array([0.0, 0.0, 1.0]))])
+    IKSolver(bolt()).solve([Target(effector="tip", position=np.array([0.0, 0.0, 1.0]))])
 
 
 STEPS: tuple[WarmupStep, ...] = (

@@ -20,7 +20,6 @@ from solver.arrays import Vector
 from solver.errors import InvalidModel
 from solver.model import (
     Chain,
-    Effector,
     EffectorMode,
     Joint,
     JointKind,
@@ -34,7 +33,7 @@ from solver.model.urdf import chain_from_urdf
 from ..config import Settings
 from ..errors import ServiceError, invalid_problem
 from .conventions import NATIVE, Y_UP_METRES, Z_UP_METRES, Convention, frame_of
-from .geometry import rotation_matrix, vec3
+from .geometry import effector, rotation_matrix, vec3
 from .limits import check_radians
 from .skeletons import skeleton_chain
 
@@ -232,19 +231,7 @@ def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
         )
         for j in spec.joints
     ]
-    effectors = [
-        Effector(
-            name=e.name,
-            link=e.link,
-            tip_offset=vec3(e.tip_offset),
-            tip_rotation=rotation_matrix(e.tip_rotation),
-            mode=EffectorMode(e.mode),
-            aim_axis=vec3(e.aim_axis),
-            position_weight=e.position_weight,
-            rotation_weight=e.rotation_weight,
-        )
-        for e in spec.effectors
-    ]
+    effectors = [effector(e, name=e.name, link=e.link) for e in spec.effectors]
     try:
         return build_chain(joints, effectors, max_dof=settings.max_dof)
     except InvalidModel as e:

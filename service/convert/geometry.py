@@ -2,7 +2,8 @@
 
 Shared by chains (joint origins, effector tips), targets and the fast path, so that
 the three build the same rotation for the same quaternion (tests/service/test_convert.py
-checks the convention against ``solver.chain.quaternion_to_matrix``).
+checks the convention against ``solver.chain.quaternion_to_matrix``); and the effector
+of a hierarchy chain or a skeleton's bone, whose tip frames are such vectors.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 
 import schemas as S
 from solver.arrays import Vector
+from solver.model import Effector, EffectorMode
 
 # A 3x3 rotation matrix as nine plain floats, row after row.
 Flat9 = tuple[float, float, float, float, float, float, float, float, float]
@@ -39,3 +41,18 @@ def rotation_rows(qw: float, qx: float, qy: float, qz: float) -> Flat9:
         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
     )  # fmt: skip
+
+
+def effector(e: S.EffectorSpec | S.BoneEffectorSpec, *, name: str, link: str) -> Effector:
+    """The solver's effector for an effector spec: a hierarchy chain's (on a link) or a
+    skeleton's (on a bone); the two differ only in how they name the effector's link."""
+    return Effector(
+        name=name,
+        link=link,
+        tip_offset=vec3(e.tip_offset),
+        tip_rotation=rotation_matrix(e.tip_rotation),
+        mode=EffectorMode(e.mode),
+        aim_axis=vec3(e.aim_axis),
+        position_weight=e.position_weight,
+        rotation_weight=e.rotation_weight,
+    )

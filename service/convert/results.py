@@ -113,7 +113,11 @@ def compact_result_dict(
     """A CompactFrameResult (``?results=compact``): no ``joints`` by name and no
     per-effector errors, which a stream reading ``q`` does not need. About a third of
     a panda answer's bytes and less work to build and encode; tests check the shape
-    against ``schemas.CompactFrameResult``."""
+    against ``schemas.CompactFrameResult``.
+
+    Its fields after ``q`` are ``result_dict``'s, written out in both: a helper
+    building them once costs an extra dict and its unpacking per frame (compact
+    rendering 1.04 -> 1.36 us, full 3.46 -> 3.83 us, CPU time, paired in one run)."""
     return {
         "id": frame_id,
         "success": r.success,

@@ -19,7 +19,6 @@ import schemas as S
 from schemas.common import MAX_COORDINATE
 from schemas.errors import ErrorCode
 from solver.errors import InvalidModel
-from solver.model import Effector, EffectorMode
 from solver.model.bvh import read_bvh
 from solver.model.gltf import read_gltf
 from solver.model.skeleton import (
@@ -33,7 +32,7 @@ from solver.model.skeleton import (
 
 from ..config import Settings
 from ..errors import ServiceError, invalid_problem
-from .geometry import rotation_matrix, vec3
+from .geometry import effector
 from .limits import check_radians
 
 SkeletonSpec = S.GltfChain | S.BvhChain
@@ -51,16 +50,7 @@ def skeleton_chain(spec: SkeletonSpec, settings: Settings) -> SkeletonChain:
     for name, bone in spec.bones.items():
         check_radians(bone.lower, bone.upper, f"bone {name!r}", f"chain.bones.{name}")
     effectors = [
-        Effector(
-            name=e.name if e.name is not None else e.bone,
-            link=e.bone,
-            tip_offset=vec3(e.tip_offset),
-            tip_rotation=rotation_matrix(e.tip_rotation),
-            mode=EffectorMode(e.mode),
-            aim_axis=vec3(e.aim_axis),
-            position_weight=e.position_weight,
-            rotation_weight=e.rotation_weight,
-        )
+        effector(e, name=e.name if e.name is not None else e.bone, link=e.bone)
         for e in spec.effectors
     ]
     free_root = None

@@ -15,20 +15,18 @@ rebuilt bundle is picked up at the next load.
 from __future__ import annotations
 
 import html
-import os
 from pathlib import Path
 from typing import Final
 
 from fastapi import FastAPI, Request
 from fastapi.responses import HTMLResponse, JSONResponse
-from fastapi.staticfiles import StaticFiles
-from starlette.responses import Response
-from starlette.types import Scope
 
 from solver.model.chain import Chain
 from solver.model.examples import EXAMPLES
 from solver.model.joints import Transform
 from solver.model.rotations import matrix_to_quaternion
+
+from ..responses import CachedStaticFiles
 
 ASSETS_DIR: Final = Path(__file__).resolve().parent.parent / "demo_assets"
 ASSETS_URL: Final = "/demo-assets"
@@ -104,21 +102,6 @@ _PAGE: Final = """<!doctype html>
 """
 
 
-class DemoAssets(StaticFiles):
-    """The demo's files, revalidated on every load (their URLs carry no version)."""
-
-    def file_response(
-        self,
-        full_path: str | os.PathLike[str],
-        stat_result: os.stat_result,
-        scope: Scope,
-        status_code: int = 200,
-    ) -> Response:
-        response = super().file_response(full_path, stat_result, scope, status_code)
-        response.headers["Cache-Control"] = "no-cache"
-        return response
-
-
 def _frame(transform: Transform) -> dict[str, list[float]]:
     return {
         "translation": [float(c) for c in transform.translation],
@@ -181,4 +164,8 @@ def add_demo(app: FastAPI) -> None:
 
     app.add_route(DEMO_URL, demo, include_in_schema=False)
     app.add_route(EXAMPLES_URL, examples, include_in_schema=False)
-    app.mount(ASSETS_URL, DemoAssets(directory=ASSETS_DIR), name="demo-assets")
+    app.mount(
+        ASSETS_URL,
+        CachedStaticFiles(directory=ASSETS_DIR, cache_control="no-cache"),
+        name="demo-assets",
+    )

@@ -22,7 +22,6 @@ network; it also keeps any future asset upgrade from reaching out silently.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Final
 
@@ -33,12 +32,9 @@ from fastapi.openapi.docs import (
     get_swagger_ui_oauth2_redirect_html,
 )
 from fastapi.responses import HTMLResponse
-from fastapi.staticfiles import StaticFiles
-from starlette.responses import Response
-from starlette.types import Scope
 
 from ..asyncapi import asyncapi_document
-from ..responses import ORJSONResponse
+from ..responses import CachedStaticFiles, ORJSONResponse
 
 ASSETS_DIR: Final = Path(__file__).resolve().parent.parent / "docs_assets"
 ASSETS_URL: Final = "/docs-assets"
@@ -52,6 +48,7 @@ OAUTH2_REDIRECT_URL: Final = "/docs/oauth2-redirect"
 # The WebSocket protocol (AsyncAPI 3), next to /openapi.json (service/asyncapi.py).
 ASYNCAPI_URL: Final = "/asyncapi.json"
 
+# The assets' URLs carry their version: cacheable for a year without revalidation.
 IMMUTABLE: Final = "public, max-age=31536000, immutable"
 # 'unsafe-inline' scripts: FastAPI's Swagger page starts the UI from an inline <script>.
 # 'unsafe-inline' styles: both UIs style elements inline at run time (ReDoc through
@@ -73,21 +70,6 @@ _PAGE_HEADERS: Final = {
     "Cache-Control": "no-cache",
     "Content-Security-Policy": CONTENT_SECURITY_POLICY,
 }
-
-
-class VersionedAssets(StaticFiles):
-    """Static files under versioned URLs: cacheable for a year without revalidation."""
-
-    def file_response(
-        self,
-        full_path: str | os.PathLike[str],
-        stat_result: os.stat_result,
-        scope: Scope,
-        status_code: int = 200,
-    ) -> Response:
-        response = super().file_response(full_path, stat_result, scope, status_code)
-        response.headers["Cache-Control"] = IMMUTABLE
-        return response
 
 
 def asset_url(root_path: str, package: str, name: str) -> str:
@@ -147,4 +129,8 @@ def add_docs(app: FastAPI) -> None:
     app.add_route(ASYNCAPI_URL, asyncapi, include_in_schema=False)
     app.add_route(OAUTH2_REDIRECT_URL, swagger_ui_redirect, include_in_schema=False)
     app.add_route(REDOC_URL, redoc, include_in_schema=False)
-    app.mount(ASSETS_URL, VersionedAssets(directory=ASSETS_DIR), name="docs-assets")
+    app.mount(
+        ASSETS_URL,
+        CachedStaticFiles(directory=ASSETS_DIR, cache_control=IMMUTABLE),
+        name="docs-assets",
+    )

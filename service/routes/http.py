@@ -8,6 +8,7 @@ too_many_plans (+ Retry-After), 503 too_many_sessions / plans_busy / not_ready
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Query, Request, Response
@@ -262,6 +263,16 @@ async def create_session(
     )
 
 
+async def _change(session: Session, store: SessionStore, apply: Callable[[], None]) -> None:
+    """Run ``apply`` on the session under its lock and save the change through the
+    store (a session deleted meanwhile answers 404), then count the request as a use."""
+    async with session.lock:
+        if session.closed:
+            raise not_found()
+        await store.change(session, apply)
+    store.touch(session)
+
+
 @router.get(
     "/sessions/{session_id}",
     response_model=S.SessionInfo,
@@ -284,17 +295,11 @@ async def patch_session(
     body: Annotated[S.OptionsPatch, Body()], session: SessionDep, svc: ServicesDep
 ) -> dict[str, Any]:
     """Change solver options; fields left out keep their value. Applies to later frames."""
-    async with session.lock:
-        if session.closed:
-            raise not_found()
 
-        def apply() -> None:
-            session.options = convert.apply_options(
-                body, session.options, svc.settings, field="body"
-            )
+    def apply() -> None:
+        session.options = convert.apply_options(body, session.options, svc.settings, field="body")
 
-        await svc.store.change(session, apply)
-    svc.store.touch(session)
+    await _change(session, svc.store, apply)
     return _session_info(session, svc.store)
 
 
@@ -308,16 +313,11 @@ async def put_pose(
     body: Annotated[S.PoseIn, Body()], session: SessionDep, svc: ServicesDep
 ) -> dict[str, Any]:
     """Set the current pose (the next frame starts from it); values are clipped into the limits."""
-    async with session.lock:
-        if session.closed:
-            raise not_found()
 
-        def apply() -> None:
-            q = convert.pose_vector(body, session.view, session.solver.q, "body")
-            session.set_pose(q)
+    def apply() -> None:
+        session.set_pose(convert.pose_vector(body, session.view, session.solver.q, "body"))
 
-        await svc.store.change(session, apply)
-    svc.store.touch(session)
+    await _change(session, svc.store, apply)
     return convert.pose_dict(session.view, session.solver.q)
 
 

@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 
 from .._jit import jit_inline, jit_leaf
-from ..model.forward import effector_frame, forward_kinematics
+from ..model.forward import axis_and_point_rate, effector_frame, forward_kinematics
 from ..model.layout import (
     ED_AIM,
     ED_ERR_P,
@@ -61,9 +61,6 @@ from ..model.layout import (
     MODE_AIM,
     MODE_POSE,
     MODE_POSITION,
-    ND_JAXIS,
-    ND_R,
-    ND_T,
     NI_DOF,
     NI_KIND,
     NI_PARENT,
@@ -130,40 +127,6 @@ def rotation_log(r00, r01, r02, r10, r11, r12, r20, r21, r22):  # type: ignore[n
     if ax * vx + ay * vy + az * vz < 0.0:
         ax, ay, az = -ax, -ay, -az
     return ax * theta, ay * theta, az * theta, theta
-
-
-@jit_inline
-def _rotate(r00, r01, r02, r10, r11, r12, r20, r21, r22, ux, uy, uz):  # type: ignore[no-untyped-def]
-    """R u for a row-major R: the world axis of node k's motion is R_k a (a rotation
-    leaves its own axis fixed)."""
-    return (
-        r00 * ux + r01 * uy + r02 * uz,
-        r10 * ux + r11 * uy + r12 * uz,
-        r20 * ux + r21 * uy + r22 * uz,
-    )
-
-
-@jit_inline
-def world_axis(nd, k):  # type: ignore[no-untyped-def]
-    """World axis R_k a of node k's motion per unit of its variable, from the frames
-    FK wrote into ND (a is the Jacobian's axis, ``layout.ND_JAXIS``: a mimic joint
-    moves multiplier x as fast as its leader's variable, so its column is scaled by
-    it, and adds to the leader's column). Takes the array: every caller is compiled
-    without reference counting (jit_leaf), so passing it costs nothing."""
-    return _rotate(
-        nd[k, ND_R],
-        nd[k, ND_R + 1],
-        nd[k, ND_R + 2],
-        nd[k, ND_R + 3],
-        nd[k, ND_R + 4],
-        nd[k, ND_R + 5],
-        nd[k, ND_R + 6],
-        nd[k, ND_R + 7],
-        nd[k, ND_R + 8],
-        nd[k, ND_JAXIS],
-        nd[k, ND_JAXIS + 1],
-        nd[k, ND_JAXIS + 2],
-    )
 
 
 @jit_inline
@@ -244,19 +207,13 @@ def effector_terms(q, g, need_grad, ni, nd, ei, ed):  # type: ignore[no-untyped-
         while k >= 0:
             d = ni[k, NI_DOF]
             if d >= 0:
-                wx, wy, wz = world_axis(nd, k)
+                wx, wy, wz, jx, jy, jz = axis_and_point_rate(nd, ni, k, px, py, pz)
                 if ni[k, NI_KIND] == NODE_ROTATION:
-                    lx = px - nd[k, ND_T]
-                    ly = py - nd[k, ND_T + 1]
-                    lz = pz - nd[k, ND_T + 2]
-                    jx = wy * lz - wz * ly
-                    jy = wz * lx - wx * lz
-                    jz = wx * ly - wy * lx
                     g[d] += 2.0 * (
                         wp * (jx * rx + jy * ry + jz * rz) + wr * (wx * ox + wy * oy + wz * oz)
                     )
-                else:
-                    g[d] += 2.0 * wp * (wx * rx + wy * ry + wz * rz)
+                else:  # a translation turns nothing, and (jx, jy, jz) is its axis
+                    g[d] += 2.0 * wp * (jx * rx + jy * ry + jz * rz)
             k = ni[k, NI_PARENT]
     return f
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 
 from .._jit import jit_inline, jit_leaf
-from ..model.forward import effector_frame
+from ..model.forward import axis_and_point_rate, effector_frame
 from ..model.layout import (
     ED_AIM,
     ED_WP,
@@ -28,7 +28,6 @@ from ..model.layout import (
     MODE_AIM,
     MODE_POSE,
     MODE_POSITION,
-    ND_T,
     NI_DOF,
     NI_KIND,
     NI_PARENT,
@@ -47,7 +46,6 @@ from .kinematics import (
     MISC_POSTURE,
     effector_terms,
     is_last_point,
-    world_axis,
 )
 
 # Above this many variables the direct Gauss-Newton metric (O(n^3)) costs more than it
@@ -59,7 +57,7 @@ METRIC_MAX_DOF = 64
 @jit_inline
 def _held(qi, gi, lo_i, hi_i):  # type: ignore[no-untyped-def]
     """A variable is frozen, or sits on a bound with the gradient pushing outward
-    (scalars: see ``_rotate`` on arrays handed to per-joint helpers)."""
+    (scalars: see ``model.forward.world_axis`` on arrays handed to per-joint helpers)."""
     return lo_i == hi_i or (qi <= lo_i and gi > 0.0) or (qi >= hi_i and gi < 0.0)
 
 
@@ -251,14 +249,11 @@ def weighted_jacobian(e, ni, nd, ei, ed, dd):  # type: ignore[no-untyped-def]
     while k >= 0:
         d = ni[k, NI_DOF]
         if d >= 0:
-            wx, wy, wz = world_axis(nd, k)
+            wx, wy, wz, jx, jy, jz = axis_and_point_rate(nd, ni, k, px, py, pz)
+            dd[DD_J, d] += sp * jx
+            dd[DD_J + 1, d] += sp * jy
+            dd[DD_J + 2, d] += sp * jz
             if ni[k, NI_KIND] == NODE_ROTATION:
-                lx = px - nd[k, ND_T]
-                ly = py - nd[k, ND_T + 1]
-                lz = pz - nd[k, ND_T + 2]
-                dd[DD_J, d] += sp * (wy * lz - wz * ly)
-                dd[DD_J + 1, d] += sp * (wz * lx - wx * lz)
-                dd[DD_J + 2, d] += sp * (wx * ly - wy * lx)
                 if mode == MODE_POSE:
                     dd[DD_J + 3, d] += sr * wx
                     dd[DD_J + 4, d] += sr * wy
@@ -268,10 +263,6 @@ def weighted_jacobian(e, ni, nd, ei, ed, dd):  # type: ignore[no-untyped-def]
                     dd[DD_J + 3, d] += sr * (wy * az - wz * ay)
                     dd[DD_J + 4, d] += sr * (wz * ax - wx * az)
                     dd[DD_J + 5, d] += sr * (wx * ay - wy * ax)
-            else:
-                dd[DD_J, d] += sp * wx
-                dd[DD_J + 1, d] += sp * wy
-                dd[DD_J + 2, d] += sp * wz
         k = ni[k, NI_PARENT]
 
 

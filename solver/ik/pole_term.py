@@ -13,7 +13,8 @@ rotation leaves its origin where it is: its column is zero).
 from __future__ import annotations
 
 from .._jit import jit_inline
-from ..model.layout import ND_JAXIS, ND_R, ND_T, NI_DOF, NI_KIND, NI_PARENT, NODE_ROTATION
+from ..model.forward import axis_and_point_rate
+from ..model.layout import ND_T, NI_DOF, NI_PARENT
 
 POLE_WIDTH = 5  # node, weight, point (3)
 POLE_NODE = 0
@@ -49,24 +50,7 @@ def pole_terms(q, g, need_grad, ni, nd, misc, start):  # type: ignore[no-untyped
         while j >= 0:
             d = ni[j, NI_DOF]
             if d >= 0:
-                # The Jacobian's axis (rate x axis): a mimic joint moves at its
-                # multiplier times its leader's variable (kinematics.world_axis).
-                ux = nd[j, ND_JAXIS]
-                uy = nd[j, ND_JAXIS + 1]
-                uz = nd[j, ND_JAXIS + 2]
-                r = ND_R
-                wx = nd[j, r] * ux + nd[j, r + 1] * uy + nd[j, r + 2] * uz
-                wy = nd[j, r + 3] * ux + nd[j, r + 4] * uy + nd[j, r + 5] * uz
-                wz = nd[j, r + 6] * ux + nd[j, r + 7] * uy + nd[j, r + 8] * uz
-                if ni[j, NI_KIND] == NODE_ROTATION:
-                    lx = ox - nd[j, ND_T]
-                    ly = oy - nd[j, ND_T + 1]
-                    lz = oz - nd[j, ND_T + 2]
-                    jx = wy * lz - wz * ly
-                    jy = wz * lx - wx * lz
-                    jz = wx * ly - wy * lx
-                    g[d] += 2.0 * w * (jx * rx + jy * ry + jz * rz)
-                else:
-                    g[d] += 2.0 * w * (wx * rx + wy * ry + wz * rz)
+                _, _, _, jx, jy, jz = axis_and_point_rate(nd, ni, j, ox, oy, oz)
+                g[d] += 2.0 * w * (jx * rx + jy * ry + jz * rz)
             j = ni[j, NI_PARENT]
     return f

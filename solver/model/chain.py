@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -208,20 +208,7 @@ def _check_joint(j: Joint) -> Joint:
             raise InvalidModel(f"lower > upper ({lo!r} > {hi!r})", joint=j.name, field="lower")
     if j.mimic is not None:
         check_mimic(j)
-    return Joint(
-        name=j.name,
-        parent=j.parent,
-        child=j.child,
-        kind=j.kind,
-        origin=j.origin,
-        pivot=pivot,
-        axis=axis,
-        axes=axes,
-        lower=lower,
-        upper=upper,
-        terminator=j.terminator,
-        mimic=j.mimic,
-    )
+    return replace(j, pivot=pivot, axis=axis, axes=axes, lower=lower, upper=upper)
 
 
 def _check_effector(e: Effector, links: set[str]) -> Effector:

@@ -7,11 +7,15 @@
 - ``tail``: n_links segments with two-axis rotational joints (2 n_links DOF).
 - ``two_arm_torso``: a tree: a spine joint and two arms whose shoulders are
   terminators, two effectors.
+
+Also (not in ``EXAMPLES``): ``bolt``, a chain with no variables, and ``with_tip``, the
+serial chain the first three end as: a fixed tip link and one effector on it.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -64,16 +68,7 @@ def panda_arm(mode: EffectorMode = EffectorMode.POSE) -> Chain:
             )
         )
         parent = child
-    joints.append(
-        Joint(
-            name="flange_joint",
-            parent=parent,
-            child="flange",
-            kind=JointKind.FIXED,
-            origin=Transform(np.array([0.0, 0.0, 0.107])),
-        )
-    )
-    return build_chain(joints, [Effector(name="tool", link="flange", mode=mode)])
+    return with_tip(joints, "flange", (0.0, 0.0, 0.107), effector="tool", mode=mode)
 
 
 def humanoid_arm(mode: EffectorMode = EffectorMode.POSE) -> Chain:
@@ -154,16 +149,7 @@ def tail(n_links: int = 20, mode: EffectorMode = EffectorMode.POSITION) -> Chain
             )
         )
         parent = child
-    joints.append(
-        Joint(
-            name="tip_joint",
-            parent=parent,
-            child="tip",
-            kind=JointKind.FIXED,
-            origin=Transform(np.array([0.0, 0.0, 0.1])),
-        )
-    )
-    return build_chain(joints, [Effector(name="tip", link="tip", mode=mode)])
+    return with_tip(joints, "tip", (0.0, 0.0, 0.1), mode=mode)
 
 
 def two_arm_torso() -> Chain:
@@ -218,6 +204,37 @@ def two_arm_torso() -> Chain:
         Effector(name="right_hand", link="right_hand"),
     ]
     return build_chain(joints, effectors)
+
+
+def with_tip(
+    joints: Sequence[Joint],
+    link: str,
+    translation: Sequence[float],
+    *,
+    parent: str | None = None,
+    joint: str | None = None,
+    effector: str | None = None,
+    mode: EffectorMode = EffectorMode.POSITION,
+) -> Chain:
+    """A serial chain: ``joints``, then a fixed joint (``joint``, default
+    ``f"{link}_joint"``) carrying ``link`` at ``translation`` [m] in ``parent``'s frame
+    (default: the last joint's child link), and one effector on ``link`` (named
+    ``effector``, default the link's name)."""
+    tip = Joint(
+        name=joint if joint is not None else f"{link}_joint",
+        parent=parent if parent is not None else joints[-1].child,
+        child=link,
+        kind=JointKind.FIXED,
+        origin=Transform(np.array(translation, dtype=np.float64)),
+    )
+    name = effector if effector is not None else link
+    return build_chain([*joints, tip], [Effector(name=name, link=link, mode=mode)])
+
+
+def bolt() -> Chain:
+    """A chain with no variables: link ``tip`` fixed 1 m above ``base``, effector ``tip``
+    (such a chain takes its own compiled path: errors only, no solve)."""
+    return with_tip([], "tip", (0.0, 0.0, 1.0), parent="base", joint="bolt")
 
 
 EXAMPLES = {

@@ -1,8 +1,9 @@
 """Forward kinematics: the world frame of every node and effector tip for joint values q.
 
-``forward_kinematics`` and ``effector_frame`` are compiled (numba) and shared by the
-IK objective (``solver.ik.kinematics``); ``link_poses`` and ``effector_poses`` are
-their Python face, 4x4 matrices.
+``forward_kinematics``, ``effector_frame`` and the Jacobian's pieces read from the
+frames FK wrote (``world_axis``, ``axis_and_point_rate``) are compiled (numba) and
+shared by the IK objective (``solver.ik.kinematics``), its metric and its pole term;
+``link_poses`` and ``effector_poses`` are their Python face, 4x4 matrices.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from .chain import Chain
 from .layout import (
     EI_NODE,
     ND_AXIS,
+    ND_JAXIS,
     ND_PRE,
     ND_R,
     ND_RATE,
@@ -140,6 +142,55 @@ def effector_frame(e, ei, ed, nd):  # type: ignore[no-untyped-def]
         a10 * b03 + a11 * b13 + a12 * b23 + nd[node, ND_T + 1],
         a20 * b03 + a21 * b13 + a22 * b23 + nd[node, ND_T + 2],
     )
+
+
+@jit_inline
+def _rotate(r00, r01, r02, r10, r11, r12, r20, r21, r22, ux, uy, uz):  # type: ignore[no-untyped-def]
+    """R u for a row-major R: the world axis of node k's motion is R_k a (a rotation
+    leaves its own axis fixed)."""
+    return (
+        r00 * ux + r01 * uy + r02 * uz,
+        r10 * ux + r11 * uy + r12 * uz,
+        r20 * ux + r21 * uy + r22 * uz,
+    )
+
+
+@jit_inline
+def world_axis(nd, k):  # type: ignore[no-untyped-def]
+    """World axis R_k a of node k's motion per unit of its variable, from the frames
+    FK wrote into ND (a is the Jacobian's axis, ``layout.ND_JAXIS``: a mimic joint
+    moves multiplier x as fast as its leader's variable, so its column is scaled by
+    it, and adds to the leader's column). Takes the array: every caller is compiled
+    without reference counting (jit_leaf), so passing it costs nothing."""
+    return _rotate(
+        nd[k, ND_R],
+        nd[k, ND_R + 1],
+        nd[k, ND_R + 2],
+        nd[k, ND_R + 3],
+        nd[k, ND_R + 4],
+        nd[k, ND_R + 5],
+        nd[k, ND_R + 6],
+        nd[k, ND_R + 7],
+        nd[k, ND_R + 8],
+        nd[k, ND_JAXIS],
+        nd[k, ND_JAXIS + 1],
+        nd[k, ND_JAXIS + 2],
+    )
+
+
+@jit_inline
+def axis_and_point_rate(nd, ni, k, px, py, pz):  # type: ignore[no-untyped-def]
+    """Node k's world axis w (``world_axis``) and how fast point p moves per unit of
+    k's variable: w x (p - o_k) about k's origin o_k for a rotation, w for a
+    translation. The second triple is the position rows of the Jacobian's column for
+    p, as the IK objective's gradient, the metric and the pole term all need it."""
+    wx, wy, wz = world_axis(nd, k)
+    if ni[k, NI_KIND] == NODE_ROTATION:
+        lx = px - nd[k, ND_T]
+        ly = py - nd[k, ND_T + 1]
+        lz = pz - nd[k, ND_T + 2]
+        return wx, wy, wz, wy * lz - wz * ly, wz * lx - wx * lz, wx * ly - wy * lx
+    return wx, wy, wz, wx, wy, wz
 
 
 @jit

@@ -23,6 +23,8 @@ from .notes import ModelNote, NoteKind
 
 # Mimic chains longer than this are a cycle (a follower of a follower of ... itself).
 _MAX_MIMIC_DEPTH = 64
+# The kinds with one variable: a mimic joint and the leader it follows are one of them.
+_SINGLE_DOF = frozenset({JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.PRISMATIC})
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,7 +48,7 @@ class Followers:
 def check_mimic(j: Joint) -> None:
     m = j.mimic
     assert m is not None
-    if j.kind not in (JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.PRISMATIC):
+    if j.kind not in _SINGLE_DOF:
         raise InvalidModel(
             f"a {j.kind.value} joint cannot mimic another: only revolute, continuous and "
             "prismatic joints can",
@@ -85,7 +87,7 @@ def resolve_mimics(checked: list[Joint]) -> dict[str, Mimic]:
             leader = nxt
         else:
             raise InvalidModel("the mimic joints form a cycle", joint=j.name, field="mimic")
-        if leader.kind not in (JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.PRISMATIC):
+        if leader.kind not in _SINGLE_DOF:
             raise InvalidModel(
                 f"mimicked joint {leader.name!r} is {leader.kind.value}: a follower needs a "
                 "revolute, continuous or prismatic leader",

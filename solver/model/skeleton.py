@@ -390,31 +390,23 @@ def chain_from_skeleton(skeleton: Skeleton, settings: SkeletonSettings) -> Skele
             )
             joints.extend(prismatic)
         if bone.name in moving_set:
+            kind = JointKind.ROTATIONAL
             axes, lower, upper = _axes_and_limits(bone, given, settings.default_axes)
-            joints.append(
-                Joint(
-                    name=bone.name,
-                    parent=parent_link,
-                    child=bone.name,
-                    kind=JointKind.ROTATIONAL,
-                    origin=origin,
-                    axes=axes,
-                    lower=lower,
-                    upper=upper,
-                    terminator=given.terminator,
-                )
+        else:  # a fixed bone: no axes, no limits (Joint's defaults)
+            kind, axes, lower, upper = JointKind.FIXED, "", (), ()
+        joints.append(
+            Joint(
+                name=bone.name,
+                parent=parent_link,
+                child=bone.name,
+                kind=kind,
+                origin=origin,
+                axes=axes,
+                lower=lower,
+                upper=upper,
+                terminator=given.terminator,
             )
-        else:
-            joints.append(
-                Joint(
-                    name=bone.name,
-                    parent=parent_link,
-                    child=bone.name,
-                    kind=JointKind.FIXED,
-                    origin=origin,
-                    terminator=given.terminator,
-                )
-            )
+        )
     chain = build_chain(joints, effectors, max_dof=settings.max_dof)
     return _with_maps(skeleton, chain, moving)
 

@@ -53,7 +53,7 @@ import dataclasses
 import math
 import re
 import xml.etree.ElementTree as ET
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import defusedxml
@@ -211,18 +211,24 @@ def _check_tips(tip_links: Sequence[str] | str) -> list[str]:
     return tips
 
 
-def _links(root: ET.Element) -> set[str]:
-    links: set[str] = set()
+def _named(root: ET.Element, tag: str) -> Iterator[tuple[str, ET.Element]]:
+    """Each ``<tag>`` element under root with its name, refusing a missing or repeated
+    name (link and joint names are unique in a URDF)."""
+    seen: set[str] = set()
     for element in root:
-        if _tag(element) != "link":
+        if _tag(element) != tag:
             continue
         name = element.get("name")
         if not name:
-            raise InvalidModel("<link> without a name", field="name")
-        if name in links:
-            raise InvalidModel("duplicate link name", joint=name, field="name")
-        links.add(name)
-    return links
+            raise InvalidModel(f"<{tag}> without a name", field="name")
+        if name in seen:
+            raise InvalidModel(f"duplicate {tag} name", joint=name, field="name")
+        seen.add(name)
+        yield name, element
+
+
+def _links(root: ET.Element) -> set[str]:
+    return {name for name, _ in _named(root, "link")}
 
 
 def _link_ref(element: ET.Element, tag: str, joint: str, links: set[str]) -> str:
@@ -237,17 +243,8 @@ def _link_ref(element: ET.Element, tag: str, joint: str, links: set[str]) -> str
 
 def _joints_by_child(root: ET.Element, links: set[str]) -> dict[str, _RawJoint]:
     """Structure of every joint, keyed by child link (a URDF is a tree: one parent each)."""
-    names: set[str] = set()
     by_child: dict[str, _RawJoint] = {}
-    for element in root:
-        if _tag(element) != "joint":
-            continue
-        name = element.get("name")
-        if not name:
-            raise InvalidModel("<joint> without a name", field="name")
-        if name in names:
-            raise InvalidModel("duplicate joint name", joint=name, field="name")
-        names.add(name)
+    for name, element in _named(root, "joint"):
         kind = element.get("type")
         if not kind:
             raise InvalidModel("joint needs a type", joint=name, field="type")

@@ -24,6 +24,8 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
+from schemas.chain import EXAMPLE_GLTF_LEG
+
 from .conftest import Server
 
 pytestmark = pytest.mark.live
@@ -31,19 +33,6 @@ pytestmark = pytest.mark.live
 TIMEOUT_S = 30.0
 SPEC_SCHEMA = Path(__file__).resolve().parents[1] / "schemas" / "asyncapi"
 PANDA = {"format": "example", "name": "panda_arm"}
-LEG = {  # docs/engines.md's glTF leg: a skeleton chain, so fk has bones to answer with
-    "format": "gltf",
-    "gltf": {
-        "asset": {"version": "2.0"},
-        "nodes": [
-            {"name": "hip", "translation": [0, 1, 0], "children": [1]},
-            {"name": "knee", "translation": [0, -0.45, 0], "children": [2]},
-            {"name": "ankle", "translation": [0, -0.45, 0]},
-        ],
-        "skins": [{"name": "leg", "joints": [0, 1, 2]}],
-    },
-    "effectors": [{"bone": "ankle", "name": "foot"}],
-}
 TOOL = {
     "effector": "tool",
     "position": {"x": 0.4, "y": 0.1, "z": 0.5},
@@ -210,7 +199,8 @@ def test_every_message_the_server_sends_matches_the_document(server: Server, spe
         assert exchange(spec, socket, batch) == "batch_result"
         assert exchange(spec, socket, {**batch, "id": 2}, binary=True) == "batch_result"
 
-    sid, token = create(server, LEG, bones={"local_rotations": True})
+    # A skeleton chain (the /docs glTF leg), so that fk has bones to answer with.
+    sid, token = create(server, EXAMPLE_GLTF_LEG, bones={"local_rotations": True})
     with ws(server, sid, token) as socket:
         assert exchange(spec, socket, {"type": "fk", "id": 1}) == "fk_result"
         foot = {"effector": "foot", "position": {"x": 0.1, "y": 0.3, "z": 0.2}}

@@ -11,8 +11,8 @@ import pytest
 
 from solver.errors import InvalidProblem
 from solver.ik import STREAM_DEFAULTS, Continuity, IKOptions, IKSolver, IKStatus, Target
-from solver.model import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
-from solver.model.examples import panda_arm
+from solver.model import Chain, Joint, JointKind
+from solver.model.examples import panda_arm, with_tip
 from solver.model.forward import effector_poses
 from tests.solver.helpers import joint_stream
 
@@ -35,15 +35,8 @@ def dial() -> Chain:
             lower=(-3.0,),
             upper=(3.0,),
         ),
-        Joint(
-            name="tip",
-            parent="link",
-            child="hand",
-            kind=JointKind.FIXED,
-            origin=Transform(np.array([1.0, 0.0, 0.0])),
-        ),
     ]
-    return build_chain(joints, [Effector(name="hand", link="hand", mode=EffectorMode.POSITION)])
+    return with_tip(joints, "hand", (1.0, 0.0, 0.0), joint="tip")
 
 
 def at_angle(a: float) -> list[Target]:

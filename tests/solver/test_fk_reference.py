@@ -27,8 +27,8 @@ import pytest
 from numpy.testing import assert_allclose
 from pytransform3d.urdf import UrdfTransformManager
 
-from solver.model import Chain, Effector, Joint, JointKind, Transform, build_chain
-from solver.model.examples import EXAMPLES, panda_arm, two_arm_torso
+from solver.model import Chain, Joint, JointKind, Transform, build_chain
+from solver.model.examples import EXAMPLES, panda_arm, two_arm_torso, with_tip
 from solver.model.forward import effector_poses, link_poses
 from solver.model.urdf import chain_from_urdf
 
@@ -92,15 +92,8 @@ def _planar(l1: float = 0.5, l2: float = 0.3) -> Chain:
             lower=(-3.0,),
             upper=(3.0,),
         ),
-        Joint(
-            name="wrist",
-            parent="fore",
-            child="hand",
-            kind=JointKind.FIXED,
-            origin=Transform(np.array([l2, 0.0, 0.0])),
-        ),
     ]
-    return build_chain(joints, [Effector(name="hand", link="hand")])
+    return with_tip(joints, "hand", (l2, 0.0, 0.0), joint="wrist")
 
 
 def test_planar_two_link_by_hand(rng: np.random.Generator) -> None:
@@ -144,15 +137,8 @@ def test_prismatic_slides_along_its_axis_in_the_joint_frame() -> None:
             lower=(-0.5,),
             upper=(0.5,),
         ),
-        Joint(
-            name="tool",
-            parent="carriage",
-            child="tip",
-            kind=JointKind.FIXED,
-            origin=Transform(np.array([0.0, 0.0, 0.05])),
-        ),
     ]
-    chain = build_chain(joints, [Effector(name="tip", link="tip")])
+    chain = with_tip(joints, "tip", (0.0, 0.0, 0.05), joint="tool")
     poses = link_poses(chain, np.array([0.25]))
     assert_allclose(
         poses["carriage"], pose(rot_x(math.pi / 2), [0.1, -0.05, 0.0]), rtol=0.0, atol=1e-15
@@ -173,15 +159,8 @@ def _shoulder_zx() -> Chain:
             lower=(-3.0, -3.0),
             upper=(3.0, 3.0),
         ),
-        Joint(
-            name="elbow_mount",
-            parent="upper",
-            child="elbow",
-            kind=JointKind.FIXED,
-            origin=Transform(np.array([0.0, 0.3, 0.0])),
-        ),
     ]
-    return build_chain(joints, [Effector(name="elbow", link="elbow")])
+    return with_tip(joints, "elbow", (0.0, 0.3, 0.0), joint="elbow_mount")
 
 
 @pytest.mark.parametrize(

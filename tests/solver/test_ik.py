@@ -32,7 +32,7 @@ from solver.ik.frame import solve_frame
 from solver.ik.kinematics import DD_HI, DD_LO, MISC_SIZE, ik_objective
 from solver.ik.metric import ik_metric
 from solver.ik.pole_term import POLE_NODE, POLE_POINT, POLE_WEIGHT
-from solver.model.examples import humanoid_arm, panda_arm, tail, two_arm_torso
+from solver.model.examples import bolt, humanoid_arm, panda_arm, tail, two_arm_torso
 from solver.model.forward import effector_poses
 
 from .helpers import CHAINS, slider_arm
@@ -256,19 +256,7 @@ def test_partial_targets_and_input_errors() -> None:
 
 
 def test_all_fixed_chain_reports_errors_without_solving() -> None:
-    chain = build_chain(
-        [
-            Joint(
-                name="bolt",
-                parent="base",
-                child="tip",
-                kind=JointKind.FIXED,
-                origin=Transform(np.array([0.0, 0.0, 1.0])),
-            )
-        ],
-        [Effector(name="tip", link="tip")],
-    )
-    solver = IKSolver(chain)
+    solver = IKSolver(bolt())
     assert solver.solve([Target(effector="tip", position=np.array([0.0, 0.0, 1.0]))]).success
     miss = solver.solve([Target(effector="tip", position=np.array([0.0, 0.0, 2.0]))])
     assert miss.status is IKStatus.NOT_REACHED

@@ -13,14 +13,11 @@ from solver import (
     EffectorMode,
     IKSolver,
     InvalidProblem,
-    Joint,
-    JointKind,
     Target,
-    Transform,
     build_chain,
 )
 from solver.ik import STREAM_DEFAULTS, Continuity, IKOptions, IKResult, pose_targets
-from solver.model.examples import humanoid_arm, panda_arm, two_arm_torso
+from solver.model.examples import bolt, humanoid_arm, panda_arm, two_arm_torso
 from solver.model.forward import effector_poses
 from solver.path import PathOptions, PlannedPath, keyframes, plan_path
 from solver.path.kernels import dp_step, frame_nodes
@@ -211,15 +208,7 @@ def test_plan_of_a_single_frame_is_the_nearest_answer() -> None:
 
 
 def test_plan_of_a_chain_without_variables() -> None:
-    bolt = Joint(
-        name="bolt",
-        parent="base",
-        child="tip",
-        kind=JointKind.FIXED,
-        origin=Transform(np.array([0.0, 0.0, 1.0])),
-    )
-    chain = build_chain([bolt], [Effector(name="tip", link="tip")])
-    solver = IKSolver(chain, STREAM)
+    solver = IKSolver(bolt(), STREAM)
     frames = [
         [Target(effector="tip", position=np.array([0.0, 0.0, 1.0]))],
         [Target(effector="tip", position=np.array([0.0, 0.5, 1.0]))],
