@@ -38,7 +38,8 @@ def token_digest(token: str) -> bytes:
     return hashlib.sha256(token.encode("utf-8", "surrogatepass")).digest()
 
 
-@dataclass(eq=False, slots=True)
+# weakref_slot: a shared store finds a session it forgot while something still holds it.
+@dataclass(eq=False, slots=True, weakref_slot=True)
 class Session:
     """A stream of frames for one chain.
 
