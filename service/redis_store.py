@@ -77,8 +77,7 @@ OptionsLoader = Callable[[dict[str, Any]], IKOptions]
 OptionsDumper = Callable[[IKOptions], dict[str, Any]]
 SolverBuilder = Callable[[ChainView, IKOptions], Awaitable[IKSolver]]
 
-# Models kept per process, by chain definition hash.
-CACHED_VIEWS = 64
+CACHED_VIEWS = 64  # models kept per process, by chain definition hash
 # Session.version of a session this worker must reload before its next frame: a write
 # failed (Redis gone) or was refused (another worker wrote first, written behind).
 RELOAD = -1
@@ -90,6 +89,8 @@ def definition_key(definition: bytes) -> str:
 
 class RedisSessionStore(SessionStore):
     """Sessions in Redis; this process keeps the ones it has served (and their solvers)."""
+
+    commits_frames = True
 
     def __init__(
         self,
@@ -207,8 +208,8 @@ class RedisSessionStore(SessionStore):
         return await asyncio.shield(loading)
 
     def _loaded(self, session_id: str, task: asyncio.Task[Session | None]) -> None:
-        if self._loading.get(session_id) is task:
-            del self._loading[session_id]
+        if self._loading.get(session_id) is task:  # a later load may have taken its place
+            self._loading.pop(session_id)
         if not task.cancelled():
             task.exception()  # retrieved: the waiters get it; with none left, nobody need
 

@@ -165,6 +165,9 @@ class SessionStore(abc.ABC):
 
     ttl_s: float
     clock: Callable[[], float]
+    # True when frames are committed to a store other workers share (``commit``,
+    # ``stored_answer`` do something): the frame path skips both steps otherwise.
+    commits_frames: bool = False
 
     @abc.abstractmethod
     async def add(self, session: Session) -> None:
