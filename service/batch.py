@@ -197,9 +197,11 @@ async def solve(
                 live.append((k, entry))
         # A shared store (IK_REDIS_URL): a session's entries sent again (same ids, same
         # targets) get the answers stored for them, as frames sent alone do.
-        live, replayed = _replay(store, live)
-        for k, frame in replayed:
-            outcomes[k] = frame
+        shared = store.commits_frames
+        if shared:
+            live, replayed = _replay(store, live)
+            for k, frame in replayed:
+                outcomes[k] = frame
         work = [e for _, e in live]
         inline_us = runner.inline_budget_us
         if not work:
@@ -239,11 +241,13 @@ async def solve(
                 raise
         for (k, _), outcome in zip(live, solved, strict=True):
             outcomes[k] = outcome
-        # Stored before answered, each session's entries in one commit, under its lock.
-        groups = _by_session(live)
-        await asyncio.gather(
-            *(_commit(store, g, outcomes, t0, runner.metrics.frames, transport) for g in groups)
-        )
+        # Stored before answered, each session's entries in one commit, under its lock
+        # (with sessions in this process's memory there is nothing to commit).
+        if shared:
+            groups = _by_session(live)
+            await asyncio.gather(
+                *(_commit(store, g, outcomes, t0, runner.metrics.frames, transport) for g in groups)
+            )
     finally:
         if not handed_over:
             _release(locked)

@@ -25,7 +25,8 @@ gets the stored answer instead of a second solve.
 Ordering across workers: a worker that holds a session solves from its copy and commits
 with the version it started from; if another worker committed in between, the script
 refuses, the session is reloaded and the frame solved again (``StaleSession``). Within
-one worker the session's lock orders frames as before.
+one worker a session is one object, whose lock orders its frames: one forgotten as idle
+while something holds it (a WebSocket's batches) is taken back, never loaded twice.
 
 Redis not answering: every call is bounded by IK_REDIS_TIMEOUT_S and becomes 503
 ``store_unavailable`` (Retry-After) or the same WebSocket error; nothing waits for
@@ -35,10 +36,11 @@ Redis to come back, and the next call after it does simply works.
 from __future__ import annotations
 
 import asyncio
-import contextlib
+import functools
 import hashlib
 import logging
 import time
+import weakref
 from collections import OrderedDict
 from collections.abc import Awaitable, Callable, Sequence
 from typing import Any
@@ -64,6 +66,7 @@ from .stored_frames import (
     unpack_answer,
     unpack_stream,
 )
+from .write_behind import Pending, WriteBehind
 
 log = logging.getLogger("service")
 
@@ -74,8 +77,7 @@ OptionsLoader = Callable[[dict[str, Any]], IKOptions]
 OptionsDumper = Callable[[IKOptions], dict[str, Any]]
 SolverBuilder = Callable[[ChainView, IKOptions], Awaitable[IKSolver]]
 
-# Models kept per process, by chain definition hash.
-CACHED_VIEWS = 64
+CACHED_VIEWS = 64  # models kept per process, by chain definition hash
 # Session.version of a session this worker must reload before its next frame: a write
 # failed (Redis gone) or was refused (another worker wrote first, written behind).
 RELOAD = -1
@@ -87,6 +89,8 @@ def definition_key(definition: bytes) -> str:
 
 class RedisSessionStore(SessionStore):
     """Sessions in Redis; this process keeps the ones it has served (and their solvers)."""
+
+    commits_frames = True
 
     def __init__(
         self,
@@ -114,17 +118,14 @@ class RedisSessionStore(SessionStore):
         self._load_options = load_options
         self._dump_options = dump_options
         self._sessions: dict[str, Session] = {}
-        self._loading: dict[str, asyncio.Future[Session | None]] = {}
+        self._loading: dict[str, asyncio.Task[Session | None]] = {}
+        # Sessions forgotten as idle that something still holds (a WebSocket remembers
+        # the sessions its batches opened): a load takes the same object back.
+        self._forgotten = weakref.WeakValueDictionary[str, Session]()
         self._views: OrderedDict[str, ChainView] = OrderedDict()
         self._commit = GroupCommit(client, COMMIT_SCRIPT)
-        # Written behind: sessions with frames not yet in Redis, and their answers.
-        self.write_behind_s = write_behind_s
-        self._dirty: dict[str, tuple[Session, list[Any]]] = {}
-        self._behind_task: asyncio.Task[None] | None = None
-        self._behind_failed = False
-        self._closing = asyncio.Event()  # close() ends the wait between flushes
-        # The sessions of the flush under way, and its end (``refresh`` waits for it).
-        self._flush_in_flight: tuple[set[str], asyncio.Event] | None = None
+        # Written behind (IK_REDIS_WRITE_BEHIND_MS > 0): None when written through.
+        self.behind = WriteBehind(write_behind_s, self._write_behind) if write_behind_s else None
         self._count = 0
 
     def __len__(self) -> int:
@@ -161,12 +162,11 @@ class RedisSessionStore(SessionStore):
         )
 
     @staticmethod
-    def _state(session: Session) -> bytes:
-        state = session.solver.stream_state()
-        record = StreamRecord(
-            state.q, state.inverse_hessian, session.rest, session.frames, session.solved
-        )
-        return pack_stream(record)
+    def _record(session: Session) -> StreamRecord:
+        """The session's stream state now, copied (call it under the session's lock)."""
+        q, h = session.solver.stream_state()
+        h = None if h is None else h.copy()
+        return StreamRecord(q.copy(), h, session.rest, session.frames, session.solved)
 
     # -- the interface ---------------------------------------------------------------
     async def add(self, session: Session) -> None:
@@ -176,7 +176,8 @@ class RedisSessionStore(SessionStore):
         keys = self._keys(session.id, key, session.owner)
         no_cap = 2**62
         owner_cap = no_cap if self.max_per_owner is None else self.max_per_owner
-        args: list[bytes | str | int] = ["new", self._state(session), self._ttl_ms()]
+        state = pack_stream(self._record(session))
+        args: list[bytes | str | int] = ["new", state, self._ttl_ms()]
         args += [KEPT_ANSWERS, session.id, self._meta(session), self.max_sessions, owner_cap]
         try:
             await self.client.set(keys[3], definition, px=self._ttl_ms())
@@ -198,22 +199,24 @@ class RedisSessionStore(SessionStore):
         if held is not None:
             return held
         loading = self._loading.get(session_id)
-        if loading is not None:  # another request of this session loads it already
-            return await asyncio.shield(loading)
-        fut: asyncio.Future[Session | None] = asyncio.get_running_loop().create_future()
-        self._loading[session_id] = fut
-        try:
-            session = await self._load(session_id)
-            fut.set_result(session)
-        except BaseException as e:
-            fut.set_exception(e)
-            fut.exception()  # retrieved: waiters get it, nobody else need
-            raise
-        finally:
-            del self._loading[session_id]
-        return session
+        if loading is None:
+            # A task of its own, which every request of the session waits for: a request
+            # that goes away (its client disconnected) ends its own wait, never the load.
+            loading = asyncio.get_running_loop().create_task(self._load(session_id))
+            self._loading[session_id] = loading
+            loading.add_done_callback(functools.partial(self._loaded, session_id))
+        return await asyncio.shield(loading)
+
+    def _loaded(self, session_id: str, task: asyncio.Task[Session | None]) -> None:
+        if self._loading.get(session_id) is task:  # a later load may have taken its place
+            self._loading.pop(session_id)
+        if not task.cancelled():
+            task.exception()  # retrieved: the waiters get it; with none left, nobody need
 
     async def _load(self, session_id: str) -> Session | None:
+        forgotten = self._forgotten.get(session_id)
+        if forgotten is not None and not forgotten.closed:
+            return await self._take_back(forgotten)
         p = self._p
         try:
             async with self.client.pipeline(transaction=False) as pipe:
@@ -255,6 +258,20 @@ class RedisSessionStore(SessionStore):
         held = self._sessions.setdefault(session_id, session)
         log.info("session %s loaded from Redis at version %d", session_id[:6], held.version)
         return held
+
+    async def _take_back(self, session: Session) -> Session | None:
+        """A session this worker forgot as idle while something still holds it: that
+        object again, brought up to date under its lock, never a second copy beside it
+        (two copies would solve from two poses and flush over each other's frames)."""
+        async with session.lock:
+            try:
+                await self.refresh(session)
+            except ServiceError:
+                if session.closed:  # gone from Redis
+                    return None
+                raise
+        session.last_seen = self.clock()
+        return self._sessions.setdefault(session.id, session)
 
     def _remember_view(self, key: str, view: ChainView) -> None:
         self._views[key] = view
@@ -305,6 +322,7 @@ class RedisSessionStore(SessionStore):
         ]
         for s in idle:
             del self._sessions[s.id]
+            self._forgotten[s.id] = s
         streaming = [s for s in self._sessions.values() if s.websockets > 0]
         p, ttl = self._p, self._ttl_ms()
         try:
@@ -340,10 +358,14 @@ class RedisSessionStore(SessionStore):
         key = answer_key(jobs)
         answer = None if key is None else StoredAnswer(jobs_digest(jobs), tuple(out))
         pairs = [] if answer is None else [key, pack_answer(answer)]
-        if self.write_behind_s > 0:
-            self._behind(session, pairs)
-        else:
+        behind = self.behind
+        if behind is None:
             await self._write(session, "", pairs)
+        elif behind.failed:
+            session.version = RELOAD  # the next frame finds out whether Redis is back
+            raise store_unavailable()
+        else:  # the state now, under the session's lock: the flush comes later
+            behind.queue(session, self._record(session), pairs)
         if answer is not None and key is not None:
             session.answers[key] = answer
             if len(session.answers) > KEPT_ANSWERS:
@@ -351,22 +373,38 @@ class RedisSessionStore(SessionStore):
 
     async def _reload_or_unavailable(self, session: Session) -> None:
         """Reload ``session`` from Redis (503 ``store_unavailable`` if Redis is still gone)."""
-        self._dirty.pop(session.id, None)  # what this worker had not written is void
+        behind = self.behind
+        if behind is not None:
+            behind.take(session.id)  # what this worker had not written is void
         await self.refresh(session)
-        self._behind_failed = False
+        if behind is not None:
+            behind.failed = False
 
     async def save(self, session: Session) -> None:
-        self._dirty.pop(session.id, None)  # written now, with the new pose or options
+        if self.behind is not None:
+            self.behind.take(session.id)  # written now, with the new pose or options
         await self._write(session, self._meta(session), [])
 
-    def _args(self, session: Session, meta: bytes | str, pairs: list[Any]) -> list[Any]:
-        args = [session.version, self._state(session), self._ttl_ms(), KEPT_ANSWERS, session.id]
+    def _args(
+        self, session: Session, record: StreamRecord, meta: bytes | str, pairs: list[Any]
+    ) -> list[Any]:
+        state = pack_stream(record)
+        args = [session.version, state, self._ttl_ms(), KEPT_ANSWERS, session.id]
         return [*args, meta, *pairs]
 
-    async def _write(self, session: Session, meta: bytes | str, pairs: list[Any]) -> None:
+    async def _write(
+        self,
+        session: Session,
+        meta: bytes | str,
+        pairs: list[Any],
+        record: StreamRecord | None = None,
+    ) -> None:
+        """Write the session through: ``record`` (default: its state now, read under its
+        lock), and ``meta`` when not empty, and these answers."""
         keys = self._keys(session.id, session.definition_key, session.owner)
+        args = self._args(session, record or self._record(session), meta, pairs)
         try:
-            v = await self._commit.run(keys, self._args(session, meta, pairs))
+            v = await self._commit.run(keys, args)
         except RedisError as e:
             # What this worker solved is not stored: whatever it holds now may be ahead
             # of Redis, so it reloads before its next frame.
@@ -389,50 +427,23 @@ class RedisSessionStore(SessionStore):
             session.version = v
 
     # -- written behind (IK_REDIS_WRITE_BEHIND_MS > 0) ---------------------------------
-    def _behind(self, session: Session, pairs: list[Any]) -> None:
-        """Queue the session's state and this answer for the next flush (the state is
-        read then: one write per session per flush, however many frames it solved)."""
-        if self._behind_failed:
-            session.version = RELOAD  # the next frame finds out whether Redis is back
-            raise store_unavailable()
-        _, pending = self._dirty.setdefault(session.id, (session, []))
-        pending.extend(pairs)
-        if self._behind_task is None:
-            self._behind_task = asyncio.get_running_loop().create_task(self._flush_behind())
-
-    async def _flush_behind(self) -> None:
+    async def _write_behind(self, batch: list[Pending]) -> None:
+        """One flush: each session's snapshot and answers, in one pipeline."""
+        calls = []
+        for p in batch:
+            s = p.session
+            keys = self._keys(s.id, s.definition_key, s.owner)
+            calls.append((keys, self._args(s, p.record, "", p.pairs), s))
         try:
-            while self._dirty and not self._closing.is_set():
-                # The interval, cut short by close(): a flush itself is never cancelled.
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(self._closing.wait(), self.write_behind_s)
-                await self._flush_once()
-        finally:
-            self._behind_task = None
-
-    async def _flush_once(self) -> None:
-        dirty, self._dirty = self._dirty, {}
-        batch = [
-            (self._keys(s.id, s.definition_key, s.owner), self._args(s, "", pairs), s)
-            for s, pairs in dirty.values()
-            if not s.closed
-        ]
-        if not batch:
-            return
-        done = asyncio.Event()
-        self._flush_in_flight = ({s.id for _, _, s in batch}, done)
-        try:
-            results = await self._commit.execute(batch)
+            results = await self._commit.execute(calls)
         except RedisError as e:
             _unavailable(e)
-            self._behind_failed = True
-            for _, _, s in batch:
+            assert self.behind is not None
+            self.behind.failed = True
+            for _, _, s in calls:
                 s.version = RELOAD
             return
-        finally:
-            self._flush_in_flight = None
-            done.set()
-        for (_, _, s), v in zip(batch, results, strict=True):
+        for (_, _, s), v in zip(calls, results, strict=True):
             if isinstance(v, Exception):
                 s.version = RELOAD
             else:
@@ -447,13 +458,14 @@ class RedisSessionStore(SessionStore):
         # Written behind: frames this worker answered may not be in Redis yet; they go
         # first, or the restore below would rewind the pose (a joint jump on the next
         # frame) and the counters.
-        in_flight = self._flush_in_flight
-        if in_flight is not None and session.id in in_flight[0]:
-            await in_flight[1].wait()
-        pending = self._dirty.pop(session.id, None)
+        behind = self.behind
+        pending = None
+        if behind is not None:
+            await behind.settled(session.id)
+            pending = behind.take(session.id)
         if pending is not None and session.version != RELOAD:
             try:
-                await self._write(session, "", pending[1])
+                await self._write(session, "", pending.pairs, pending.record)
             except StaleSession:  # another worker wrote first: reloaded from Redis
                 return
         p = self._p
@@ -478,14 +490,8 @@ class RedisSessionStore(SessionStore):
             raise _unavailable(e) from None
 
     async def close(self) -> None:
-        # Written behind: end the wait for the next flush, let a flush under way finish
-        # (its frames are in no other place), then write what is left, before the exit.
-        self._closing.set()
-        task = self._behind_task
-        if task is not None:
-            await task
-        if self._dirty:
-            await self._flush_once()
+        if self.behind is not None:  # what is written behind goes before the exit
+            await self.behind.close()
         await self.client.aclose()
 
 

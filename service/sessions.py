@@ -38,7 +38,8 @@ def token_digest(token: str) -> bytes:
     return hashlib.sha256(token.encode("utf-8", "surrogatepass")).digest()
 
 
-@dataclass(eq=False, slots=True)
+# weakref_slot: a shared store finds a session it forgot while something still holds it.
+@dataclass(eq=False, slots=True, weakref_slot=True)
 class Session:
     """A stream of frames for one chain.
 
@@ -164,6 +165,9 @@ class SessionStore(abc.ABC):
 
     ttl_s: float
     clock: Callable[[], float]
+    # True when frames are committed to a store other workers share (``commit``,
+    # ``stored_answer`` do something): the frame path skips both steps otherwise.
+    commits_frames: bool = False
 
     @abc.abstractmethod
     async def add(self, session: Session) -> None:

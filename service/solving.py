@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import gc
 import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
@@ -295,27 +296,15 @@ class Runner:
             raise rate_limited(wait_s, self.max_frames_per_s)
         await session.lock.acquire()
         handoff = _LockHandoff()
+        args = (session, jobs, t0, transport, plan, on_submit, client, may_inline, handoff)
         try:
-            # A shared store (IK_REDIS_URL) commits the frames before they are answered;
-            # when another worker committed this session's frames first, the session is
-            # reloaded from the store and the frames are solved again from there.
-            for _ in range(STALE_RETRIES):
+            if not store.commits_frames:  # sessions in this process: nothing to commit
                 if session.closed:
                     raise not_found()
-                stored = None if plan else store.stored_answer(session, jobs)
-                if stored is not None:  # the same frames sent again: the same answers
-                    out: tuple[list[SolvedFrame], PlannedPath | None] = (stored, None)
-                    break
-                out = await self._solve(
-                    session, jobs, t0, transport, plan, on_submit, client, may_inline, handoff
-                )
-                try:
-                    await store.commit(session, jobs, out[0])
-                except StaleSession:
-                    continue
-                break
+                out = await self._solve(*args)
             else:
-                raise store_unavailable()
+                solve = functools.partial(self._solve, *args)
+                out = await _solve_and_commit(session, store, jobs, plan, solve)
         finally:
             if not handoff.handed_over:
                 session.lock.release()
@@ -373,6 +362,32 @@ class Runner:
                 fut.add_done_callback(lambda _: session.lock.release())
                 handoff.handed_over = True
             raise
+
+
+async def _solve_and_commit(
+    session: Session,
+    store: SessionStore,
+    jobs: Sequence[FrameJob],
+    plan: bool,
+    solve: Callable[[], Awaitable[tuple[list[SolvedFrame], PlannedPath | None]]],
+) -> tuple[list[SolvedFrame], PlannedPath | None]:
+    """With a shared store (IK_REDIS_URL), under the session's lock: the stored answers
+    of frames sent again, else ``solve`` and commit before answering; when another
+    worker committed this session's frames first, the session is reloaded from the
+    store and the frames are solved again from there."""
+    for _ in range(STALE_RETRIES):
+        if session.closed:
+            raise not_found()
+        stored = None if plan else store.stored_answer(session, jobs)
+        if stored is not None:  # the same frames sent again: the same answers
+            return stored, None
+        out = await solve()
+        try:
+            await store.commit(session, jobs, out[0])
+        except StaleSession:
+            continue
+        return out
+    raise store_unavailable()
 
 
 class _LockHandoff:

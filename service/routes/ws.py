@@ -91,11 +91,8 @@ _AUTH_CLOSE = {
 
 def _raw_id(raw: Any) -> int | None:
     """The id of a message that failed validation, if it has a usable one."""
-    if isinstance(raw, dict):
-        v = raw.get("id")
-        if isinstance(v, int) and not isinstance(v, bool):
-            return v
-    return None
+    v = raw.get("id") if isinstance(raw, dict) else None
+    return v if isinstance(v, int) and not isinstance(v, bool) else None
 
 
 class _SlowReader(Exception):
@@ -135,6 +132,9 @@ class _Connection:
         self._sending_since: float | None = None  # loop.time() when a send started
         self._timed_out = False
         self._watch: asyncio.TimerHandle | None = None
+        # The message being solved (id, binary), and the last one the shutdown answered.
+        self._solving: tuple[int, bool] | None = None
+        self._answered_by_shutdown: int | None = None
 
     @functools.cached_property
     def client(self) -> str:
@@ -276,25 +276,7 @@ class _Connection:
         if isinstance(msg, S.PingMessage):
             await self.send(pong_message(msg_id), binary)
             return
-        answered_by_shutdown = False
-
-        async def shutdown_reply() -> None:
-            """The answer when the server stops before this message is solved."""
-            nonlocal answered_by_shutdown
-            answered_by_shutdown = True
-            reply = self.error_reply(
-                msg_id,
-                ErrorCode.SHUTTING_DOWN,
-                "the server is shutting down before this message was solved; send it again "
-                "after reconnecting (another replica, or this one once restarted)",
-                retry_after_s=1.0,
-            )
-            if binary:
-                await self.ws.send_bytes(packb_message(reply))
-            else:
-                await self.ws.send_text(dumps_message(reply))
-
-        self.svc.shutdown_replies.add(shutdown_reply)
+        self._solving = (msg_id, binary)
         try:
             if isinstance(msg, RawBatch | S.BatchMessage):
                 reply = await batch_reply(msg, binary, t0, self)
@@ -316,9 +298,24 @@ class _Connection:
         except (ServiceError, IKError) as e:
             reply = self.exception_reply(msg_id, e)
         finally:
-            self.svc.shutdown_replies.discard(shutdown_reply)
-        if not answered_by_shutdown:
+            self._solving = None
+        if self._answered_by_shutdown != msg_id:
             await self.send(reply, binary)
+
+    async def shutdown_reply(self) -> None:
+        """Answer the message being solved, if any, when the server stops first
+        (``__main__``'s shutdown calls it; registered once per connection, in ``_serve``)."""
+        if self._solving is None:
+            return
+        msg_id, binary = self._solving
+        self._answered_by_shutdown = msg_id
+        message = "the server is shutting down before this message was solved; send it again "
+        message += "after reconnecting (another replica, or this one once restarted)"
+        reply = self.error_reply(msg_id, ErrorCode.SHUTTING_DOWN, message, retry_after_s=1.0)
+        ws = self.ws
+        await (
+            ws.send_bytes(packb_message(reply)) if binary else ws.send_text(dumps_message(reply))
+        )
 
     async def frame(
         self,
@@ -425,6 +422,8 @@ async def _serve(
     conn = _Connection(ws, svc, session, build)
     limit = svc.settings.ws_max_message_bytes
     conn.start_watch()
+    shutdown_reply = conn.shutdown_reply  # one bound method: the set holds this one
+    svc.shutdown_replies.add(shutdown_reply)
     done_at = -math.inf
     try:
         while True:
@@ -491,6 +490,7 @@ async def _serve(
         except Exception:  # the socket may be gone already
             pass
     finally:
+        svc.shutdown_replies.discard(shutdown_reply)
         conn.stop_watch()
 
 

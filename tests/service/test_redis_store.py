@@ -9,6 +9,9 @@ installs it with apt-get).
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import json
 import os
 import shutil
 import threading
@@ -16,6 +19,8 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+import msgpack
+import numpy as np
 import pytest
 import redis
 from pydantic import SecretStr
@@ -25,7 +30,8 @@ from loadtest.cluster import RedisServer
 from service.config import Settings
 from service.main import create_app
 from service.redis_store import RedisSessionStore
-from service.stored_frames import unpack_stream
+from service.sessions import Session
+from service.stored_frames import StreamRecord, unpack_stream
 
 from .helpers import Created, create, hand_frame
 
@@ -233,3 +239,141 @@ def test_written_behind_a_flush_under_way_at_shutdown_is_not_lost(warm_solver: f
     finally:
         server.resume()
         server.stop()
+
+
+def _stored_stream(redis_url: str, s: Created) -> StreamRecord:
+    """The session's stream state as written in Redis (no worker in between)."""
+    with redis.Redis.from_url(redis_url) as r:
+        state = r.hget(f"ik:s:{s.id}", "state")
+    assert isinstance(state, bytes)
+    return unpack_stream(state, len(s.body["pose"]["q"]))
+
+
+def _frame_q(client: TestClient, s: Created, frame_id: int, y: float) -> list[float]:
+    r = client.post(
+        f"/v1/sessions/{s.id}/frames", json=hand_frame(frame_id, y=y), headers=s.headers
+    )
+    assert r.status_code == 200, r.text
+    q: list[float] = r.json()["results"][0]["q"]
+    return q
+
+
+def test_written_behind_a_flush_during_a_pooled_solve_stores_the_last_answered_pose(
+    workers: Workers, redis_url: str
+) -> None:
+    """A flush that runs while a frame thread is between moving the pose and counting
+    the frame writes the state as it was when the last frame was answered: the pose of
+    the frames counted, not the pose of a frame still being solved."""
+    # inline_budget_us=0: every frame is solved on a frame thread, the loop stays free.
+    (a,) = workers(1, redis_write_behind_ms=60_000, inline_budget_us=0)
+    s = create(a)
+    behind = _store(a).behind
+    assert behind is not None
+    store = _store(a)
+    answered = _frame_q(a, s, 0, 0.1)  # answered, queued for the next flush
+    session = a.portal.call(store.get, s.id)
+    assert session is not None
+    track = session.solver.track
+
+    def track_then_flush(*args: Any, **kwargs: Any) -> Any:
+        result = track(*args, **kwargs)  # the pose has moved, the frame is not counted
+        a.portal.call(behind.flush)  # the flush, on the loop, at this very moment
+        return result
+
+    session.solver.track = track_then_flush  # type: ignore[method-assign]
+    _frame_q(a, s, 1, 0.14)
+    stored = _stored_stream(redis_url, s)
+    assert stored.frames == 1
+    assert stored.q.tolist() == pytest.approx(answered, abs=0)
+
+
+def test_a_cancelled_load_leaves_the_other_waiters_their_session(workers: Workers) -> None:
+    """Two requests of a session this worker does not hold: the first (which loads it
+    from Redis) is cancelled mid-load (its client went away); the second still gets it."""
+    a, b = workers()
+    s = create(a)
+    store = _store(b)
+
+    async def second_load_after_the_first_is_cancelled() -> Session | None:
+        first = asyncio.create_task(store.get(s.id))
+        await asyncio.sleep(0)  # the first load waits for Redis
+        second = asyncio.create_task(store.get(s.id))
+        await asyncio.sleep(0)  # the second waits for the first's load
+        first.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await first
+        return await second
+
+    session = b.portal.call(second_load_after_the_first_is_cancelled)
+    assert session is not None and session.id == s.id
+    assert b.portal.call(store.get, s.id) is session  # loaded once, kept
+
+
+def _ws_batch(ws: Any, msg_id: int, entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    ws.send_text(json.dumps({"type": "batch", "id": msg_id, "frames": entries}))
+    reply = ws.receive_json()
+    assert reply["type"] == "batch_result", reply
+    results: list[dict[str, Any]] = reply["results"]
+    assert all(r["success"] for r in results), results
+    return results
+
+
+def test_a_session_forgotten_while_a_websocket_batch_holds_it_stays_one_session(
+    workers: Workers, redis_url: str
+) -> None:
+    """A WebSocket's batches keep a session open (the connection remembers it). When the
+    worker forgets it as idle and an HTTP request brings it back from Redis, both use
+    one session: the pose PUT over HTTP is where the socket's next frame starts, and
+    every frame answered is stored (written behind: two copies in one worker would
+    each flush with their own version, and one copy's frames would be refused)."""
+    (a,) = workers(1, redis_write_behind_ms=60_000)
+    via, s = create(a), create(a)
+    store = _store(a)
+    with a.websocket_connect(f"/v1/sessions/{via.id}/ws", headers=via.headers) as ws:
+        _ws_batch(ws, 1, [_entry(s, 1, 0.1)])
+        held = a.portal.call(store.get, s.id)
+        assert held is not None
+        held.last_seen -= 2 * store.ttl_s  # idle for two TTLs in this worker...
+        a.portal.call(store.expire)  # ...so the sweep forgets it (Redis keeps it)
+        pose = [0.05] * len(s.body["pose"]["q"])
+        r = a.put(f"/v1/sessions/{s.id}/pose", json={"q": pose}, headers=s.headers)
+        assert r.status_code == 200, r.text
+        (second,) = _ws_batch(ws, 2, [_entry(s, 2, 0.1)])
+        again = a.portal.call(store.get, s.id)
+    assert store.behind is not None
+    a.portal.call(store.behind.flush)
+    stored = _stored_stream(redis_url, s)
+    assert stored.frames == 2
+    assert stored.q.tolist() == pytest.approx(second["result"]["q"], abs=0)
+    # The frame started from the pose PUT: its step is measured from there.
+    start = np.array(pose)
+    largest = float(np.max(np.abs(np.array(second["result"]["q"]) - start)))
+    assert second["result"]["largest_step_rad"] == pytest.approx(largest)
+    assert again is held  # one object for the session in this worker
+
+
+def test_ws_batch_is_stored_and_a_resent_batch_gets_its_stored_answers(
+    workers: Workers,
+) -> None:
+    """A WebSocket ``batch`` with sessions in Redis, JSON and MessagePack: each entry is
+    committed before the answer, and the same batch sent again on another worker (a
+    client resending after a failover) gets the stored answers, not a second solve."""
+    a, b = workers()
+    via, s1, s2 = create(a), create(a), create(a)
+    sent = [_entry(s1, 1, 0.1), _entry(s2, 1, 0.12), _entry(s1, 2, 0.11)]
+    with a.websocket_connect(f"/v1/sessions/{via.id}/ws", headers=via.headers) as ws:
+        first = _ws_batch(ws, 1, sent)
+        ws.send_bytes(msgpack.packb({"type": "batch", "id": 2, "frames": [_entry(s2, 2, 0.13)]}))
+        packed = msgpack.unpackb(ws.receive_bytes())
+    assert packed["type"] == "batch_result" and packed["results"][0]["success"], packed
+    assert [(r["session"], r["id"]) for r in first] == [(s1.id, 1), (s2.id, 1), (s1.id, 2)]
+    stored = _in_redis(workers, s1)
+    assert stored["counters"]["frames"] == 2
+    assert stored["pose"]["q"] == pytest.approx(first[2]["result"]["q"], abs=0)
+    stored = _in_redis(workers, s2)
+    assert stored["counters"]["frames"] == 2
+    assert stored["pose"]["q"] == pytest.approx(packed["results"][0]["result"]["q"], abs=0)
+    with b.websocket_connect(f"/v1/sessions/{via.id}/ws", headers=via.headers) as ws:
+        again = _ws_batch(ws, 1, sent)
+    assert [r["result"]["q"] for r in again] == [r["result"]["q"] for r in first]
+    assert _in_redis(workers, s1)["counters"]["frames"] == 2
