@@ -164,7 +164,8 @@ def solve_frame(  # type: ignore[no-untyped-def]
     misc = data[5]
     w_posture = misc[MISC_POSTURE]
     w_limit = misc[MISC_LIMIT]
-    regularised = w_posture > 0.0 or w_limit > 0.0
+    # A goal of -inf (the pole shaping pass, ``poles``) is never met: nothing to retry.
+    regularised = (w_posture > 0.0 or w_limit > 0.0) and fopt[C.F_F_GOAL] > -math.inf
     restarts = iopt[C.I_MAX_RESTARTS]
     if regularised:
         iopt[C.I_MAX_RESTARTS] = 0  # restarts belong to the exact phase (see below)
