@@ -57,11 +57,14 @@ TOLERANCES = {"position_tolerance_m": 1e-5, "rotation_tolerance_rad": 1e-4}
 FPS = 60.0
 
 
-def policies() -> dict[str, IKOptions]:
+def policies(budget_us: float | None = -1.0) -> dict[str, IKOptions]:
     """The options each of our runs uses (session defaults at the benchmark's
     tolerances): the default (``smooth``, 0.1 rad per frame) and ``reach``, main's
-    tracker (its global fallback then sampled an infinite radius, now a full turn)."""
+    tracker (its global fallback then sampled an infinite radius, now a full turn).
+    ``budget_us``: the per-frame time budget (None: none; negative: the session's)."""
     base = replace(STREAM_DEFAULTS, **TOLERANCES)
+    if budget_us is None or budget_us >= 0.0:
+        base = replace(base, time_budget_us=budget_us)
     assert base.continuity is Continuity.SMOOTH
     return {"default": base, "reach": replace(base, continuity=Continuity.REACH)}
 
@@ -91,6 +94,7 @@ class Row:
     worst_step: float = 0.0
     worst_ratio: float = 0.0
     times_us: list[float] = field(default_factory=list)
+    iterations: list[int] = field(default_factory=list)  # ours only: load-independent cost
     over_limit: int = 0  # frames whose step is over max_joint_step_rad
 
 
@@ -108,9 +112,15 @@ class Outlier:
 
 
 def run_ours(
-    bc: BenchChain, position: bool, opts: IKOptions, stream: Stream, targets: list[list[Target]]
+    bc: BenchChain,
+    position: bool,
+    opts: IKOptions,
+    stream: Stream,
+    targets: list[list[Target]],
+    iterations: list[int],
 ) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """Answers, success flags and per-frame wall times of ``track`` over a stream."""
+    """Answers, success flags and per-frame wall times of ``track`` over a stream (each
+    frame's optimizer iterations appended to ``iterations``)."""
     solver = IKSolver(bc.position if position else bc.pose, opts)
     solver.set_pose(bc.to_ours(stream.path[0]))
     qs = np.empty((len(targets), bc.pose.n_dof))
@@ -123,6 +133,7 @@ def run_ours(
         times.append((clock() - t0) * 1e6)
         qs[k] = r.q
         ok[k] = r.success
+        iterations.append(r.iterations)
     return qs, ok, times
 
 
@@ -156,18 +167,21 @@ def run_peer(
     return qs, ok, times
 
 
-def within_tolerance(bc: BenchChain, position: bool, qs: np.ndarray, poses: np.ndarray) -> int:
-    """Frames whose answer (our FK) is within the tolerances: the same judge for all."""
-    n = 0
-    for q, target in zip(qs, poses, strict=True):
+def within_tolerance(
+    bc: BenchChain, position: bool, qs: np.ndarray, poses: np.ndarray
+) -> np.ndarray:
+    """Per frame, whether its answer (our FK) is within the tolerances: the same judge
+    for all."""
+    flags = np.zeros(len(qs), dtype=bool)
+    for k, (q, target) in enumerate(zip(qs, poses, strict=True)):
         x = effector_poses(bc.pose, q)[0]
         ok = np.linalg.norm(x[:3, 3] - target[:3, 3]) <= TOLERANCES["position_tolerance_m"]
         if ok and not position:
             r = target[:3, :3].T @ x[:3, :3]
             angle = math.acos(max(-1.0, min(1.0, 0.5 * (np.trace(r) - 1.0))))
             ok = angle <= TOLERANCES["rotation_tolerance_rad"]
-        n += bool(ok)
-    return n
+        flags[k] = bool(ok)
+    return flags
 
 
 def cause(
@@ -199,11 +213,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--chains", nargs="*", default=list(CHAINS))
     ap.add_argument("--modes", nargs="*", default=["pose", "position"])
     ap.add_argument("--no-peer", action="store_true", help="skip ik_LM")
+    ap.add_argument(
+        "--budget-us",
+        type=float,
+        default=-1.0,
+        help="our per-frame time budget (0: none, so that frames within tolerance do not "
+        "depend on the machine's load; default: the session's, 5000)",
+    )
+    ap.add_argument("--misses", action="store_true", help="list our frames outside the tolerances")
     args = ap.parse_args(argv)
 
     from bench.peers.rtb_peer import RtbIK
 
-    runs = policies()
+    runs = policies(None if args.budget_us == 0.0 else args.budget_us)
     solvers = [*runs, "ik_LM"] if not args.no_peer else list(runs)
     rows: dict[tuple[str, str, str], Row] = {}
     outliers: list[Outlier] = []
@@ -237,12 +259,23 @@ def main(argv: Sequence[str] | None = None) -> int:
                         qs, ok, times = run_peer(peer, bc, position, stream, poses, peer_chain.base)
                         limit = math.inf
                     else:
-                        qs, ok, times = run_ours(bc, position, runs[label], stream, targets)
+                        row = rows.setdefault((name, mode, label), Row())
+                        qs, ok, times = run_ours(
+                            bc, position, runs[label], stream, targets, row.iterations
+                        )
                         limit = runs[label].max_joint_step_rad
                     steps = largest_steps(ours_path[0], qs)
                     row = rows.setdefault((name, mode, label), Row())
                     row.frames += len(qs)
-                    row.solved += within_tolerance(bc, position, qs, poses)
+                    within = within_tolerance(bc, position, qs, poses)
+                    row.solved += int(within.sum())
+                    if args.misses and label != "ik_LM":
+                        for k in np.flatnonzero(~within):
+                            print(
+                                f"# miss: {name} {mode} {label} stream {si} ({stream.kind}) "
+                                f"frame {k}",
+                                file=sys.stderr,
+                            )
                     row.streams += 1
                     worst = float(steps.max())
                     row.within_2x += worst <= 2.0 * ref
@@ -274,25 +307,33 @@ def report(
         f"at {FPS:g} Hz; generator seeds [{last}, chain, 0..{args.streams - 1}]; tolerances "
         f"{TOLERANCES['position_tolerance_m']:g} m / {TOLERANCES['rotation_tolerance_rad']:g} rad"
     )
-    opts = policies()
+    opts = policies(None if args.budget_us == 0.0 else args.budget_us)
+    budget = opts["default"].time_budget_us
     print(
         f"default policy: {opts['default'].continuity.value}, max_joint_step_rad "
-        f"{opts['default'].max_joint_step_rad:g}"
+        f"{opts['default'].max_joint_step_rad:g}; our time budget per frame: "
+        f"{'none' if budget is None else f'{budget:g} us'}"
     )
     print()
     print(
         "| chain | mode | solver | frames within tol | streams <= 2x ref step | worst step "
-        "(x ref) | median us | p99 us |"
+        "(x ref) | median us | p99 us | iterations median / p99 / max |"
     )
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for (name, mode, label), r in rows.items():
         t = np.array(r.times_us)
         extra = f", {r.over_limit} frames over the limit" if r.over_limit else ""
+        its = np.array(r.iterations)
+        iters = (
+            f"{np.median(its):.0f} / {np.percentile(its, 99):.0f} / {its.max()}"
+            if its.size
+            else "-"
+        )
         print(
             f"| {name} | {mode} | {label} | {100.0 * r.solved / r.frames:.2f}% | "
             f"{r.within_2x}/{r.streams} ({100.0 * r.within_2x / r.streams:.0f}%){extra} | "
             f"{r.worst_step:.3f} ({r.worst_ratio:.1f}x) | {np.median(t):.1f} | "
-            f"{np.percentile(t, 99):.0f} |"
+            f"{np.percentile(t, 99):.0f} | {iters} |"
         )
     print()
     print("Bars:")

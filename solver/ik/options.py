@@ -29,7 +29,11 @@ class IKOptions:
         max_step_rad: Cap on any variable's change per iteration (a step cap keeps a
             cold solve from slamming several joints into their limits).
         posture_weight: Pull towards the reference pose (rest or previous): w sum dq^2.
-        limit_weight: Penalty within ``limit_margin`` x range of a limit.
+        limit_weight: Penalty within ``limit_margin`` x range of a limit. Both are
+            preferences among poses within the tolerances: a solve that misses with
+            them continues without them (``frame.solve_frame``), since the penalised
+            minimum can sit off a target that needs a joint inside the band (an arm
+            stretched against its elbow stop).
         limit_margin: Width of that band as a fraction of the range.
         stall_window: Multi-pass trigger (iterations); 0 for a single pass.
         ftol: Relative improvement below which an iteration counts as stalled.

@@ -56,7 +56,9 @@ def _steps(start: list[float], results: list[dict[str, Any]]) -> float:
 def test_a_planned_clip_crosses_smoothly_where_the_tracked_clip_jumps(
     make_client: Callable[..., TestClient],
 ) -> None:
-    # The Panda stream of tests/solver/test_path.py whose tracker jumps at frame 78.
+    # The Panda stream of tests/solver/test_path.py whose tracker steps 0.11 rad (6.4x
+    # the reference's) near frame 78 (radians before frames in the limit band were
+    # solved on the exact task).
     # 90 frames x 50 ms at worst: over the default IK_MAX_REQUEST_WORK_S.
     client = make_client(Settings(max_frames_per_request=600, max_request_work_s=5.0))
     path = joint_stream(panda_arm(), 4, 90)
@@ -73,7 +75,7 @@ def test_a_planned_clip_crosses_smoothly_where_the_tracked_clip_jumps(
     results = r.json()["results"]
     assert _steps(path[0].tolist(), results) <= 2 * ref
     assert body.plan.largest_step_rad == _steps(path[0].tolist(), results)
-    assert body.plan.tracked_largest_step_rad > 10 * ref
+    assert body.plan.tracked_largest_step_rad > 5 * ref
     assert body.plan.candidates > 90 and body.plan.plan_us > 0
 
     tracked = _panda_session(client, path[0])
@@ -81,7 +83,7 @@ def test_a_planned_clip_crosses_smoothly_where_the_tracked_clip_jumps(
         f"/v1/sessions/{tracked.id}/frames", json=_clip(path, False), headers=tracked.headers
     )
     assert r.status_code == 200 and "plan" not in r.json()
-    assert _steps(path[0].tolist(), r.json()["results"]) > 10 * ref
+    assert _steps(path[0].tolist(), r.json()["results"]) > 5 * ref
 
 
 def test_a_planned_clip_counts_its_frames_and_moves_the_session(

@@ -152,12 +152,14 @@ def test_the_null_space_step_keeps_a_redundant_arm_off_the_limit_its_stream_drif
     closest, worst = closest_to_a_limit(tight, path)
     assert closest > 0.05
     assert worst <= 2.0 * reference
-    # Without it: at the limit under SMOOTH; in the limit band, then a jump, under REACH.
+    # Without it: at the limit under SMOOTH; in the limit band under REACH, then a step
+    # many times the reference's (0.48 rad; a 1+ rad jump of the global fallback before
+    # a frame in the band was solved on the exact task, solver/ik/frame.py).
     drifting = replace(tight, null_space_step_rad=0.0)
     assert closest_to_a_limit(drifting, path)[0] < 0.005
     closest, worst = closest_to_a_limit(replace(drifting, continuity=Continuity.REACH), path)
     assert closest < 0.02
-    assert worst > 1.0
+    assert worst > 5.0 * reference
 
 
 def test_continuity_is_checked() -> None:

@@ -83,13 +83,16 @@ def assert_reaches(chain, q: np.ndarray, targets: list[Target]) -> None:  # type
 @pytest.mark.parametrize("key_every", [1, 5], ids=["every-frame", "keyframes"])
 def test_plan_crosses_smoothly_where_tracking_pops(key_every: int) -> None:
     # A Panda stream whose reference crosses the shoulder pole (joint 2 through 0):
-    # the tracker, on another point of the self-motion, jumps by radians at frame 78.
+    # the tracker, on another point of the self-motion, steps 0.11 rad (6.4x the
+    # reference's) near frame 78. (Before a frame in the limit band was solved on the
+    # exact task, solver/ik/frame.py, its global fallback jumped by radians there; no
+    # 90-frame stream of seeds 0-39 pops by 10x any more.)
     chain = panda_arm()
     path = joint_stream(chain, 4, 90)
     ref = float(np.abs(np.diff(path, axis=0)).max())
     frames = [pose_targets(chain, q) for q in path]
     tracked = np.array([r.q for r in tracked_from(chain, path[0], frames)])
-    assert largest_step(path[0], tracked) > 10 * ref
+    assert largest_step(path[0], tracked) > 5 * ref
 
     plan = planned_from(chain, path[0], frames, path_options=PathOptions(key_every=key_every))
     assert plan.success
