@@ -19,6 +19,14 @@ FK: the tip's full pose where its own path has at least 6 variables, its positio
 otherwise; each is solved from the middle of the limits with the default options
 (``IKSolver``, 5 ms budget). "Solved" counts ``success`` within the budget.
 
+On a shared machine the 5 ms of wall time are partly other processes' time. For a
+figure that does not depend on the load, give the solver a larger budget
+(``--budget-us 100000``): each solve then runs until it succeeds, and "within 5 ms
+of CPU" counts the successes whose thread CPU time was at most 5 ms; the tables also
+give each chain's iterations (the median and p99 over its solved targets) and the
+largest count of restarts. ``--full-restart-every 1`` gives the restarts before
+partial restarts (every restart re-draws every variable), for an A/B in one checkout.
+
     pip download --no-deps pybullet==3.2.7 -d /tmp/pyb
     unzip -q /tmp/pyb/pybullet-*.whl 'pybullet_data/*' -d /tmp/pyb
     OPENBLAS_NUM_THREADS=1 python -m bench.urdf_sweep --pybullet-data /tmp/pyb/pybullet_data
@@ -45,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from solver.errors import InvalidModel
-from solver.ik import IKSolver, Target
+from solver.ik import IKOptions, IKSolver, Target
 from solver.model import Chain, EffectorMode, build_chain
 from solver.model.forward import link_poses
 from solver.model.urdf import chain_from_urdf
@@ -87,6 +95,9 @@ class ChainRun:
     reference: str = ""  # why pinocchio gave no model (or one read with mimic=False)
     times_us: list[float] = field(default_factory=list)
     solved: int = 0
+    solved_cpu: int = 0  # solved within BUDGET_US of the thread's CPU time
+    iterations: list[int] = field(default_factory=list)  # of the solved targets
+    restarts: int = 0  # the most a solved target needed
     statuses: collections.Counter[str] = field(default_factory=collections.Counter)
 
 
@@ -241,9 +252,11 @@ def with_modes(chain: Chain) -> Chain:
     return build_chain(list(chain.joints), effectors)
 
 
-def solve_run(run: ChainRun, chain: Chain, poses: int, rng: np.random.Generator) -> None:
+def solve_run(
+    run: ChainRun, chain: Chain, poses: int, rng: np.random.Generator, options: IKOptions
+) -> None:
     chain = with_modes(chain)
-    solver = IKSolver(chain)
+    solver = IKSolver(chain, options)
     full = {e.name: e.mode is EffectorMode.POSE for e in chain.effectors}
     seed = chain.mid_limits()
     for _ in range(poses):
@@ -262,6 +275,12 @@ def solve_run(run: ChainRun, chain: Chain, poses: int, rng: np.random.Generator)
         run.times_us.append(r.solve_us)
         ok = r.success and r.solve_us <= BUDGET_US
         run.solved += ok
+        # Both bound the core's CPU time from above: its wall time, and the call's CPU
+        # time (which also counts the Python around it, a millisecond on the first call).
+        run.solved_cpu += r.success and min(r.solve_us, cpu_us) <= BUDGET_US
+        if r.success:
+            run.iterations.append(r.iterations)
+            run.restarts = max(run.restarts, r.restarts)
         if ok:
             run.statuses["solved"] += 1
         elif cpu_us < 0.8 * r.solve_us:
@@ -289,7 +308,17 @@ def main() -> None:
     parser.add_argument("--max-multi-dof", type=int, default=30)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--only", default="", help="substring of the files to sweep")
+    parser.add_argument(
+        "--budget-us", type=float, default=BUDGET_US, help="the solver's time budget [us]"
+    )
+    parser.add_argument(
+        "--full-restart-every",
+        type=int,
+        default=IKOptions().full_restart_every,
+        help="IKOptions.full_restart_every (1: every restart re-draws every variable)",
+    )
     args = parser.parse_args()
+    options = IKOptions(time_budget_us=args.budget_us, full_restart_every=args.full_restart_every)
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(args.seed)
     files = [f for f in urdf_files(args.pybullet_data) if args.only in str(f[1])]
@@ -337,7 +366,7 @@ def main() -> None:
             try:
                 if model is not None:
                     run.fk_error = fk_error(chain, model, base, rng)
-                solve_run(run, chain, args.poses, rng)
+                solve_run(run, chain, args.poses, rng, options)
             except Exception as e:  # a sweep finds what breaks: record it, go on
                 import_classes[f"sweep error: {type(e).__name__}"] += 1
                 refused.append((f"{label} -> {','.join(tip_links)}", f"sweep: {e}"[:110], ""))
@@ -349,6 +378,12 @@ def main() -> None:
 
 def _rate(run: ChainRun) -> float:
     return run.solved / max(1, len(run.times_us))
+
+
+def _rate_cpu(run: ChainRun) -> float:
+    """Solved within BUDGET_US of the thread's CPU time (with a larger solver budget:
+    what the solver does with 5 ms of CPU, whatever the machine's load)."""
+    return run.solved_cpu / max(1, len(run.times_us))
 
 
 def _rate_on_cpu(run: ChainRun) -> float:
@@ -401,8 +436,18 @@ def report(files, import_classes, notes, refused, singles, multis, no_chain, arg
         for r in runs:
             statuses.update({k: v for k, v in r.statuses.items() if k != "solved"})
         below = [r for r in runs if _rate(r) < bar]
-        below_cpu = [r for r in runs if _rate_on_cpu(r) < bar]
-        print(f"\n### {title}: {len(runs)} chains, {args.poses} targets each\n")
+        below_cpu = [r for r in runs if _rate_on_cpu(r) < bar or _rate_cpu(r) < bar]
+        print(
+            f"\n### {title}: {len(runs)} chains, {args.poses} targets each "
+            f"(budget {args.budget_us:g} us, full_restart_every {args.full_restart_every})\n"
+        )
+        cpu_rates = [_rate_cpu(r) for r in runs]
+        print(
+            f"- solved within {BUDGET_US / 1000:g} ms of CPU: worst chain {min(cpu_rates):.2%}, "
+            f"all targets "
+            f"{sum(r.solved_cpu for r in runs) / sum(len(r.times_us) for r in runs):.3%}; "
+            f"chains below {bar:.1%}: {sum(rate < bar for rate in cpu_rates)}"
+        )
         print(
             f"- solved within {BUDGET_US / 1000:g} ms: worst chain {min(rates):.2%}, "
             f"all targets {sum(r.solved for r in runs) / sum(len(r.times_us) for r in runs):.3%}; "
@@ -421,15 +466,20 @@ def report(files, import_classes, notes, refused, singles, multis, no_chain, arg
         print(f"- misses by class: {dict(statuses) or 'none'}")
         if below_cpu:
             print(
-                "\n| chain | DOF | solved | on CPU | median [us] | p99 [us] | misses |\n"
-                "|---|---:|---:|---:|---:|---:|---|"
+                "\n| chain | DOF | solved | on CPU | within 5 ms of CPU | median [us] | "
+                "p99 [us] | iterations p50 / p99 | most restarts | misses |\n"
+                "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"
             )
-            for r in sorted(below_cpu, key=_rate_on_cpu):
+            for r in sorted(below_cpu, key=_rate_cpu):
                 misses = {k: v for k, v in r.statuses.items() if k != "solved"}
+                its = r.iterations or [0]
                 print(
                     f"| {r.file} -> {','.join(r.tips)[:60]} | {r.n_dof} | {_rate(r):.2%} | "
-                    f"{_rate_on_cpu(r):.2%} | {statistics.median(r.times_us):.0f} | "
-                    f"{np.percentile(r.times_us, 99):.0f} | {misses} |"
+                    f"{_rate_on_cpu(r):.2%} | {_rate_cpu(r):.2%} | "
+                    f"{statistics.median(r.times_us):.0f} | "
+                    f"{np.percentile(r.times_us, 99):.0f} | "
+                    f"{statistics.median(its):.0f} / {np.percentile(its, 99):.0f} | "
+                    f"{r.restarts} | {misses} |"
                 )
 
 

@@ -190,7 +190,14 @@ class Settings(BaseSettings):
     default_position_tolerance_m: float = Field(default=1e-4, gt=0, description="[m]")
     default_rotation_tolerance_rad: float = Field(default=1e-3, gt=0, description="[rad]")
     default_max_iter: int = Field(default=1000, ge=1, description="Iterations per frame")
-    default_max_restarts: int = Field(default=50, ge=0, description="Restarts per frame")
+    # None: the solver's own defaults, 126 for one-shot solves (enough that the time
+    # budget, not the count, ends a solve that keeps missing: solver.ik.IKOptions) and
+    # 50 for a session's frames (local restarts near the previous pose: STREAM_DEFAULTS).
+    default_max_restarts: int | None = Field(
+        default=None,
+        ge=0,
+        description="Restarts per frame; unset: 126 for one-shot solves, 50 for sessions",
+    )
 
     def api_key_list(self) -> tuple[bytes, ...]:
         """The configured API keys (UTF-8), empty when keys are off."""

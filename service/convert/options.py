@@ -15,14 +15,16 @@ from ..errors import invalid_problem
 
 
 def _with_server_defaults(base: IKOptions, settings: Settings) -> IKOptions:
-    """``base`` with the tolerances, budget and limits the server is configured with."""
+    """``base`` with the tolerances, budget and limits the server is configured with
+    (``base``'s own restart count unless IK_DEFAULT_MAX_RESTARTS is set)."""
+    restarts = settings.default_max_restarts
     return replace(
         base,
         time_budget_us=settings.default_time_budget_us,
         position_tolerance_m=settings.default_position_tolerance_m,
         rotation_tolerance_rad=settings.default_rotation_tolerance_rad,
         max_iter=settings.default_max_iter,
-        max_restarts=settings.default_max_restarts,
+        max_restarts=base.max_restarts if restarts is None else restarts,
     )
 
 

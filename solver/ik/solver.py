@@ -59,6 +59,7 @@ from .options import IKOptions
 from .pole_term import pole_block_size
 from .poles import PoleShaper
 from .result import STATUSES, EffectorError, IKResult, IKStatus, ResultLayout
+from .settled import settled_variables
 from .targets import Target
 from .task import Task
 
@@ -477,7 +478,7 @@ def _register_once(data: tuple[np.ndarray, ...]) -> None:
     """Bind the IK objective to the IK data tuple's type (every chain shares it)."""
     global _REGISTERED
     if not _REGISTERED:
-        register_objective(ik_objective, ik_goal, data, ik_metric)
+        register_objective(ik_objective, ik_goal, data, ik_metric, settled_variables)
         _REGISTERED = True
 
 

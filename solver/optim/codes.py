@@ -49,10 +49,12 @@ GOAL_STATUSES: tuple[GoalStatus, ...] = (GoalStatus.NO_GOAL, GoalStatus.MET, Goa
 START_INITIAL = 0
 START_RESET_H = 1
 START_RESTART = 2
+START_RESTART_PARTIAL = 3
 PASS_STARTS: tuple[PassStart, ...] = (
     PassStart.INITIAL,
     PassStart.RESET_H,
     PassStart.RESTART_RANDOM,
+    PassStart.RESTART_PARTIAL,
 )
 
 
@@ -101,7 +103,10 @@ I_MAX_PASSES = 9
 I_METRIC_EVERY = 10
 I_METRIC_UNTIL = 11  # 0: no limit
 I_FINAL_METRIC = 12  # 1: re-seed H at the answer too (the caller carries H to its next solve)
-N_IOPT = 13
+# Every this many restarts re-draws every variable (1: all of them do; 0: only those
+# where the objective keeps nothing), see ``restart``.
+I_FULL_RESTART_EVERY = 13
+N_IOPT = 14
 
 # Columns of the pass log the core fills.
 L_START = 0

@@ -43,8 +43,8 @@ from .analyzer import decide
 from .bfgs import bfgs_update, descent_direction, scale_initial_h, set_identity
 from .evaluate import all_finite, evaluate, project, projected_gradient_norm
 from .line_search import line_search
-from .objective import call_goal, call_metric
-from .restart import random_point
+from .objective import call_goal, call_metric, call_restart_keep
+from .restart import keep_values, random_point
 
 # What the core returns (a named tuple: numba builds and returns it like any tuple).
 CoreResult = namedtuple(
@@ -241,6 +241,7 @@ def solve_passes(  # type: ignore[no-untyped-def]
     metric_every = iopt[C.I_METRIC_EVERY]
     metric_until = iopt[C.I_METRIC_UNTIL]
     final_metric = iopt[C.I_FINAL_METRIC] != 0
+    full_restart_every = iopt[C.I_FULL_RESTART_EVERY]
     gtol = fopt[C.F_GTOL]
     max_step = fopt[C.F_MAX_STEP]
     xtol = fopt[C.F_XTOL]
@@ -425,6 +426,15 @@ def solve_passes(  # type: ignore[no-untyped-def]
             start_kind = C.START_RESTART
             n_restarts += 1
             random_point(x0, lo, hi, fopt[C.F_RESTART_RADIUS], rng_state, x)
+            if full_restart_every != 1 and (
+                full_restart_every == 0 or n_restarts % full_restart_every != 0
+            ):
+                # A partial restart (``restart``): the variables the objective calls
+                # settled at the best point keep their values there; odd ones keep
+                # every variable with a settled share, even ones only wholly settled.
+                if call_restart_keep(fg, out_x, data, scratch) > 0:
+                    keep_values(scratch, out_x, x, n_restarts % 2 == 0)
+                    start_kind = C.START_RESTART_PARTIAL
             f = evaluate(fg, data, x, g, True, grad_mode, lo, hi, scratch, counters)
             if has_goal:
                 m = call_goal(fg, f, x, data)

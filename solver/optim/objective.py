@@ -24,12 +24,16 @@ import numba
 from numba.core import types
 from numba.extending import overload
 
-# (numba type of data, fg, goal_fn or None, metric_fn or None)
-_REGISTRY: list[tuple[Any, Any, Any, Any]] = []
+# (numba type of data, fg, goal_fn or None, metric_fn or None, restart_keep_fn or None)
+_REGISTRY: list[tuple[Any, Any, Any, Any, Any]] = []
 
 
 def register_objective(
-    fg: Any, goal_fn: Any, data_example: tuple[Any, ...], metric_fn: Any = None
+    fg: Any,
+    goal_fn: Any,
+    data_example: tuple[Any, ...],
+    metric_fn: Any = None,
+    restart_keep_fn: Any = None,
 ) -> None:
     """Bind ``fg`` to the numba type of ``data_example``.
 
@@ -39,22 +43,27 @@ def register_objective(
         data_example: A data tuple of the type the objective will receive.
         metric_fn: Optional ``metric_fn(x, g, lower, upper, data, h) -> bool`` that
             writes an inverse Hessian for the free variables into h (True when it did).
+        restart_keep_fn: Optional ``restart_keep_fn(x, data, keep) -> int`` for random
+            restarts (``restart``): writes into keep[i] how settled variable i is at
+            x, from 0.0 (re-draw it) to 1.0 (keep its value: for the IK, a variable
+            that moves only effectors already on target), and returns how many
+            variables have a share above 0 (0: re-draw every variable).
     """
     data_type = numba.typeof(data_example)
-    for ty, f, _, _ in _REGISTRY:
+    for ty, f, _, _, _ in _REGISTRY:
         if ty == data_type and f is not fg:
             raise ValueError(f"another objective is registered for data type {data_type}")
-    _REGISTRY.append((data_type, fg, goal_fn, metric_fn))
+    _REGISTRY.append((data_type, fg, goal_fn, metric_fn, restart_keep_fn))
 
 
 def registered_for(fg: Any) -> bool:
-    return any(f is fg for _, f, _, _ in _REGISTRY)
+    return any(f is fg for _, f, _, _, _ in _REGISTRY)
 
 
-def _lookup(data_type: Any) -> tuple[Any, Any, Any]:
-    for ty, fg, goal, metric in _REGISTRY:
+def _lookup(data_type: Any) -> tuple[Any, Any, Any, Any]:
+    for ty, fg, goal, metric, keep in _REGISTRY:
         if ty == data_type:
-            return fg, goal, metric
+            return fg, goal, metric, keep
     raise TypeError(f"no objective registered for data of type {data_type}")
 
 
@@ -130,5 +139,32 @@ def _call_metric_compiled(fg, x, g, lo, hi, data, h):  # type: ignore[no-untyped
 
     def impl_none(fg, x, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
         return False
+
+    return impl_none
+
+
+def call_restart_keep(fg: Any, x: Any, data: Any, keep: Any) -> int:
+    """The registered restart shares at x into ``keep`` (see ``register_objective``);
+    returns how many are above 0, 0 when there is no such function."""
+    if fg is None:
+        restart_keep = _lookup(numba.typeof(data))[3]
+        if restart_keep is not None:
+            return int(restart_keep(x, data, keep))
+    return 0
+
+
+@overload(call_restart_keep, inline="always")
+def _call_restart_keep_compiled(fg, x, data, keep):  # type: ignore[no-untyped-def]
+    if isinstance(fg, types.NoneType):
+        restart_keep = _lookup(data)[3]
+        if restart_keep is not None:
+
+            def impl_keep(fg, x, data, keep):  # type: ignore[no-untyped-def]
+                return restart_keep(x, data, keep)
+
+            return impl_keep
+
+    def impl_none(fg, x, data, keep):  # type: ignore[no-untyped-def]
+        return 0
 
     return impl_none

@@ -48,6 +48,12 @@ class MinimizeOptions:
         restart_radius: Random restarts sample the box intersected with x0 +- this
             (same unit as x); inf samples the whole box. A side that stays
             infinite uses x0 +- 10 max(|x0_i|, 1).
+        full_restart_every: With an objective that says which variables are settled
+            (its ``restart_keep_fn``, see ``register_objective``), a restart keeps
+            their values at the best point and re-draws the others (a partial
+            restart, ``restart``), except every this many restarts, which re-draw
+            every variable (1: all restarts do, as without such an objective; 0:
+            only those where nothing is settled).
         time_budget_s: Wall-clock budget of the whole solve; None for no limit.
         scale_initial_h: Scale H0 = I by y.s / y.y after the first step of a pass
             (Nocedal & Wright eq. 6.20); off by default, as in the article.
@@ -81,6 +87,7 @@ class MinimizeOptions:
     gradient: GradientMode = GradientMode.ANALYTIC
     max_restarts: int = 0
     restart_radius: float = math.inf
+    full_restart_every: int = 1
     time_budget_s: float | None = None
     scale_initial_h: bool = False
     skip_update_eps: float = 1e-10
@@ -111,6 +118,12 @@ class MinimizeOptions:
         for name in ("max_iter", "max_fev", "max_passes"):
             if getattr(self, name) < 1:
                 raise InvalidProblem(f"{name} must be >= 1, got {getattr(self, name)!r}")
-        for name in ("stall_window", "max_restarts", "metric_every", "metric_until"):
+        for name in (
+            "stall_window",
+            "max_restarts",
+            "full_restart_every",
+            "metric_every",
+            "metric_until",
+        ):
             if getattr(self, name) < 0:
                 raise InvalidProblem(f"{name} must be >= 0, got {getattr(self, name)!r}")

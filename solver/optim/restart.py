@@ -1,6 +1,24 @@
 """Random restarts: a seeded generator that lives in the solve's state, and the point
 it draws (the analyzer's RESTART_RANDOM).
 
+A restart draws every variable (``random_point``). With an objective that can say
+how settled each variable is (``register_objective``'s ``restart_keep_fn``: for the
+IK, the share of the effectors a variable moves that are already on target), most
+restarts then put the settled variables back at their values in the best point
+(``keep_values``): a partial restart, logged as ``PassStart.RESTART_PARTIAL``.
+Re-drawing everything lands each part of the problem in its solution's basin again
+at random, so with several independent parts (a robot's limbs) the chance that all
+of them land at once shrinks with every part; keeping the parts that are done
+leaves only the others to chance.
+
+Partial restarts alternate between keeping every variable with a settled share
+(odd restarts: a limb off target is re-drawn, the torso it shares with limbs on
+target is kept) and keeping only the wholly settled ones (even restarts: the torso
+is re-drawn too, in case it is what keeps the limb off); every
+``full_restart_every``-th restart re-draws everything, in case the settled values
+themselves are what blocks the rest. The generator draws every variable either
+way, so the sequence of draws does not depend on what is kept.
+
 Compiled (numba).
 """
 
@@ -44,3 +62,12 @@ def random_point(x_center, lo, hi, radius, rng_state, out):  # type: ignore[no-u
             b = c + fallback
         v = a + (b - a) * uniform(rng_state)
         out[i] = lo[i] if v < lo[i] else (hi[i] if v > hi[i] else v)
+
+
+@jit_leaf
+def keep_values(keep, source, out, only_whole):  # type: ignore[no-untyped-def]
+    """out[i] = source[i] for each variable a partial restart keeps: keep[i] >= 1
+    (wholly settled) with ``only_whole``, else keep[i] > 0 (a settled share)."""
+    for i in range(out.shape[0]):
+        if keep[i] >= 1.0 if only_whole else keep[i] > 0.0:
+            out[i] = source[i]

@@ -80,3 +80,5 @@ class PassStart(enum.StrEnum):
     INITIAL = "initial"
     RESET_H = "reset_h"
     RESTART_RANDOM = "restart_random"
+    # A restart that kept the variables the objective called settled (``restart``).
+    RESTART_PARTIAL = "restart_partial"

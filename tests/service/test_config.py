@@ -45,3 +45,18 @@ def test_bad_values_are_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_frozen() -> None:
     with pytest.raises(ValidationError):
         Settings().port = 1  # type: ignore[misc]
+
+
+def test_restarts_default_to_the_solvers_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Unset, IK_DEFAULT_MAX_RESTARTS leaves each kind of solve its solver default
+    (IKOptions for one-shot solves, STREAM_DEFAULTS for sessions); set, it sets both."""
+    from service import convert
+    from solver.ik import STREAM_DEFAULTS, IKOptions
+
+    s = Settings()
+    assert convert.oneshot_defaults(s).max_restarts == IKOptions().max_restarts == 126
+    assert convert.session_defaults(s).max_restarts == STREAM_DEFAULTS.max_restarts == 50
+    monkeypatch.setenv("IK_DEFAULT_MAX_RESTARTS", "7")
+    s = Settings()
+    assert convert.oneshot_defaults(s).max_restarts == 7
+    assert convert.session_defaults(s).max_restarts == 7
