@@ -192,7 +192,9 @@ def solve_frame(  # type: ignore[no-untyped-def]
             # on the 40-DOF tail that answer lay deep against several limits, where the
             # exact solve crawled; from the seed it took 3 iterations). Its passes
             # follow in the log (one INITIAL start). The regularised answer is kept
-            # (in ``moved``) if the exact solve ends further from the goal.
+            # (in ``moved``), with its termination code, if the exact solve ends
+            # further from the goal (H, carried by a stream with carry_hessian, is
+            # then the exact run's: an approximation either way, not worth an n x n copy).
             for i in range(n):
                 moved[i] = out_x[i]
             misc[MISC_POSTURE] = 0.0
@@ -204,11 +206,13 @@ def solve_frame(  # type: ignore[no-untyped-def]
             misc[MISC_POSTURE] = w_posture
             misc[MISC_LIMIT] = w_limit
             dd[DD_XLAST, 0] = math.nan  # the cached f was the exact one: stale now
-            if exact.passes > 0 and exact.goal_measure > res.goal_measure:
+            closer = exact.passes > 0 and exact.goal_measure > res.goal_measure
+            if closer:
                 for i in range(n):
                     out_x[i] = moved[i]  # the regularised answer was closer
             if exact.passes > 0:
-                code = exact.code
+                if not closer:  # the code describes the answer returned
+                    code = exact.code
                 nit += exact.iterations
                 nfev += exact.function_evals
                 passes += exact.passes

@@ -432,9 +432,15 @@ def solve_passes(  # type: ignore[no-untyped-def]
                 # A partial restart (``restart``): the variables the objective calls
                 # settled at the best point keep their values there; odd ones keep
                 # every variable with a settled share, even ones only wholly settled.
+                # Where that would keep every free variable (or none), the odd one
+                # falls back to the wholly settled, then to the whole-box draw.
                 if call_restart_keep(fg, out_x, data, scratch) > 0:
-                    keep_values(scratch, out_x, x, n_restarts % 2 == 0)
-                    start_kind = C.START_RESTART_PARTIAL
+                    whole = n_restarts % 2 == 0
+                    kept = keep_values(scratch, out_x, x, whole, lo, hi)
+                    if kept == 0 and not whole:
+                        kept = keep_values(scratch, out_x, x, True, lo, hi)
+                    if kept > 0:
+                        start_kind = C.START_RESTART_PARTIAL
             f = evaluate(fg, data, x, g, True, grad_mode, lo, hi, scratch, counters)
             if has_goal:
                 m = call_goal(fg, f, x, data)

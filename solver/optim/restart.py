@@ -65,9 +65,25 @@ def random_point(x_center, lo, hi, radius, rng_state, out):  # type: ignore[no-u
 
 
 @jit_leaf
-def keep_values(keep, source, out, only_whole):  # type: ignore[no-untyped-def]
+def keep_values(keep, source, out, only_whole, lo, hi):  # type: ignore[no-untyped-def]
     """out[i] = source[i] for each variable a partial restart keeps: keep[i] >= 1
-    (wholly settled) with ``only_whole``, else keep[i] > 0 (a settled share)."""
+    (wholly settled) with ``only_whole``, else keep[i] > 0 (a settled share).
+
+    Returns how many free variables (lo < hi) it kept; 0, writing nothing, when it
+    would keep none or every one of them: keeping every free variable would start the
+    "restart" at the best point, a pass spent on nothing (two effectors on one link,
+    one on target and one off, give every variable a share).
+    """
+    kept = 0
+    free = 0
+    for i in range(out.shape[0]):
+        if lo[i] < hi[i]:
+            free += 1
+            if keep[i] >= 1.0 if only_whole else keep[i] > 0.0:
+                kept += 1
+    if kept == 0 or kept == free:
+        return 0
     for i in range(out.shape[0]):
         if keep[i] >= 1.0 if only_whole else keep[i] > 0.0:
             out[i] = source[i]
+    return kept

@@ -21,6 +21,7 @@ from solver import (
 )
 from solver.ik import pose_targets
 from solver.ik.settled import settled_variables
+from solver.model import EffectorMode
 from solver.model.examples import panda_arm
 from solver.model.forward import effector_poses
 from solver.optim.restart import keep_values
@@ -90,12 +91,56 @@ def test_a_shared_variable_gets_the_share_of_its_effectors_on_target() -> None:
 def test_keep_values_keeps_settled_or_wholly_settled_variables() -> None:
     keep = np.array([1.0, 0.5, 0.0])
     source = np.array([1.0, 2.0, 3.0])
+    lo, hi = np.full(3, -5.0), np.full(3, 5.0)
     out = np.zeros(3)
-    keep_values(keep, source, out, False)
+    assert keep_values(keep, source, out, False, lo, hi) == 2
     np.testing.assert_array_equal(out, [1.0, 2.0, 0.0])
     out = np.zeros(3)
-    keep_values(keep, source, out, True)
+    assert keep_values(keep, source, out, True, lo, hi) == 1
     np.testing.assert_array_equal(out, [1.0, 0.0, 0.0])
+
+
+def test_keep_values_keeps_nothing_when_it_would_keep_every_free_variable() -> None:
+    """Keeping every free variable would start the restart at the best point: a pass
+    spent on nothing. A frozen variable (lo == hi) does not count as one to re-draw."""
+    source = np.array([1.0, 2.0, 3.0])
+    lo, hi = np.array([-5.0, -5.0, 3.0]), np.array([5.0, 5.0, 3.0])
+    out = np.zeros(3)
+    assert keep_values(np.array([0.5, 0.5, 0.0]), source, out, False, lo, hi) == 0
+    np.testing.assert_array_equal(out, [0.0, 0.0, 0.0])
+    assert keep_values(np.zeros(3), source, out, False, lo, hi) == 0
+    np.testing.assert_array_equal(out, [0.0, 0.0, 0.0])
+
+
+def test_no_partial_restart_starts_at_the_best_point() -> None:
+    """Two effectors on one link, one on target and one unreachable with it: every
+    variable moves both, so every variable has a share. A restart that kept them all
+    would begin where the best pass ended and do nothing (the review of the merge
+    found three such passes in six restarts); now it re-draws instead."""
+    chain = panda_arm()
+    probe = dataclasses.replace(
+        chain.effectors[0],
+        name="probe",
+        mode=EffectorMode.POSITION,
+        tip_offset=np.array([0.0, 0.0, 0.05]),
+        position_weight=1e-6,
+    )
+    chain = build_chain(list(chain.joints), [*chain.effectors, probe])
+    q = np.random.default_rng(1).uniform(chain.lower, chain.upper)
+    tool, tip = effector_poses(chain, q)
+    targets = [
+        Target(effector="tool", position=tool[:3, 3], rotation=tool[:3, :3]),
+        Target(effector="probe", position=tip[:3, 3] + [0.0, 0.03, 0.0]),  # 3 cm off
+    ]
+    solver = IKSolver(chain, IKOptions(time_budget_us=None, max_restarts=6), seed=3)
+    result = solver.solve(targets, q)
+    restarts = (PassStart.RESTART_RANDOM, PassStart.RESTART_PARTIAL)
+    assert sum(p.start in restarts for p in result.pass_log) == 6
+    best = np.inf
+    for p in result.pass_log:
+        if p.start in restarts:
+            assert p.f_start != best, result.pass_log
+        best = min(best, p.f_end)
 
 
 def _solved(chain: Chain, options: IKOptions, goals: np.ndarray) -> tuple[int, set[PassStart]]:
