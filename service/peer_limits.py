@@ -20,14 +20,20 @@ import asyncio
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import httptools
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
+from uvicorn.protocols.utils import ClientDisconnected
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from schemas import ErrorCode
 
 from .responses import dumps
+
+if TYPE_CHECKING:
+    from uvicorn._types import ASGISendEvent  # uvicorn's own name for the send's argument
+    from websockets.frames import Frame
 
 log = logging.getLogger("service")
 
@@ -229,11 +235,24 @@ def protocols(limits: PeerLimits) -> tuple[type[asyncio.Protocol], type[asyncio.
             super().handle_websocket_upgrade()
 
     class LimitedWebSocket(WebSocketsSansIOProtocol):
-        """websockets-sansio that drops a client whose unread pongs pass the limit."""
+        """websockets-sansio that drops a client whose unread pongs pass the limit, and
+        that lets go of a socket it has closed even when the client never reads.
+
+        uvicorn ends a connection with ``transport.close()``, which waits for the write
+        buffer to drain: a client that stopped reading never lets it, so the socket, its
+        buffers and its place in the per-address count were held for as long as the
+        client kept the connection open. And when uvicorn closes on its own (a keepalive
+        ping unanswered) it tells the app nothing: a handler waiting for the next message
+        waited for good. Here every close is bounded by uvicorn's ``close_timeout`` (the
+        10 s it gives a closing handshake), after which the transport is aborted (the
+        app then sees the disconnect), and a send after uvicorn's close is the disconnect
+        it is rather than a RuntimeError.
+        """
 
         _address = ""
         _pings = 0
         _pings_since = 0.0
+        _abort_timer: asyncio.TimerHandle | None = None
 
         def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
             super().connection_made(transport)
@@ -241,8 +260,50 @@ def protocols(limits: PeerLimits) -> tuple[type[asyncio.Protocol], type[asyncio.
             counts.add(self._address)
 
         def connection_lost(self, exc: Exception | None) -> None:
+            if self._abort_timer is not None:
+                self._abort_timer.cancel()
+                self._abort_timer = None
             counts.remove(self._address)
             super().connection_lost(exc)
+
+        def _abort_if_not_closed_soon(self) -> None:
+            """Bound a ``transport.close()`` that waits on a client that does not read."""
+            if self._abort_timer is None and not self.disconnected:
+                self._abort_timer = self.loop.call_later(self.close_timeout, self._abort)
+
+        def _abort(self) -> None:
+            self._abort_timer = None
+            if not self.disconnected:
+                unsent = self.transport.get_write_buffer_size()
+                log.info("aborted a WebSocket from %s: %d bytes unread", self._address, unsent)
+                self.transport.abort()
+
+        async def run_asgi(self) -> None:
+            await super().run_asgi()
+            self._abort_if_not_closed_soon()  # the app is done: the close may wait forever
+
+        def keepalive_timeout(self) -> None:
+            super().keepalive_timeout()
+            if self.close_sent:
+                # uvicorn does not tell the app: without this, a handler waiting for
+                # the next message would wait until the transport closed.
+                self.queue.put_nowait({"type": "websocket.disconnect", "code": 1011})
+                self._abort_if_not_closed_soon()
+
+        def handle_close(self, event: Frame) -> None:
+            super().handle_close(event)
+            self._abort_if_not_closed_soon()
+
+        async def send(self, message: ASGISendEvent) -> None:
+            if self.close_sent and not self.disconnected:
+                # uvicorn closed the connection (keepalive, protocol error) under the app:
+                # a send meets the disconnect an app expects and a close is done already,
+                # rather than uvicorn's RuntimeError ("Unexpected ASGI message").
+                if message["type"] == "websocket.send":
+                    raise ClientDisconnected()
+                if message["type"] == "websocket.close":
+                    return
+            await super().send(message)
 
         def handle_ping(self) -> None:
             now = self.loop.time()

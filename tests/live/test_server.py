@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import base64
+import errno
 import json
+import os
 import signal
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -204,25 +208,49 @@ def test_sigterm_answers_the_ws_frame_in_flight_then_closes_1012(
 
 
 def _ws_frame(payload: bytes) -> bytes:
-    """A masked client text frame (RFC 6455), payload < 126 bytes."""
-    assert len(payload) < 126
-    mask = b"\x01\x02\x03\x04"
-    masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
-    return bytes([0x81, 0x80 | len(payload)]) + mask + masked
+    """A client text frame (RFC 6455), payload < 65536 bytes, masked with the key 0 (a
+    valid key that leaves the payload as it is: no per-byte work for large frames)."""
+    mask = b"\x00\x00\x00\x00"
+    if len(payload) < 126:
+        return bytes([0x81, 0x80 | len(payload)]) + mask + payload
+    return bytes([0x81, 0x80 | 126]) + len(payload).to_bytes(2, "big") + mask + payload
 
 
-def test_client_that_stops_reading_is_bounded_and_dropped(
-    start_server: Callable[..., Server],
-) -> None:
-    """A raw client with a tiny receive buffer pipelines pings and never reads: the
-    server stops reading once its write buffer is full (it answers before it reads),
-    then drops the socket after IK_WS_SEND_TIMEOUT_S; the session keeps working."""
-    import base64
-    import os
-    import socket
+def _clip_frame(msg_id: int) -> bytes:
+    """A clip of 200 frames: ~28 kB asked, ~145 kB answered (full results), so a few
+    dozen unread answers fill any socket buffer the kernel grows for the connection (a
+    ping's 25-byte pong needed over 100,000: seconds of a loaded server's time)."""
+    frames = [{"targets": [tool_target(0.1)]}] * 200
+    return _ws_frame(json.dumps({"type": "clip", "id": msg_id, "frames": frames}).encode())
 
-    srv = start_server(IK_WS_SEND_TIMEOUT_S="1")
-    sid, headers = session(srv)
+
+def _send_until_stalled(sock: socket.socket, stall_s: float, within_s: float) -> int:
+    """Pipeline clips on a non-blocking socket until a send has waited ``stall_s`` (the
+    server stopped reading: backpressure reached the client); returns how many."""
+    sent = 0
+    unsent = bytearray()  # the rest of a frame the socket took only part of
+    stalled_since: float | None = None
+    deadline = time.monotonic() + within_s
+    while time.monotonic() < deadline:  # bounded in time and count
+        if not unsent:
+            sent += 1
+            unsent += _clip_frame(sent)
+        try:
+            # A non-blocking send may take part of a frame; the rest goes first next
+            # time, or the server would read the next frame's bytes as this one's.
+            del unsent[: sock.send(unsent)]
+            stalled_since = None
+        except BlockingIOError:
+            stalled_since = stalled_since or time.monotonic()
+            if time.monotonic() - stalled_since > stall_s:
+                return sent
+            time.sleep(0.01)
+    raise AssertionError(f"never back-pressured after {sent} clips")
+
+
+def _unreading_socket(srv: Server, sid: str, headers: dict[str, str]) -> socket.socket:
+    """A WebSocket opened by hand with a tiny receive buffer, for a client that never
+    reads its answers (a library client would read them)."""
     token = headers["Authorization"].removeprefix("Bearer ")
     sock = socket.socket()
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
@@ -240,38 +268,83 @@ def test_client_that_stops_reading_is_bounded_and_dropped(
     while b"\r\n\r\n" not in head:
         head += sock.recv(1)
     assert head.startswith(b"HTTP/1.1 101")
-    sock.setblocking(False)
-    sent = 0
-    stalled_since: float | None = None
-    deadline = time.monotonic() + 20.0
-    while time.monotonic() < deadline:  # bounded in time and count
-        frame = _ws_frame(json.dumps({"type": "ping", "id": sent}).encode())
-        try:
-            sock.send(frame)  # a partial write cannot happen for frames this small here
-            sent += 1
-            stalled_since = None
-        except BlockingIOError:
-            stalled_since = stalled_since or time.monotonic()
-            if time.monotonic() - stalled_since > 2.0:
-                break  # the server stopped reading: backpressure reached the client
-            time.sleep(0.01)
-        if sent >= 500_000:
-            break
-    assert stalled_since is not None, f"never back-pressured after {sent} pings"
+    return sock
 
-    def metric(name: str) -> float:
-        text = httpx.get(f"{srv.base}/metrics", timeout=TIMEOUT_S).text
-        for line in text.splitlines():
-            if line.startswith(name):
-                return float(line.rsplit(" ", 1)[1])
-        return 0.0
 
-    until = time.monotonic() + 15.0
-    while metric("ik_websockets") != 0.0 and time.monotonic() < until:
+def _metric(srv: Server, name: str) -> float:
+    """One series of /metrics (the whole series name, labels included), 0 when absent."""
+    text = httpx.get(f"{srv.base}/metrics", timeout=TIMEOUT_S).text
+    for line in text.splitlines():
+        series, _, value = line.rpartition(" ")
+        if series == name:  # the whole series: not a longer name it begins
+            return float(value)
+    return 0.0
+
+
+def _assert_no_websocket_left(srv: Server, within_s: float, why: str) -> None:
+    until = time.monotonic() + within_s
+    while _metric(srv, "ik_websockets") != 0.0 and time.monotonic() < until:
         time.sleep(0.1)
-    assert metric("ik_websockets") == 0.0
-    assert metric('ik_errors_total{code="slow_reader",transport="ws"}') == 1.0
-    sock.close()
+    assert _metric(srv, "ik_websockets") == 0.0, f"{why}:\n{srv.log()[-3000:]}"
+
+
+def _assert_reset_within(srv: Server, sock: socket.socket, within_s: float) -> None:
+    """The server let go of the socket: the client, which never read, sees a reset
+    (a close would wait for ever for the client to read what is buffered)."""
+    until = time.monotonic() + within_s
+    error = 0
+    while error == 0 and time.monotonic() < until:
+        error = sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
+        time.sleep(0.05)
+    assert error == errno.ECONNRESET, f"socket error {error}:\n{srv.log()[-3000:]}"
+
+
+def test_client_that_stops_reading_is_bounded_and_dropped(
+    start_server: Callable[..., Server],
+) -> None:
+    """A raw client with a tiny receive buffer pipelines clips and never reads: the
+    server stops reading once its write buffer is full (it answers before it reads),
+    then drops the socket after IK_WS_SEND_TIMEOUT_S and lets go of it within uvicorn's
+    close_timeout; the session keeps working."""
+    srv = start_server(IK_WS_SEND_TIMEOUT_S="1")
+    sid, headers = session(srv)
+    with _unreading_socket(srv, sid, headers) as sock:  # closed when an assertion fails
+        sock.setblocking(False)
+        sent = _send_until_stalled(sock, stall_s=2.0, within_s=30.0)
+        _assert_no_websocket_left(srv, 15.0, f"not dropped after {sent} clips")
+        assert _metric(srv, 'ik_errors_total{code="slow_reader",transport="ws"}') == 1.0
+        _assert_reset_within(srv, sock, 10.0)
+    r = httpx.post(
+        f"{srv.base}/v1/sessions/{sid}/frames",
+        json={"id": 1, "targets": [tool_target(0.1)]},
+        headers=headers,
+        timeout=TIMEOUT_S,
+    )
+    assert r.status_code == 200 and r.json()["results"][0]["id"] == 1
+
+
+def test_keepalive_timeout_under_a_full_buffer_ends_the_handler(
+    start_server: Callable[..., Server],
+) -> None:
+    """A client that never reads answers nor pings: uvicorn's keepalive closes the
+    connection while the write buffer cannot drain. The socket is let go of within
+    uvicorn's close_timeout and the handler ends (it used to wait for IK_WS_SEND_TIMEOUT_S,
+    or, waiting for a message, for ever); the session keeps working."""
+    # The send time limit (60 s) far beyond what the test waits: only the close counts.
+    # The keepalive ping (3 s after the accept) finds the write buffer full already
+    # (the clips fill it within about a second).
+    srv = start_server(
+        IK_WS_PING_INTERVAL_S="3", IK_WS_PING_TIMEOUT_S="1", IK_WS_SEND_TIMEOUT_S="60"
+    )
+    sid, headers = session(srv)
+    with _unreading_socket(srv, sid, headers) as sock:
+        sock.setblocking(False)
+        _send_until_stalled(sock, stall_s=1.0, within_s=30.0)
+        # uvicorn closed at the keepalive timeout; the handler is in a send that cannot
+        # finish: the socket is aborted within uvicorn's close_timeout (10 s), which
+        # ends the send, the handler and the count.
+        _assert_no_websocket_left(srv, 30.0, "the handler outlived the close")
+        _assert_reset_within(srv, sock, 5.0)
     r = httpx.post(
         f"{srv.base}/v1/sessions/{sid}/frames",
         json={"id": 1, "targets": [tool_target(0.1)]},
