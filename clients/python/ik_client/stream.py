@@ -46,6 +46,8 @@ from .types import (
     Target,
 )
 
+# What ends one reconnect attempt and lets the next one start (``_Retries.attempt_failed``).
+_ATTEMPT_FAILURES = (ConnectionClosed, OSError, InvalidHandshake, TimeoutError)
 # Answers of long clips of big chains can be large; the server bounds what it sends.
 MAX_ANSWER_BYTES = 64 * 2**20
 OPEN_TIMEOUT_S = 30.0
@@ -174,6 +176,13 @@ class _Retries:
             raise stream_closed(code, reason) from exc
         self._last = exc
 
+    def attempt_failed(self, exc: Exception) -> None:
+        """Note a reconnect attempt that failed (one of ``_ATTEMPT_FAILURES``): a close is
+        noted as by ``closed``; an unreachable server or a refused handshake is tried
+        again."""
+        if isinstance(exc, ConnectionClosed):
+            self.closed(exc)
+
     def delays(self) -> Iterator[float]:
         """The wait before each reconnect attempt left [s]; then the last close, raised.
         An attempt counts when it starts (a server that accepts and closes again uses
@@ -248,6 +257,10 @@ class _BaseStream(Generic[Connection]):
     def _answer(self, data: str | bytes) -> Answer:
         self._retries.tries = 0
         return self._pipeline.answer(data)
+
+    def _reconnected(self, connection: Connection) -> None:
+        self._connection = connection
+        self.reconnects += 1
 
 
 class AsyncStream(_BaseStream[AsyncConnection]):
@@ -336,13 +349,10 @@ class AsyncStream(_BaseStream[AsyncConnection]):
                     connection = await self._open()
                     for data in self._pipeline.resend():
                         await connection.send(data)
-                except ConnectionClosed as again:
-                    self._retries.closed(again)
+                except _ATTEMPT_FAILURES as failure:
+                    self._retries.attempt_failed(failure)
                     continue
-                except (OSError, InvalidHandshake, TimeoutError):
-                    continue
-                self._connection = connection
-                self.reconnects += 1
+                self._reconnected(connection)
                 return
 
 
@@ -415,11 +425,8 @@ class Stream(_BaseStream[SyncConnection]):
                 connection = self._open()
                 for data in self._pipeline.resend():
                     connection.send(data)
-            except ConnectionClosed as again:
-                self._retries.closed(again)
+            except _ATTEMPT_FAILURES as failure:
+                self._retries.attempt_failed(failure)
                 continue
-            except (OSError, InvalidHandshake, TimeoutError):
-                continue
-            self._connection = connection
-            self.reconnects += 1
+            self._reconnected(connection)
             return
