@@ -1,4 +1,5 @@
-"""Both clients know exactly the service's error codes (``schemas.ErrorCode``) and
+"""Both clients know exactly the service's error codes (``schemas.ErrorCode``, and the
+Python client the termination codes: its copy is generated, tests/clients/client_codes.py) and
 WebSocket close codes (``service.errors.WS_CLOSE_CODES``): the clients mirror them (they
 are packages of their own and do not import the server), and a code added to the
 service and not to a client would reach that client's users untyped."""
@@ -12,6 +13,9 @@ import ik_client
 
 import schemas
 from service.errors import WS_CLOSE_CODES
+from solver.optim.termination import Termination
+
+from . import client_codes
 
 ROOT = Path(__file__).resolve().parents[2]
 # The codes a client can see: the server's, and 1006 (a drop, which no server sends).
@@ -27,7 +31,12 @@ def typescript_object(name: str, file: str) -> str:
 
 
 def test_python_client_codes_are_the_services() -> None:
+    """ik_client/codes.py is what tests/clients/client_codes.py renders from the service."""
+    assert client_codes.CODES_FILE.read_text() == client_codes.render(), (
+        "ik_client/codes.py is stale: python -m tests.clients.client_codes"
+    )
     assert {c.value for c in ik_client.ErrorCode} == {c.value for c in schemas.ErrorCode}
+    assert {t.value for t in ik_client.Termination} == {t.value for t in Termination}
 
 
 def test_each_code_has_one_python_exception() -> None:

@@ -13,35 +13,7 @@ import enum
 from dataclasses import KW_ONLY, dataclass
 from typing import Any, ClassVar
 
-
-class ErrorCode(enum.StrEnum):
-    """The service's stable error codes (docs/api.md and docs/websocket.md, Errors)."""
-
-    INVALID_FORMAT = "invalid_format"
-    INVALID_PROBLEM = "invalid_problem"
-    ID_REUSE = "id_reuse"
-    UNAUTHORIZED = "unauthorized"
-    FORBIDDEN = "forbidden"
-    FORBIDDEN_ORIGIN = "forbidden_origin"
-    NOT_FOUND = "not_found"
-    METHOD_NOT_ALLOWED = "method_not_allowed"
-    HTTP_ERROR = "http_error"
-    PAYLOAD_TOO_LARGE = "payload_too_large"
-    TOO_MANY_SESSIONS = "too_many_sessions"
-    KEY_SESSION_LIMIT = "key_session_limit"
-    RATE_LIMITED = "rate_limited"
-    NOT_READY = "not_ready"
-    WARMUP_FAILED = "warmup_failed"
-    PLANS_BUSY = "plans_busy"
-    TOO_MANY_PLANS = "too_many_plans"
-    SERVER_BUSY = "server_busy"
-    TOO_MUCH_WORK = "too_much_work"
-    # Reasons of WebSocket closes (a close's reason is its error code).
-    TOO_MANY_WEBSOCKETS = "too_many_websockets"
-    SLOW_READER = "slow_reader"
-    SHUTTING_DOWN = "shutting_down"
-    STORE_UNAVAILABLE = "store_unavailable"
-    INTERNAL_ERROR = "internal_error"
+from .codes import ErrorCode as ErrorCode  # re-exported: ik_client.errors.ErrorCode
 
 
 class CloseCode(enum.IntEnum):

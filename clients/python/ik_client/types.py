@@ -12,21 +12,8 @@ import enum
 from dataclasses import dataclass
 from typing import Any, Literal, NotRequired, TypedDict
 
+from .codes import Termination as Termination  # re-exported: ik_client.types.Termination
 from .errors import ServiceError, service_error
-
-
-class Termination(enum.StrEnum):
-    """How the optimizer's last pass ended (docs/api.md, Termination codes)."""
-
-    GOAL_REACHED = "goal_reached"
-    GTOL = "gtol"
-    STEP_SMALL = "step_small"
-    STALLED = "stalled"
-    LINE_SEARCH_FAILED = "line_search_failed"
-    MAX_ITER = "max_iter"
-    MAX_FEV = "max_fev"
-    DEADLINE = "deadline"
-    NONFINITE = "nonfinite"
 
 
 class Status(enum.StrEnum):
