@@ -16,6 +16,7 @@ from .common import (
     Quaternion,
     StrictModel,
     Vec3,
+    check_exactly_one,
 )
 
 # Longest name (joint, link, effector) a request may use.
@@ -280,8 +281,7 @@ class GltfChain(_SkeletonChainBase):
 
     @model_validator(mode="after")
     def _one_source(self) -> GltfChain:
-        if (self.glb_base64 is None) == (self.gltf is None):
-            raise ValueError("give exactly one of glb_base64 and gltf")
+        check_exactly_one(self, "glb_base64", "gltf")
         return self
 
 

@@ -34,6 +34,16 @@ class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True, strict=True)
 
 
+def check_exactly_one(model: BaseModel, first: str, second: str) -> None:
+    """A model validator's check that exactly one of two optional fields is set.
+
+    Raises:
+        ValueError: both or neither are set (pydantic reports it as the model's error).
+    """
+    if (getattr(model, first) is None) == (getattr(model, second) is None):
+        raise ValueError(f"give exactly one of '{first}' and '{second}'")
+
+
 class Vec3(StrictModel):
     """A 3-vector: a point or offset [m], or a direction (unitless); each component
     finite and within +-1e6."""

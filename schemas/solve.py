@@ -9,7 +9,7 @@ from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
 from solver.model.notes import NoteKind
 
 from .chain import EXAMPLE_ARM, ChainSpec, EffectorModeName, Name
-from .common import FiniteFloat, Quaternion, StrictModel, Vec3
+from .common import FiniteFloat, Quaternion, StrictModel, Vec3, check_exactly_one
 from .engines import BoneOutput, Conventions, ConventionsOut
 
 # Frame ids: non-negative integers that a JavaScript client can hold exactly.
@@ -300,8 +300,7 @@ class PoseIn(StrictModel):
 
     @model_validator(mode="after")
     def _exactly_one(self) -> PoseIn:
-        if (self.q is None) == (self.joints is None):
-            raise ValueError("give exactly one of 'q' and 'joints'")
+        check_exactly_one(self, "q", "joints")
         return self
 
 
