@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Any
+from typing import Any, Final
 
 import schemas as S
 from solver.errors import IKError
@@ -63,19 +63,15 @@ def apply_options(
         raise invalid_problem(str(e), field) from None
 
 
+# The options a client sees (schema ``SolverOptions``), each an ``IKOptions`` field of
+# the same name.
+_OPTION_NAMES: Final = tuple(S.SolverOptions.model_fields)
+
+
 def options_dict(o: IKOptions) -> dict[str, Any]:
     """The SolverOptions view of IKOptions (JSON-ready)."""
-    return {
-        "position_tolerance_m": o.position_tolerance_m,
-        "rotation_tolerance_rad": o.rotation_tolerance_rad,
-        "time_budget_us": o.time_budget_us,
-        "max_iter": o.max_iter,
-        "max_restarts": o.max_restarts,
-        "restart_radius_rad": o.restart_radius_rad if math.isfinite(o.restart_radius_rad) else 1e9,
-        "max_step_rad": o.max_step_rad,
-        "posture_weight": o.posture_weight,
-        "limit_weight": o.limit_weight,
-        "limit_margin": o.limit_margin,
-        "continuity": o.continuity.value,
-        "max_joint_step_rad": o.max_joint_step_rad,
-    }
+    out = {name: getattr(o, name) for name in _OPTION_NAMES}
+    if not math.isfinite(o.restart_radius_rad):  # JSON has no infinity: the schema's cap
+        out["restart_radius_rad"] = 1e9
+    out["continuity"] = o.continuity.value
+    return out
