@@ -213,16 +213,22 @@ class RedisSessionStore(SessionStore):
         if not task.cancelled():
             task.exception()  # retrieved: the waiters get it; with none left, nobody need
 
+    async def _read_hashes(self, session_id: str) -> tuple[dict[bytes, bytes], dict[bytes, bytes]]:
+        """A session's hash and its stored answers' hash, in one round trip (empty when
+        the session is not in Redis)."""
+        async with self.client.pipeline(transaction=False) as pipe:
+            pipe.hgetall(f"{self._p}s:{session_id}")
+            pipe.hgetall(f"{self._p}a:{session_id}")
+            stored, answers = await pipe.execute()
+        return stored, answers
+
     async def _load(self, session_id: str) -> Session | None:
         forgotten = self._forgotten.get(session_id)
         if forgotten is not None and not forgotten.closed:
             return await self._take_back(forgotten)
         p = self._p
         try:
-            async with self.client.pipeline(transaction=False) as pipe:
-                pipe.hgetall(f"{p}s:{session_id}")
-                pipe.hgetall(f"{p}a:{session_id}")
-                stored, answers = await pipe.execute()
+            stored, answers = await self._read_hashes(session_id)
             if not stored:
                 return None
             token, owner, chain, options, created_at = msgpack.unpackb(stored[b"meta"])
@@ -468,12 +474,8 @@ class RedisSessionStore(SessionStore):
                 await self._write(session, "", pending.pairs, pending.record)
             except StaleSession:  # another worker wrote first: reloaded from Redis
                 return
-        p = self._p
         try:
-            async with self.client.pipeline(transaction=False) as pipe:
-                pipe.hgetall(f"{p}s:{session.id}")
-                pipe.hgetall(f"{p}a:{session.id}")
-                stored, answers = await pipe.execute()
+            stored, answers = await self._read_hashes(session.id)
         except RedisError as e:
             raise _unavailable(e) from None
         if not stored:
