@@ -26,7 +26,7 @@ from solver.model.examples import EXAMPLES
 from solver.model.joints import Transform
 from solver.model.rotations import matrix_to_quaternion
 
-from ..responses import CachedStaticFiles
+from ..responses import CachedStaticFiles, content_security_policy
 
 ASSETS_DIR: Final = Path(__file__).resolve().parent.parent / "demo_assets"
 ASSETS_URL: Final = "/demo-assets"
@@ -36,16 +36,7 @@ EXAMPLES_URL: Final = "/demo/examples.json"
 # The page runs only its own bundle ('self', no inline script); three.js needs no inline
 # style, but the page's own code sets element styles through the CSSOM, which CSP allows.
 # connect-src 'self' covers fetch and the same host's ws:// (CSP Level 3).
-CONTENT_SECURITY_POLICY: Final = "; ".join(
-    [
-        "default-src 'self'",
-        "script-src 'self'",
-        "style-src 'self'",
-        "img-src 'self' data: blob:",
-        "connect-src 'self'",
-        "frame-ancestors 'self'",
-    ]
-)
+CONTENT_SECURITY_POLICY: Final = content_security_policy(img_src="data: blob:")
 
 _PAGE: Final = """<!doctype html>
 <html lang="en">
