@@ -15,7 +15,7 @@ object, is not used because each message is its own payload (no union).
 
 from __future__ import annotations
 
-from typing import Any, Final
+from typing import Any, Final, NamedTuple
 
 from pydantic import BaseModel
 from pydantic.json_schema import JsonSchemaMode, models_json_schema
@@ -30,31 +30,40 @@ CHANNEL: Final = "session"
 WS_ADDRESS: Final = "/v1/sessions/{session_id}/ws"
 _REF: Final = "#/components/schemas/{model}"
 
-# (message name, model, summary): what a client sends ...
-CLIENT_MESSAGES: Final[tuple[tuple[str, type[BaseModel], str], ...]] = (
-    ("frame", ws.FrameMessage, "Solve one frame from the session's pose"),
-    ("clip", ws.ClipMessage, "Solve (or plan) a clip of frames"),
-    ("fk", ws.FkMessage, "Forward kinematics of a pose, without moving it"),
-    ("ping", ws.PingMessage, "Keep-alive and round-trip time"),
-    ("batch", ws.BatchMessage, "One frame for each of several sessions (many characters)"),
+
+class WsMessage(NamedTuple):
+    """A message of the protocol: its ``type``, the model of its payload and a summary;
+    for a client message, the server message that answers it (or an error, possible for
+    every one)."""
+
+    name: str
+    model: type[BaseModel]
+    summary: str
+    reply: str | None = None
+
+
+# What a client sends ...
+CLIENT_MESSAGES: Final = (
+    WsMessage("frame", ws.FrameMessage, "Solve one frame from the session's pose", "result"),
+    WsMessage("clip", ws.ClipMessage, "Solve (or plan) a clip of frames", "clip_result"),
+    WsMessage("fk", ws.FkMessage, "Forward kinematics of a pose, without moving it", "fk_result"),
+    WsMessage("ping", ws.PingMessage, "Keep-alive and round-trip time", "pong"),
+    WsMessage(
+        "batch",
+        ws.BatchMessage,
+        "One frame for each of several sessions (many characters)",
+        "batch_result",
+    ),
 )
 # ... and what the server answers.
-SERVER_MESSAGES: Final[tuple[tuple[str, type[BaseModel], str], ...]] = (
-    ("result", ws.ResultMessage, "A frame's result"),
-    ("clip_result", ws.ClipResultMessage, "A clip's results, one per frame"),
-    ("fk_result", ws.FkResultMessage, "An fk message's bone data"),
-    ("pong", ws.PongMessage, "The answer to a ping"),
-    ("batch_result", ws.BatchResultMessage, "A batch's results, one entry per frame"),
-    ("error", ws.ErrorMessage, "A message that failed; the socket stays open"),
+SERVER_MESSAGES: Final = (
+    WsMessage("result", ws.ResultMessage, "A frame's result"),
+    WsMessage("clip_result", ws.ClipResultMessage, "A clip's results, one per frame"),
+    WsMessage("fk_result", ws.FkResultMessage, "An fk message's bone data"),
+    WsMessage("pong", ws.PongMessage, "The answer to a ping"),
+    WsMessage("batch_result", ws.BatchResultMessage, "A batch's results, one entry per frame"),
+    WsMessage("error", ws.ErrorMessage, "A message that failed; the socket stays open"),
 )
-# Which answers each client message may get (an error is possible for every one).
-REPLIES: Final[dict[str, tuple[str, ...]]] = {
-    "frame": ("result", "error"),
-    "clip": ("clip_result", "error"),
-    "fk": ("fk_result", "error"),
-    "ping": ("pong", "error"),
-    "batch": ("batch_result", "error"),
-}
 # The reason (an ErrorCode) each close code is sent with.
 CLOSE_REASONS: Final[dict[int, tuple[ErrorCode | str, ...]]] = {
     1000: (),
@@ -105,11 +114,12 @@ def _close_line(entry: dict[str, Any]) -> str:
     return f"- {entry['code']} {reasons}: {entry['meaning']}"
 
 
-def _message(name: str, model: type[BaseModel], summary: str) -> dict[str, Any]:
+def _message(message: WsMessage) -> dict[str, Any]:
+    model = message.model
     return {
-        "name": name,
+        "name": message.name,
         "title": model.__name__,
-        "summary": summary,
+        "summary": message.summary,
         "description": (model.__doc__ or "").strip(),
         "contentType": "application/json",
         "payload": {"$ref": _REF.format(model=model.__name__)},
@@ -118,9 +128,9 @@ def _message(name: str, model: type[BaseModel], summary: str) -> dict[str, Any]:
 
 def _schemas() -> dict[str, Any]:
     models: list[tuple[type[BaseModel], JsonSchemaMode]] = [
-        (m, "validation") for _, m, _ in CLIENT_MESSAGES
+        (m.model, "validation") for m in CLIENT_MESSAGES
     ]
-    models += [(m, "serialization") for _, m, _ in SERVER_MESSAGES]
+    models += [(m.model, "serialization") for m in SERVER_MESSAGES]
     _, top = models_json_schema(models, ref_template=_REF)
     schemas: dict[str, Any] = top.get("$defs", {})
     return schemas
@@ -128,33 +138,32 @@ def _schemas() -> dict[str, Any]:
 
 def asyncapi_document(*, title: str, version: str) -> dict[str, Any]:
     """The AsyncAPI 3.0 document of the session WebSocket."""
-    channel_messages = {
-        name: {"$ref": f"#/components/messages/{name}"}
-        for name, _, _ in CLIENT_MESSAGES + SERVER_MESSAGES
-    }
+    messages = CLIENT_MESSAGES + SERVER_MESSAGES
+    channel_messages = {m.name: {"$ref": f"#/components/messages/{m.name}"} for m in messages}
     close_table = "\n".join(_close_line(c) for c in _close_codes())
 
     def message_ref(name: str) -> dict[str, str]:
         return {"$ref": f"#/channels/{CHANNEL}/messages/{name}"}
 
     operations: dict[str, Any] = {}
-    for name, _, summary in CLIENT_MESSAGES:
-        operations[f"send_{name}"] = {
+    for m in CLIENT_MESSAGES:
+        assert m.reply is not None, f"client message {m.name} has no reply"
+        operations[f"send_{m.name}"] = {
             "action": "send",
             "channel": {"$ref": f"#/channels/{CHANNEL}"},
-            "summary": summary,
-            "messages": [message_ref(name)],
+            "summary": m.summary,
+            "messages": [message_ref(m.name)],
             "reply": {
                 "channel": {"$ref": f"#/channels/{CHANNEL}"},
-                "messages": [message_ref(answer) for answer in REPLIES[name]],
+                "messages": [message_ref(m.reply), message_ref("error")],
             },
         }
-    for name, _, summary in SERVER_MESSAGES:
-        operations[f"receive_{name}"] = {
+    for m in SERVER_MESSAGES:
+        operations[f"receive_{m.name}"] = {
             "action": "receive",
             "channel": {"$ref": f"#/channels/{CHANNEL}"},
-            "summary": summary,
-            "messages": [message_ref(name)],
+            "summary": m.summary,
+            "messages": [message_ref(m.name)],
         }
     return {
         "asyncapi": ASYNCAPI_VERSION,
@@ -189,10 +198,7 @@ def asyncapi_document(*, title: str, version: str) -> dict[str, Any]:
         },
         "operations": operations,
         "components": {
-            "messages": {
-                name: _message(name, model, summary)
-                for name, model, summary in CLIENT_MESSAGES + SERVER_MESSAGES
-            },
+            "messages": {m.name: _message(m) for m in messages},
             "schemas": _schemas(),
         },
     }
