@@ -74,20 +74,7 @@ def create_app(
         # The store is built after the runner (a shared one builds models on its threads).
         metrics = Metrics(lambda: len(app.state.ik.store))
         warm = Warmup(warmup or default_warmup(settings.compile_processes))
-        runner = Runner(
-            inline_budget_us=settings.inline_budget_us,
-            threads=settings.solver_threads,
-            metrics=metrics,
-            warmup=warm,
-            max_frames_per_s=settings.max_frames_per_s,
-            max_frames_per_request=settings.max_frames_per_request,
-            max_queued_plans=settings.max_queued_plans,
-            build_threads=settings.build_threads,
-            oneshot_threads=settings.oneshot_threads,
-            max_queued_jobs=settings.max_queued_jobs,
-            max_request_work_s=settings.max_request_work_s,
-            max_client_work_s=settings.max_client_work_s,
-        )
+        runner = Runner(settings, metrics=metrics, warmup=warm)
         sessions = store
         if sessions is None:  # (not `store or ...`: an empty store is falsy)
             sessions = default_store(settings, runner)

@@ -30,6 +30,7 @@ from solver.ik import IKOptions, IKSolver
 from solver.ik import Target as SolverTarget
 from solver.path import PlannedPath, plan_path
 
+from .config import Settings
 from .convert import ChainView, FrameJob, SolvedFrame, plan_steps
 from .errors import (
     ServiceError,
@@ -126,48 +127,35 @@ def freeze_long_lived_objects() -> float:
 class Runner:
     """Runs solves inline or in the pool, records metrics, keeps sessions in order."""
 
-    def __init__(
-        self,
-        *,
-        inline_budget_us: float,
-        threads: int,
-        metrics: Metrics,
-        warmup: Warmup,
-        max_frames_per_s: float = 0.0,
-        max_frames_per_request: int = 1,
-        max_queued_plans: int = 4,
-        build_threads: int = 1,
-        oneshot_threads: int = 1,
-        max_queued_jobs: int = 64,
-        max_request_work_s: float = 2.0,
-        max_client_work_s: float = 4.0,
-    ) -> None:
-        self.inline_budget_us = inline_budget_us
-        self.max_frames_per_s = max_frames_per_s
+    def __init__(self, settings: Settings, *, metrics: Metrics, warmup: Warmup) -> None:
+        """The limits and thread counts are ``settings``' (docs/operations.md)."""
+        self.inline_budget_us = settings.inline_budget_us
+        self.max_frames_per_s = settings.max_frames_per_s
         # One second's worth, and never less than the longest clip a request may carry.
-        self.burst = max(max_frames_per_s, float(max_frames_per_request))
+        self.burst = max(settings.max_frames_per_s, float(settings.max_frames_per_request))
         self.metrics = metrics
         self.warmup = warmup
         # Each class of work on threads of its own (service/work.py): a long clip
         # never delays a session's creation or a one-shot solve.
+        queued = settings.max_queued_jobs
         self.pools = {
-            WorkClass.BUILD: WorkPool(WorkClass.BUILD, build_threads, max_queued_jobs),
-            WorkClass.SOLVE: WorkPool(WorkClass.SOLVE, oneshot_threads, max_queued_jobs),
-            WorkClass.FRAMES: WorkPool(WorkClass.FRAMES, threads, max_queued_jobs),
+            WorkClass.BUILD: WorkPool(WorkClass.BUILD, settings.build_threads, queued),
+            WorkClass.SOLVE: WorkPool(WorkClass.SOLVE, settings.oneshot_threads, queued),
+            WorkClass.FRAMES: WorkPool(WorkClass.FRAMES, settings.solver_threads, queued),
         }
         # A request's worst case (frames x time_budget_us) is capped; of the pooled
         # frames' worst case in flight, one client holds at most its share.
-        self.max_request_work_s = max_request_work_s
-        self.frame_shares = CostShares(max_client_work_s)
+        self.max_request_work_s = settings.max_request_work_s
+        self.frame_shares = CostShares(settings.max_client_work_s)
         # A planned clip takes 0.05-1 s (600 frames): they queue on a thread of their own
         # so that they never hold up the pool's frames, one-shot solves and chain builds.
         self.plan_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ik-plan")
         # A queue of plans is a queue of seconds: beyond this many, say so at once
         # (503) rather than let clients time out waiting.
-        self.max_queued_plans = max_queued_plans
+        self.max_queued_plans = settings.max_queued_plans
         # One client (an API key; a session when the server has no keys) holds at most
         # half the places, so that it cannot keep everyone else's plans out.
-        self.max_plans_per_client = max(1, max_queued_plans // 2)
+        self.max_plans_per_client = max(1, settings.max_queued_plans // 2)
         self.plans_in_flight = 0  # queued or running; changed on the loop only
         self.plans_by_client: dict[str, int] = {}  # the same, per client
 

@@ -172,7 +172,13 @@ class _HeldPlans:
 
     def __init__(self, max_queued_plans: int, real_plan: Callable[..., Any]) -> None:
         self.real_plan = real_plan
-        settings = Settings()
+        settings = Settings(
+            inline_budget_us=0.0,
+            solver_threads=1,
+            max_frames_per_request=10,
+            max_frames_per_s=0.0,
+            max_queued_plans=max_queued_plans,
+        )
         self.view = convert.chain_from_spec(S.HierarchyChain.model_validate(ARM), settings)
         self.options = convert.session_defaults(settings)
         self.release = threading.Event()
@@ -180,14 +186,7 @@ class _HeldPlans:
         self.names: dict[int, str] = {}  # id of a session's solver -> session name
         warm = solving.Warmup(lambda _report: 0.0)
         warm._run()
-        self.runner = solving.Runner(
-            inline_budget_us=0.0,
-            threads=1,
-            metrics=Metrics(lambda: 1),
-            warmup=warm,
-            max_frames_per_request=10,
-            max_queued_plans=max_queued_plans,
-        )
+        self.runner = solving.Runner(settings, metrics=Metrics(lambda: 1), warmup=warm)
         self.store = InMemorySessionStore(max_sessions=10, ttl_s=60.0)
         frame = S.Frame.model_validate(hand_frame(1))
         self.jobs = [(1, convert.targets(frame.targets, self.view, "t"))]

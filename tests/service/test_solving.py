@@ -49,11 +49,10 @@ def test_frames_run_inline_or_in_the_pool(
 
 def test_inline_rule_is_frames_times_budget() -> None:
     warm = solving.Warmup(lambda _report: 0.0)
-    runner = solving.Runner(
-        inline_budget_us=1000.0, threads=1, metrics=Metrics(lambda: 0), warmup=warm
-    )
+    settings = Settings(inline_budget_us=1000.0, solver_threads=1)
+    runner = solving.Runner(settings, metrics=Metrics(lambda: 0), warmup=warm)
     try:
-        base = convert.session_defaults(Settings())
+        base = convert.session_defaults(settings)
         assert runner.inline(1, replace(base, time_budget_us=1000.0))
         assert not runner.inline(2, replace(base, time_budget_us=1000.0))
         assert runner.inline(10, replace(base, time_budget_us=100.0))
@@ -72,9 +71,7 @@ def test_concurrent_pooled_requests_of_one_session_run_in_arrival_order(
     async def scenario() -> list[float]:
         warm = solving.Warmup(lambda _report: 0.0)
         warm._run()
-        runner = solving.Runner(
-            inline_budget_us=0.0, threads=2, metrics=Metrics(lambda: 1), warmup=warm
-        )
+        runner = solving.Runner(settings, metrics=Metrics(lambda: 1), warmup=warm)
         store = InMemorySessionStore(max_sessions=1, ttl_s=60.0)
         session, _ = new_session(view, IKSolver(view.chain, options), options, now=store.clock())
         await store.add(session)
