@@ -214,19 +214,17 @@ class RedisSessionStore(SessionStore):
             task.exception()  # retrieved: the waiters get it; with none left, nobody need
 
     async def _read_hashes(self, session_id: str) -> tuple[dict[bytes, bytes], dict[bytes, bytes]]:
-        """A session's hash and its stored answers' hash, in one round trip (empty when
-        the session is not in Redis)."""
+        """A session's hash and its answers' hash in one round trip (empty: not in Redis)."""
         async with self.client.pipeline(transaction=False) as pipe:
             pipe.hgetall(f"{self._p}s:{session_id}")
             pipe.hgetall(f"{self._p}a:{session_id}")
             stored, answers = await pipe.execute()
-        return stored, answers
+            return stored, answers
 
     async def _load(self, session_id: str) -> Session | None:
         forgotten = self._forgotten.get(session_id)
         if forgotten is not None and not forgotten.closed:
             return await self._take_back(forgotten)
-        p = self._p
         try:
             stored, answers = await self._read_hashes(session_id)
             if not stored:
@@ -235,7 +233,7 @@ class RedisSessionStore(SessionStore):
             view = self._views.get(chain)
             definition: bytes | None = None
             if view is None:
-                found = await self.client.get(f"{p}chain:{chain}")
+                found = await self.client.get(f"{self._p}chain:{chain}")
                 definition = found if isinstance(found, bytes) else None
                 if definition is None:
                     return None
