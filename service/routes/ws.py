@@ -28,7 +28,7 @@ import functools
 import logging
 import math
 import time
-from typing import Annotated, Any
+from typing import Annotated, Any, Unpack
 
 import msgpack
 import orjson
@@ -59,6 +59,7 @@ from ..sessions import Session
 from ..solving import session_client
 from .ws_batch import RawBatch, batch_reply, raw_batch
 from .ws_messages import (
+    ErrorDetails,
     clip_result_message,
     error_message,
     fk_result_message,
@@ -194,16 +195,11 @@ class _Connection:
             self._sending_since = None
 
     def error_reply(
-        self,
-        msg_id: int | None,
-        code: ErrorCode,
-        message: str,
-        field: str | None = None,
-        retry_after_s: float | None = None,
+        self, msg_id: int | None, code: ErrorCode, message: str, **details: Unpack[ErrorDetails]
     ) -> dict[str, Any]:
-        """An error message for ``msg_id``, counted in the metrics."""
+        """An error message for ``msg_id`` (``error_message``), counted in the metrics."""
         self.svc.metrics.error(code, "ws")
-        return error_message(msg_id, code, message, field, retry_after_s)
+        return error_message(msg_id, code, message, **details)
 
     def exception_reply(self, msg_id: int, exc: ServiceError | IKError) -> dict[str, Any]:
         """The one place that turns a handler's exception into an error message
@@ -218,7 +214,9 @@ class _Connection:
         err = solver_error(exc) if isinstance(exc, IKError) else exc
         if err.code is ErrorCode.NOT_FOUND:
             raise err
-        return self.error_reply(msg_id, err.code, err.detail, err.field, err.retry_after_s)
+        return self.error_reply(
+            msg_id, err.code, err.detail, field=err.field, retry_after_s=err.retry_after_s
+        )
 
     def decode(self, data: str | bytes, binary: bool) -> FastFrame | RawBatch | ClientMessage:
         """A well-formed frame as the fast path's ``(id, targets)`` (convert.fast_frame), a
@@ -264,13 +262,14 @@ class _Connection:
         try:
             msg = self.decode(data, binary)
         except _Unreadable as e:
-            reply = self.error_reply(e.msg_id, ErrorCode.INVALID_FORMAT, e.message, e.field)
+            reply = self.error_reply(e.msg_id, ErrorCode.INVALID_FORMAT, e.message, field=e.field)
             await self.send(reply, binary)
             return
         msg_id = msg[0] if isinstance(msg, tuple) else msg.id  # a RawBatch's [0]: its id
         if msg_id <= self.last_id:
             message = f"id must be greater than {self.last_id}"
-            await self.send(self.error_reply(msg_id, ErrorCode.ID_REUSE, message, "id"), binary)
+            reply = self.error_reply(msg_id, ErrorCode.ID_REUSE, message, field="id")
+            await self.send(reply, binary)
             return
         self.last_id = msg_id
         if isinstance(msg, S.PingMessage):

@@ -8,7 +8,7 @@ are ``schemas.ws`` (``ResultMessage``, ``ClipResultMessage``, ``BatchResultMessa
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypedDict
 
 from schemas import ErrorCode
 
@@ -46,6 +46,13 @@ def fk_result_message(msg_id: int, fk: dict[str, Any]) -> dict[str, Any]:
 def pong_message(msg_id: int) -> dict[str, Any]:
     """The answer to a ``ping``."""
     return {"id": msg_id, "type": "pong"}
+
+
+class ErrorDetails(TypedDict, total=False):
+    """What an error message may add to its code and message."""
+
+    field: str | None  # dotted path of the offending field
+    retry_after_s: float | None  # when to send it again [s]
 
 
 def error_message(
