@@ -317,32 +317,33 @@ class Runner:
         its end releases it (``handoff.handed_over``; the caller must not)."""
         options = session.options
         metrics = self.metrics
-        work: Callable[..., tuple[list[SolvedFrame], PlannedPath | None]] = (
-            _plan_all if plan else _track_all
-        )
-        if not plan and may_inline and self.inline(len(jobs), options):
-            return work(session, jobs, options, t0, metrics.frames, transport)
-        loop = asyncio.get_running_loop()
+        fut: asyncio.Future[tuple[list[SolvedFrame], PlannedPath | None]]
+        if plan:
+            fut = asyncio.get_running_loop().run_in_executor(
+                self.plan_pool, _plan_all, session, jobs, options, t0
+            )
+            # Counted on the loop (the metrics are the loop's) when the plan is done.
+            fut.add_done_callback(functools.partial(_count_plan, metrics, transport))
+            if on_submit is not None:
+                on_submit(fut)
+        elif may_inline and self.inline(len(jobs), options):
+            return _track_all(session, jobs, options, t0, metrics.frames, transport)
+        else:
+            loop = asyncio.get_running_loop()
 
-        def record(batch: list[SolvedFrame], transport: str) -> None:
-            # The metrics are the loop's: hand the batch over (one wake-up).
-            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-                loop.call_soon_threadsafe(metrics.frames, batch, transport)
+            def record(batch: list[SolvedFrame], transport: str) -> None:
+                # The metrics are the loop's: hand the batch over (one wake-up).
+                with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                    loop.call_soon_threadsafe(metrics.frames, batch, transport)
 
-        if not plan:
             # Admitted before any state changes: a refusal leaves the lock free.
             cost_s = self.request_work_s(len(jobs), options)
             pool = self.pools[WorkClass.FRAMES]
             pool.admit()
             shares = self.frame_shares
             shares.take(client, cost_s)
-            fut = pool.submit(work, session, jobs, options, t0, record, transport)
+            fut = pool.submit(_track_all, session, jobs, options, t0, record, transport)
             fut.add_done_callback(lambda _: shares.give_back(client, cost_s))
-        else:
-            args = (session, jobs, options, t0, record, transport)
-            fut = loop.run_in_executor(self.plan_pool, work, *args)
-            if on_submit is not None:
-                on_submit(fut)
         try:
             return await asyncio.shield(fut)
         except asyncio.CancelledError:
@@ -429,15 +430,10 @@ def _track_all(
 
 
 def _plan_all(
-    session: Session,
-    jobs: Sequence[FrameJob],
-    options: IKOptions,
-    t0: float,
-    record: Callable[[list[SolvedFrame], str], None],
-    transport: str,
+    session: Session, jobs: Sequence[FrameJob], options: IKOptions, t0: float
 ) -> tuple[list[SolvedFrame], PlannedPath]:
-    """``_track_all`` for a planned clip: all frames or none (a rejected target fails
-    the request and leaves the session's pose as it was)."""
+    """``_track_all`` for a planned clip, on the planning thread: all frames or none (a
+    rejected target fails the request and leaves the session's pose as it was)."""
     if session.closed:  # deleted while the plan waited for the planning thread
         raise not_found()
     start = session.solver.q.copy()
@@ -450,8 +446,17 @@ def _plan_all(
     ]
     session.frames += len(plan.results)
     session.solved += sum(r.success for r in plan.results)
-    record(out, transport)
     return out, plan
+
+
+def _count_plan(
+    metrics: Metrics,
+    transport: str,
+    done: asyncio.Future[tuple[list[SolvedFrame], PlannedPath | None]],
+) -> None:
+    """A finished plan's frames in the metrics (a done callback: on the loop)."""
+    if not done.cancelled() and done.exception() is None:
+        metrics.frames(done.result()[0], transport)
 
 
 def make_solver(view: ChainView, options: IKOptions) -> IKSolver:
