@@ -290,23 +290,22 @@ def _markdown(out: dict[str, Any], cmd: str, problems: list[str]) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
+    ap.add_argument(
+        "--duration", dest="duration_s", type=float, default=600.0, help="seconds (default 600)"
+    )
     ap.add_argument("--ws-clients", type=int, default=3)
     ap.add_argument("--http-clients", type=int, default=1)
     ap.add_argument("--rate", type=float, default=50.0, help="frames/s per client")
-    ap.add_argument("--churn", type=float, default=10.0, help="seconds per session")
-    ap.add_argument("--sample", type=float, default=10.0, help="seconds between samples")
+    ap.add_argument("--churn", dest="churn_s", type=float, default=10.0, help="seconds per session")
+    ap.add_argument(
+        "--sample", dest="sample_s", type=float, default=10.0, help="seconds between samples"
+    )
     ap.add_argument("--max-growth", type=float, default=0.10)
     ap.add_argument("--append", action="store_true", help="append to bench/RESULTS.md")
     args = ap.parse_args()
-    out = run(
-        duration_s=args.duration,
-        ws_clients=args.ws_clients,
-        http_clients=args.http_clients,
-        rate=args.rate,
-        churn_s=args.churn,
-        sample_s=args.sample,
-    )
+    # The options named as run()'s parameters (dest=), passed through.
+    passed = ("duration_s", "ws_clients", "http_clients", "rate", "churn_s", "sample_s")
+    out = run(**{name: getattr(args, name) for name in passed})
     problems = verdict(out, args.max_growth)
     cmd = "python -m loadtest.soak " + " ".join(sys.argv[1:])
     text = _markdown(out, cmd.strip(), problems)
