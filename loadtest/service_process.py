@@ -46,7 +46,10 @@ def readyz(base: str, timeout_s: float = 2.0) -> tuple[int, bytes] | None:
         with urllib.request.urlopen(f"{base}/readyz", timeout=timeout_s) as r:
             return int(r.status), r.read()
     except urllib.error.HTTPError as e:  # 503 while warming up
-        return e.code, e.read()
+        # The error holds the response's socket: close it here, not at garbage
+        # collection, where the ResourceWarning lands in whichever test runs then.
+        with e:
+            return e.code, e.read()
     except (urllib.error.URLError, ConnectionError, TimeoutError):
         return None
 
