@@ -23,6 +23,10 @@ from .notes import ModelNote, NoteKind
 
 # Mimic chains longer than this are a cycle (a follower of a follower of ... itself).
 _MAX_MIMIC_DEPTH = 64
+# A multiplier or offset beyond this, alone or composed along a chain of mimics, is
+# refused: each is finite, but two followers at 1e200 compose to inf, and every frame
+# would then end ``nonfinite``. The schemas bound coordinates at 1e6 for the same reason.
+MAX_MIMIC_FACTOR = 1e6
 # The kinds with one variable: a mimic joint and the leader it follows are one of them.
 _SINGLE_DOF = frozenset({JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.PRISMATIC})
 
@@ -58,8 +62,19 @@ def check_mimic(j: Joint) -> None:
     if m.joint == j.name:
         raise InvalidModel("a joint cannot mimic itself", joint=j.name, field="mimic")
     for name in ("multiplier", "offset"):
-        if not math.isfinite(float(getattr(m, name))):
-            raise InvalidModel(f"mimic {name} must be finite", joint=j.name, field=f"mimic.{name}")
+        _check_factor(float(getattr(m, name)), name, j.name, composed=False)
+
+
+def _check_factor(value: float, name: str, joint: str, *, composed: bool) -> None:
+    if math.isfinite(value) and abs(value) <= MAX_MIMIC_FACTOR:
+        return
+    where = " (composed along its chain of mimic joints)" if composed else ""
+    raise InvalidModel(
+        f"mimic {name} must be a finite number within +-{MAX_MIMIC_FACTOR:g}{where}, "
+        f"not {value:g}",
+        joint=joint,
+        field=f"mimic.{name}",
+    )
 
 
 def resolve_mimics(checked: list[Joint]) -> dict[str, Mimic]:
@@ -94,6 +109,8 @@ def resolve_mimics(checked: list[Joint]) -> dict[str, Mimic]:
                 joint=j.name,
                 field="mimic",
             )
+        _check_factor(multiplier, "multiplier", j.name, composed=True)
+        _check_factor(offset, "offset", j.name, composed=True)
         resolved[j.name] = Mimic(leader.name, float(multiplier), float(offset))
     return resolved
 

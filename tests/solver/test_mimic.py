@@ -148,6 +148,24 @@ def _joint(name: str, parent: str, child: str, **kw: object) -> Joint:
             "b",
             id="nan_multiplier",
         ),
+        pytest.param(
+            [_joint("a", "w", "l1"), _joint("b", "l1", "l2", mimic=Mimic("a", 1.0, 2e6))],
+            "mimic.offset",
+            "b",
+            id="offset_beyond_1e6",
+        ),
+        # Each factor is finite and within bounds alone; composed they would be 1e12 (and
+        # 1e200 x 1e200 gave inf: every frame then ended nonfinite).
+        pytest.param(
+            [
+                _joint("a", "w", "l1"),
+                _joint("b", "l1", "lb", mimic=Mimic("a", 1e6)),
+                _joint("c", "lb", "l2", mimic=Mimic("b", 1e6)),
+            ],
+            "mimic.multiplier",
+            "c",
+            id="composed_multiplier_beyond_1e6",
+        ),
     ],
 )
 def test_invalid_mimic(joints: list[Joint], field: str, joint: str) -> None:
