@@ -70,8 +70,7 @@ def _check_factor(value: float, name: str, joint: str, *, composed: bool) -> Non
         return
     where = " (composed along its chain of mimic joints)" if composed else ""
     raise InvalidModel(
-        f"mimic {name} must be a finite number within +-{MAX_MIMIC_FACTOR:g}{where}, "
-        f"not {value:g}",
+        f"mimic {name} must be a finite number within +-{MAX_MIMIC_FACTOR:g}{where}, not {value:g}",
         joint=joint,
         field=f"mimic.{name}",
     )
