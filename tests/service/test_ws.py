@@ -129,6 +129,22 @@ def test_id_must_increase(client: TestClient, session: Created) -> None:
         assert ws.receive_json()["success"] is True
 
 
+def test_only_a_message_that_was_read_uses_up_its_id(client: TestClient, session: Created) -> None:
+    """invalid_format: not read as a message, its id stays free for the corrected one;
+    invalid_problem (a readable frame naming no effector of the chain) takes its id."""
+    with client.websocket_connect(url(session), headers=session.headers) as ws:
+        ws.send_json({**frame_msg(40), "extra": 1})
+        assert ws.receive_json()["error"]["code"] == "invalid_format"
+        ws.send_json(frame_msg(40))
+        assert ws.receive_json()["success"] is True
+        unknown = frame_msg(41)
+        unknown["targets"][0]["effector"] = "claw"
+        ws.send_json(unknown)
+        assert ws.receive_json()["error"]["code"] == "invalid_problem"
+        ws.send_json(frame_msg(41))
+        assert ws.receive_json()["error"]["code"] == "id_reuse"
+
+
 def test_unreachable_frame_is_a_result_with_success_false(
     client: TestClient, session: Created
 ) -> None:
