@@ -46,7 +46,10 @@ def skeleton_chain(spec: SkeletonSpec, settings: Settings) -> SkeletonChain:
             ``invalid_problem`` for anything else, naming the field.
     """
     skeleton = _read(spec, settings)
-    _check_lengths(skeleton, "chain.bvh" if isinstance(spec, S.BvhChain) else _source(spec))
+    if isinstance(spec, S.BvhChain):
+        _check_lengths(skeleton, "chain.bvh", "check the file's units (unit_m)")
+    else:  # glTF is metres by its specification: there is no unit to set
+        _check_lengths(skeleton, _source(spec), "glTF is in metres: check the node's values")
     for name, bone in spec.bones.items():
         check_radians(bone.lower, bone.upper, f"bone {name!r}", f"chain.bones.{name}")
     effectors = [
@@ -91,7 +94,7 @@ def _source(spec: S.GltfChain) -> str:
     return "chain.glb_base64" if spec.glb_base64 is not None else "chain.gltf"
 
 
-def _check_lengths(skeleton: Skeleton, field: str) -> None:
+def _check_lengths(skeleton: Skeleton, field: str, advice: str) -> None:
     """Refuse bone offsets beyond ``MAX_COORDINATE`` (1000 km), as JSON chains do: JSON
     numbers have no bound, and 1e300 would overflow the kinematics.
 
@@ -103,7 +106,7 @@ def _check_lengths(skeleton: Skeleton, field: str) -> None:
             if not np.all(np.abs(part.translation) <= MAX_COORDINATE):
                 raise invalid_problem(
                     f"bone {bone.name!r}: a translation beyond {MAX_COORDINATE:g} m "
-                    f"({part.translation.tolist()}); check the file's units (unit_m)",
+                    f"({part.translation.tolist()}); {advice}",
                     field,
                 )
 

@@ -147,8 +147,20 @@ class Motion:
         return int(self.values.shape[0])
 
 
+# How many of a skeleton's bone names an unknown-bone error lists when none is alike.
+_LISTED_BONES = 12
+
+
 def unknown_bone(name: str, names: Iterable[str], *, field: str) -> InvalidModel:
     """The error for a bone name that is not in the skeleton, with close names."""
-    close = difflib.get_close_matches(name, list(names), n=5, cutoff=0.5)
-    hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+    known = list(names)
+    close = difflib.get_close_matches(name, known, n=5, cutoff=0.5)
+    if close:
+        hint = f"; did you mean {', '.join(repr(c) for c in close)}?"
+    else:
+        # Nothing alike (a file without node names calls its bones node_<index>): the
+        # names there are, so that the caller need not open the file to find them.
+        shown = ", ".join(repr(n) for n in known[:_LISTED_BONES])
+        more = f", ... ({len(known)} in all)" if len(known) > _LISTED_BONES else ""
+        hint = f"; the skeleton's bones are {shown}{more}" if known else ""
     return InvalidModel(f"unknown bone {name!r}{hint}", joint=name, field=field)

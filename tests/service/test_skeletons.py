@@ -242,6 +242,15 @@ def test_unknown_bone_names_say_which_setting_and_suggest(client: TestClient) ->
     assert body["field"] == "bones.world[0]" and "Head" in body["detail"]
 
 
+def test_an_unknown_bone_like_no_other_lists_the_bones_there_are(client: TestClient) -> None:
+    # CesiumMan's nodes have no names: its bones are node_<index>, which an engine's
+    # "LeftHand" resembles too little for a suggestion.
+    body = error(client, glb_chain("CesiumMan.glb", effector_bones=["LeftHand"]))
+    assert body["field"] == "chain.effectors[0].bone", body
+    assert "bones are 'node_2', 'node_11'" in body["detail"], body
+    assert "(19 in all)" in body["detail"], body
+
+
 def test_limits_in_degrees_and_bad_settings_are_named(client: TestClient) -> None:
     body = error(client, walk_chain(bones={"LeftLeg": {"lower": [-150.0], "upper": [0.0]}}))
     assert body["field"] == "chain.bones.LeftLeg.lower" and "radians" in body["detail"]
@@ -289,7 +298,10 @@ def test_translations_beyond_a_thousand_km_are_refused(client: TestClient) -> No
     bvh = EXAMPLE_BVH_LEG["bvh"].replace("OFFSET 10 0 0", "OFFSET 1e300 0 0")
     body = error(client, {**EXAMPLE_BVH_LEG, "bvh": bvh})
     assert body["field"] == "chain.bvh" and "LeftUpLeg" in body["detail"], body
+    assert "unit_m" in body["detail"], body
     chain = copy.deepcopy(EXAMPLE_GLTF_LEG)
     chain["gltf"]["nodes"][1]["translation"] = [0.0, -1e7, 0.0]
     body = error(client, chain)
     assert body["field"] == "chain.gltf" and "knee" in body["detail"], body
+    # glTF has no unit_m to set (metres by its specification): not advised.
+    assert "unit_m" not in body["detail"] and "metres" in body["detail"], body
