@@ -360,6 +360,23 @@ def test_async_stream_batch(server: Server) -> None:
     assert_solved(entry.result)
 
 
+@pytest.mark.parametrize("reader", ["orjson", "json"])
+def test_answers_read_with_or_without_orjson(
+    ik: Client, session: Session, reader: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Answers are read with orjson when it is installed (ik-client[fast]), else json:
+    the same typed answers either way."""
+    if reader == "json":
+        monkeypatch.setattr("ik_client.stream._loads", json.loads)
+    with ik.stream(session) as stream:
+        result = stream.frame([tool(0.1)])
+        with pytest.raises(InvalidRequest) as error:
+            stream.frame([{"effector": "claw", "position": {"x": 0.4, "y": 0.1, "z": 0.5}}])
+    assert_solved(result)
+    assert result.joints is not None and result.effectors is not None
+    assert error.value.code is ErrorCode.INVALID_PROBLEM and error.value.id == 1
+
+
 def test_stream_without_deflate(ik: Client, session: Session) -> None:
     """websockets offers permessage-deflate, which the server accepts; ``deflate=False``
     sends messages as they are."""
