@@ -360,16 +360,22 @@ def test_async_stream_batch(server: Server) -> None:
     assert_solved(entry.result)
 
 
-@pytest.mark.parametrize("reader", ["orjson", "json"])
-def test_answers_read_with_or_without_orjson(
-    ik: Client, session: Session, reader: str, monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize("codec", ["orjson", "json"])
+def test_json_with_or_without_orjson(
+    ik: Client, session: Session, codec: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Answers are read with orjson when it is installed (ik-client[fast]), else json:
-    the same typed answers either way."""
-    if reader == "json":
+    """Messages are written and answers read with orjson when it is installed
+    (ik-client[fast]), else json: the same typed answers either way, and NaN refused
+    before it is sent, counting as nothing sent."""
+    if codec == "json":
         monkeypatch.setattr("ik_client.stream._loads", json.loads)
+        monkeypatch.setattr("ik_client.stream._orjson_dumps", None)
+    nan: Target = {"effector": "tool", "position": {"x": float("nan"), "y": 0.1, "z": 0.5}}
     with ik.stream(session) as stream:
         result = stream.frame([tool(0.1)])
+        with pytest.raises(ValueError):
+            stream.send_frame([nan])
+        assert stream.in_flight == 0
         with pytest.raises(InvalidRequest) as error:
             stream.frame([{"effector": "claw", "position": {"x": 0.4, "y": 0.1, "z": 0.5}}])
     assert_solved(result)

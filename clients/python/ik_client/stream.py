@@ -50,16 +50,34 @@ from .types import (
     Target,
 )
 
-# Answers are read with orjson when it is installed (``pip install ik-client[fast]``):
-# about 5x faster than json, which counts for a client streaming thousands of frames a
-# second (loadtest); the same values either way.
+# JSON messages are written and answers read with orjson when it is installed (``pip
+# install ik-client[fast]``): several times faster than json, which counts for a client
+# streaming thousands of frames a second (loadtest); the same values either way.
 _loads: Callable[[str | bytes], Any]
+_orjson_dumps: Callable[[Any], bytes] | None
 try:
     import orjson
 
     _loads = orjson.loads
+    _orjson_dumps = orjson.dumps
 except ImportError:  # pragma: no cover - the test environment has orjson
     _loads = json.loads
+    _orjson_dumps = None
+
+
+def _dumps(payload: dict[str, Any]) -> str:
+    """``payload`` as compact JSON; NaN and infinity refused (ValueError), as the server
+    refuses them, here where the caller is."""
+    if _orjson_dumps is not None:
+        try:
+            data = _orjson_dumps(payload)
+        except TypeError:  # orjson.JSONEncodeError: something only json writes (int keys)
+            pass
+        else:
+            if b"null" not in data:  # orjson writes NaN and infinity as null: json decides
+                return data.decode()
+    return json.dumps(payload, separators=(",", ":"), allow_nan=False)
+
 
 # What ends one reconnect attempt and lets the next one start (``_Retries.attempt_failed``).
 _ATTEMPT_FAILURES = (ConnectionClosed, OSError, InvalidHandshake, TimeoutError)
@@ -106,10 +124,11 @@ class _Pipeline:
     def add(self, body: dict[str, Any]) -> tuple[int, str | bytes]:
         """Number a new message; returns its id and its encoding."""
         message = _Message(self._next_id, self._next_wire_id, body)
+        data = self._encode(message)  # a message that cannot be written is not counted
         self._next_id += 1
         self._next_wire_id += 1
         self._waiting[message.wire_id] = message
-        return message.id, self._encode(message)
+        return message.id, data
 
     def resend(self) -> list[str | bytes]:
         """Every waiting message, in order, under the id it was sent with: what a new
@@ -166,8 +185,7 @@ class _Pipeline:
         payload = {**message.body, "id": message.wire_id}
         if self.encoding is Encoding.MSGPACK:
             return bytes(msgpack.packb(payload))
-        # The server refuses NaN and infinity; refuse them here, where the caller is.
-        return json.dumps(payload, separators=(",", ":"), allow_nan=False)
+        return _dumps(payload)
 
 
 def _frame(targets: list[Target]) -> dict[str, Any]:
