@@ -35,8 +35,8 @@ from urllib.parse import urlsplit
 import httpx
 import orjson
 from ik_client import (
-    AsyncClient,
     AsyncStream,
+    Encoding,
     FrameAnswer,
     FrameResult,
     Reconnect,
@@ -45,6 +45,7 @@ from ik_client import (
     Target,
     UnexpectedAnswer,
 )
+from ik_client.calls import ws_url
 from websockets.exceptions import ConnectionClosed, InvalidHandshake
 
 from .paths import Path
@@ -170,36 +171,39 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
     res = ClientResult(spec.index, spec.path.chain, "ws")
     parts = urlsplit(spec.url)
     host, port = parts.hostname or "127.0.0.1", parts.port or 80
-    async with AsyncClient(spec.url, timeout_s=spec.timeout_s) as ik:
+    try:
+        sock, created, res.worker = await asyncio.to_thread(
+            create_session_sticky, host, port, session_body(spec), spec.timeout_s
+        )
+        session = StickySession(created["id"], created["token"])
+        # The stream alone, not an AsyncClient's: each httpx client loads the CA
+        # certificates (tens of ms of CPU), which would stall the clients already sending.
+        stream = AsyncStream(
+            ws_url(spec.url, session, spec.results == "compact"),
+            session.token,
+            encoding=Encoding.JSON,
+            reconnect=NO_RECONNECT,
+            timeout_s=None,  # the drain below bounds the wait for the last answers
+            deflate=False,
+            sock=sock,
+        )
+        await asyncio.wait_for(stream.__aenter__(), spec.timeout_s)
+    except SetupError as e:
+        res.errors[e.kind] += 1
+        progress.errors += 1
+        return res
+    except (OSError, TimeoutError, ConnectionClosed, InvalidHandshake) as e:
+        res.errors[f"setup_{type(e).__name__}"] += 1
+        progress.errors += 1
+        return res
+    res.opened = True
+    try:
+        await _stream_frames(spec, start, progress, res, stream)
+    finally:
         try:
-            sock, created, res.worker = await asyncio.to_thread(
-                create_session_sticky, host, port, session_body(spec), spec.timeout_s
-            )
-            stream = ik.stream(
-                StickySession(created["id"], created["token"]),
-                compact=spec.results == "compact",
-                reconnect=NO_RECONNECT,
-                timeout_s=None,  # the drain below bounds the wait for the last answers
-                deflate=False,
-                sock=sock,
-            )
-            await asyncio.wait_for(stream.__aenter__(), spec.timeout_s)
-        except SetupError as e:
-            res.errors[e.kind] += 1
-            progress.errors += 1
-            return res
-        except (OSError, TimeoutError, ConnectionClosed, InvalidHandshake) as e:
-            res.errors[f"setup_{type(e).__name__}"] += 1
-            progress.errors += 1
-            return res
-        res.opened = True
-        try:
-            await _stream_frames(spec, start, progress, res, stream)
-        finally:
-            try:
-                await asyncio.wait_for(stream.close(), spec.timeout_s)
-            except (TimeoutError, ConnectionClosed, OSError):
-                pass
+            await asyncio.wait_for(stream.close(), spec.timeout_s)
+        except (TimeoutError, ConnectionClosed, OSError):
+            pass
     return res
 
 
