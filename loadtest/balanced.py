@@ -4,7 +4,8 @@ Starts ``loadtest.cluster.Cluster`` (redis-server, the workers, HAProxy running
 deploy/haproxy.cfg) for each worker count, opens ``--clients`` WebSocket streams through
 the balancer (one session each, spread by connection), each sending its next frame as
 soon as the previous one is answered, for ``--duration`` seconds; prints the answered
-frames per second.
+frames per second. The clients are ik_client's (``AsyncClient``, ``AsyncStream``), with
+reconnecting off: a stream that drops fails the run rather than being mended.
 
     OPENBLAS_NUM_THREADS=1 python -m loadtest.balanced --workers 1,2,4 --clients 32
 """
@@ -18,40 +19,37 @@ import tempfile
 import time
 from pathlib import Path
 
-import httpx
-import orjson
-from websockets.asyncio.client import connect
+from ik_client import AsyncClient, FrameAnswer, Quaternion, ServiceError, Target
 
+from .clients import NO_RECONNECT
 from .cluster import Cluster
 
-DOWN = {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0}
+DOWN: Quaternion = {"w": 0.0, "x": 1.0, "y": 0.0, "z": 0.0}
+PANDA = {"format": "example", "name": "panda_arm"}
 
 
-def _frame(i: int, k: int) -> bytes:
+def _targets(i: int, k: int) -> list[Target]:
     a = 2 * math.pi * (k + i) / 200
     position = {"x": 0.45 + 0.08 * math.cos(a), "y": 0.08 * math.sin(a), "z": 0.45}
-    targets = [{"effector": "tool", "position": position, "orientation": DOWN}]
-    return orjson.dumps({"type": "frame", "id": k, "targets": targets})
+    return [{"effector": "tool", "position": position, "orientation": DOWN}]
 
 
 async def _client(base: str, i: int, ready: asyncio.Barrier, stop_at: list[float]) -> int:
     """One stream: its session and socket first, then (once every client has them)
     frames back to back until ``stop_at[0]``; the frames answered in that window."""
-    async with httpx.AsyncClient(base_url=base, timeout=60) as http:
-        chain = {"format": "example", "name": "panda_arm"}
-        r = await http.post("/v1/sessions", json={"chain": chain})
-        r.raise_for_status()
-        s = r.json()
-    ws_url = base.replace("http", "ws", 1) + f"/v1/sessions/{s['id']}/ws"
-    n = 0
-    headers = {"Authorization": f"Bearer {s['token']}"}
-    async with connect(ws_url, additional_headers=headers) as ws:
-        await ready.wait()
-        while time.perf_counter() < stop_at[0]:
-            await ws.send(_frame(i, n).decode())
-            answer = orjson.loads(await ws.recv())
-            if answer.get("type") == "result":
-                n += 1
+    async with AsyncClient(base, timeout_s=60.0) as ik:
+        session = await ik.create_session(PANDA)
+        n = 0
+        async with ik.stream(session, reconnect=NO_RECONNECT, timeout_s=60.0) as stream:
+            await ready.wait()
+            while time.perf_counter() < stop_at[0]:
+                await stream.send_frame(_targets(i, n))
+                try:
+                    answer = await stream.receive()
+                except ServiceError:
+                    continue  # answered, but with an error: not counted
+                if isinstance(answer, FrameAnswer):
+                    n += 1
     return n
 
 

@@ -4,7 +4,15 @@ chain over one WebSocket, one ``batch`` message per tick (``loadtest.cost --char
 Each client creates its sessions over HTTP, opens the socket on the first one and, at
 ``rate_hz``, sends one batch holding a frame for every session, each session at its own
 point of the chain's path; it waits for the answer before the next tick's send is due
-(one message in flight). An entry answered with an error counts in ``errors``.
+(one message in flight). An entry answered with an error counts in ``errors``
+(``entry_<code>``), as does an error answer to the whole message (``ws_<code>``) and a
+socket closed under the client (``closed_<code>``, which ends that client).
+
+The batches go through ik_client's ``AsyncStream`` (``send_batch``; reconnecting off,
+no permessage-deflate). The sessions are created with plain httpx: the floor's bare
+echo, measured by the same clients, answers session creation with an id and a token
+only, and echoes each batch back as it came (an ``UnexpectedAnswer`` whose entries are
+the frames echoed).
 """
 
 from __future__ import annotations
@@ -18,8 +26,18 @@ from typing import Any
 
 import httpx
 import orjson
-from websockets.asyncio.client import connect
+from ik_client import (
+    Answer,
+    AsyncClient,
+    BatchAnswer,
+    BatchFrame,
+    ServiceError,
+    StreamClosed,
+    Target,
+    UnexpectedAnswer,
+)
 
+from .clients import NO_RECONNECT, StickySession
 from .paths import make_path
 
 
@@ -51,41 +69,57 @@ async def _client(
                 return
             sessions.append(r.json())
     await ready.wait()  # every client has its sessions: the measured window starts
-    heads = [
-        b'{"session":"%s","token":"%s","id":' % (s["id"].encode(), s["token"].encode())
-        for s in sessions
-    ]
-    first = sessions[0]
-    query = "" if results == "full" else f"?results={results}"
-    ws_url = url.replace("http://", "ws://") + f"/v1/sessions/{first['id']}/ws{query}"
-    headers = {"Authorization": f"Bearer {first['token']}"}
+    refs = [StickySession(x["id"], x["token"]) for x in sessions]
+    targets: list[list[Target]] = [orjson.loads(t) for t in path.targets]
     period = 1.0 / rate_hz
-    n_path = len(path.targets)
-    async with connect(ws_url, additional_headers=headers, compression=None, max_size=None) as ws:
+    n_path = len(targets)
+    async with (
+        AsyncClient(url, timeout_s=60.0) as ik,
+        ik.stream(
+            refs[0],
+            compact=results == "compact",
+            reconnect=NO_RECONNECT,
+            timeout_s=None,
+            deflate=False,
+        ) as stream,
+    ):
         start = time.perf_counter() + index * period / 7
         k = 0
         while (t_sched := start + k * period) - start < duration_s:
             delay = t_sched - time.perf_counter()
             if delay > 0:
                 await asyncio.sleep(delay)
-            entries = b",".join(
-                head + b'%d,"targets":%s}' % (k, path.targets[(k + 37 * j) % n_path])
-                for j, head in enumerate(heads)
-            )
-            await ws.send(b'{"type":"batch","id":%d,"frames":[%s]}' % (k, entries), text=True)
-            answer = orjson.loads(await ws.recv())
+            frames: list[BatchFrame] = [
+                {"session": s.id, "token": s.token, "id": k,
+                 "targets": targets[(k + 37 * j) % n_path]}
+                for j, s in enumerate(refs)
+            ]  # fmt: skip
+            entries = 0
+            answer: Answer | UnexpectedAnswer | None
+            try:
+                await stream.send_batch(frames)
+                answer = await stream.receive()
+            except UnexpectedAnswer as e:  # the floor's echo
+                answer = e
+            except ServiceError as e:  # the whole message refused
+                run.errors[f"ws_{e.code}"] += 1
+                answer = None
+            except StreamClosed as e:
+                run.errors[f"closed_{e.close_code}"] += 1
+                return
             now = time.perf_counter()
             run.messages += 1
-            results = answer.get("results") or answer.get("frames") or []
-            run.entries += len(results)
+            if isinstance(answer, BatchAnswer):
+                entries = len(answer.results)
+                for r in answer.results:
+                    if r.error is not None:
+                        run.errors[f"entry_{r.error.code}"] += 1
+            elif isinstance(answer, UnexpectedAnswer):  # the floor's echo: the frames sent
+                entries = len(answer.envelope.get("frames") or [])
+            run.entries += entries
             if now - start >= warmup_s:
-                run.measured_entries += len(results)
+                run.measured_entries += entries
                 run.rtt_ms.append((now - t_sched) * 1e3)
-            if "error" in answer:
-                run.errors[f"ws_{answer['error'].get('code')}"] += 1
-            for r in results:
-                if "error" in r:
-                    run.errors[f"entry_{r['error'].get('code')}"] += 1
             k += 1
 
 

@@ -4,7 +4,17 @@ Sends are open-loop on a fixed schedule (frame k at start + k / rate): a slow an
 does not delay the next frame over WebSocket (the server answers in order, so a client
 may pipeline), and over HTTP the next request goes out as soon as the previous answer
 is in (one request in flight per client, which is what keeps HTTP frames in order).
-Latency is measured from the scheduled time either way.
+Latency is measured from the scheduled time either way (over WebSocket, to the answer
+as ik_client returns it, decoded).
+
+WebSocket frames go through ik_client (``AsyncStream``: ids, pipelining, answers and
+error answers typed), opened on the keep-alive connection that created the session
+(``create_session_sticky``), so they reach the worker process that holds it.
+Reconnecting is off: a drop is an error to count, not something to hide. Session
+creation and HTTP frames stay on plain HTTP (httpx), because the floors
+(loadtest.floors), which the same generator drives, answer them with bare bodies (an
+id and a token; ``{"id", "termination": "echo"}``) that are not the service's schema a
+typed client reads; making them full answers would change the floor being measured.
 
 Error kinds (``ClientResult.errors``): ``setup_<why>`` (the session could not be opened),
 ``ws_<code>`` / ``http_<status>`` (the server answered with an error), ``closed_<code>``
@@ -24,13 +34,26 @@ from urllib.parse import urlsplit
 
 import httpx
 import orjson
-from websockets.asyncio.client import connect
-from websockets.exceptions import ConnectionClosed
+from ik_client import (
+    AsyncStream,
+    Encoding,
+    FrameAnswer,
+    FrameResult,
+    Reconnect,
+    ServiceError,
+    StreamClosed,
+    Target,
+    UnexpectedAnswer,
+)
+from ik_client.calls import ws_url
+from websockets.exceptions import ConnectionClosed, InvalidHandshake
 
 from .paths import Path
 from .records import ClientResult, Progress
 
 WORKER_HEADER = "x-worker"  # set by loadtest.serve; tells which process owns the session
+# A load tool counts a dropped connection (closed_<code>); it never reconnects past it.
+NO_RECONNECT = Reconnect(attempts=0)
 
 
 class SetupError(Exception):
@@ -56,6 +79,15 @@ class ClientSpec:
     phase_s: float  # first frame this long after the common start (spreads the ticks)
     options: dict[str, Any]
     results: str = "full"  # ?results= of the service: "full" or "compact"
+
+
+@dataclass(frozen=True, slots=True)
+class StickySession:
+    """The id and token of a session made by ``create_session_sticky`` (an
+    ``ik_client.SessionRef``; the floors answer with no more than these two)."""
+
+    id: str
+    token: str
 
 
 def session_body(spec: ClientSpec) -> bytes:
@@ -131,7 +163,11 @@ async def _sleep_until(t: float) -> None:
 
 
 async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> ClientResult:
-    """One WebSocket client: sticky session, paced sends, in-order answers checked."""
+    """One WebSocket client: sticky session, paced sends, in-order answers checked.
+
+    Frames go through ik_client's ``AsyncStream`` on the connection that created the
+    session, with reconnecting off (a drop is counted as ``closed_<code>``, not mended)
+    and no permessage-deflate (300-byte frames gain nothing from it; it costs CPU)."""
     res = ClientResult(spec.index, spec.path.chain, "ws")
     parts = urlsplit(spec.url)
     host, port = parts.hostname or "127.0.0.1", parts.port or 80
@@ -139,35 +175,53 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
         sock, created, res.worker = await asyncio.to_thread(
             create_session_sticky, host, port, session_body(spec), spec.timeout_s
         )
-        ws = await connect(
-            f"ws://{host}:{port}/v1/sessions/{created['id']}/ws{_query(spec)}",
+        session = StickySession(created["id"], created["token"])
+        # The stream alone, not an AsyncClient's: each httpx client loads the CA
+        # certificates (tens of ms of CPU), which would stall the clients already sending.
+        stream = AsyncStream(
+            ws_url(spec.url, session, spec.results == "compact"),
+            session.token,
+            encoding=Encoding.JSON,
+            reconnect=NO_RECONNECT,
+            timeout_s=None,  # the drain below bounds the wait for the last answers
+            deflate=False,
             sock=sock,
-            additional_headers={"Authorization": f"Bearer {created['token']}"},
-            open_timeout=spec.timeout_s,
-            compression=None,  # 300-byte frames gain nothing from deflate; it costs CPU
-            max_size=None,
-            ping_interval=None,  # the run is short; pings would only add traffic
         )
+        await asyncio.wait_for(stream.__aenter__(), spec.timeout_s)
     except SetupError as e:
         res.errors[e.kind] += 1
         progress.errors += 1
         return res
-    except (OSError, TimeoutError, ConnectionClosed) as e:
+    except (OSError, TimeoutError, ConnectionClosed, InvalidHandshake) as e:
         res.errors[f"setup_{type(e).__name__}"] += 1
         progress.errors += 1
         return res
     res.opened = True
+    try:
+        await _stream_frames(spec, start, progress, res, stream)
+    finally:
+        try:
+            await asyncio.wait_for(stream.close(), spec.timeout_s)
+        except (TimeoutError, ConnectionClosed, OSError):
+            pass
+    return res
+
+
+async def _stream_frames(
+    spec: ClientSpec, start: float, progress: Progress, res: ClientResult, stream: AsyncStream
+) -> None:
+    """Send the path on schedule (a sender task) and check each answer against the
+    oldest frame in flight (a receiver task); drain, then count what is left."""
     period = 1.0 / spec.rate_hz
-    targets = [t.decode() for t in spec.path.targets]
+    targets: list[list[Target]] = [orjson.loads(t) for t in spec.path.targets]
     n_path = len(targets)
     offset = spec.index * 37  # clients on the same chain start at different points
-    in_flight: deque[tuple[int, float]] = deque()
+    in_flight: deque[tuple[int, float]] = deque()  # (the stream's id, scheduled time)
     first = _first_frame_at(start, spec)
-    sending_done = asyncio.Event()
     all_answered = asyncio.Event()
 
     async def sender() -> None:
-        k = 0
+        k = 0  # the stream numbers its messages 0, 1, 2, ...: k is the id it gives
         try:
             while True:
                 t_sched = first + k * period
@@ -175,24 +229,34 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
                     break
                 await _sleep_until(t_sched)
                 now = time.perf_counter()
-                msg = f'{{"type":"frame","id":{k},"targets":{targets[(offset + k) % n_path]}}}'
-                in_flight.append((k, t_sched))
+                in_flight.append((k, t_sched))  # before the send: its answer may come first
                 all_answered.clear()
                 res.send_lag_us.append((now - t_sched) * 1e6)
                 res.sent += 1  # counted before the send: a frame lost in it is unanswered
                 progress.sent += 1
-                await ws.send(msg)
+                await stream.send_frame(targets[(offset + k) % n_path])
                 k += 1
-        except ConnectionClosed:
+        except StreamClosed:
             pass  # the receiver records why
-        finally:
-            sending_done.set()
 
     async def receiver() -> None:
-        async for raw in ws:
+        while True:
+            result: FrameResult | None = None
+            error: str | None = None
+            try:
+                answer = await stream.receive()
+                rid = answer.id
+                if isinstance(answer, FrameAnswer):
+                    result = answer.result
+            except ServiceError as e:  # an error answer
+                rid, error = e.id, f"ws_{e.code}"
+            except UnexpectedAnswer as e:
+                if e.id is None:
+                    res.errors["unknown_id"] += 1
+                    progress.errors += 1
+                    continue
+                rid = e.id  # not a result: the bare echo (loadtest.floors) sends the frame back
             now = time.perf_counter()
-            msg = orjson.loads(raw)
-            rid = msg.get("id")
             if in_flight and in_flight[0][0] == rid:
                 _, t_sched = in_flight.popleft()
             else:
@@ -210,21 +274,20 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
             rtt = now - t_sched
             if rtt > period:
                 progress.late += 1
-            if "error" in msg:
-                res.errors[f"ws_{msg['error'].get('code')}"] += 1
+            if error is not None:
+                res.errors[error] += 1
                 progress.errors += 1
             else:
-                r = msg.get("result")
                 res.t_s.append(t_sched - first)
                 res.rtt_us.append(rtt * 1e6)
-                if r is None:  # a bare echo (loadtest.floors) answers with the frame itself
+                if result is None:
                     res.solve_us.append(0.0)
                     res.server_us.append(0.0)
                     res.terminations["echo"] += 1
                 else:
-                    res.solve_us.append(r["solve_us"])
-                    res.server_us.append(r["server_us"])
-                    res.terminations[r["termination"]] += 1
+                    res.solve_us.append(result.solve_us)
+                    res.server_us.append(result.server_us)
+                    res.terminations[result.termination.value] += 1
             if not in_flight:
                 all_answered.set()
 
@@ -241,8 +304,8 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
         if recv_task.done():
             # The socket closed (or the receiver failed) before the client was done.
             exc = recv_task.exception()
-            if exc is None or isinstance(exc, ConnectionClosed):
-                kind = f"closed_{ws.close_code}"
+            if isinstance(exc, StreamClosed):
+                kind = f"closed_{exc.close_code}"
             else:
                 kind = type(exc).__name__
             res.lost = True
@@ -254,12 +317,8 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
             res.errors["unanswered"] += len(in_flight)
             progress.errors += len(in_flight)
         recv_task.cancel()
-        await asyncio.gather(recv_task, return_exceptions=True)
-        try:
-            await asyncio.wait_for(ws.close(), spec.timeout_s)
-        except (TimeoutError, ConnectionClosed, OSError):
-            pass
-    return res
+        send_task.cancel()
+        await asyncio.gather(recv_task, send_task, return_exceptions=True)
 
 
 async def http_client(spec: ClientSpec, start: float, progress: Progress) -> ClientResult:

@@ -1,3 +1,4 @@
+# Raw websockets and sockets on purpose: its point is the wire (abuses no client library sends).
 """``python -m loadtest.hostile``: the abuses of issue 23 against a fresh ``python -m
 service`` on 127.0.0.1, one at a time, each while a well-behaved client sends a panda
 frame at 60 Hz over WebSocket and another creates a session every 100 ms.

@@ -10,6 +10,9 @@ Starts the server twice on 127.0.0.1 (IK_INLINE_BUDGET_US=1e12: every frame inli
           time budget B us) while another client pings: the ping round trip shows
           how long the event loop is held by someone else's solve.
 
+The clients are ik_client's (``AsyncClient``, ``AsyncStream``; reconnecting off): what
+is compared is the server's solving, not the wire.
+
 Usage (from the repository root; bounded: a few thousand frames, < 1 min):
 
     OPENBLAS_NUM_THREADS=1 python -m loadtest.ws_inline_vs_thread [--clients 4] [--frames 2000]
@@ -19,20 +22,20 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import statistics
 import time
-from typing import Any
 
-import httpx
 import numpy as np
-from websockets.asyncio.client import connect
+from ik_client import AsyncClient, AsyncStream, SolverOptionsPatch, Target
 
 from solver.model import matrix_to_quaternion
 from solver.model.examples import panda_arm
 from solver.model.forward import effector_poses
 
+from .clients import NO_RECONNECT
 from .service_process import ServiceProcess
+
+PANDA = {"format": "example", "name": "panda_arm"}
 
 
 def start_server(inline_budget_us: float, budget_us: float) -> ServiceProcess:
@@ -51,10 +54,10 @@ def start_server(inline_budget_us: float, budget_us: float) -> ServiceProcess:
     return server
 
 
-def panda_path(n: int) -> list[dict[str, Any]]:
+def panda_path(n: int) -> list[Target]:
     chain = panda_arm()
     mid = chain.mid_limits()
-    out = []
+    out: list[Target] = []
     for k in range(n):
         q = np.clip(mid + 0.3 * np.sin(0.01 * k + np.arange(7)), chain.lower, chain.upper)
         pose = effector_poses(chain, q)[0]
@@ -70,63 +73,48 @@ def panda_path(n: int) -> list[dict[str, Any]]:
     return out
 
 
-def new_session(base: str, options: dict[str, Any]) -> tuple[str, str]:
-    r = httpx.post(
-        f"{base}/v1/sessions",
-        json={"chain": {"format": "example", "name": "panda_arm"}, "options": options},
-        timeout=30.0,
-    )
-    r.raise_for_status()
-    return r.json()["id"], r.json()["token"]
+async def stream_of(ik: AsyncClient, options: SolverOptionsPatch) -> AsyncStream:
+    """A new panda_arm session with ``options`` and its WebSocket (to open with ``async
+    with``), not reconnecting."""
+    session = await ik.create_session(PANDA, options=options)
+    return ik.stream(session, reconnect=NO_RECONNECT)
 
 
 async def stream_client(
-    base: str, ws_base: str, path: list[dict[str, Any]]
+    base: str, path: list[Target]
 ) -> tuple[list[float], list[float], list[float]]:
-    sid, token = new_session(base, {})
     rtts, solve, server = [], [], []
-    async with connect(
-        f"{ws_base}/v1/sessions/{sid}/ws", additional_headers={"Authorization": f"Bearer {token}"}
-    ) as ws:
-        for i, target in enumerate(path):
+    async with AsyncClient(base) as ik, await stream_of(ik, {}) as stream:
+        for target in path:
             t = time.perf_counter()
-            await ws.send(json.dumps({"type": "frame", "id": i, "targets": [target]}))
-            reply = json.loads(await ws.recv())
+            result = await stream.frame([target])
             rtts.append(time.perf_counter() - t)
-            assert reply["id"] == i
-            solve.append(reply["result"]["solve_us"] * 1e-6)
-            server.append(reply["result"]["server_us"] * 1e-6)
+            solve.append(result.solve_us * 1e-6)
+            server.append(result.server_us * 1e-6)
     return rtts, solve, server
 
 
-async def heavy_client(base: str, ws_base: str, budget_us: float, stop: asyncio.Event) -> int:
-    sid, token = new_session(base, {"time_budget_us": budget_us, "max_iter": 100_000})
-    far = {
+async def heavy_client(base: str, budget_us: float, stop: asyncio.Event) -> int:
+    far: Target = {
         "effector": "tool",
         "position": {"x": 3.0, "y": 0.0, "z": 0.5},
         "orientation": {"w": 1.0, "x": 0.0, "y": 0.0, "z": 0.0},
     }
     n = 0
-    async with connect(
-        f"{ws_base}/v1/sessions/{sid}/ws", additional_headers={"Authorization": f"Bearer {token}"}
-    ) as ws:
+    options: SolverOptionsPatch = {"time_budget_us": budget_us, "max_iter": 100_000}
+    async with AsyncClient(base) as ik, await stream_of(ik, options) as stream:
         while not stop.is_set() and n < 2000:
-            await ws.send(json.dumps({"type": "frame", "id": n, "targets": [far]}))
-            await ws.recv()
+            await stream.frame([far])  # not reachable: a result with success False
             n += 1
     return n
 
 
-async def ping_client(base: str, ws_base: str, count: int) -> list[float]:
-    sid, token = new_session(base, {})
+async def ping_client(base: str, count: int) -> list[float]:
     rtts = []
-    async with connect(
-        f"{ws_base}/v1/sessions/{sid}/ws", additional_headers={"Authorization": f"Bearer {token}"}
-    ) as ws:
-        for i in range(count):
+    async with AsyncClient(base) as ik, await stream_of(ik, {}) as stream:
+        for _ in range(count):
             t = time.perf_counter()
-            await ws.send(json.dumps({"type": "ping", "id": i}))
-            await ws.recv()
+            await stream.ping()
             rtts.append(time.perf_counter() - t)
             await asyncio.sleep(0.002)
     return rtts
@@ -137,19 +125,19 @@ def pct(xs: list[float], p: float) -> float:
 
 
 async def run(port: int, clients: int, frames: int, budget_us: float) -> dict[str, float]:
-    base, ws_base = f"http://127.0.0.1:{port}", f"ws://127.0.0.1:{port}"
+    base = f"http://127.0.0.1:{port}"
     path = panda_path(frames)
-    await stream_client(base, ws_base, path[:50])  # warm connections and caches
+    await stream_client(base, path[:50])  # warm connections and caches
     t = time.perf_counter()
-    results = await asyncio.gather(*(stream_client(base, ws_base, path) for _ in range(clients)))
+    results = await asyncio.gather(*(stream_client(base, path) for _ in range(clients)))
     wall = time.perf_counter() - t
     rtts = [x for r in results for x in r[0]]
     solve = [x for r in results for x in r[1]]
     server = [x for r in results for x in r[2]]
     stop = asyncio.Event()
-    heavy = asyncio.create_task(heavy_client(base, ws_base, budget_us, stop))
+    heavy = asyncio.create_task(heavy_client(base, budget_us, stop))
     await asyncio.sleep(0.2)
-    pings = await ping_client(base, ws_base, 300)
+    pings = await ping_client(base, 300)
     stop.set()
     heavy_frames = await heavy
     return {

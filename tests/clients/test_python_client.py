@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import json
 import socket
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -16,6 +17,7 @@ import pytest
 from ik_client import (
     AsyncClient,
     AuthError,
+    BatchAnswer,
     Client,
     ClipAnswer,
     ConnectionLost,
@@ -36,7 +38,9 @@ from ik_client import (
     Target,
     Termination,
     TooManyWebSockets,
+    UnexpectedAnswer,
 )
+from websockets.asyncio.server import ServerConnection, serve
 
 from .conftest import Server
 
@@ -310,6 +314,159 @@ def test_too_many_websockets_after_bounded_retries(start_server: Callable[..., S
             # Each retry is accepted and closed again (at the resend or at the next read):
             # no more than the two allowed.
             assert second.reconnects <= 2
+
+
+@pytest.mark.parametrize("encoding", list(Encoding))
+def test_stream_batches_pipelined_in_order(ik: Client, encoding: Encoding) -> None:
+    """``batch`` messages on one session's socket: one answer per batch, in order, one
+    entry per frame, an entry's error in that entry."""
+    a, b = ik.create_session(PANDA), ik.create_session(PANDA)
+
+    def entries(k: int) -> list[ik_client.BatchFrame]:
+        return [
+            {"session": a.id, "token": a.token, "id": k, "targets": [tool(0.1 + 0.002 * k)]},
+            {"session": b.id, "token": b.token, "id": k, "targets": [tool(0.12)]},
+        ]
+
+    with ik.stream(a, encoding=encoding, compact=True) as stream:
+        ids = [stream.send_batch(entries(k)) for k in range(5)]
+        answers = [stream.receive() for _ in ids]
+        assert [x.id for x in answers] == ids == list(range(5))
+        for k, answer in enumerate(answers):
+            assert isinstance(answer, BatchAnswer) and len(answer.results) == 2
+            assert [(e.session, e.id) for e in answer.results] == [(a.id, k), (b.id, k)]
+            assert all(e.result is not None and e.result.joints is None for e in answer.results)
+        wrong = entries(5)
+        wrong[1]["token"] = "not-its-token"
+        first, refused = stream.batch(wrong)
+        assert first.result is not None and first.error is None
+        assert refused.result is None and isinstance(refused.error, AuthError)
+
+
+def test_async_stream_batch(server: Server) -> None:
+    async def run() -> list[ik_client.BatchEntryResult]:
+        async with AsyncClient(server.base) as ik:
+            a = await ik.create_session(PANDA)
+            frame: ik_client.BatchFrame = {
+                "session": a.id,
+                "token": a.token,
+                "targets": [tool(0.1)],
+            }
+            async with ik.stream(a) as stream:
+                return await stream.batch([frame])
+
+    (entry,) = asyncio.run(run())
+    assert entry.result is not None
+    assert_solved(entry.result)
+
+
+@pytest.mark.parametrize("codec", ["orjson", "json"])
+def test_json_with_or_without_orjson(
+    ik: Client, session: Session, codec: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Messages are written and answers read with orjson when it is installed
+    (ik-client[fast]), else json: the same typed answers either way, and NaN refused
+    before it is sent, counting as nothing sent."""
+    if codec == "json":
+        monkeypatch.setattr("ik_client.stream._loads", json.loads)
+        monkeypatch.setattr("ik_client.stream._orjson_dumps", None)
+    nan: Target = {"effector": "tool", "position": {"x": float("nan"), "y": 0.1, "z": 0.5}}
+    with ik.stream(session) as stream:
+        result = stream.frame([tool(0.1)])
+        with pytest.raises(ValueError):
+            stream.send_frame([nan])
+        assert stream.in_flight == 0
+        with pytest.raises(InvalidRequest) as error:
+            stream.frame([{"effector": "claw", "position": {"x": 0.4, "y": 0.1, "z": 0.5}}])
+    assert_solved(result)
+    assert result.joints is not None and result.effectors is not None
+    assert error.value.code is ErrorCode.INVALID_PROBLEM and error.value.id == 1
+
+
+def test_stream_without_deflate(ik: Client, session: Session) -> None:
+    """websockets offers permessage-deflate, which the server accepts; ``deflate=False``
+    sends messages as they are."""
+    with ik.stream(session) as offered, ik.stream(session, deflate=False) as plain:
+        assert [e.name for e in offered.connection.protocol.extensions] == ["permessage-deflate"]
+        assert plain.connection.protocol.extensions == []
+        assert_solved(plain.frame([tool(0.1)]))
+
+
+def sticky_session(server: Server) -> tuple[socket.socket, Session]:
+    """A session created on a keep-alive connection, and that connection."""
+    sock = socket.create_connection(("127.0.0.1", server.port), timeout=30.0)
+    body = b'{"chain": {"format": "example", "name": "panda_arm"}}'
+    sock.sendall(
+        b"POST /v1/sessions HTTP/1.1\r\nHost: 127.0.0.1\r\ncontent-type: application/json\r\n"
+        b"content-length: %d\r\n\r\n%s" % (len(body), body)
+    )
+    response = b""
+    while b"\r\n\r\n" not in response:
+        response += sock.recv(65536)
+    head, _, rest = response.partition(b"\r\n\r\n")
+    length = int(
+        next(h for h in head.split(b"\r\n") if h.lower().startswith(b"content-length")).split(b":")[
+            1
+        ]
+    )
+    while len(rest) < length:
+        rest += sock.recv(65536)
+    assert head.startswith(b"HTTP/1.1 201")
+    return sock, Session.from_json(json.loads(rest))
+
+
+def test_stream_on_a_given_socket(server: Server, ik: Client) -> None:
+    """``sock``: the first handshake goes over the connection given (here the one that
+    created the session); a reconnect opens a new one."""
+    sock, session = sticky_session(server)
+    with ik.stream(session, sock=sock) as stream:
+        assert stream.connection.socket is sock
+        assert_solved(stream.frame([tool(0.1)]))
+        sock.shutdown(socket.SHUT_RDWR)
+        assert_solved(stream.frame([tool(0.11)]))
+        assert stream.reconnects == 1 and stream.connection.socket is not sock
+
+
+def test_async_stream_on_a_given_socket(server: Server) -> None:
+    sock, session = sticky_session(server)
+
+    async def run() -> FrameResult:
+        async with AsyncClient(server.base) as ik:
+            async with ik.stream(session, sock=sock, deflate=False) as stream:
+                assert (
+                    stream.connection.transport.get_extra_info("socket").fileno() == sock.fileno()
+                )
+                return await stream.frame([tool(0.1)])
+
+    assert_solved(asyncio.run(run()))
+
+
+def test_answers_the_client_cannot_read() -> None:
+    """A server that echoes (loadtest.floors) or answers an id nothing waits for: an
+    ``UnexpectedAnswer`` naming the message answered, and the stream goes on."""
+
+    async def echo(ws: ServerConnection) -> None:
+        async for message in ws:
+            await ws.send(message)  # the frame itself: a type the client does not read
+            await ws.send('{"id": 99, "type": "pong"}')  # an id nothing waits for
+
+    async def run() -> tuple[UnexpectedAnswer, UnexpectedAnswer, int]:
+        async with serve(echo, "127.0.0.1", 0) as server:
+            port = server.sockets[0].getsockname()[1]
+            async with AsyncClient(f"http://127.0.0.1:{port}") as ik:
+                ref = dataclasses.make_dataclass("Ref", ["id", "token"])("s", "t")
+                async with ik.stream(ref, reconnect=Reconnect(attempts=0)) as stream:
+                    sent = await stream.send_frame([tool(0.1)])
+                    with pytest.raises(UnexpectedAnswer) as echoed:
+                        await stream.receive()
+                    with pytest.raises(UnexpectedAnswer) as unknown:
+                        await stream.receive()
+                    assert stream.in_flight == 0
+                    return echoed.value, unknown.value, sent
+
+    echoed, unknown, sent = asyncio.run(asyncio.wait_for(run(), 30.0))
+    assert echoed.id == sent == 0 and echoed.envelope["type"] == "frame"
+    assert unknown.id is None and unknown.envelope == {"id": 99, "type": "pong"}
 
 
 def frames_on_the_server(ik: Client, session: Session) -> int:

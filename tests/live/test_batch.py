@@ -1,6 +1,10 @@
 """Batches through a real uvicorn: pipelined batch messages answered in order with each
 session's frames in order, MessagePack, an entry's own error, per-session rate limits,
-the size caps of a message and of a body."""
+the size caps of a message and of a body.
+
+The batches go through ik_client's stream; the size caps (a message over the limit,
+closed 1009; a body over it, 413) are written by hand, as the wire they test.
+"""
 
 from __future__ import annotations
 
@@ -9,12 +13,12 @@ from collections.abc import Callable
 from typing import Any
 
 import httpx
-import msgpack
 import pytest
+from ik_client import BatchAnswer, BatchFrame, Client, Encoding, ErrorCode, Session
 from websockets.exceptions import ConnectionClosed
 
 from .conftest import Server
-from .test_server import TIMEOUT_S, session, tool_target, ws_connect
+from .test_server import PANDA, TIMEOUT_S, session, tool_target, ws_connect
 
 pytestmark = pytest.mark.live
 
@@ -24,52 +28,52 @@ def entry(sid: str, headers: dict[str, str], frame_id: int, y: float) -> dict[st
     return {"session": sid, "token": token, "id": frame_id, "targets": [tool_target(y)]}
 
 
-def frames_of(server: Server, sid: str, headers: dict[str, str]) -> int:
-    r = httpx.get(f"{server.base}/v1/sessions/{sid}", headers=headers, timeout=TIMEOUT_S)
-    return int(r.json()["counters"]["frames"])
+def batch_frame(s: Session, frame_id: int, y: float) -> BatchFrame:
+    return {"session": s.id, "token": s.token, "id": frame_id, "targets": [tool_target(y)]}
 
 
 def test_pipelined_batches_in_order_json_and_msgpack(server: Server) -> None:
-    (a, ha), (b, hb), (c, hc) = session(server), session(server), session(server)
-    with ws_connect(server, a, ha) as ws:
-        for i in range(10):  # sent back to back: answered in order, each entry in place
-            es = [
-                entry(a, ha, i, 0.1 + 0.002 * i),
-                entry(b, hb, 100 + i, 0.12),
-                entry(c, hc, i, 0.14),
+    with Client(server.base, timeout_s=TIMEOUT_S) as ik:
+        a, b, c = (ik.create_session(PANDA) for _ in range(3))
+        with ik.stream(a) as stream:
+            sent = [  # back to back: answered in order, each entry in place
+                stream.send_batch(
+                    [
+                        batch_frame(a, i, 0.1 + 0.002 * i),
+                        batch_frame(b, 100 + i, 0.12),
+                        batch_frame(c, i, 0.14),
+                    ]
+                )  # fmt: skip
+                for i in range(10)
             ]
-            ws.send(json.dumps({"type": "batch", "id": i, "frames": es}))
-        replies = [json.loads(ws.recv(timeout=TIMEOUT_S)) for _ in range(10)]
-        ws.send(msgpack.packb({"type": "batch", "id": 10, "frames": [entry(b, hb, 7, 0.13)]}))
-        packed = ws.recv(timeout=TIMEOUT_S)
-    assert [r["id"] for r in replies] == list(range(10))
-    assert all(r["type"] == "batch_result" for r in replies)
-    for i, r in enumerate(replies):
-        assert [(e["session"], e["id"]) for e in r["results"]] == [(a, i), (b, 100 + i), (c, i)]
-        assert all(e["result"]["id"] == e["id"] for e in r["results"])
-    assert isinstance(packed, bytes)
-    last = msgpack.unpackb(packed)
-    assert last["id"] == 10 and last["results"][0]["session"] == b
-    assert [frames_of(server, s, h) for s, h in ((a, ha), (b, hb), (c, hc))] == [10, 11, 10]
+            replies = [stream.receive() for _ in range(10)]
+        with ik.stream(a, encoding=Encoding.MSGPACK) as packed:
+            last = packed.batch([batch_frame(b, 7, 0.13)])
+        assert [r.id for r in replies] == sent
+        for i, r in enumerate(replies):
+            assert isinstance(r, BatchAnswer)
+            assert [(e.session, e.id) for e in r.results] == [(a.id, i), (b.id, 100 + i), (c.id, i)]
+            assert all(e.result is not None and e.result.id == e.id for e in r.results)
+        assert last[0].session == b.id and last[0].result is not None
+        assert [ik.get_session(s).counters.frames for s in (a, b, c)] == [10, 11, 10]
 
 
 def test_entry_errors_and_rate_limits(start_server: Callable[..., Server]) -> None:
     server = start_server(IK_MAX_FRAMES_PER_S="1", IK_MAX_FRAMES_PER_REQUEST="3")
-    (a, ha), (b, hb) = session(server), session(server)
-    bad = {**entry(b, hb, 2, 0.1), "targets": [{"effector": "tool"}]}
-    with ws_connect(server, a, ha) as ws:
-        ws.send(msgpack.packb({"type": "batch", "id": 1, "frames": [entry(a, ha, 1, 0.1), bad]}))
-        first = msgpack.unpackb(ws.recv(timeout=TIMEOUT_S))
-        # a's bucket holds 3 (IK_MAX_FRAMES_PER_REQUEST) and refills at 1/s: the 4th waits.
-        es = [entry(a, ha, i, 0.1) for i in (3, 4, 5)]
-        ws.send(msgpack.packb({"type": "batch", "id": 2, "frames": es}))
-        second = msgpack.unpackb(ws.recv(timeout=TIMEOUT_S))
-    assert [e["success"] for e in first["results"]] == [True, False]
-    assert first["results"][1]["error"]["code"] == "invalid_format"
-    assert first["results"][1]["error"]["field"].startswith("frames.1.targets.0")
-    codes = [e.get("error", {}).get("code") for e in second["results"]]
-    assert codes[:2] == [None, None] and codes[2] == "rate_limited"
-    assert second["results"][2]["error"]["retry_after_s"] > 0
+    with Client(server.base, timeout_s=TIMEOUT_S) as ik:
+        a, b = ik.create_session(PANDA), ik.create_session(PANDA)
+        bad: Any = {**batch_frame(b, 2, 0.1), "targets": [{"effector": "tool"}]}
+        with ik.stream(a, encoding=Encoding.MSGPACK) as stream:
+            first = stream.batch([batch_frame(a, 1, 0.1), bad])
+            # a's bucket holds 3 (IK_MAX_FRAMES_PER_REQUEST) and refills at 1/s: the 4th waits.
+            second = stream.batch([batch_frame(a, i, 0.1) for i in (3, 4, 5)])
+    assert [e.success for e in first] == [True, False]
+    assert first[1].error is not None and first[1].error.code is ErrorCode.INVALID_FORMAT
+    assert (first[1].error.field or "").startswith("frames.1.targets.0")
+    codes = [None if e.error is None else e.error.code for e in second]
+    assert codes == [None, None, ErrorCode.RATE_LIMITED]
+    retry_after_s = second[2].error.retry_after_s if second[2].error else None
+    assert retry_after_s is not None and retry_after_s > 0
 
 
 def test_size_caps(start_server: Callable[..., Server]) -> None:

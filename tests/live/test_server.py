@@ -1,4 +1,10 @@
-"""`python -m service` for real: uvicorn, WebSockets (JSON, MessagePack), limits, shutdown."""
+"""`python -m service` for real: uvicorn, WebSockets (JSON, MessagePack), limits, shutdown.
+
+What an ordinary client sees (shutdown's answers and close codes) goes through
+ik_client; raw websockets and sockets stay where the wire itself is tested: JSON and
+MessagePack messages on one socket, a malformed message, a refused handshake, an
+oversized message, the token in the query string, readers that stop reading.
+"""
 
 from __future__ import annotations
 
@@ -16,6 +22,15 @@ from typing import Any
 import httpx
 import msgpack
 import pytest
+from ik_client import (
+    Client,
+    FrameAnswer,
+    Reconnect,
+    RetryLater,
+    ServerRestarting,
+    SolverOptionsPatch,
+    Stream,
+)
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
@@ -44,6 +59,12 @@ def session(server: Server) -> tuple[str, dict[str, str]]:
 def ws_connect(server: Server, sid: str, headers: dict[str, str], **kw: Any) -> ClientConnection:
     url = server.base.replace("http", "ws", 1) + f"/v1/sessions/{sid}/ws"
     return connect(url, additional_headers=headers, open_timeout=TIMEOUT_S, **kw)
+
+
+def no_reconnect_stream(ik: Client, options: SolverOptionsPatch | None = None) -> Stream:
+    """A new panda_arm session's stream (ik_client) that raises a close, never mends it."""
+    session = ik.create_session(PANDA, options=options)
+    return ik.stream(session, reconnect=Reconnect(attempts=0), timeout_s=TIMEOUT_S)
 
 
 def test_logs_where_the_docs_are(server: Server) -> None:
@@ -110,14 +131,12 @@ def test_ws_message_over_uvicorns_limit_closes_1009(
 
 def test_sigterm_closes_open_websockets_with_1012(start_server: Callable[..., Server]) -> None:
     doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="2")
-    sid, headers = session(doomed)
-    with ws_connect(doomed, sid, headers) as ws:
-        ws.send(json.dumps({"type": "ping", "id": 1}))
-        assert json.loads(ws.recv(timeout=TIMEOUT_S))["type"] == "pong"
+    with Client(doomed.base, timeout_s=TIMEOUT_S) as ik, no_reconnect_stream(ik) as stream:
+        stream.ping()
         doomed.proc.send_signal(signal.SIGTERM)
-        with pytest.raises(ConnectionClosed) as info:
-            ws.recv(timeout=TIMEOUT_S)
-    assert info.value.rcvd is not None and info.value.rcvd.code == 1012
+        with pytest.raises(ServerRestarting) as info:
+            stream.receive()
+    assert info.value.close_code == 1012
     # uvicorn shuts down gracefully, then re-raises the signal it caught.
     assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)
     assert "Finished server process" in doomed.log()
@@ -133,15 +152,8 @@ def test_token_is_redacted_from_the_access_log(server: Server) -> None:
     assert token not in server.log()
 
 
-def _slow_session(server: Server) -> tuple[str, dict[str, str]]:
-    """A session whose frames each burn a 50 ms budget (unreachable target, pooled)."""
-    r = httpx.post(
-        f"{server.base}/v1/sessions",
-        json={"chain": PANDA, "options": {"time_budget_us": 50_000, "max_iter": 100_000}},
-        timeout=TIMEOUT_S,
-    )
-    assert r.status_code == 201, r.text
-    return r.json()["id"], {"Authorization": f"Bearer {r.json()['token']}"}
+# Frames to an unreachable target each burn this 50 ms budget (pooled).
+_SLOW: SolverOptionsPatch = {"time_budget_us": 50_000, "max_iter": 100_000}
 
 
 def _refused(server: Server) -> bool:
@@ -162,25 +174,22 @@ def test_sigterm_answers_http_frames_in_flight_and_refuses_new_connections(
     start_server: Callable[..., Server],
 ) -> None:
     doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="10")
-    sid, headers = _slow_session(doomed)
-    far = {**tool_target(0.1), "position": {"x": 9.0, "y": 0.0, "z": 0.0}}
-    clip = {"frames": [{"id": i, "targets": [far]} for i in range(20)]}  # about 1 s
+    far: Any = {**tool_target(0.1), "position": {"x": 9.0, "y": 0.0, "z": 0.0}}
+    frames: list[Any] = [{"id": i, "targets": [far]} for i in range(20)]  # about 1 s
     result: dict[str, Any] = {}
+    with Client(doomed.base, timeout_s=TIMEOUT_S) as ik:
+        session = ik.create_session(PANDA, options=_SLOW)
 
-    def post() -> None:
-        result["r"] = httpx.post(
-            f"{doomed.base}/v1/sessions/{sid}/frames", json=clip, headers=headers, timeout=30.0
-        )
+        def post() -> None:
+            result["clip"] = ik.clip(session, frames)
 
-    t = threading.Thread(target=post)
-    t.start()
-    time.sleep(0.3)  # the clip is being solved (a 20 x 50 ms clip)
-    doomed.proc.send_signal(signal.SIGTERM)
-    assert _refused(doomed)
-    t.join(TIMEOUT_S)
-    r = result["r"]
-    assert r.status_code == 200
-    assert [x["id"] for x in r.json()["results"]] == list(range(20))
+        t = threading.Thread(target=post)
+        t.start()
+        time.sleep(0.3)  # the clip is being solved (a 20 x 50 ms clip)
+        doomed.proc.send_signal(signal.SIGTERM)
+        assert _refused(doomed)
+        t.join(TIMEOUT_S)
+    assert [x.id for x in result["clip"].results] == list(range(20))
     assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)
 
 
@@ -188,22 +197,19 @@ def test_sigterm_answers_the_ws_frame_in_flight_then_closes_1012(
     start_server: Callable[..., Server],
 ) -> None:
     doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="10")
-    sid, headers = _slow_session(doomed)
-    far = {**tool_target(0.1), "position": {"x": 9.0, "y": 0.0, "z": 0.0}}
-    with ws_connect(doomed, sid, headers) as ws:
-        for i in range(20):  # pipelined, 50 ms each
-            ws.send(json.dumps({"type": "frame", "id": i, "targets": [far]}))
-        first = json.loads(ws.recv(timeout=TIMEOUT_S))
-        assert first["id"] == 0
+    far: Any = {**tool_target(0.1), "position": {"x": 9.0, "y": 0.0, "z": 0.0}}
+    with Client(doomed.base, timeout_s=TIMEOUT_S) as ik, no_reconnect_stream(ik, _SLOW) as stream:
+        sent = [stream.send_frame([far]) for _ in range(20)]  # pipelined, 50 ms each
+        assert stream.receive().id == sent[0]
         doomed.proc.send_signal(signal.SIGTERM)
         answered = []
-        with pytest.raises(ConnectionClosed) as info:
+        with pytest.raises(ServerRestarting) as info:
             while True:
-                answered.append(json.loads(ws.recv(timeout=TIMEOUT_S)))
-    assert info.value.rcvd is not None and info.value.rcvd.code == 1012
+                answered.append(stream.receive())
+    assert info.value.close_code == 1012
     # The frame in flight when SIGTERM came was answered (a result, not lost).
-    assert answered and all(a["type"] == "result" and "result" in a for a in answered)
-    assert [a["id"] for a in answered] == list(range(1, 1 + len(answered)))
+    assert answered and all(isinstance(a, FrameAnswer) for a in answered)
+    assert [a.id for a in answered] == sent[1 : 1 + len(answered)]
     assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)
 
 
@@ -354,6 +360,15 @@ def test_keepalive_timeout_under_a_full_buffer_ends_the_handler(
     assert r.status_code == 200 and r.json()["results"][0]["id"] == 1
 
 
+# continuity "reach": a smooth session keeps its restarts within one step of the last
+# answer and gives up far sooner; the tests of _SLOWER need frames that use their budget.
+_SLOWER: SolverOptionsPatch = {
+    "time_budget_us": 50_000,
+    "max_iter": 100_000,
+    "max_restarts": 10_000,
+    "continuity": "reach",
+}
+
 # Just out of the panda's reach: restarts spend each frame's whole 50 ms budget.
 _EDGE_OF_REACH = {
     "effector": "tool",
@@ -362,50 +377,31 @@ _EDGE_OF_REACH = {
 }
 
 
-def _slower_session(server: Server) -> tuple[str, dict[str, str]]:
-    """A session whose unreachable frames each take their whole 50 ms: restarts until
-    the budget is spent."""
-    # continuity "reach": a smooth session keeps its restarts within one step of the
-    # last answer and gives up far sooner; this test needs frames that use their budget.
-    options = {
-        "time_budget_us": 50_000,
-        "max_iter": 100_000,
-        "max_restarts": 10_000,
-        "continuity": "reach",
-    }
-    r = httpx.post(
-        f"{server.base}/v1/sessions",
-        json={"chain": PANDA, "options": options},
-        timeout=TIMEOUT_S,
-    )
-    assert r.status_code == 201, r.text
-    return r.json()["id"], {"Authorization": f"Bearer {r.json()['token']}"}
-
-
 def test_sigterm_past_the_graceful_time_answers_http_with_json_503(
     start_server: Callable[..., Server],
 ) -> None:
     """A clip longer than IK_GRACEFUL_SHUTDOWN_S: uvicorn cancels it; the client gets
     JSON it can act on, not uvicorn's plain-text 500."""
     doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="0")  # no grace: cancelled at once
-    sid, headers = _slower_session(doomed)
-    far = _EDGE_OF_REACH
-    clip = {"frames": [{"id": i, "targets": [far]} for i in range(38)]}  # about 1.9 s
+    far: Any = _EDGE_OF_REACH
+    frames: list[Any] = [{"id": i, "targets": [far]} for i in range(38)]  # about 1.9 s
     result: dict[str, Any] = {}
+    with Client(doomed.base, timeout_s=TIMEOUT_S) as ik:
+        session = ik.create_session(PANDA, options=_SLOWER)
 
-    def post() -> None:
-        result["r"] = httpx.post(
-            f"{doomed.base}/v1/sessions/{sid}/frames", json=clip, headers=headers, timeout=30.0
-        )
+        def post() -> None:
+            with pytest.raises(RetryLater) as refused:
+                ik.clip(session, frames)
+            result["error"] = refused.value
 
-    t = threading.Thread(target=post)
-    t.start()
-    time.sleep(0.3)
-    doomed.proc.send_signal(signal.SIGTERM)
-    t.join(TIMEOUT_S)
-    r = result["r"]
-    assert r.status_code == 503, r.text
-    assert r.json()["code"] == "shutting_down" and r.headers["Retry-After"] == "1"
+        t = threading.Thread(target=post)
+        t.start()
+        time.sleep(0.3)
+        doomed.proc.send_signal(signal.SIGTERM)
+        t.join(TIMEOUT_S)
+    # A JSON body with its code (uvicorn's own would be a plain-text 500: http_500).
+    error = result["error"]
+    assert (error.status_code, error.code, error.retry_after_s) == (503, "shutting_down", 1.0)
     assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)
 
 
@@ -413,17 +409,20 @@ def test_sigterm_past_the_graceful_time_answers_the_ws_message_before_1012(
     start_server: Callable[..., Server],
 ) -> None:
     doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="1", IK_MAX_REQUEST_WORK_S="10")
-    sid, headers = _slower_session(doomed)
-    far = _EDGE_OF_REACH
-    frames = [{"id": i, "targets": [far]} for i in range(150)]  # about 7 s
-    with ws_connect(doomed, sid, headers) as ws:
-        ws.send(json.dumps({"type": "clip", "id": 7, "frames": frames}))
+    far: Any = _EDGE_OF_REACH
+    frames: list[Any] = [{"id": i, "targets": [far]} for i in range(150)]  # about 7 s
+    with (
+        Client(doomed.base, timeout_s=TIMEOUT_S) as ik,
+        no_reconnect_stream(ik, _SLOWER) as stream,
+    ):
+        clip_id = stream.send_clip(frames)
         time.sleep(0.3)
         doomed.proc.send_signal(signal.SIGTERM)
-        reply = json.loads(ws.recv(timeout=TIMEOUT_S))
-        with pytest.raises(ConnectionClosed) as info:
-            ws.recv(timeout=TIMEOUT_S)
-    assert reply["id"] == 7 and reply["error"]["code"] == "shutting_down", reply
-    assert reply["error"]["retry_after_s"] == 1.0
-    assert info.value.rcvd is not None and info.value.rcvd.code == 1012
+        with pytest.raises(RetryLater) as reply:
+            stream.receive()
+        with pytest.raises(ServerRestarting) as info:
+            stream.receive()
+    assert reply.value.id == clip_id and reply.value.code == "shutting_down"
+    assert reply.value.retry_after_s == 1.0
+    assert info.value.close_code == 1012
     assert doomed.proc.wait(TIMEOUT_S) in (0, -signal.SIGTERM)

@@ -33,10 +33,12 @@ from .errors import (
     StreamAuthError,
     StreamClosed,
     TooManyWebSockets,
+    UnexpectedAnswer,
 )
 from .stream import AsyncStream, Reconnect, Stream
 from .types import (
     Answer,
+    BatchAnswer,
     BatchEntryResult,
     BatchFrame,
     BoneOutput,
@@ -83,6 +85,7 @@ __all__ = [
     "Chain",
     "Client",
     "ClipAnswer",
+    "BatchAnswer",
     "BatchEntryResult",
     "BatchFrame",
     "ClipResult",
@@ -132,5 +135,6 @@ __all__ = [
     "Target",
     "Termination",
     "TooManyWebSockets",
+    "UnexpectedAnswer",
     "Vec3",
 ]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import abc
 import functools
+import socket
 from collections.abc import Callable, Coroutine
 from typing import Any, Generic, ParamSpec, TypeVar, overload
 
@@ -112,12 +113,34 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
         compact: bool = False,
         reconnect: Reconnect = DEFAULT_RECONNECT,
         timeout_s: float | None = DEFAULT_TIMEOUT_S,
+        deflate: bool = True,
+        sock: socket.socket | None = None,
     ) -> S:
         """The session's WebSocket; open it with ``with`` (``Stream``) or ``async with``
-        (``AsyncStream``). ``timeout_s`` bounds each wait for an answer."""
+        (``AsyncStream``).
+
+        Args:
+            session: The session (or anything with ``id`` and ``token``).
+            encoding: JSON text or MessagePack binary messages.
+            compact: Compact frame results (``?results=compact``).
+            reconnect: How to reconnect after a drop; ``Reconnect(attempts=0)`` raises
+                the drop as a ``StreamClosed`` instead.
+            timeout_s: Bounds each wait for an answer [s]; None waits for ever.
+            deflate: Offer permessage-deflate (False: messages go uncompressed, which
+                costs less CPU at both ends for frames of a few hundred bytes).
+            sock: An open TCP connection to the server for the first handshake, e.g.
+                the keep-alive connection that created the session, so the WebSocket
+                reaches the worker holding it; reconnects open new connections.
+        """
         url = calls.ws_url(self.base_url, session, compact)
         return self._stream_type(
-            url, session.token, encoding=encoding, reconnect=reconnect, timeout_s=timeout_s
+            url,
+            session.token,
+            encoding=encoding,
+            reconnect=reconnect,
+            timeout_s=timeout_s,
+            deflate=deflate,
+            sock=sock,
         )
 
 

@@ -51,6 +51,23 @@ class IKClientError(Exception):
     """Base of every error this client raises."""
 
 
+class UnexpectedAnswer(IKClientError):
+    """A stream's answer that this client cannot read: an answer to an id that waits
+    for none (``id`` None: nothing was taken off the stream's in-flight messages), or an
+    answer of a type it does not know (``id``: the message it answers, which counts as
+    answered). The stream goes on; ``envelope`` is the message as decoded.
+
+    Attributes:
+        id: The caller's id of the message answered; None when no message waited for it.
+        envelope: The decoded message (JSON or MessagePack).
+    """
+
+    def __init__(self, message: str, *, id: int | None, envelope: dict[str, Any]) -> None:
+        super().__init__(message)
+        self.id = id
+        self.envelope = envelope
+
+
 @dataclass(eq=False)  # an exception equals only itself
 class ServiceError(IKClientError):
     """An error the service answered with; its subclass says what a caller can do about

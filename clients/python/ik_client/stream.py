@@ -20,9 +20,10 @@ from __future__ import annotations
 import asyncio
 import functools
 import json
+import socket
 import time
 from collections import OrderedDict
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
@@ -33,9 +34,12 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake
 from websockets.sync.client import ClientConnection as SyncConnection
 from websockets.sync.client import connect as sync_connect
 
-from .errors import RECONNECTABLE, IKClientError, service_error, stream_closed
+from .errors import RECONNECTABLE, IKClientError, UnexpectedAnswer, service_error, stream_closed
 from .types import (
     Answer,
+    BatchAnswer,
+    BatchEntryResult,
+    BatchFrame,
     ClipAnswer,
     ClipResult,
     Encoding,
@@ -45,6 +49,35 @@ from .types import (
     Pong,
     Target,
 )
+
+# JSON messages are written and answers read with orjson when it is installed (``pip
+# install ik-client[fast]``): several times faster than json, which counts for a client
+# streaming thousands of frames a second (loadtest); the same values either way.
+_loads: Callable[[str | bytes], Any]
+_orjson_dumps: Callable[[Any], bytes] | None
+try:
+    import orjson
+
+    _loads = orjson.loads
+    _orjson_dumps = orjson.dumps
+except ImportError:  # pragma: no cover - the test environment has orjson
+    _loads = json.loads
+    _orjson_dumps = None
+
+
+def _dumps(payload: dict[str, Any]) -> str:
+    """``payload`` as compact JSON; NaN and infinity refused (ValueError), as the server
+    refuses them, here where the caller is."""
+    if _orjson_dumps is not None:
+        try:
+            data = _orjson_dumps(payload)
+        except TypeError:  # orjson.JSONEncodeError: something only json writes (int keys)
+            pass
+        else:
+            if b"null" not in data:  # orjson writes NaN and infinity as null: json decides
+                return data.decode()
+    return json.dumps(payload, separators=(",", ":"), allow_nan=False)
+
 
 # What ends one reconnect attempt and lets the next one start (``_Retries.attempt_failed``).
 _ATTEMPT_FAILURES = (ConnectionClosed, OSError, InvalidHandshake, TimeoutError)
@@ -91,10 +124,11 @@ class _Pipeline:
     def add(self, body: dict[str, Any]) -> tuple[int, str | bytes]:
         """Number a new message; returns its id and its encoding."""
         message = _Message(self._next_id, self._next_wire_id, body)
+        data = self._encode(message)  # a message that cannot be written is not counted
         self._next_id += 1
         self._next_wire_id += 1
         self._waiting[message.wire_id] = message
-        return message.id, self._encode(message)
+        return message.id, data
 
     def resend(self) -> list[str | bytes]:
         """Every waiting message, in order, under the id it was sent with: what a new
@@ -111,13 +145,17 @@ class _Pipeline:
         if isinstance(data, bytes):
             envelope = msgpack.unpackb(data, raw=False)
         else:
-            envelope = json.loads(data)
+            envelope = _loads(data)
         wire_id = envelope.get("id")
         if wire_id is None and self._waiting:  # the server could not read the id: in order
             wire_id = next(iter(self._waiting))
         message = self._waiting.pop(wire_id, None)
         if message is None:
-            raise IKClientError(f"an answer to id {wire_id!r}, which is not waiting: {envelope}")
+            raise UnexpectedAnswer(
+                f"an answer to id {wire_id!r}, which is not waiting: {envelope}",
+                id=None,
+                envelope=envelope,
+            )
         kind = envelope.get("type")
         if "error" in envelope:
             error = envelope["error"]
@@ -133,16 +171,21 @@ class _Pipeline:
             return FrameAnswer(message.id, FrameResult.from_json({**result, "id": message.id}))
         if kind == "clip_result":
             return ClipAnswer(message.id, ClipResult.from_json(envelope))
+        if kind == "batch_result":
+            results = [BatchEntryResult.from_json(e) for e in envelope["results"]]
+            return BatchAnswer(message.id, results)
         if kind == "pong":
             return Pong(message.id)
-        raise IKClientError(f"unknown answer type {kind!r}: {envelope}")
+        # Not the envelope in the message: formatting it costs more than the rest.
+        raise UnexpectedAnswer(
+            f"an answer of unknown type {kind!r} to id {wire_id}", id=message.id, envelope=envelope
+        )
 
     def _encode(self, message: _Message) -> str | bytes:
         payload = {**message.body, "id": message.wire_id}
         if self.encoding is Encoding.MSGPACK:
             return bytes(msgpack.packb(payload))
-        # The server refuses NaN and infinity; refuse them here, where the caller is.
-        return json.dumps(payload, separators=(",", ":"), allow_nan=False)
+        return _dumps(payload)
 
 
 def _frame(targets: list[Target]) -> dict[str, Any]:
@@ -151,6 +194,10 @@ def _frame(targets: list[Target]) -> dict[str, Any]:
 
 def _clip(frames: list[Frame], plan: bool) -> dict[str, Any]:
     return {"type": "clip", "frames": frames, "plan": plan}
+
+
+def _batch(frames: list[BatchFrame]) -> dict[str, Any]:
+    return {"type": "batch", "frames": frames}
 
 
 def _close_of(exc: ConnectionClosed) -> tuple[int, str]:
@@ -213,12 +260,25 @@ def _expect_clip(answer: Answer) -> ClipResult:
     return answer.clip
 
 
+def _expect_batch(answer: Answer) -> list[BatchEntryResult]:
+    if not isinstance(answer, BatchAnswer):
+        raise IKClientError(f"expected a batch result, got {answer!r}")
+    return answer.results
+
+
 Connection = TypeVar("Connection", SyncConnection, AsyncConnection)
 
 
 class _BaseStream(Generic[Connection]):
     """What both streams hold: the URL and token, the pipeline, the reconnect budget and
-    the current websockets connection (``Connection``, threading or asyncio)."""
+    the current websockets connection (``Connection``, threading or asyncio).
+
+    ``deflate`` offers permessage-deflate (websockets' default); frames of a few hundred
+    bytes gain little from it and it costs CPU at both ends. ``sock``, an open TCP
+    connection to the server, carries the first connection's handshake (e.g. the
+    keep-alive connection that created the session, so that the WebSocket reaches the
+    worker process holding it); a reconnect opens a new connection.
+    """
 
     def __init__(
         self,
@@ -228,6 +288,8 @@ class _BaseStream(Generic[Connection]):
         encoding: Encoding,
         reconnect: Reconnect,
         timeout_s: float | None = 30.0,
+        deflate: bool = True,
+        sock: socket.socket | None = None,
     ) -> None:
         self.url = url
         self.reconnects = 0  # connections made after the first
@@ -235,11 +297,19 @@ class _BaseStream(Generic[Connection]):
         self._pipeline = _Pipeline(encoding)
         self._retries = _Retries(reconnect)
         self._connection: Connection | None = None
+        self._sock = sock  # taken by the first _open()
         self._connect_options: dict[str, Any] = {
             "additional_headers": {"Authorization": f"Bearer {token}"},
             "open_timeout": OPEN_TIMEOUT_S,
             "max_size": MAX_ANSWER_BYTES,
         }
+        if not deflate:
+            self._connect_options["compression"] = None
+
+    def _take_sock(self) -> dict[str, Any]:
+        """``sock=`` for the first connection only: a socket carries one handshake."""
+        sock, self._sock = self._sock, None
+        return {} if sock is None else {"sock": sock}
 
     @property
     def connection(self) -> Connection:
@@ -266,10 +336,11 @@ class _BaseStream(Generic[Connection]):
 class AsyncStream(_BaseStream[AsyncConnection]):
     """A session's WebSocket (asyncio). Use as ``async with client.stream(session) as s``.
 
-    ``send_frame`` / ``send_clip`` / ``send_ping`` return the message's id; ``receive``
-    returns the next answer (in the order sent) or raises its ``ServiceError``, waiting
-    at most ``timeout_s`` (``TimeoutError``). ``frame``, ``clip`` and ``ping`` send one
-    message and wait for its answer. Sends may come from several tasks; answers are read
+    ``send_frame`` / ``send_clip`` / ``send_batch`` / ``send_ping`` return the message's
+    id; ``receive`` returns the next answer (in the order sent) or raises its
+    ``ServiceError`` (an answer it cannot read: ``UnexpectedAnswer``), waiting at most
+    ``timeout_s`` (``TimeoutError``). ``frame``, ``clip``, ``batch`` and ``ping`` send
+    one message and wait for its answer. Sends may come from several tasks; answers are read
     by one task at a time.
     """
 
@@ -295,6 +366,9 @@ class AsyncStream(_BaseStream[AsyncConnection]):
     async def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
         return await self._send(_clip(frames, plan))
 
+    async def send_batch(self, frames: list[BatchFrame]) -> int:
+        return await self._send(_batch(frames))
+
     async def send_ping(self) -> int:
         return await self._send({"type": "ping"})
 
@@ -317,12 +391,16 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         await self.send_clip(frames, plan=plan)
         return _expect_clip(await self.receive())
 
+    async def batch(self, frames: list[BatchFrame]) -> list[BatchEntryResult]:
+        await self.send_batch(frames)
+        return _expect_batch(await self.receive())
+
     async def ping(self) -> Pong:
         await self.send_ping()
         return _expect_pong(await self.receive())
 
     async def _open(self) -> AsyncConnection:
-        return await async_connect(self.url, **self._connect_options)
+        return await async_connect(self.url, **self._connect_options, **self._take_sock())
 
     async def _send(self, body: dict[str, Any]) -> int:
         async with self._lock:
@@ -378,6 +456,9 @@ class Stream(_BaseStream[SyncConnection]):
     def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
         return self._send(_clip(frames, plan))
 
+    def send_batch(self, frames: list[BatchFrame]) -> int:
+        return self._send(_batch(frames))
+
     def send_ping(self) -> int:
         return self._send({"type": "ping"})
 
@@ -398,12 +479,17 @@ class Stream(_BaseStream[SyncConnection]):
         self.send_clip(frames, plan=plan)
         return _expect_clip(self.receive())
 
+    def batch(self, frames: list[BatchFrame]) -> list[BatchEntryResult]:
+        self.send_batch(frames)
+        return _expect_batch(self.receive())
+
     def ping(self) -> Pong:
         self.send_ping()
         return _expect_pong(self.receive())
 
     def _open(self) -> SyncConnection:
-        connection: SyncConnection = sync_connect(self.url, **self._connect_options)
+        options = {**self._connect_options, **self._take_sock()}
+        connection: SyncConnection = sync_connect(self.url, **options)
         # websockets 17.1 warns about a connection not entered as a context manager;
         # this one lives as long as the stream, which closes it (its exit is close()).
         return connection.__enter__()

@@ -472,6 +472,16 @@ class ClipAnswer:
 
 
 @dataclass(frozen=True, slots=True)
+class BatchAnswer:
+    """A ``batch_result`` message: the answer to the stream's batch ``id``, one entry per
+    frame sent, in order, each a result or that entry's own error."""
+
+    id: int
+    results: list[BatchEntryResult]
+    type: Literal["batch_result"] = "batch_result"
+
+
+@dataclass(frozen=True, slots=True)
 class Pong:
     """A ``pong`` message: the answer to the stream's ping ``id``."""
 
@@ -479,4 +489,4 @@ class Pong:
     type: Literal["pong"] = "pong"
 
 
-Answer = FrameAnswer | ClipAnswer | Pong
+Answer = FrameAnswer | ClipAnswer | BatchAnswer | Pong
