@@ -66,9 +66,13 @@ async def _client(
             )
             if r.status_code != 201:
                 run.errors[f"setup_http_{r.status_code}"] += 1
-                return
+                break
             sessions.append(r.json())
     await ready.wait()  # every client has its sessions: the measured window starts
+    if len(sessions) < characters:
+        # Counted above; it still met the others at the barrier (returning before it
+        # left them waiting for ever) and sends nothing.
+        return
     refs = [StickySession(x["id"], x["token"]) for x in sessions]
     targets: list[list[Target]] = [orjson.loads(t) for t in path.targets]
     period = 1.0 / rate_hz
