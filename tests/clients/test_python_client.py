@@ -249,6 +249,25 @@ def test_async_client_calls(server: Server) -> None:
 
 # --- the stream ---------------------------------------------------------------------------
 @pytest.mark.parametrize("encoding", list(Encoding))
+def test_stream_frame_asks_for_bones_per_frame(ik: Client, encoding: Encoding) -> None:
+    """``bones`` on one frame overrides the session's bone output (none by default) for
+    that frame only (docs/websocket.md, the frame message)."""
+    from schemas.chain import EXAMPLE_GLTF_LEG
+
+    session = ik.create_session(EXAMPLE_GLTF_LEG)
+    foot: Target = {"effector": "foot", "position": {"x": 0.0, "y": 0.5, "z": 0.1}}
+    try:
+        with ik.stream(session, encoding=encoding) as stream:
+            plain = stream.frame([foot])
+            with_bones = stream.frame([foot], bones={"local_rotations": True})
+            after = stream.frame([foot])
+    finally:
+        ik.delete_session(session)
+    assert plain.bones is None and after.bones is None
+    assert with_bones.bones is not None and "knee" in with_bones.bones["local"]
+
+
+@pytest.mark.parametrize("encoding", list(Encoding))
 def test_stream_pipelines_in_order(ik: Client, session: Session, encoding: Encoding) -> None:
     with ik.stream(session, encoding=encoding) as stream:
         ids = [stream.send_frame([tool(0.1 + 0.002 * i)]) for i in range(20)]

@@ -4,12 +4,9 @@ The same geometry as tests/service/test_poles_weights.py, over real sockets."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import httpx
-import msgpack
 import pytest
-from websockets.sync.client import connect
+from ik_client import Client, Encoding
 
 from tests.service.test_poles_weights import Legs, post_frame, vec
 
@@ -30,22 +27,25 @@ def test_a_pole_flips_the_knee_and_weight_zero_frees_a_foot(server: Server) -> N
             result = post_frame(legs, legs.frame([target]))
             assert result["success"] is True
             assert sign * legs.knee_side(result) > 0.02 * legs.leg_cm
-        url = server.base.replace("http", "ws", 1) + f"/v1/sessions/{legs.s.id}/ws"
         far = vec(legs.hip + [5000.0, 5000.0, 5000.0])
-        with connect(url, additional_headers=legs.s.headers, open_timeout=TIMEOUT_S) as ws:
-            for fid, sign in enumerate((1.0, -1.0), start=1):
+        bones = legs.frame([])["bones"]  # the bones' world positions, asked per frame
+        # `legs.s` has the id and token a stream takes.
+        with (
+            Client(server.base, timeout_s=TIMEOUT_S) as ik,
+            ik.stream(legs.s, encoding=Encoding.MSGPACK) as stream,  # type: ignore[arg-type]
+        ):
+            for sign in (1.0, -1.0):
                 pole = {"position": vec(legs.middle + sign * legs.leg_cm * legs.across)}
                 target = {"effector": "right_foot", "position": vec(legs.target), "pole": pole}
-                ws.send(msgpack.packb({"type": "frame", "id": fid, **legs.frame([target])}))
-                answer: dict[str, Any] = msgpack.unpackb(ws.recv(timeout=TIMEOUT_S))
-                assert answer["success"] is True, answer
-                assert sign * legs.knee_side(answer["result"]) > 0.02 * legs.leg_cm
+                r = stream.frame([target], bones=bones)  # type: ignore[list-item]
+                assert r.success is True, r
+                assert sign * legs.knee_side({"bones": r.bones}) > 0.02 * legs.leg_cm
             freed = [
                 {"effector": "left_foot", "position": vec(legs.left + [0.0, 10.0, 0.0])},
                 {"effector": "right_foot", "position": far, "position_weight": 0.0},
             ]
-            ws.send(msgpack.packb({"type": "frame", "id": 3, "targets": freed}))
-            answer = msgpack.unpackb(ws.recv(timeout=TIMEOUT_S))
-            assert answer["success"] is True, answer
-            errors = {e["name"]: e for e in answer["result"]["effectors"]}
-            assert errors["right_foot"]["position_error_m"] is None
+            r = stream.frame(freed)  # type: ignore[arg-type]
+            assert r.success is True, r
+            assert r.effectors is not None
+            errors = {e.name: e for e in r.effectors}
+            assert errors["right_foot"].position_error_m is None

@@ -40,6 +40,7 @@ from .types import (
     BatchAnswer,
     BatchEntryResult,
     BatchFrame,
+    BoneOutput,
     ClipAnswer,
     ClipResult,
     Encoding,
@@ -188,8 +189,11 @@ class _Pipeline:
         return _dumps(payload)
 
 
-def _frame(targets: list[Target]) -> dict[str, Any]:
-    return {"type": "frame", "targets": targets}
+def _frame(targets: list[Target], bones: BoneOutput | None) -> dict[str, Any]:
+    """A frame message; ``bones`` overrides the session's bone output for this frame."""
+    if bones is None:
+        return {"type": "frame", "targets": targets}
+    return {"type": "frame", "targets": targets, "bones": bones}
 
 
 def _clip(frames: list[Frame], plan: bool) -> dict[str, Any]:
@@ -360,8 +364,8 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         if self._connection is not None:
             await self._connection.close()
 
-    async def send_frame(self, targets: list[Target]) -> int:
-        return await self._send(_frame(targets))
+    async def send_frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> int:
+        return await self._send(_frame(targets, bones))
 
     async def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
         return await self._send(_clip(frames, plan))
@@ -383,8 +387,8 @@ class AsyncStream(_BaseStream[AsyncConnection]):
                 continue
             return self._answer(data)
 
-    async def frame(self, targets: list[Target]) -> FrameResult:
-        await self.send_frame(targets)
+    async def frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> FrameResult:
+        await self.send_frame(targets, bones=bones)
         return _expect_frame(await self.receive())
 
     async def clip(self, frames: list[Frame], *, plan: bool = False) -> ClipResult:
@@ -450,8 +454,8 @@ class Stream(_BaseStream[SyncConnection]):
         if self._connection is not None:
             self._connection.close()
 
-    def send_frame(self, targets: list[Target]) -> int:
-        return self._send(_frame(targets))
+    def send_frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> int:
+        return self._send(_frame(targets, bones))
 
     def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
         return self._send(_clip(frames, plan))
@@ -471,8 +475,8 @@ class Stream(_BaseStream[SyncConnection]):
                 continue
             return self._answer(data)
 
-    def frame(self, targets: list[Target]) -> FrameResult:
-        self.send_frame(targets)
+    def frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> FrameResult:
+        self.send_frame(targets, bones=bones)
         return _expect_frame(self.receive())
 
     def clip(self, frames: list[Frame], *, plan: bool = False) -> ClipResult:
