@@ -39,16 +39,23 @@ from .work import WorkClass
 log = logging.getLogger("service")
 
 DESCRIPTION = """\
-Inverse kinematics over HTTP and WebSocket: create a **session** for a chain (joints as
-JSON, URDF text, or a built-in example), then send **frames** of targets; each frame is
-warm-started from the previous answer. `POST /v1/solve` is a stateless one-shot.
+Inverse kinematics over HTTP and WebSocket: create a **session** for a chain (a glTF or
+BVH character's skeleton, URDF text as robots ship it, joints as JSON, or a built-in
+example), then send **frames** of targets (a position, an orientation and/or an aim per
+effector, with optional blend weights and pole targets); each frame is warm-started from
+the previous answer, and can answer with bone rotations to apply. `POST /v1/solve` is a
+stateless one-shot; `POST /v1/batch` carries one frame each for several sessions.
 
-Conventions: metres, radians, microseconds (`_us`); quaternions are objects
-`{w, x, y, z}`; finite numbers only; unknown fields are rejected. Errors are
-`{"detail", "code"}`. Session calls need `Authorization: Bearer <token>` (the token
-comes back from `POST /v1/sessions`). When the server has API keys, `POST /v1/sessions`
-and `POST /v1/solve` need `X-API-Key: <key>`. The WebSocket protocol
-(`/v1/sessions/{id}/ws`) is described in docs/websocket.md in the repository.
+Conventions: metres, radians, microseconds (`_us`), in the chain's own axes (Z up for
+URDF and JSON chains, Y up for glTF and BVH) unless the session names its engine's
+(`conventions`: Unity, Unreal, Godot, glTF, three.js, ROS, or up axis, handedness and
+centimetres); quaternions are objects `{w, x, y, z}`; finite numbers only; unknown
+fields are rejected. Errors are `{"detail", "code"}`. Session calls need `Authorization:
+Bearer <token>` (the token comes back from `POST /v1/sessions`; a batch entry carries
+its session's). When the server has API keys, `POST /v1/sessions` and `POST /v1/solve`
+need `X-API-Key: <key>`. The WebSocket protocol (`/v1/sessions/{id}/ws`) is described as
+AsyncAPI 3 at `/asyncapi.json`, and in docs/websocket.md in the repository. A live demo
+is at `/demo`.
 """
 
 
