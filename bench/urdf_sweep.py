@@ -322,10 +322,16 @@ def main() -> None:
         default=IKOptions().full_restart_every,
         help="IKOptions.full_restart_every (1: every restart re-draws every variable)",
     )
+    parser.add_argument(
+        "--no-turn-restarts",
+        action="store_true",
+        help="IKOptions.turn_restarts=False (restarts as before turn restarts)",
+    )
     args = parser.parse_args()
     options = IKOptions(
         time_budget_us=args.budget_us,
         full_restart_every=args.full_restart_every,
+        turn_restarts=not args.no_turn_restarts,
     )
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(args.seed)
@@ -448,7 +454,8 @@ def report(files, import_classes, notes, refused, singles, multis, no_chain, arg
         below_cpu = [r for r in runs if _rate_on_cpu(r) < bar or _rate_cpu(r) < bar]
         print(
             f"\n### {title}: {len(runs)} chains, {args.poses} targets each "
-            f"(budget {args.budget_us:g} us, full_restart_every {args.full_restart_every})\n"
+            f"(budget {args.budget_us:g} us, full_restart_every {args.full_restart_every}, "
+            f"turn_restarts {not args.no_turn_restarts})\n"
         )
         cpu_rates = [_rate_cpu(r) for r in runs]
         print(
