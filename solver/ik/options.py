@@ -36,7 +36,7 @@ class IKOptions:
             40%; the human's hands and head: 99.1%, 99.5%, 98.3%); with 0, some g1
             targets were never solved (the kept joints were what blocked them).
         turn_restarts: The first restart from each new best pose turns the revolute
-            joints that a limit stops, whose range is over half a turn and which move
+            joints that a limit stops, whose range is over three quarters of a turn and which move
             an effector off target, the other way round: to the same angle from the
             other side, or to the opposite limit when the range is short of a full
             turn (``settled.variable_periods``, ``optim.restart.turn_values``).

@@ -64,6 +64,9 @@ def test_a_full_turn_of_range_turns_to_the_same_angle() -> None:
         ([LIMIT], [0.0], [0.0], -LIMIT, LIMIT, math.inf),  # no pull at all
         ([LIMIT], [-1.0], [1.0], -LIMIT, LIMIT, math.inf),  # it moves only what is on target
         ([1.5], [-1.0], [0.0], -1.5, 1.5, math.inf),  # a range under half a turn (a knee)
+        # A gap over a quarter turn (g1's shoulder roll, 3.84 rad of range): the
+        # opposite bound is no nearer the best angle than a random draw.
+        ([1.92], [-1.0], [0.0], -1.92, 1.92, math.inf),
         ([LIMIT], [-1.0], [0.0], -LIMIT, LIMIT, 0.3),  # a stream's local restarts
         ([0.5], [-1.0], [0.0], -LIMIT, LIMIT, math.inf),  # not on a bound
     ],
