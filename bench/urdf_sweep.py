@@ -307,7 +307,12 @@ def main() -> None:
     parser.add_argument("--poses", type=int, default=1000, help="targets per chain")
     parser.add_argument("--max-multi-dof", type=int, default=30)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--only", default="", help="substring of the files to sweep")
+    parser.add_argument(
+        "--only",
+        default="",
+        help="sweep the files whose path contains one of these comma-separated substrings",
+    )
+    parser.add_argument("--multi-only", action="store_true", help="solve only the multi-tip chains")
     parser.add_argument(
         "--budget-us", type=float, default=BUDGET_US, help="the solver's time budget [us]"
     )
@@ -317,11 +322,21 @@ def main() -> None:
         default=IKOptions().full_restart_every,
         help="IKOptions.full_restart_every (1: every restart re-draws every variable)",
     )
+    parser.add_argument(
+        "--no-turn-restarts",
+        action="store_true",
+        help="IKOptions.turn_restarts=False (restarts as before turn restarts)",
+    )
     args = parser.parse_args()
-    options = IKOptions(time_budget_us=args.budget_us, full_restart_every=args.full_restart_every)
+    options = IKOptions(
+        time_budget_us=args.budget_us,
+        full_restart_every=args.full_restart_every,
+        turn_restarts=not args.no_turn_restarts,
+    )
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(args.seed)
-    files = [f for f in urdf_files(args.pybullet_data) if args.only in str(f[1])]
+    only = [part for part in args.only.split(",") if part] or [""]
+    files = [f for f in urdf_files(args.pybullet_data) if any(o in str(f[1]) for o in only)]
     import_classes: collections.Counter[str] = collections.Counter()
     notes: collections.Counter[str] = collections.Counter()
     refused: list[tuple[str, str, str]] = []
@@ -344,7 +359,7 @@ def main() -> None:
         if not tips:
             no_chain += 1
             continue
-        groups = [(tip, singles) for tip in tips]
+        groups = [] if args.multi_only else [(tip, singles) for tip in tips]
         if len(tips) >= 2:
             groups.append(([t[0] for t in tips], multis))
         groups += [(named, multis) for named in NAMED_MULTI.get(path.name, [])]
@@ -439,7 +454,8 @@ def report(files, import_classes, notes, refused, singles, multis, no_chain, arg
         below_cpu = [r for r in runs if _rate_on_cpu(r) < bar or _rate_cpu(r) < bar]
         print(
             f"\n### {title}: {len(runs)} chains, {args.poses} targets each "
-            f"(budget {args.budget_us:g} us, full_restart_every {args.full_restart_every})\n"
+            f"(budget {args.budget_us:g} us, full_restart_every {args.full_restart_every}, "
+            f"turn_restarts {not args.no_turn_restarts})\n"
         )
         cpu_rates = [_rate_cpu(r) for r in runs]
         print(

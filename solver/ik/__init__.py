@@ -8,7 +8,8 @@ things are:
     frame.py        the compiled per-frame solve (validate, solve, report errors)
     kinematics.py   the IK objective, its exact gradient, the goal measure, errors
     metric.py       the Gauss-Newton metric handed to the optimizer; null-space step
-    settled.py      how settled each variable is, for the optimizer's partial restarts
+    settled.py      for the optimizer's restarts: how settled each variable is (partial
+                    restarts), which variables are angles (turn restarts)
     targets.py      ``Target`` and its packed row, ``Pole``
     blend.py        blend weights between 0 and 1: the goal part of the way there
     poles.py        pole targets: the shaping pass, the default pulled link

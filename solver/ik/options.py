@@ -35,6 +35,11 @@ class IKOptions:
             98.6%, 98.5% and 97.3% of the targets within 5 ms of CPU (g1: 73%, 71%,
             40%; the human's hands and head: 99.1%, 99.5%, 98.3%); with 0, some g1
             targets were never solved (the kept joints were what blocked them).
+        turn_restarts: The first restart from each new best pose turns the revolute
+            joints that a limit stops, whose range is over three quarters of a turn and which move
+            an effector off target, the other way round: to the same angle from the
+            other side, or to the opposite limit when the range is short of a full
+            turn (``settled.variable_periods``, ``optim.restart.turn_values``).
         max_step_rad: Cap on any variable's change per iteration (a step cap keeps a
             cold solve from slamming several joints into their limits).
         posture_weight: Pull towards the reference pose (rest or previous): w sum dq^2.
@@ -102,6 +107,7 @@ class IKOptions:
     max_restarts: int = 126
     restart_radius_rad: float = math.inf
     full_restart_every: int = 8
+    turn_restarts: bool = True
     max_step_rad: float = 0.5
     posture_weight: float = 0.0
     limit_weight: float = 0.0
@@ -181,6 +187,7 @@ class IKOptions:
             max_restarts=self.max_restarts,
             restart_radius=self.restart_radius_rad,
             full_restart_every=self.full_restart_every,
+            turn_restarts=self.turn_restarts,
             time_budget_s=budget,
             scale_initial_h=self.scale_initial_h,
             max_passes=min(4 * (self.max_restarts + 1) + 8, 512),

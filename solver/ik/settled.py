@@ -1,6 +1,7 @@
 """How settled each variable is, for partial restarts: the share of the effectors it
 moves that are already on target (compiled; registered as the IK objective's
-``restart_keep_fn``).
+``restart_keep_fn``); and which variables are angles, for turn restarts
+(``variable_periods``, its ``restart_period_fn``).
 
 The optimizer knows no kinematics (``optim.restart``): it asks the objective how
 settled each variable is at its best point, and a partial restart keeps the settled
@@ -15,6 +16,8 @@ the usual one over the whole box.
 
 from __future__ import annotations
 
+import math
+
 from .._jit import jit_leaf
 from ..model.layout import (
     ED_ERR_P,
@@ -27,8 +30,11 @@ from ..model.layout import (
     EI_MODE,
     EI_NODE,
     MODE_POSITION,
+    ND_RATE,
     NI_DOF,
+    NI_KIND,
     NI_PARENT,
+    NODE_ROTATION,
 )
 from .kinematics import DD_GSCRATCH, DD_HI, DD_LO, effector_errors, is_last_point
 
@@ -76,3 +82,32 @@ def settled_variables(x, data, keep):  # type: ignore[no-untyped-def]
         if keep[i] > 0.0 and dd[DD_LO, i] < dd[DD_HI, i]:
             kept += 1
     return kept
+
+
+@jit_leaf
+def variable_periods(data, period):  # type: ignore[no-untyped-def]
+    """period[i]: 2 pi where every node that variable i drives is a rotation at a whole
+    rate (a revolute or continuous joint, an axis of a rotational joint, and mimic
+    followers at multiplier +-1, +-2, ...): the pose is the same a full turn on; 0.0
+    where one is a translation or a fractional rate. Returns how many are 2 pi."""
+    ni, nd, ei, ed, dd, misc = data
+    for i in range(period.shape[0]):
+        period[i] = -1.0  # not seen yet
+    for k in range(ni.shape[0]):
+        d = ni[k, NI_DOF]
+        if d < 0:
+            continue
+        rate = nd[k, ND_RATE]
+        whole = rate != 0.0 and rate == math.floor(rate)
+        if ni[k, NI_KIND] == NODE_ROTATION and whole:
+            if period[d] < 0.0:
+                period[d] = 2.0 * math.pi
+        else:
+            period[d] = 0.0
+    count = 0
+    for i in range(period.shape[0]):
+        if period[i] < 0.0:
+            period[i] = 0.0
+        elif period[i] > 0.0:
+            count += 1
+    return count

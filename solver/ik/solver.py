@@ -59,7 +59,7 @@ from .options import IKOptions
 from .pole_term import pole_block_size
 from .poles import PoleShaper
 from .result import STATUSES, EffectorError, IKResult, IKStatus, ResultLayout
-from .settled import settled_variables
+from .settled import settled_variables, variable_periods
 from .targets import Target
 from .task import Task
 
@@ -478,7 +478,9 @@ def _register_once(data: tuple[np.ndarray, ...]) -> None:
     """Bind the IK objective to the IK data tuple's type (every chain shares it)."""
     global _REGISTERED
     if not _REGISTERED:
-        register_objective(ik_objective, ik_goal, data, ik_metric, settled_variables)
+        register_objective(
+            ik_objective, ik_goal, data, ik_metric, settled_variables, variable_periods
+        )
         _REGISTERED = True
 
 

@@ -7,7 +7,8 @@ Knows nothing of kinematics. Where things are:
     line_search.py  the cubic backtrack and the article's curvature phase
     bfgs.py         the inverse BFGS update and the projected descent direction
     evaluate.py     f and g (analytic or finite differences), box projection
-    restart.py      the seeded random restarts, partial restarts (keep what is settled)
+    restart.py      the seeded random restarts, partial restarts (keep what is settled),
+                    turn restarts (a periodic variable a bound stops, the other way round)
     analyzer.py     the analyzer's policy table and its guards (``decide``)
     termination.py  termination codes, actions, goal statuses (the JSON strings)
     codes.py        their integer mirrors and the option / log layouts for the core

@@ -50,11 +50,13 @@ START_INITIAL = 0
 START_RESET_H = 1
 START_RESTART = 2
 START_RESTART_PARTIAL = 3
+START_RESTART_TURN = 4
 PASS_STARTS: tuple[PassStart, ...] = (
     PassStart.INITIAL,
     PassStart.RESET_H,
     PassStart.RESTART_RANDOM,
     PassStart.RESTART_PARTIAL,
+    PassStart.RESTART_TURN,
 )
 
 
@@ -106,7 +108,10 @@ I_FINAL_METRIC = 12  # 1: re-seed H at the answer too (the caller carries H to i
 # Every this many restarts re-draws every variable (1: all of them do; 0: only those
 # where the objective keeps nothing), see ``restart``.
 I_FULL_RESTART_EVERY = 13
-N_IOPT = 14
+# 1: a restart from a new best point first turns its periodic variables pressed against
+# a bound the other way round (``restart.turn_values``); 0: never.
+I_TURN_RESTARTS = 14
+N_IOPT = 15
 
 # Columns of the pass log the core fills.
 L_START = 0

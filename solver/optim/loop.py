@@ -43,8 +43,8 @@ from .analyzer import decide
 from .bfgs import bfgs_update, descent_direction, scale_initial_h, set_identity
 from .evaluate import all_finite, evaluate, project, projected_gradient_norm
 from .line_search import line_search
-from .objective import call_goal, call_metric, call_restart_keep
-from .restart import keep_values, random_point
+from .objective import call_goal, call_metric, call_restart_keep, call_restart_period
+from .restart import keep_values, random_point, turn_values
 
 # What the core returns (a named tuple: numba builds and returns it like any tuple).
 CoreResult = namedtuple(
@@ -242,6 +242,7 @@ def solve_passes(  # type: ignore[no-untyped-def]
     metric_until = iopt[C.I_METRIC_UNTIL]
     final_metric = iopt[C.I_FINAL_METRIC] != 0
     full_restart_every = iopt[C.I_FULL_RESTART_EVERY]
+    turn_restarts = iopt[C.I_TURN_RESTARTS] != 0
     gtol = fopt[C.F_GTOL]
     max_step = fopt[C.F_MAX_STEP]
     xtol = fopt[C.F_XTOL]
@@ -286,6 +287,7 @@ def solve_passes(  # type: ignore[no-untyped-def]
     final_code = C.NONFINITE
     start_kind = C.START_INITIAL
     h_is_identity = is_identity(h)
+    f_turned = math.nan  # f_best when a turn restart was last tried (NaN: never)
     # "Fresh": H = I or the objective's own metric, i.e. no curvature learnt yet
     # (a caller's H carried from a previous solve is not fresh).
     h_fresh = h_is_identity
@@ -426,8 +428,24 @@ def solve_passes(  # type: ignore[no-untyped-def]
             start_kind = C.START_RESTART
             n_restarts += 1
             random_point(x0, lo, hi, fopt[C.F_RESTART_RADIUS], rng_state, x)
-            if full_restart_every != 1 and (
-                full_restart_every == 0 or n_restarts % full_restart_every != 0
+            turned = 0
+            if turn_restarts and f_best != f_turned:
+                # A turn restart (``restart``), once per best point: from the best
+                # point, the unsettled periodic variables that a bound stops turned
+                # the other way round. hy is free between passes: the periods.
+                f_turned = f_best
+                if call_restart_period(fg, data, hy) > 0:
+                    if call_restart_keep(fg, out_x, data, scratch) == 0:
+                        for i in range(n):
+                            scratch[i] = 0.0
+                    turned = turn_values(
+                        out_x, out_g, hy, scratch, lo, hi, x0, fopt[C.F_RESTART_RADIUS], x
+                    )
+                    if turned > 0:
+                        start_kind = C.START_RESTART_TURN
+            if turned == 0 and (
+                full_restart_every != 1
+                and (full_restart_every == 0 or n_restarts % full_restart_every != 0)
             ):
                 # A partial restart (``restart``): the variables the objective calls
                 # settled at the best point keep their values there; odd ones keep

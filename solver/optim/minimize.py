@@ -61,6 +61,7 @@ def pack_options(
     iopt[C.I_METRIC_UNTIL] = options.metric_until
     iopt[C.I_FINAL_METRIC] = int(options.final_metric)
     iopt[C.I_FULL_RESTART_EVERY] = options.full_restart_every
+    iopt[C.I_TURN_RESTARTS] = int(options.turn_restarts)
     return fopt, iopt
 
 

@@ -24,8 +24,9 @@ import numba
 from numba.core import types
 from numba.extending import overload
 
-# (numba type of data, fg, goal_fn or None, metric_fn or None, restart_keep_fn or None)
-_REGISTRY: list[tuple[Any, Any, Any, Any, Any]] = []
+# (numba type of data, fg, goal_fn, metric_fn, restart_keep_fn, restart_period_fn),
+# each function None when not given
+_REGISTRY: list[tuple[Any, Any, Any, Any, Any, Any]] = []
 
 
 def register_objective(
@@ -34,6 +35,7 @@ def register_objective(
     data_example: tuple[Any, ...],
     metric_fn: Any = None,
     restart_keep_fn: Any = None,
+    restart_period_fn: Any = None,
 ) -> None:
     """Bind ``fg`` to the numba type of ``data_example``.
 
@@ -48,22 +50,27 @@ def register_objective(
             x, from 0.0 (re-draw it) to 1.0 (keep its value: for the IK, a variable
             that moves only effectors already on target), and returns how many
             variables have a share above 0 (0: re-draw every variable).
+        restart_period_fn: Optional ``restart_period_fn(data, period) -> int`` for
+            turn restarts (``restart.turn_values``): writes into period[i] the period
+            of f in variable i (f(x + period[i] e_i) = f(x); for the IK 2 pi for the
+            angle of a revolute joint) or 0.0 where f is not periodic in it, and
+            returns how many are periodic.
     """
     data_type = numba.typeof(data_example)
-    for ty, f, _, _, _ in _REGISTRY:
+    for ty, f, *_ in _REGISTRY:
         if ty == data_type and f is not fg:
             raise ValueError(f"another objective is registered for data type {data_type}")
-    _REGISTRY.append((data_type, fg, goal_fn, metric_fn, restart_keep_fn))
+    _REGISTRY.append((data_type, fg, goal_fn, metric_fn, restart_keep_fn, restart_period_fn))
 
 
 def registered_for(fg: Any) -> bool:
-    return any(f is fg for _, f, _, _, _ in _REGISTRY)
+    return any(f is fg for _, f, *_ in _REGISTRY)
 
 
-def _lookup(data_type: Any) -> tuple[Any, Any, Any, Any]:
-    for ty, fg, goal, metric, keep in _REGISTRY:
+def _lookup(data_type: Any) -> tuple[Any, Any, Any, Any, Any]:
+    for ty, fg, goal, metric, keep, period in _REGISTRY:
         if ty == data_type:
-            return fg, goal, metric, keep
+            return fg, goal, metric, keep, period
     raise TypeError(f"no objective registered for data of type {data_type}")
 
 
@@ -165,6 +172,34 @@ def _call_restart_keep_compiled(fg, x, data, keep):  # type: ignore[no-untyped-d
             return impl_keep
 
     def impl_none(fg, x, data, keep):  # type: ignore[no-untyped-def]
+        return 0
+
+    return impl_none
+
+
+def call_restart_period(fg: Any, data: Any, period: Any) -> int:
+    """The registered periods of the variables into ``period`` (see
+    ``register_objective``); returns how many are periodic, 0 when there is no such
+    function (``period`` is then untouched)."""
+    if fg is None:
+        restart_period = _lookup(numba.typeof(data))[4]
+        if restart_period is not None:
+            return int(restart_period(data, period))
+    return 0
+
+
+@overload(call_restart_period, inline="always")
+def _call_restart_period_compiled(fg, data, period):  # type: ignore[no-untyped-def]
+    if isinstance(fg, types.NoneType):
+        restart_period = _lookup(data)[4]
+        if restart_period is not None:
+
+            def impl_period(fg, data, period):  # type: ignore[no-untyped-def]
+                return restart_period(data, period)
+
+            return impl_period
+
+    def impl_none(fg, data, period):  # type: ignore[no-untyped-def]
         return 0
 
     return impl_none

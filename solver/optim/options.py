@@ -54,6 +54,10 @@ class MinimizeOptions:
             restart, ``restart``), except every this many restarts, which re-draw
             every variable (1: all restarts do, as without such an objective; 0:
             only those where nothing is settled).
+        turn_restarts: With an objective that says which variables are periodic
+            (its ``restart_period_fn``), the first restart from each new best point
+            turns the unsettled periodic variables that a bound stops the other way
+            round (``restart.turn_values``) instead of drawing a random point.
         time_budget_s: Wall-clock budget of the whole solve; None for no limit.
         scale_initial_h: Scale H0 = I by y.s / y.y after the first step of a pass
             (Nocedal & Wright eq. 6.20); off by default, as in the article.
@@ -88,6 +92,7 @@ class MinimizeOptions:
     max_restarts: int = 0
     restart_radius: float = math.inf
     full_restart_every: int = 1
+    turn_restarts: bool = True
     time_budget_s: float | None = None
     scale_initial_h: bool = False
     skip_update_eps: float = 1e-10

@@ -19,6 +19,18 @@ is re-drawn too, in case it is what keeps the limb off); every
 themselves are what blocks the rest. The generator draws every variable either
 way, so the sequence of draws does not depend on what is kept.
 
+A turn restart (``turn_values``) goes first, once per best point, where the objective
+says which variables are periodic (``register_objective``'s ``restart_period_fn``: for
+the IK, the angle of a revolute joint, period 2 pi). At a local minimum a bound
+often holds an angle whose best value lies just past it: the joint would have to
+turn the short way, through the gap its limits forbid, and no descent from inside
+the box gets there. Turning the variable the other way round by a period lands it
+at that angle from the other side (a range of a full turn: the same pose), or at the
+opposite bound, short of it by the gap (a range within a quarter turn of a full
+one); the descent then approaches it from the side the limits allow. It starts from
+the best point with only those variables moved, which a random draw almost never
+does (on Baxter, 22 of 35 misses had such a joint).
+
 Compiled (numba).
 """
 
@@ -87,3 +99,45 @@ def keep_values(keep, source, out, only_whole, lo, hi):  # type: ignore[no-untyp
         if keep[i] >= 1.0 if only_whole else keep[i] > 0.0:
             out[i] = source[i]
     return kept
+
+
+@jit_leaf
+def turn_values(x, g, period, keep, lo, hi, x_center, radius, out):  # type: ignore[no-untyped-def]
+    """out = x with each variable that a bound stops turned the other way round by its
+    period, clamped into the box; returns how many it turned (0: out is untouched).
+
+    Variable i turns when it is periodic (period[i] > 0) and not settled
+    (keep[i] < 1: it moves something still off target), sits on a bound (within
+    1e-9 of its range) that the gradient pushes it against (the bound is active with
+    a positive multiplier: g[i] < 0 at the upper bound, > 0 at the lower), and its
+    range is over three quarters of a period: the gap the bounds forbid is then under
+    a quarter period, so the turned value lies within a quarter period of every value
+    in the gap, the best one included, where a periodic error (1 - cos of the angle
+    to the best, for a point turning on a circle) is still convex. A wider gap would
+    land it no nearer the best value than a random draw (on g1, turning its +-1.9 rad
+    shoulder rolls too took more iterations: median 108 against 84 with the quarter).
+    Like a random restart, the turned value stays within ``radius`` of ``x_center``
+    (a stream's local restarts turn nothing across a range).
+    """
+    turned = 0
+    for i in range(x.shape[0]):
+        p = period[i]
+        width = hi[i] - lo[i]
+        if not (p > 0.0 and keep[i] < 1.0 and 4.0 * width > 3.0 * p and math.isfinite(width)):
+            continue
+        tol = 1e-9 * width
+        if x[i] >= hi[i] - tol and g[i] < 0.0:
+            v = x[i] - p
+        elif x[i] <= lo[i] + tol and g[i] > 0.0:
+            v = x[i] + p
+        else:
+            continue
+        v = lo[i] if v < lo[i] else (hi[i] if v > hi[i] else v)
+        if abs(v - x_center[i]) > radius:
+            continue
+        if turned == 0:
+            for j in range(x.shape[0]):
+                out[j] = x[j]
+        out[i] = v
+        turned += 1
+    return turned

@@ -82,3 +82,6 @@ class PassStart(enum.StrEnum):
     RESTART_RANDOM = "restart_random"
     # A restart that kept the variables the objective called settled (``restart``).
     RESTART_PARTIAL = "restart_partial"
+    # A restart from the best point with its periodic variables that a bound stops
+    # turned the other way round, to (or towards) the same angle (``restart``).
+    RESTART_TURN = "restart_turn"
