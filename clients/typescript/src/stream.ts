@@ -20,7 +20,17 @@
 import { decode, encode } from "@msgpack/msgpack";
 
 import { IKClientError, RECONNECTABLE, StreamClosed, serviceError, streamClosed } from "./errors.js";
-import type { Answer, ClipAnswer, Encoding, Frame, FrameResult, FrameResults, Pong, Target } from "./types.js";
+import type {
+  Answer,
+  BoneOutput,
+  ClipAnswer,
+  Encoding,
+  Frame,
+  FrameResult,
+  FrameResults,
+  Pong,
+  Target,
+} from "./types.js";
 
 /** How hard a stream tries to get its connection back: `attempts` connections, waiting
  * `initialDelayMs` before the first and doubling up to `maxDelayMs`; the count starts
@@ -61,6 +71,16 @@ export interface StreamOptions {
   auth?: "header" | "subprotocol";
   /** A WebSocket class to use instead of the global one (or `ws` when there is none). */
   WebSocket?: SocketClass;
+}
+
+/** What one frame message may add to its targets. */
+export interface FrameOptions {
+  /** This frame's bone output instead of the session's (skeleton chains; docs/websocket.md). */
+  bones?: BoneOutput;
+}
+
+function frameMessage(targets: Target[], options: FrameOptions): Envelope {
+  return options.bones === undefined ? { type: "frame", targets } : { type: "frame", targets, bones: options.bones };
 }
 
 const OPEN = 1;
@@ -136,8 +156,9 @@ export class Stream<R = FrameResult> {
     return this.waiting.size;
   }
 
-  sendFrame(targets: Target[]): number {
-    return this.send({ type: "frame", targets }).id;
+  /** `options.bones` overrides the session's bone output for this frame only. */
+  sendFrame(targets: Target[], options: FrameOptions = {}): number {
+    return this.send(frameMessage(targets, options)).id;
   }
 
   sendClip(frames: Frame[], options: { plan?: boolean } = {}): number {
@@ -155,8 +176,8 @@ export class Stream<R = FrameResult> {
     return next.answer;
   }
 
-  async frame(targets: Target[]): Promise<R> {
-    const answer = await this.answerOf(this.send({ type: "frame", targets }));
+  async frame(targets: Target[], options: FrameOptions = {}): Promise<R> {
+    const answer = await this.answerOf(this.send(frameMessage(targets, options)));
     if (answer.type !== "result") throw new IKClientError(`expected a frame result, got ${answer.type}`);
     return answer.result;
   }

@@ -390,6 +390,36 @@ describe("stream", () => {
       }
     });
 
+    test(`a frame may ask for bones (${encoding})`, async () => {
+      // schemas.chain.EXAMPLE_BVH_LEG: a two-bone leg, no bone output by default.
+      const leg: BvhChain = {
+        format: "bvh",
+        bvh: [
+          "HIERARCHY", "ROOT Hips", "{", "  OFFSET 0 0 0",
+          "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+          "  JOINT LeftUpLeg", "  {", "    OFFSET 10 0 0", "    CHANNELS 3 Zrotation Xrotation Yrotation",
+          "    JOINT LeftLeg", "    {", "      OFFSET 0 -45 0", "      CHANNELS 3 Zrotation Xrotation Yrotation",
+          "      End Site", "      {", "        OFFSET 0 -45 0", "      }", "    }", "  }", "}",
+        ].join("\n"),
+        unit_m: 0.01,
+        moving: ["LeftUpLeg", "LeftLeg"],
+        effectors: [{ bone: "LeftLeg_end", name: "left_foot" }],
+      };
+      const session = await ik.createSession(leg);
+      const stream = await ik.stream(session, { encoding });
+      const foot: Target = { effector: "left_foot", position: { x: 0.1, y: -0.8, z: 0.1 } };
+      try {
+        const plain = await stream.frame([foot]);
+        const withBones = await stream.frame([foot], { bones: { local_rotations: true } });
+        const after = await stream.frame([foot]);
+        assert.ok(plain.bones == null && after.bones == null);
+        assert.ok(withBones.bones?.local?.["LeftLeg"] !== undefined, JSON.stringify(withBones));
+      } finally {
+        stream.close();
+        await ik.deleteSession(session);
+      }
+    });
+
     test(`error answer, then the next frame (${encoding})`, async () => {
       const session = await ik.createSession(PANDA);
       const stream = await ik.stream(session, { encoding, compact: true });
