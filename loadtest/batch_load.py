@@ -58,16 +58,19 @@ async def _client(
     warmup_s: float, results: str, run: BatchRun, ready: asyncio.Barrier,
 ) -> None:  # fmt: skip
     path = make_path(chain, rate_hz)
-    async with httpx.AsyncClient(base_url=url, timeout=60.0) as http:
-        sessions = []
-        for _ in range(characters):
-            r = await http.post(
-                "/v1/sessions", json={"chain": {"format": "example", "name": chain}}
-            )
-            if r.status_code != 201:
-                run.errors[f"setup_http_{r.status_code}"] += 1
-                break
-            sessions.append(r.json())
+    sessions = []
+    try:
+        async with httpx.AsyncClient(base_url=url, timeout=60.0) as http:
+            for _ in range(characters):
+                r = await http.post(
+                    "/v1/sessions", json={"chain": {"format": "example", "name": chain}}
+                )
+                if r.status_code != 201:
+                    run.errors[f"setup_http_{r.status_code}"] += 1
+                    break
+                sessions.append(r.json())
+    except httpx.HTTPError as e:  # refused, timed out: counted, and still at the barrier
+        run.errors[f"setup_{type(e).__name__}"] += 1
     await ready.wait()  # every client has its sessions: the measured window starts
     if len(sessions) < characters:
         # Counted above; it still met the others at the barrier (returning before it

@@ -181,3 +181,27 @@ def test_single_tip_solves_change_only_where_a_turn_restart_was_taken() -> None:
 @pytest.mark.parametrize("make", [IKOptions, MinimizeOptions])
 def test_turn_restarts_are_on_by_default(make: type) -> None:
     assert make().turn_restarts is True
+
+
+def test_one_turn_restart_per_best_point() -> None:
+    """Targets in the gap the limits forbid: each wrist stops at a limit, and turning it
+    lands on the other limit, no better. The turn is tried once from that best point;
+    the later restarts are random draws, not the same turned pass again (review: with
+    the once-per-best-point rule removed, every restart was ``restart_turn``)."""
+    count = 3
+    urdf_chain = chain_from_urdf(
+        _wrists(count), base_link="base", tip_links=[f"tip{k}" for k in range(count)]
+    )
+    chain = build_chain(
+        list(urdf_chain.joints),
+        [dataclasses.replace(e, mode=EffectorMode.POSITION) for e in urdf_chain.effectors],
+    )
+    targets = [
+        Target(effector=e.name, position=np.array([-0.3, 0.5 * k, 0.0]))
+        for k, e in enumerate(chain.effectors)
+    ]
+    options = IKOptions(time_budget_us=None, max_restarts=6)
+    r = IKSolver(chain, options, seed=5).solve(targets, np.full(count, 2.9))
+    starts = [p.start for p in r.pass_log]
+    assert starts.count(PassStart.RESTART_TURN) == 1, starts
+    assert starts.count(PassStart.RESTART_RANDOM) >= 1, starts
