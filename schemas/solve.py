@@ -281,11 +281,18 @@ class Pose(StrictModel):
         "(`followers`: multiplier x its leader + offset; not in `q`)",
         examples=[{"panda_finger_joint1": 0.02, "panda_finger_joint2": 0.02}],
     )
+    clipped: list[str] = Field(
+        default_factory=list,
+        description="The DOFs whose value the client sent (PUT pose, `initial_pose`) was "
+        "outside the limits and was set to the nearest limit; empty otherwise",
+        examples=[["joint1"]],
+    )
 
 
 class PoseIn(StrictModel):
     """A pose: either ``q`` (every DOF, in order) or ``joints`` (some DOFs by name; the
-    others keep their current value). Values are clipped into the limits."""
+    others keep their current value). Values are clipped into the limits; the answer's
+    ``clipped`` names the DOFs that were."""
 
     model_config = ConfigDict(
         json_schema_extra={"examples": [{"joints": {"elbow": 1.2}}, {"q": [0.0, 0.2, 1.2]}]}

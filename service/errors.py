@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -52,7 +52,7 @@ from starlette.routing import compile_path
 from schemas import ErrorCode
 from solver.errors import IKError
 
-from .hints import hint
+from .hints import JSON_INVALID, hint
 from .responses import ORJSONResponse
 
 log = logging.getLogger("service")
@@ -204,6 +204,14 @@ def dotted_field(loc: Sequence[Any]) -> str | None:
     return ".".join(str(p) for p in parts) or None
 
 
+def _field_of(error: Mapping[str, Any]) -> str | None:
+    """The field a validation error names: the whole ``body`` when it is not JSON at
+    all (its ``loc`` then ends in a character offset, not a field)."""
+    if error.get("type") == JSON_INVALID:
+        return "body"
+    return dotted_field(error["loc"])
+
+
 _HTTP_CODES = {
     status.HTTP_404_NOT_FOUND: ErrorCode.NOT_FOUND,
     status.HTTP_405_METHOD_NOT_ALLOWED: ErrorCode.METHOD_NOT_ALLOWED,
@@ -220,7 +228,7 @@ async def _validation_error(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, RequestValidationError)
     detail = validation_errors(exc.errors())
     body: dict[str, Any] = {"detail": detail, "code": ErrorCode.INVALID_FORMAT}
-    if detail and (field := dotted_field(detail[0]["loc"])) is not None:
+    if detail and (field := _field_of(detail[0])) is not None:
         body["field"] = field  # the first error's, as the WebSocket's error names it
     return ORJSONResponse(body, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
 

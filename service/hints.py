@@ -37,6 +37,8 @@ VECTOR_ARRAY = 'a vector is an object {"x": ..., "y": ..., "z": ...}, not an arr
 _NOT_AN_OBJECT = frozenset({"model_type", "model_attributes_type"})
 
 _LONGEST_GUESS = 64
+# FastAPI's error type for a body that does not parse as JSON.
+JSON_INVALID = "json_invalid"
 
 
 @functools.cache
@@ -131,7 +133,19 @@ def hint(error: Mapping[str, Any]) -> str | None:
         loc = error.get("loc") or ()
         if loc and isinstance(loc[-1], str):
             return _did_you_mean(loc[-1])
+    if kind == JSON_INVALID:
+        return _json_hint(error)
     return None
+
+
+def _json_hint(error: Mapping[str, Any]) -> str:
+    """FastAPI reports a body that is not JSON with the character offset of the fault
+    as the last part of ``loc`` (``["body", 4]``); say it in words."""
+    loc = error.get("loc") or ()
+    where = f" at character {loc[-1]}" if loc and isinstance(loc[-1], int) else ""
+    reason = (error.get("ctx") or {}).get("error")
+    because = f" ({reason})" if isinstance(reason, str) and reason else ""
+    return f"the body is not valid JSON{where}{because}"
 
 
 def message_type_hint(raw: Any) -> str:

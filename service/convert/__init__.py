@@ -24,7 +24,7 @@ from .chains import ChainView, chain_from_spec, check_bone_output
 from .fast_path import FastFrame, fast_frame, fast_targets
 from .frames import FrameJob, clip_jobs, targets
 from .options import apply_options, oneshot_defaults, options_dict, session_defaults
-from .poses import pose_dict, pose_vector
+from .poses import clipped_dofs, pose_dict, pose_vector
 from .results import (
     ResultBuilder,
     SolvedFrame,
@@ -57,6 +57,7 @@ __all__ = [
     "oneshot_defaults",
     "options_dict",
     "plan_summary",
+    "clipped_dofs",
     "pose_dict",
     "pose_vector",
     "render_frames",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -48,12 +49,29 @@ def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str) ->
     return np.clip(q, chain.lower, chain.upper)
 
 
-def pose_dict(view: ChainView, q: Vector) -> dict[str, Any]:
-    """A ``Pose``: q in DOF order, and by name with the mimic joints' values."""
+def clipped_dofs(pose: S.PoseIn, view: ChainView) -> list[str]:
+    """The DOFs whose value in ``pose`` is outside the limits (``pose_vector`` sets them
+    to the nearest limit), in DOF order. Called after ``pose_vector`` accepted it."""
+    chain = view.chain
+    if pose.q is not None:
+        sent = dict(zip(chain.dof_names, pose.q, strict=True))
+    else:
+        assert pose.joints is not None
+        sent = pose.joints
+    return [
+        name
+        for i, name in enumerate(chain.dof_names)
+        if name in sent and not chain.lower[i] <= sent[name] <= chain.upper[i]
+    ]
+
+
+def pose_dict(view: ChainView, q: Vector, clipped: Sequence[str] = ()) -> dict[str, Any]:
+    """A ``Pose``: q in DOF order, and by name with the mimic joints' values;
+    ``clipped``: the DOFs a pose the client sent had outside the limits."""
     values = q.tolist()
     chain = view.chain
     joints = dict(zip(chain.dof_names, values, strict=True))
     followers = chain.followers
     if followers.names:
         joints.update(zip(followers.names, followers.values(q).tolist(), strict=True))
-    return {"q": values, "joints": joints}
+    return {"q": values, "joints": joints, "clipped": list(clipped)}

@@ -228,8 +228,10 @@ async def create_session(
     options = convert.apply_options(body.options, convert.session_defaults(settings), settings)
     solver = await svc.runner.run(WorkClass.BUILD, make_solver, view, options)
     session, token = new_session(view, solver, options, now=svc.store.clock(), owner=owner)
+    clipped: list[str] = []
     if body.initial_pose is not None:
         session.set_pose(convert.pose_vector(body.initial_pose, view, solver.q, "initial_pose"))
+        clipped = convert.clipped_dofs(body.initial_pose, view)
     session.definition = chain_definition(body)
     try:
         await svc.store.add(session)
@@ -253,7 +255,7 @@ async def create_session(
         "token": token,
         **view.summary,
         "options": convert.options_dict(options),
-        "pose": convert.pose_dict(view, solver.q),
+        "pose": convert.pose_dict(view, solver.q, clipped),
         "idle_ttl_s": svc.store.ttl_s,
     }
     return ORJSONResponse(
@@ -312,13 +314,15 @@ async def patch_session(
 async def put_pose(
     body: Annotated[S.PoseIn, Body()], session: SessionDep, svc: ServicesDep
 ) -> dict[str, Any]:
-    """Set the current pose (the next frame starts from it); values are clipped into the limits."""
+    """Set the current pose (the next frame starts from it). Values outside the limits
+    are set to the nearest limit, and the answer's ``clipped`` names those DOFs."""
 
     def apply() -> None:
         session.set_pose(convert.pose_vector(body, session.view, session.solver.q, "body"))
 
     await _change(session, svc.store, apply)
-    return convert.pose_dict(session.view, session.solver.q)
+    clipped = convert.clipped_dofs(body, session.view)
+    return convert.pose_dict(session.view, session.solver.q, clipped)
 
 
 @router.delete(

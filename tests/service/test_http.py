@@ -91,10 +91,19 @@ def test_put_pose_sets_and_clips_the_pose(client: TestClient, session: Created) 
     )
     assert r.status_code == 200
     assert r.json()["q"] == [0.5, 0.25, 2.6]  # elbow clipped to its upper limit
+    assert r.json()["clipped"] == ["elbow"]  # and the answer says so
     r = client.put(
         f"/v1/sessions/{session.id}/pose", json={"joints": {"elbow": 1.5}}, headers=session.headers
     )
     assert r.json()["joints"] == {"shoulder.z": 0.5, "shoulder.y": 0.25, "elbow": 1.5}
+    assert r.json()["clipped"] == []
+    r = client.put(
+        f"/v1/sessions/{session.id}/pose", json={"joints": {"elbow": -9.0}}, headers=session.headers
+    )
+    assert r.json()["clipped"] == ["elbow"] and r.json()["q"][:2] == [0.5, 0.25]
+    r = client.put(
+        f"/v1/sessions/{session.id}/pose", json={"joints": {"elbow": 1.5}}, headers=session.headers
+    )
     got = client.get(f"/v1/sessions/{session.id}", headers=session.headers).json()
     assert got["pose"]["q"] == [0.5, 0.25, 1.5]
 
@@ -297,6 +306,9 @@ def test_non_json_body_is_422(client: TestClient, session: Created) -> None:
         headers={**session.headers, "content-type": "application/json"},
     )
     assert r.status_code == 422 and r.json()["code"] == "invalid_format"
+    # The field is the body, not FastAPI's character offset; the message says where.
+    assert r.json()["field"] == "body"
+    assert r.json()["detail"][0]["msg"].startswith("the body is not valid JSON at character 1")
 
 
 @pytest.mark.parametrize(
@@ -495,6 +507,13 @@ def test_aim_effector_points_along_the_direction(client: TestClient) -> None:
     zero = {"targets": [{"effector": "hand", "direction": {"x": 0.0, "y": 0.0, "z": 0.0}}]}
     r = client.post(f"/v1/sessions/{s.id}/frames", json=zero, headers=s.headers)
     assert r.status_code == 422 and r.json()["field"] == "targets[0].direction"
+
+
+def test_initial_pose_outside_the_limits_is_clipped_and_named(client: TestClient) -> None:
+    s = create(client, initial_pose={"q": [9.0, 0.25, 1.0]})
+    assert s.body["pose"]["clipped"] == ["shoulder.z"]
+    assert s.body["pose"]["q"][1:] == [0.25, 1.0]
+    assert create(client, initial_pose={"q": [0.0, 0.25, 1.0]}).body["pose"]["clipped"] == []
 
 
 def test_initial_pose_of_the_wrong_length(client: TestClient) -> None:
