@@ -49,13 +49,15 @@ stateless one-shot; `POST /v1/batch` carries one frame each for several sessions
 Conventions: metres, radians, microseconds (`_us`), in the chain's own axes (Z up for
 URDF and JSON chains, Y up for glTF and BVH) unless the session names its engine's
 (`conventions`: Unity, Unreal, Godot, glTF, three.js, ROS, or up axis, handedness and
-centimetres); quaternions are objects `{w, x, y, z}`; finite numbers only; unknown
-fields are rejected. Errors are `{"detail", "code"}`. Session calls need `Authorization:
-Bearer <token>` (the token comes back from `POST /v1/sessions`; a batch entry carries
-its session's). When the server has API keys, `POST /v1/sessions` and `POST /v1/solve`
-need `X-API-Key: <key>`. The WebSocket protocol (`/v1/sessions/{id}/ws`) is described as
-AsyncAPI 3 at `/asyncapi.json`, and in docs/websocket.md in the repository. A live demo
-is at `/demo`.
+centimetres: target positions and directions in, bone rotations and positions out).
+Joint values, tolerances and errors (`position_error_m`) stay in the chain's own units
+and frame under any `conventions`. Quaternions are objects `{w, x, y, z}`; finite
+numbers only; unknown fields are rejected. Errors are `{"detail", "code"}`. Session
+calls need `Authorization: Bearer <token>` (the token comes back from `POST
+/v1/sessions`; a batch entry carries its session's). When the server has API keys, `POST
+/v1/sessions` and `POST /v1/solve` need `X-API-Key: <key>`. The WebSocket protocol
+(`/v1/sessions/{id}/ws`) is described as AsyncAPI 3 at `/asyncapi.json`, and in
+docs/websocket.md in the repository. A live demo is at `/demo`.
 """
 
 

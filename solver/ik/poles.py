@@ -31,6 +31,7 @@ the elbow of clavicle-shoulder-elbow-wrist).
 
 from __future__ import annotations
 
+import difflib
 import math
 from typing import Any
 
@@ -111,6 +112,13 @@ def pole_node(chain: Chain, effector: int, link: str | None) -> int:
     path = limb_path(chain, effector)
     if link not in path:
         near = ", ".join(repr(p) for p in path[:-1][:8])
+        if link not in chain.compiled.link_node:  # a typo, not a link of another limb
+            close = difflib.get_close_matches(link, list(chain.compiled.link_node), n=1)
+            guess = f" (did you mean {close[0]!r}?)" if close else ""
+            raise InvalidProblem(
+                f"pole for {name!r}: the chain has no link {link!r}{guess}; "
+                f"links on the effector's path: {near}"
+            )
         raise InvalidProblem(
             f"pole for {name!r}: link {link!r} is not on the effector's path to the root"
             f" (links there: {near})"

@@ -104,6 +104,10 @@ def test_a_named_pole_bone_and_bad_poles(legs: Chain) -> None:
     assert result.success and knee_side(legs, result.q, across) < -0.02
     with pytest.raises(InvalidProblem, match="not on the effector's path"):
         solver.solve([Target(effector="right_foot", position=target, pole=Pole(target, "node_8"))])
+    # A name that is no link of the chain is a typo, said as such with the closest name.
+    typo = KNEE + "_"
+    with pytest.raises(InvalidProblem, match=f"no link '{typo}'.*did you mean '{KNEE}'"):
+        solver.solve([Target(effector="right_foot", position=target, pole=Pole(target, typo))])
     with pytest.raises(InvalidProblem, match="finite"):
         Pole([0.0, math.nan, 0.0])
 
