@@ -158,6 +158,9 @@ def _gltf_field(where: str, e: InvalidModel) -> str:
     part = e.joint or ""
     if part == "skin":
         return "chain.skin"
+    if where == "chain.gltf" and part == "json" and e.field:
+        # a top-level member of the document ("nodes must be an array")
+        return f"{where}.{e.field}"
     if where == "chain.gltf" and part not in ("", "glb", "json"):
         # "nodes[3](hip)" -> chain.gltf.nodes[3].<field>
         path = part.split("(", 1)[0].strip()

@@ -214,7 +214,7 @@ def test_a_10000_node_document_is_refused(client: TestClient) -> None:
     nodes = [{"children": [i + 1]} for i in range(9_999)] + [{}]
     doc = {"asset": {"version": "2.0"}, "nodes": nodes, "skins": [{"joints": [0, 1]}]}
     body = error(client, {"format": "gltf", "gltf": doc, "effectors": [{"bone": "node_1"}]})
-    assert body["code"] == "invalid_problem" and body["field"].startswith("chain.gltf")
+    assert body["code"] == "invalid_problem" and body["field"] == "chain.gltf.nodes"
     assert "4096" in body["detail"], body
 
 
@@ -223,6 +223,13 @@ def test_gltf_json_errors_name_the_node_field(client: TestClient) -> None:
     chain["gltf"]["nodes"][1]["scale"] = [1.0, 2.0, 1.0]
     body = error(client, chain)
     assert body["field"] == "chain.gltf.nodes[1].scale", body
+
+
+def test_gltf_document_errors_name_the_member(client: TestClient) -> None:
+    chain = copy.deepcopy(EXAMPLE_GLTF_LEG)
+    chain["gltf"]["skins"] = {"joints": [0, 1]}
+    body = error(client, chain)
+    assert body["field"] == "chain.gltf.skins" and "must be an array" in body["detail"], body
 
 
 def test_bad_base64_is_invalid_format(client: TestClient) -> None:
