@@ -132,7 +132,8 @@ def test_session_calls(ik: Client) -> None:
 
     first = session.dof[0].name
     pose = ik.set_pose(session, joints={first: 0.25})
-    assert pose.joints[first] == pytest.approx(0.25)
+    assert pose.joints[first] == pytest.approx(0.25) and pose.clipped == []
+    assert ik.set_pose(session, joints={first: 100.0}).clipped == [first]  # past its limit
     inside = [0.3 * d.lower + 0.7 * d.upper for d in session.dof if d.lower and d.upper]
     assert len(inside) == 7
     pose = ik.set_pose(session, q=inside)

@@ -288,14 +288,17 @@ class BatchEntryResult:
 
 @dataclass(frozen=True, slots=True)
 class Pose:
-    """Schema ``Pose``: joint values in DOF order and by name [rad] or [m]."""
+    """Schema ``Pose``: joint values in DOF order and by name [rad] or [m]; ``clipped``
+    names the DOFs whose value the client sent (``set_pose``, ``initial_pose``) was
+    outside the limits and was set to the nearest limit."""
 
     q: list[float]
     joints: dict[str, float]
+    clipped: list[str]
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> Pose:
-        return cls(d["q"], d["joints"])
+        return cls(d["q"], d["joints"], d.get("clipped", []))
 
 
 @dataclass(frozen=True, slots=True)

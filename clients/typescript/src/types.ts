@@ -305,6 +305,9 @@ export interface FrameResults<R = FrameResult> {
 export interface Pose {
   q: number[];
   joints: Record<string, number>;
+  /** The DOFs whose value the client sent (`setPose`, `initialPose`) was outside the
+   * limits and was set to the nearest limit; empty otherwise. */
+  clipped: string[];
 }
 
 /** Schema `DofInfo`: one degree of freedom; null limits are unbounded. */

@@ -210,7 +210,7 @@ const DECLARED: Record<string, string[]> = {
   PlanSummary: k<PlanSummary>({ largest_step_rad: true, tracked_largest_step_rad: true, candidates: true, plan_us: true }),
   FrameResults: k<FrameResults>({ results: true, plan: true }),
   CompactFrameResults: k<FrameResults<CompactFrameResult>>({ results: true, plan: true }),
-  Pose: k<Pose>({ q: true, joints: true }),
+  Pose: k<Pose>({ q: true, joints: true, clipped: true }),
   DofInfo: k<DofInfo>({ name: true, lower: true, upper: true }),
   EffectorInfo: k<EffectorInfo>({ name: true, mode: true }),
   FollowerInfo: k<FollowerInfo>({ name: true, leader: true, multiplier: true, offset: true }),
@@ -271,6 +271,7 @@ describe("http", () => {
 
     const first = session.dof[0]!.name;
     assert.ok(Math.abs((await ik.setPose(session, { joints: { [first]: 0.25 } })).joints[first]! - 0.25) < 1e-12);
+    assert.deepEqual((await ik.setPose(session, { joints: { [first]: 100 } })).clipped, [first]); // past its limit
     const inside = session.dof.map((d) => 0.3 * d.lower! + 0.7 * d.upper!);
     const pose = await ik.setPose(session, { q: inside });
     pose.q.forEach((v, i) => assert.ok(Math.abs(v - inside[i]!) < 1e-12));
