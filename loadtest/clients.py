@@ -167,7 +167,9 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
 
     Frames go through ik_client's ``AsyncStream`` on the connection that created the
     session, with reconnecting off (a drop is counted as ``closed_<code>``, not mended)
-    and no permessage-deflate (300-byte frames gain nothing from it; it costs CPU)."""
+    no permessage-deflate (300-byte frames gain nothing from it; it costs CPU) and no
+    keepalive pings (as the raw clients before ik_client: they add traffic to a short
+    run, and a reconnect-less client learns of a drop from its reads)."""
     res = ClientResult(spec.index, spec.path.chain, "ws")
     parts = urlsplit(spec.url)
     host, port = parts.hostname or "127.0.0.1", parts.port or 80
@@ -186,6 +188,7 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
             timeout_s=None,  # the drain below bounds the wait for the last answers
             deflate=False,
             sock=sock,
+            ping_interval_s=None,  # the run is short; pings would only add traffic
         )
         await asyncio.wait_for(stream.__aenter__(), spec.timeout_s)
     except SetupError as e:

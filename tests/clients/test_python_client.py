@@ -8,6 +8,7 @@ import asyncio
 import dataclasses
 import json
 import socket
+import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -410,6 +411,32 @@ def test_stream_without_deflate(ik: Client, session: Session) -> None:
         assert [e.name for e in offered.connection.protocol.extensions] == ["permessage-deflate"]
         assert plain.connection.protocol.extensions == []
         assert_solved(plain.frame([tool(0.1)]))
+
+
+def test_stream_keepalive_pings(ik: Client, session: Session) -> None:
+    """``ping_interval_s``: websockets' keepalive pings, whose pongs measure
+    ``latency``; None sends none (loadtest's clients), through a reconnect too."""
+    with (
+        ik.stream(session, ping_interval_s=0.05) as pinging,
+        ik.stream(session, ping_interval_s=None) as quiet,
+    ):
+        deadline = time.monotonic() + 10.0
+        while pinging.connection.latency == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert pinging.connection.latency > 0  # a pong came back
+        assert quiet.connection.latency == 0  # the same time, and no ping
+        quiet.connection.socket.shutdown(socket.SHUT_RDWR)
+        assert_solved(quiet.frame([tool(0.1)]))
+        assert quiet.reconnects == 1 and quiet.connection.ping_interval is None
+
+
+def test_async_stream_keepalive_pings(server: Server, session: Session) -> None:
+    async def run() -> tuple[float | None, float | None]:
+        async with AsyncClient(server.base) as ik:
+            async with ik.stream(session, ping_interval_s=None, ping_timeout_s=None) as s:
+                return s.connection.ping_interval, s.connection.ping_timeout
+
+    assert asyncio.run(run()) == (None, None)
 
 
 def sticky_session(server: Server) -> tuple[socket.socket, Session]:

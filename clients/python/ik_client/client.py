@@ -20,7 +20,7 @@ import httpx
 
 from . import calls
 from .calls import Call, SessionRef
-from .stream import AsyncStream, Reconnect, Stream
+from .stream import PING_INTERVAL_S, PING_TIMEOUT_S, AsyncStream, Reconnect, Stream
 from .types import Encoding
 
 T = TypeVar("T")
@@ -115,6 +115,8 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
         timeout_s: float | None = DEFAULT_TIMEOUT_S,
         deflate: bool = True,
         sock: socket.socket | None = None,
+        ping_interval_s: float | None = PING_INTERVAL_S,
+        ping_timeout_s: float | None = PING_TIMEOUT_S,
     ) -> S:
         """The session's WebSocket; open it with ``with`` (``Stream``) or ``async with``
         (``AsyncStream``).
@@ -131,6 +133,10 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
             sock: An open TCP connection to the server for the first handshake, e.g.
                 the keep-alive connection that created the session, so the WebSocket
                 reaches the worker holding it; reconnects open new connections.
+            ping_interval_s: Period of websockets' keepalive pings [s] (its default,
+                20); None sends none (a load client: they would add to what it measures).
+            ping_timeout_s: How long a ping may wait for its pong before the connection
+                counts as dropped [s] (its default, 20); None waits for ever.
         """
         url = calls.ws_url(self.base_url, session, compact)
         return self._stream_type(
@@ -141,6 +147,8 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
             timeout_s=timeout_s,
             deflate=deflate,
             sock=sock,
+            ping_interval_s=ping_interval_s,
+            ping_timeout_s=ping_timeout_s,
         )
 
 

@@ -85,6 +85,10 @@ _ATTEMPT_FAILURES = (ConnectionClosed, OSError, InvalidHandshake, TimeoutError)
 # Answers of long clips of big chains can be large; the server bounds what it sends.
 MAX_ANSWER_BYTES = 64 * 2**20
 OPEN_TIMEOUT_S = 30.0
+# websockets' own keepalive defaults: a ping every 20 s, the connection dropped (1011)
+# when its pong takes longer than 20 s.
+PING_INTERVAL_S = 20.0
+PING_TIMEOUT_S = 20.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -281,7 +285,10 @@ class _BaseStream(Generic[Connection]):
     bytes gain little from it and it costs CPU at both ends. ``sock``, an open TCP
     connection to the server, carries the first connection's handshake (e.g. the
     keep-alive connection that created the session, so that the WebSocket reaches the
-    worker process holding it); a reconnect opens a new connection.
+    worker process holding it); a reconnect opens a new connection. ``ping_interval_s``
+    and ``ping_timeout_s`` are websockets' keepalive (None: no pings, or no wait for
+    their pong): a client that reads answers all the time learns of a dead connection
+    from its reads, and a load client's pings would only add traffic to what it measures.
     """
 
     def __init__(
@@ -294,6 +301,8 @@ class _BaseStream(Generic[Connection]):
         timeout_s: float | None = 30.0,
         deflate: bool = True,
         sock: socket.socket | None = None,
+        ping_interval_s: float | None = PING_INTERVAL_S,
+        ping_timeout_s: float | None = PING_TIMEOUT_S,
     ) -> None:
         self.url = url
         self.reconnects = 0  # connections made after the first
@@ -306,6 +315,8 @@ class _BaseStream(Generic[Connection]):
             "additional_headers": {"Authorization": f"Bearer {token}"},
             "open_timeout": OPEN_TIMEOUT_S,
             "max_size": MAX_ANSWER_BYTES,
+            "ping_interval": ping_interval_s,
+            "ping_timeout": ping_timeout_s,
         }
         if not deflate:
             self._connect_options["compression"] = None
