@@ -572,6 +572,30 @@ def test_async_stream_reconnects_mid_pipeline(server: Server, session: Session) 
     assert reconnects == 1
 
 
+def test_resend_is_the_message_as_first_sent(server: Server, session: Session) -> None:
+    """A message resent after a drop is the bytes first sent, not the caller's target
+    as it is by then: here changed to NaN, which could not be written again (a
+    ValueError out of the reconnect), and would be another frame if it could."""
+
+    async def run() -> tuple[ik_client.Answer, ik_client.Answer, int]:
+        async with AsyncClient(server.base) as ik:
+            async with ik.stream(session) as stream:
+                # A planned clip ahead keeps the frame unanswered until the cut.
+                await stream.send_clip([{"targets": [tool(0.1)]}] * 20, plan=True)
+                target = tool(0.15)
+                sent = await stream.send_frame([target])
+                target["position"]["y"] = float("nan")  # the caller reuses its dict
+                stream.connection.transport.abort()
+                clip, frame = await stream.receive(), await stream.receive()
+                assert frame.id == sent
+                return clip, frame, stream.reconnects
+
+    clip, frame, reconnects = asyncio.run(asyncio.wait_for(run(), 60.0))
+    assert reconnects == 1
+    assert isinstance(clip, ClipAnswer) and isinstance(frame, FrameAnswer)
+    assert_solved(frame.result)
+
+
 def test_stream_url_and_token_from_session(server: Server, session: Session) -> None:
     with Client(server.base + "/") as ik:
         url = ik.stream(session, compact=True).url

@@ -109,8 +109,11 @@ class Reconnect:
 @dataclass(slots=True)
 class _Message:
     id: int  # the id the caller was given
-    wire_id: int  # the id it carries on the current connection
-    body: dict[str, Any]  # without "id"
+    wire_id: int  # the id it carries on every connection
+    # The message as first sent, id included: a reconnect sends these bytes again. A new
+    # encoding of the body could differ (the caller may have changed its dicts since)
+    # or fail, and the server recognises a resent message by its id and content.
+    data: str | bytes
 
 
 class _Pipeline:
@@ -127,19 +130,24 @@ class _Pipeline:
         return len(self._waiting)
 
     def add(self, body: dict[str, Any]) -> tuple[int, str | bytes]:
-        """Number a new message; returns its id and its encoding."""
-        message = _Message(self._next_id, self._next_wire_id, body)
-        data = self._encode(message)  # a message that cannot be written is not counted
+        """Number a new message; returns its id and its encoding.
+
+        Raises:
+            ValueError, TypeError: ``body`` cannot be written; nothing was counted.
+        """
+        data = self._encode(body, self._next_wire_id)
+        message = _Message(self._next_id, self._next_wire_id, data)
         self._next_id += 1
         self._next_wire_id += 1
         self._waiting[message.wire_id] = message
         return message.id, data
 
     def resend(self) -> list[str | bytes]:
-        """Every waiting message, in order, under the id it was sent with: what a new
-        connection gets. The same id and content let a server that stored the answer
-        give it again rather than solve the frame twice."""
-        return [self._encode(m) for m in self._waiting.values()]
+        """Every waiting message, in order, as first sent: what a new connection gets.
+        The same id and content let a server that stored the answer give it again
+        rather than solve the frame twice; and nothing is encoded again, so nothing
+        here can fail to encode."""
+        return [m.data for m in self._waiting.values()]
 
     def answer(self, data: str | bytes) -> Answer:
         """The answer ``data`` carries, under its message's caller id.
@@ -186,8 +194,8 @@ class _Pipeline:
             f"an answer of unknown type {kind!r} to id {wire_id}", id=message.id, envelope=envelope
         )
 
-    def _encode(self, message: _Message) -> str | bytes:
-        payload = {**message.body, "id": message.wire_id}
+    def _encode(self, body: dict[str, Any], wire_id: int) -> str | bytes:
+        payload = {**body, "id": wire_id}
         if self.encoding is Encoding.MSGPACK:
             return bytes(msgpack.packb(payload))
         return _dumps(payload)
