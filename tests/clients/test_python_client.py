@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import datetime
 import json
 import socket
 import time
@@ -402,6 +403,34 @@ def test_json_with_or_without_orjson(
     assert_solved(result)
     assert result.joints is not None and result.effectors is not None
     assert error.value.code is ErrorCode.INVALID_PROBLEM and error.value.id == 1
+
+
+@dataclasses.dataclass
+class Point:
+    x: float
+    y: float
+    z: float
+
+
+@pytest.mark.parametrize("codec", ["orjson", "json"])
+@pytest.mark.parametrize(
+    "position", [Point(0.4, 0.1, 0.5), datetime.datetime(2026, 1, 1)], ids=["dataclass", "datetime"]
+)
+def test_json_refuses_the_same_with_or_without_orjson(
+    ik: Client, session: Session, codec: str, position: object, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """orjson writes dataclasses and datetimes, json does not: refused either way
+    (TypeError), before anything is sent."""
+    if codec == "json":
+        monkeypatch.setattr("ik_client.stream._orjson_dumps", None)
+    target: Any = {"effector": "tool", "position": position}
+    with ik.stream(session) as stream:
+        with pytest.raises(TypeError):
+            stream.send_frame([target])
+        assert stream.in_flight == 0
+        result = stream.frame([tool(0.1)])
+    assert_solved(result)
+    assert result.id == 0
 
 
 def test_stream_without_deflate(ik: Client, session: Session) -> None:

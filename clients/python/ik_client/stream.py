@@ -60,7 +60,13 @@ try:
     import orjson
 
     _loads = orjson.loads
-    _orjson_dumps = orjson.dumps
+    # orjson writes dataclasses and datetimes itself, which json refuses: passed
+    # through, orjson refuses them too (TypeError) and json decides, so that a target
+    # is accepted or refused the same with and without orjson.
+    _orjson_dumps = functools.partial(
+        orjson.dumps,
+        option=orjson.OPT_PASSTHROUGH_DATACLASS | orjson.OPT_PASSTHROUGH_DATETIME,
+    )
 except ImportError:  # pragma: no cover - the test environment has orjson
     _loads = json.loads
     _orjson_dumps = None
@@ -72,8 +78,8 @@ def _dumps(payload: dict[str, Any]) -> str:
     if _orjson_dumps is not None:
         try:
             data = _orjson_dumps(payload)
-        except TypeError:  # orjson.JSONEncodeError: something only json writes (int keys)
-            pass
+        except TypeError:  # orjson.JSONEncodeError: int keys, which json writes, or a
+            pass  # value neither writes (a dataclass, a datetime), which json refuses
         else:
             if b"null" not in data:  # orjson writes NaN and infinity as null: json decides
                 return data.decode()
