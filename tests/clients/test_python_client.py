@@ -433,6 +433,25 @@ def test_json_refuses_the_same_with_or_without_orjson(
     assert result.id == 0
 
 
+@pytest.mark.parametrize("encoding", list(Encoding))
+def test_non_finite_numbers_refused_alike(ik: Client, session: Session, encoding: Encoding) -> None:
+    """NaN and infinity, in a frame or a clip, in any encoding: the same ValueError
+    naming the field, before anything is sent (MessagePack could carry them)."""
+    far: Target = {**tool(0.1), "position_weight": float("inf")}
+    nan: Target = {"effector": "tool", "position": {"x": float("nan"), "y": 0.1, "z": 0.5}}
+    with ik.stream(session, encoding=encoding) as stream:
+        with pytest.raises(ValueError, match=r"^targets\[0\]\.position\.x is nan: "):
+            stream.send_frame([nan])
+        with pytest.raises(
+            ValueError, match=r"^frames\[1\]\.targets\[0\]\.position_weight is inf: "
+        ):
+            stream.send_clip([{"targets": [tool(0.1)]}, {"targets": [far]}])
+        assert stream.in_flight == 0
+        result = stream.frame([tool(0.1)])
+    assert_solved(result)
+    assert result.id == 0
+
+
 def test_stream_without_deflate(ik: Client, session: Session) -> None:
     """websockets offers permessage-deflate, which the server accepts; ``deflate=False``
     sends messages as they are."""

@@ -20,6 +20,8 @@ from __future__ import annotations
 import asyncio
 import functools
 import json
+import math
+import re
 import socket
 import time
 from collections import OrderedDict
@@ -72,9 +74,38 @@ except ImportError:  # pragma: no cover - the test environment has orjson
     _orjson_dumps = None
 
 
+# A float in MessagePack is 0xcb and 8 big-endian bytes (msgpack writes every Python
+# float so); NaN and infinity have every exponent bit set: 0x7f or 0xff (the sign), then
+# 0xf_. Other bytes can match too; a match only sends the message to the full check.
+_MSGPACK_NON_FINITE = re.compile(rb"\xcb[\x7f\xff][\xf0-\xff]")
+
+
+def _refuse_non_finite(
+    value: Any, field: str = "", ancestors: frozenset[int] = frozenset()
+) -> None:
+    """Raise ValueError naming the first NaN or infinity in ``value`` (a message, or a
+    part of it at ``field``): the server refuses them, and JSON cannot carry them (json
+    refuses them, orjson writes null), so both encodings refuse them here, alike.
+    A container met again inside itself is left to the encoder, which refuses it."""
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ValueError(f"{field} is {value!r}: the service takes finite numbers only")
+        return
+    if id(value) in ancestors:
+        return
+    if isinstance(value, dict):
+        inner = ancestors | {id(value)}
+        for key, item in value.items():
+            _refuse_non_finite(item, f"{field}.{key}" if field else str(key), inner)
+    elif isinstance(value, list | tuple):
+        inner = ancestors | {id(value)}
+        for index, item in enumerate(value):
+            _refuse_non_finite(item, f"{field}[{index}]", inner)
+
+
 def _dumps(payload: dict[str, Any]) -> str:
-    """``payload`` as compact JSON; NaN and infinity refused (ValueError), as the server
-    refuses them, here where the caller is."""
+    """``payload`` as compact JSON; NaN and infinity refused (ValueError naming the
+    field), as the server refuses them, here where the caller is."""
     if _orjson_dumps is not None:
         try:
             data = _orjson_dumps(payload)
@@ -83,7 +114,19 @@ def _dumps(payload: dict[str, Any]) -> str:
         else:
             if b"null" not in data:  # orjson writes NaN and infinity as null: json decides
                 return data.decode()
-    return json.dumps(payload, separators=(",", ":"), allow_nan=False)
+    try:
+        return json.dumps(payload, separators=(",", ":"), allow_nan=False)
+    except ValueError:
+        _refuse_non_finite(payload)  # when a NaN or infinity is why, the same error as msgpack's
+        raise
+
+
+def _packb(payload: dict[str, Any]) -> bytes:
+    """``payload`` as MessagePack; NaN and infinity refused as by ``_dumps``."""
+    data: bytes = msgpack.packb(payload)
+    if _MSGPACK_NON_FINITE.search(data):  # perhaps one: the full check decides
+        _refuse_non_finite(payload)
+    return data
 
 
 # What ends one reconnect attempt and lets the next one start (``_Retries.attempt_failed``).
@@ -203,7 +246,7 @@ class _Pipeline:
     def _encode(self, body: dict[str, Any], wire_id: int) -> str | bytes:
         payload = {**body, "id": wire_id}
         if self.encoding is Encoding.MSGPACK:
-            return bytes(msgpack.packb(payload))
+            return _packb(payload)
         return _dumps(payload)
 
 
