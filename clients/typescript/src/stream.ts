@@ -89,8 +89,11 @@ const TOKEN_SUBPROTOCOL_PREFIX = "ik.token.";
 
 interface Message<R> {
   id: number; // the id the caller was given
-  wireId: number; // the id it carries on the current connection
-  body: Record<string, unknown>; // without "id"
+  wireId: number; // the id it carries on every connection
+  // The message as first sent, id included: a reconnect sends these bytes again. A new
+  // encoding of the body could differ (the caller may have changed its objects since)
+  // or throw, and the server recognises a resent message by its id and content.
+  data: string | Uint8Array;
   resolve: (answer: Answer<R>) => void;
   reject: (error: Error) => void;
   answer: Promise<Answer<R>>;
@@ -206,6 +209,9 @@ export class Stream<R = FrameResult> {
 
   private send(body: Record<string, unknown>): Message<R> {
     if (this.failure !== null) throw this.failure;
+    // Encoded before it counts: a message that cannot be written throws here, and
+    // nothing waits for an answer to it or holds its id.
+    const data = this.encode(body, this.nextWireId);
     let resolve!: (answer: Answer<R>) => void;
     let reject!: (error: Error) => void;
     const answer = new Promise<Answer<R>>((res, rej) => {
@@ -213,16 +219,19 @@ export class Stream<R = FrameResult> {
       reject = rej;
     });
     answer.catch(() => {}); // an answer nobody awaits must not be an unhandled rejection
-    const message: Message<R> = { id: this.nextId++, wireId: this.nextWireId++, body, resolve, reject, answer };
+    const message: Message<R> = { id: this.nextId++, wireId: this.nextWireId++, data, resolve, reject, answer };
     this.waiting.set(message.wireId, message);
     this.unread.push(message);
     // While reconnecting it waits: the new connection gets it with the others.
-    if (this.socketNow.readyState === OPEN) this.socketNow.send(this.encode(message));
+    if (this.socketNow.readyState === OPEN) this.socketNow.send(data);
     return message;
   }
 
-  private encode(message: Message<R>): string | Uint8Array {
-    const payload = { ...message.body, id: message.wireId };
+  /** `body` with its id, as sent; throws for a non-finite number (naming its field) and
+   * for what the encoding cannot write (a BigInt, a cycle). */
+  private encode(body: Record<string, unknown>, wireId: number): string | Uint8Array {
+    refuseNonFinite(body, "", new Set());
+    const payload = { ...body, id: wireId };
     return this.encoding === "msgpack" ? encode(payload) : JSON.stringify(payload);
   }
 
@@ -288,11 +297,45 @@ export class Stream<R = FrameResult> {
     this.watch(socket);
     socket.onopen = () => {
       this.reconnects += 1;
-      // Every waiting message, in order, under the id it was sent with: a server that
-      // stored its answer recognises it (same id, same content) and does not solve it twice.
-      for (const message of this.waiting.values()) socket.send(this.encode(message));
+      // Every waiting message, in order, as first sent: a server that stored its answer
+      // recognises it (same id, same content) and does not solve it twice.
+      for (const message of [...this.waiting.values()]) this.resend(socket, message);
     };
   }
+
+  /** Send `message` again on `socket`; one the socket refuses gets that error as its
+   * answer, and the messages after it are still sent. */
+  private resend(socket: Socket, message: Message<R>): void {
+    try {
+      socket.send(message.data);
+    } catch (error) {
+      this.waiting.delete(message.wireId);
+      message.reject(error instanceof Error ? error : new IKClientError(String(error)));
+    }
+  }
+}
+
+/**
+ * Throw naming the first NaN or infinity in `value` (a message body, or its part at
+ * `field`): JSON.stringify would send it as null and MessagePack as a float, and the
+ * server refuses both; here the caller learns which field. An object met again inside
+ * itself (`ancestors`) is left to the encoder, which throws for the cycle.
+ */
+function refuseNonFinite(value: unknown, field: string, ancestors: Set<object>): void {
+  if (typeof value === "number") {
+    if (Number.isFinite(value)) return;
+    throw new IKClientError(`${field} is ${value}: the service takes finite numbers only`);
+  }
+  if (value === null || typeof value !== "object" || ancestors.has(value)) return;
+  ancestors.add(value);
+  if (Array.isArray(value)) {
+    value.forEach((item, index) => refuseNonFinite(item, `${field}[${index}]`, ancestors));
+  } else {
+    for (const [key, item] of Object.entries(value)) {
+      refuseNonFinite(item, field ? `${field}.${key}` : key, ancestors);
+    }
+  }
+  ancestors.delete(value);
 }
 
 /** Resolves when `socket` opens; rejects with its close if it closes first. */

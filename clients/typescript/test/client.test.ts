@@ -19,6 +19,7 @@ import {
   Client,
   ConnectionLost,
   ErrorCode,
+  IKClientError,
   InvalidRequest,
   NotFound,
   RetryLater,
@@ -76,6 +77,15 @@ const ENCODINGS: Encoding[] = ["json", "msgpack"];
 
 function tool(y: number): Target {
   return { effector: "tool", position: { x: 0.4, y, z: 0.5 }, orientation: DOWN };
+}
+
+/** `promise`, or a rejection after `ms` (a lost answer fails the test instead of hanging it). */
+function within<T>(ms: number, promise: Promise<T>): Promise<T> {
+  let timer: NodeJS.Timeout | undefined;
+  const timeout = new Promise<never>((_, reject) => {
+    timer = setTimeout(() => reject(new Error(`no answer in ${ms} ms`)), ms);
+  });
+  return Promise.race([promise, timeout]).finally(() => clearTimeout(timer));
 }
 
 function assertSolved(result: CompactFrameResult): void {
@@ -485,6 +495,65 @@ describe("stream", () => {
   });
 
   for (const encoding of ENCODINGS) {
+    test(`NaN and infinity are refused before anything is sent, naming the field (${encoding})`, async () => {
+      const session = await ik.createSession(PANDA);
+      const stream = await ik.stream(session, { encoding });
+      const named = (pattern: RegExp) => (e: unknown) => e instanceof IKClientError && pattern.test(e.message);
+      try {
+        const nan: Target = { effector: "tool", position: { x: Number.NaN, y: 0.1, z: 0.5 } };
+        assert.throws(() => stream.sendFrame([nan]), named(/^targets\[0\]\.position\.x is NaN: /));
+        const far: Target = { ...tool(0.1), position_weight: Number.POSITIVE_INFINITY };
+        assert.throws(
+          () => stream.sendClip([{ targets: [tool(0.1)] }, { targets: [far] }]),
+          named(/^frames\[1\]\.targets\[0\]\.position_weight is Infinity: /),
+        );
+        const turned: Target = { ...tool(0.1), orientation: { w: Number.NEGATIVE_INFINITY, x: 1, y: 0, z: 0 } };
+        await assert.rejects(stream.frame([turned]), named(/^targets\[0\]\.orientation\.w is -Infinity: /));
+        assert.equal(stream.inFlight, 0);
+        const result = await stream.frame([tool(0.1)]);
+        assertSolved(result);
+        assert.equal(result.id, 0);
+      } finally {
+        stream.close();
+      }
+    });
+
+    test(`an unencodable message is not in flight; the next is answered after a reconnect (${encoding})`, async () => {
+      const session = await ik.createSession(PANDA);
+      const stream = await ik.stream(session, { encoding });
+      try {
+        const big = { ...tool(0.1), position_weight: 1n } as unknown as Target; // neither encoding writes a BigInt
+        assert.throws(() => stream.sendFrame([big]));
+        assert.equal(stream.inFlight, 0);
+        (stream.socket as unknown as NodeWebSocket).terminate();
+        const id = stream.sendFrame([tool(0.1)]);
+        const answer = await within(20_000, stream.receive());
+        assert.ok(answer.type === "result" && answer.id === id && id === 0);
+        assertSolved(answer.result);
+        assert.equal(stream.reconnects, 1);
+      } finally {
+        stream.close();
+      }
+    });
+
+    test(`a reconnect resends a message as first sent, not as its objects are now (${encoding})`, async () => {
+      const session = await ik.createSession(PANDA);
+      const stream = await ik.stream(session, { encoding });
+      try {
+        const target = tool(0.15);
+        const id = stream.sendFrame([target]);
+        // In the same tick: the answer cannot have been read before the cut.
+        target.position!.y = Number.NaN; // the caller reuses its objects
+        (stream.socket as unknown as NodeWebSocket).terminate();
+        const answer = await within(20_000, stream.receive());
+        assert.ok(answer.type === "result" && answer.id === id);
+        assertSolved(answer.result);
+        assert.equal(stream.reconnects, 1);
+      } finally {
+        stream.close();
+      }
+    });
+
     test(`reconnects mid-pipeline: every frame answered once, in order (${encoding})`, async () => {
       const session = await ik.createSession(PANDA);
       const stream = await ik.stream(session, { encoding });
