@@ -72,6 +72,23 @@ export class IKClientError extends Error {
   override name = "IKClientError";
 }
 
+/** A stream's answer that this client cannot read (ik_client's `UnexpectedAnswer`): one
+ * of a type it does not know, which rejects the message it answers (`id`: that
+ * message's id; it counts as answered), or an answer to an id that nothing waits for
+ * (`id` null: nothing is taken off the messages in flight), which the stream hands to
+ * its `onUnexpected` option. `envelope` is the answer as decoded. */
+export class UnexpectedAnswer extends IKClientError {
+  override name = "UnexpectedAnswer";
+
+  constructor(
+    message: string,
+    readonly id: number | null,
+    readonly envelope: Readonly<Record<string, unknown>>,
+  ) {
+    super(message);
+  }
+}
+
 export interface ServiceErrorInit {
   field?: string | null | undefined;
   retryAfterS?: number | null | undefined;

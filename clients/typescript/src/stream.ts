@@ -19,7 +19,14 @@
 
 import { decode, encode } from "@msgpack/msgpack";
 
-import { IKClientError, RECONNECTABLE, StreamClosed, serviceError, streamClosed } from "./errors.js";
+import {
+  IKClientError,
+  RECONNECTABLE,
+  StreamClosed,
+  UnexpectedAnswer,
+  serviceError,
+  streamClosed,
+} from "./errors.js";
 import type {
   Answer,
   BoneOutput,
@@ -71,6 +78,9 @@ export interface StreamOptions {
   auth?: "header" | "subprotocol";
   /** A WebSocket class to use instead of the global one (or `ws` when there is none). */
   WebSocket?: SocketClass;
+  /** Called with an answer to an id nothing waits for (an `UnexpectedAnswer` whose `id`
+   * is null); no message's promise can take it. Default: such answers are dropped. */
+  onUnexpected?: (error: UnexpectedAnswer) => void;
 }
 
 /** What one frame message may add to its targets. */
@@ -125,6 +135,7 @@ export class Stream<R = FrameResult> {
     private readonly connect: () => Socket,
     private readonly encoding: Encoding,
     private readonly reconnect: Reconnect,
+    private readonly onUnexpected: ((error: UnexpectedAnswer) => void) | undefined,
     first: Socket,
   ) {
     this.socketNow = first;
@@ -146,7 +157,8 @@ export class Stream<R = FrameResult> {
     };
     const first = connect();
     await opened(first);
-    return new Stream<R>(url, connect, options.encoding ?? "json", { ...DEFAULT_RECONNECT, ...options.reconnect }, first);
+    const reconnect = { ...DEFAULT_RECONNECT, ...options.reconnect };
+    return new Stream<R>(url, connect, options.encoding ?? "json", reconnect, options.onUnexpected, first);
   }
 
   /** The current socket (a test drops it: `ws`'s `terminate()`). */
@@ -254,7 +266,11 @@ export class Stream<R = FrameResult> {
     let wireId = envelope["id"] as number | null | undefined;
     if (wireId === null || wireId === undefined) wireId = this.waiting.keys().next().value; // in order
     const message = wireId === undefined ? undefined : this.waiting.get(wireId);
-    if (message === undefined) return; // not one of ours: nothing waits for it
+    if (message === undefined) {
+      const text = `an answer (${String(envelope["type"])}) to id ${String(envelope["id"])}, which is not waiting`;
+      this.onUnexpected?.(new UnexpectedAnswer(text, null, envelope));
+      return;
+    }
     this.waiting.delete(message.wireId);
     this.tries = 0;
     const id = message.id;
@@ -275,7 +291,8 @@ export class Stream<R = FrameResult> {
     } else if (envelope["type"] === "pong") {
       message.resolve({ type: "pong", id });
     } else {
-      message.reject(new IKClientError(`unknown answer type ${String(envelope["type"])}`));
+      const text = `an answer of unknown type ${String(envelope["type"])} to id ${message.wireId}`;
+      message.reject(new UnexpectedAnswer(text, id, envelope));
     }
   }
 

@@ -8,7 +8,7 @@
 import assert from "node:assert/strict";
 import { after, before, describe, test } from "node:test";
 
-import { WebSocket as NodeWebSocket } from "ws";
+import { WebSocket as NodeWebSocket, WebSocketServer } from "ws";
 
 import {
   AuthError,
@@ -28,6 +28,7 @@ import {
   Status,
   StreamAuthError,
   Termination,
+  UnexpectedAnswer,
   serviceError,
   type ClipRequest,
   type CompactFrameResult,
@@ -481,6 +482,43 @@ describe("stream", () => {
     assert.ok(missing instanceof SessionGone);
     assert.equal(missing.closeCode, 4404);
     assert.equal(missing.reason, ErrorCode.NotFound);
+  });
+
+  test("answers the client cannot read: UnexpectedAnswer, and the stream goes on", async () => {
+    // A server that echoes each message (a type the client does not read; loadtest's
+    // floors do so), and after the first answers an id nothing waits for.
+    const echo = new WebSocketServer({ host: "127.0.0.1", port: 0 });
+    echo.on("connection", (socket) => {
+      let first = true;
+      socket.on("message", (data, binary) => {
+        socket.send(data, { binary });
+        if (first) socket.send(JSON.stringify({ id: 99, type: "pong" }));
+        first = false;
+      });
+    });
+    await new Promise((resolve) => echo.once("listening", resolve));
+    const { port } = echo.address() as { port: number };
+    const unexpected: UnexpectedAnswer[] = [];
+    const stream = await new Client(`http://127.0.0.1:${port}`).stream(
+      { id: "s", token: "t" },
+      { reconnect: { attempts: 0 }, onUnexpected: (e) => unexpected.push(e) },
+    );
+    try {
+      const echoed = await stream.frame([tool(0.1)]).catch((e: unknown) => e);
+      assert.ok(echoed instanceof UnexpectedAnswer && echoed instanceof IKClientError);
+      assert.equal(echoed.id, 0);
+      assert.equal(echoed.envelope["type"], "frame");
+      const pong = await stream.ping().catch((e: unknown) => e); // the stream goes on
+      assert.ok(pong instanceof UnexpectedAnswer && pong.id === 1 && pong.envelope["type"] === "ping");
+      assert.equal(stream.inFlight, 0);
+      assert.deepEqual(
+        unexpected.map((e) => [e.id, e.envelope]),
+        [[null, { id: 99, type: "pong" }]],
+      );
+    } finally {
+      stream.close();
+      echo.close();
+    }
   });
 
   test("without reconnects, a drop rejects what is in flight", async () => {
