@@ -40,7 +40,9 @@ async def _client(base: str, i: int, ready: asyncio.Barrier, stop_at: list[float
     async with AsyncClient(base, timeout_s=60.0) as ik:
         session = await ik.create_session(PANDA)
         n = 0
-        async with ik.stream(session, reconnect=NO_RECONNECT, timeout_s=60.0) as stream:
+        async with ik.stream(
+            session, reconnect=NO_RECONNECT, timeout_s=60.0, ping_interval_s=None
+        ) as stream:
             await ready.wait()
             while time.perf_counter() < stop_at[0]:
                 await stream.send_frame(_targets(i, n))

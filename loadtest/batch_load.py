@@ -88,6 +88,7 @@ async def _client(
             reconnect=NO_RECONNECT,
             timeout_s=None,
             deflate=False,
+            ping_interval_s=None,  # no keepalive frames in the measured traffic
         ) as stream,
     ):
         start = time.perf_counter() + index * period / 7

@@ -77,7 +77,7 @@ async def stream_of(ik: AsyncClient, options: SolverOptionsPatch) -> AsyncStream
     """A new panda_arm session with ``options`` and its WebSocket (to open with ``async
     with``), not reconnecting."""
     session = await ik.create_session(PANDA, options=options)
-    return ik.stream(session, reconnect=NO_RECONNECT)
+    return ik.stream(session, reconnect=NO_RECONNECT, ping_interval_s=None)
 
 
 async def stream_client(
