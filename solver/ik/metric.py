@@ -110,25 +110,74 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     for i in range(n):
         for j in range(n):
             h[i, j] = 0.0
+    # An effector's Jacobian is zero outside the variables on its path to the root, so
+    # only their pairs are summed: on a tree of many limbs (a humanoid's 9 effectors,
+    # 29 variables) each limb's block instead of every n x n pair per effector. The
+    # sums are the same, term for term (the pairs skipped add exact zeros).
+    listed = dd.shape[0] > DD_STACK  # a row to list the path's variables in
     for e in range(ei.shape[0]):
         if ei[e, EI_ACTIVE] == 0:
             continue
         weighted_jacobian(e, ni, nd, ei, ed, dd)
-        for i in range(n):
-            if free[i] == 0.0:
-                continue
-            for j in range(i, n):
-                if free[j] == 0.0:
-                    continue
-                acc = 0.0
-                for r in range(6):
-                    acc += dd[DD_J + r, i] * dd[DD_J + r, j]
-                h[i, j] += 2.0 * acc
-                if j != i:
-                    h[j, i] += 2.0 * acc
+        if listed:
+            _add_path_pairs(e, ni, ei, dd, free, h)
+        else:
+            _add_all_pairs(dd, free, h)
     for i in range(n):
         h[i, i] += c
     return _invert_spd_in_place(h)
+
+
+@jit_inline
+def _add_pair(dd, h, i, j):  # type: ignore[no-untyped-def]
+    """h[i, j] and h[j, i] += 2 (J^T J)[i, j] for one effector's rows in DD_J (i <= j)."""
+    acc = 0.0
+    for r in range(6):
+        acc += dd[DD_J + r, i] * dd[DD_J + r, j]
+    h[i, j] += 2.0 * acc
+    if j != i:
+        h[j, i] += 2.0 * acc
+
+
+@jit_inline
+def _add_all_pairs(dd, free, h):  # type: ignore[no-untyped-def]
+    n = h.shape[0]
+    for i in range(n):
+        if free[i] == 0.0:
+            continue
+        for j in range(i, n):
+            if free[j] != 0.0:
+                _add_pair(dd, h, i, j)
+
+
+@jit_inline
+def _add_path_pairs(e, ni, ei, dd, free, h):  # type: ignore[no-untyped-def]
+    """``_add_all_pairs`` over the free variables on effector e's path only, listed
+    once each (a mimic leader can move several nodes) in DD's first stacked row."""
+    path = dd[DD_STACK]
+    count = 0
+    k = ei[e, EI_NODE]
+    while k >= 0:
+        d = ni[k, NI_DOF]
+        k = ni[k, NI_PARENT]
+        if d < 0 or free[d] == 0.0:
+            continue
+        seen = False
+        for m in range(count):
+            if path[m] == d:
+                seen = True
+                break
+        if not seen:
+            path[count] = d
+            count += 1
+    for a in range(count):
+        da = int(path[a])
+        for b in range(a, count):
+            db = int(path[b])
+            if da <= db:
+                _add_pair(dd, h, da, db)
+            else:
+                _add_pair(dd, h, db, da)
 
 
 @jit_leaf

@@ -16,6 +16,7 @@ from solver.model import Chain, Effector, build_chain
 from solver.model.examples import humanoid_arm, panda_arm, tail, two_arm_torso
 from solver.model.forward import effector_poses
 from solver.model.layout import ED_WP, ED_WR
+from solver.model.urdf import chain_from_urdf
 
 
 def _weighted_jacobian_fd(chain: Chain, q: np.ndarray, eps: float = 1e-6) -> np.ndarray:
@@ -50,9 +51,31 @@ def _tail_with_two_points() -> Chain:
     )
 
 
+_SERIAL_MIMIC = """<robot name="serial_mimic">
+  <link name="base"/><link name="l1"/><link name="l2"/><link name="l3"/><link name="tip"/>
+  <joint name="a" type="revolute"><parent link="base"/><child link="l1"/>
+    <origin xyz="0 0 0.1"/><axis xyz="0 1 0"/><limit lower="-2" upper="2"/></joint>
+  <joint name="b" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 1 0"/><limit lower="-2" upper="2"/>
+    <mimic joint="a" multiplier="0.5" offset="0.1"/></joint>
+  <joint name="c" type="revolute"><parent link="l2"/><child link="l3"/>
+    <origin xyz="0 0 0.3"/><axis xyz="1 0 0"/><limit lower="-2" upper="2"/></joint>
+  <joint name="d" type="revolute"><parent link="l3"/><child link="tip"/>
+    <origin xyz="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="-2" upper="2"/>
+    <mimic joint="c" multiplier="-1.5"/></joint>
+</robot>"""
+
+
+def _serial_mimic() -> Chain:
+    """Two leaders, each moving two nodes of one path (a, b = 0.5 a + 0.1; c, d = -1.5 c):
+    the metric must count each leader's column once per effector."""
+    return chain_from_urdf(_SERIAL_MIMIC, base_link="base", tip_links="tip")
+
+
 @pytest.mark.parametrize(
     ("factory", "low_rank"),
     [
+        (_serial_mimic, False),  # 6 rows, 2 variables, 4 moving nodes
         (lambda: panda_arm(EffectorMode.POSITION), True),  # 3 rows, 7 variables
         (panda_arm, False),  # 6 rows, 7 variables
         (humanoid_arm, False),
