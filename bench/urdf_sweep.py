@@ -327,12 +327,20 @@ def main() -> None:
         action="store_true",
         help="IKOptions.turn_restarts=False (restarts as before turn restarts)",
     )
+    parser.add_argument(
+        "--metric-every",
+        type=int,
+        default=None,
+        help="IKOptions.metric_every (default: IKOptions' own)",
+    )
     args = parser.parse_args()
     options = IKOptions(
         time_budget_us=args.budget_us,
         full_restart_every=args.full_restart_every,
         turn_restarts=not args.no_turn_restarts,
     )
+    if args.metric_every is not None:
+        options = dataclasses.replace(options, metric_every=args.metric_every)
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(args.seed)
     only = [part for part in args.only.split(",") if part] or [""]

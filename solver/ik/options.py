@@ -9,6 +9,11 @@ from ..errors import InvalidProblem
 from ..optim import AnalyzerPolicy, MinimizeOptions
 from .continuity import Continuity
 
+# From this many variables a chain with at least as many task rows as variables
+# re-seeds H every second iteration by default (``IKOptions.metric_interval``): the
+# 7-DOF arms of bench/ik/ keep every iteration, where the metric is cheap.
+EVERY_SECOND_METRIC_DOF = 13
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class IKOptions:
@@ -84,8 +89,17 @@ class IKOptions:
         metric_every: Re-seed H from the exact Gauss-Newton metric (2 J^T W J + mu I)^-1
             every this many iterations (1: damped Gauss-Newton steps under the same
             line search, multi-pass and analyzer; 0: the article's BFGS, with the
-            metric only at the start of each pass). 1 is the default because it
-            took ~10 iterations against ~37 on 7-DOF pose problems (bench/ik/).
+            metric only at the start of each pass). None (the default) chooses by
+            the chain (``metric_interval``): 1, which took ~10 iterations against
+            ~37 on 7-DOF pose problems (bench/ik/), except 2 for chains of at least
+            ``EVERY_SECOND_METRIC_DOF`` variables whose effectors have at least as
+            many task rows as there are variables (many tips: g1's 9 effectors, 39
+            rows on 29 variables). There the metric is the direct n x n inverse and
+            costs several objective evaluations (g1: ~20 us against ~3 us), and
+            BFGS's update in between is nearly as good a step; a redundant task
+            (Tiago's three fingertips: 18 rows, 27 variables) needed more
+            iterations at its p99 without the metric (bench/RESULTS.md, URDF files
+            in the wild).
         metric_until: Re-seed only during a pass's first this many iterations, then
             BFGS updates (0: always). Near a singularity damped Gauss-Newton crawls
             (hundreds of iterations per frame, bench/ik/ part (c), iiwa); BFGS
@@ -118,7 +132,7 @@ class IKOptions:
     scale_initial_h: bool = True
     curvature: bool = False
     carry_hessian: bool = False
-    metric_every: int = 1
+    metric_every: int | None = None
     metric_until: int = 0
     null_space_step_rad: float = 0.0
     damping: float = 0.0
@@ -164,7 +178,7 @@ class IKOptions:
             raise InvalidProblem(f"limit_margin must be in [0, 0.5), got {self.limit_margin!r}")
         if self.time_budget_us is not None and not self.time_budget_us >= 0.0:
             raise InvalidProblem(f"time_budget_us must be >= 0, got {self.time_budget_us!r}")
-        if self.metric_every < 0 or self.metric_until < 0:
+        if (self.metric_every is not None and self.metric_every < 0) or self.metric_until < 0:
             raise InvalidProblem("metric_every and metric_until must be >= 0")
         if self.max_iter < 1 or self.max_restarts < 0 or self.stall_window < 0:
             raise InvalidProblem("max_iter must be >= 1, max_restarts and stall_window >= 0")
@@ -173,7 +187,16 @@ class IKOptions:
                 f"full_restart_every must be >= 0, got {self.full_restart_every!r}"
             )
 
-    def minimize_options(self) -> MinimizeOptions:
+    def metric_interval(self, n_dof: int, task_rows: int) -> int:
+        """``metric_every`` for a chain of ``n_dof`` variables whose effectors have
+        ``task_rows`` rows in all (3 per position effector, 6 per pose or aim)."""
+        if self.metric_every is not None:
+            return self.metric_every
+        return 2 if task_rows >= n_dof >= EVERY_SECOND_METRIC_DOF else 1
+
+    def minimize_options(self, n_dof: int = 0, task_rows: int = 0) -> MinimizeOptions:
+        """The optimizer's options for a chain of ``n_dof`` variables and
+        ``task_rows`` task rows (they choose ``metric_every`` when it is None)."""
         budget = None if self.time_budget_us is None else self.time_budget_us * 1e-6
         return MinimizeOptions(
             gtol=self.gtol,
@@ -191,7 +214,7 @@ class IKOptions:
             time_budget_s=budget,
             scale_initial_h=self.scale_initial_h,
             max_passes=min(4 * (self.max_restarts + 1) + 8, 512),
-            metric_every=self.metric_every,
+            metric_every=self.metric_interval(n_dof, task_rows),
             metric_until=self.metric_until,
             final_metric=self.carry_hessian,
         )

@@ -26,7 +26,7 @@ import numpy as np
 from .._jit import compiled_entry
 from ..arrays import Matrix, Vector
 from ..errors import DimensionMismatch
-from ..model import Chain
+from ..model import Chain, EffectorMode
 from ..optim import Termination, register_objective
 from ..optim import codes as C
 from ..optim.minimize import pack_options
@@ -124,6 +124,9 @@ class IKSolver:
         _register_once(self._data)
         self._task = Task(chain, ei, self._data[3], self._dd)
         self._effector_names = chain.effector_names
+        # The task's rows with every effector targeted, as the metric counts them
+        # (3 for a position effector, 6 otherwise): they choose metric_every's default.
+        self._task_rows = sum(3 if e.mode is EffectorMode.POSITION else 6 for e in chain.effectors)
         self._misc_for: IKOptions | None = None
         self._mid = chain.mid_limits()
         self._identity = np.eye(n)
@@ -335,7 +338,7 @@ class IKSolver:
             return last
         hit = self._packed.get(id(opts))
         if hit is None or hit.options is not opts:
-            mopts = opts.minimize_options()
+            mopts = opts.minimize_options(self._n, self._task_rows)
             seed = int(self._rng.integers(0, 2**31 - 1))
             fopt, iopt = pack_options(mopts, seed=seed)
             if len(self._packed) > 32:

@@ -336,6 +336,41 @@ def test_metric_until_switches_from_gauss_newton_to_bfgs_updates() -> None:
         IKOptions(metric_until=-1)
 
 
+def test_metric_every_by_default_depends_on_what_the_metric_costs() -> None:
+    """None (the default) re-seeds every iteration, except every second one on chains
+    of 13+ variables with at least as many task rows as variables."""
+    auto = IKOptions()
+    assert auto.metric_every is None
+    assert auto.metric_interval(7, 6) == 1  # a 7-DOF arm's pose
+    assert auto.metric_interval(12, 24) == 1
+    assert auto.metric_interval(29, 39) == 2  # a humanoid's 9 effectors
+    assert auto.metric_interval(27, 18) == 1  # three fingertips: a redundant task
+    assert auto.metric_interval(40, 3) == 1  # the low-rank form: cheap at any size
+    assert IKOptions(metric_every=1).metric_interval(29, 39) == 1
+    assert IKOptions(metric_every=0).metric_interval(29, 39) == 0
+    # The solver counts the chain's rows: three pose effectors on 14 variables.
+    base = tail(7)
+    chain = build_chain(
+        list(base.joints),
+        [Effector(name=f"e{k}", link=f"seg{k}", mode=EffectorMode.POSE) for k in (3, 5, 7)],
+    )
+    assert chain.n_dof == 14
+    rng = np.random.default_rng(3)
+    targets = pose_targets(chain, rng.uniform(chain.lower, chain.upper))
+    plain = IKOptions(max_restarts=0, time_budget_us=None)
+
+    def run(every: int | None) -> IKResult:
+        return IKSolver(chain, dataclasses.replace(plain, metric_every=every)).solve(targets)
+
+    default, every_2, every_1 = run(None), run(2), run(1)
+    assert default.iterations == every_2.iterations
+    assert_allclose(default.q, every_2.q, rtol=0, atol=0)
+    assert (every_1.iterations, every_1.function_evals) != (
+        every_2.iterations,
+        every_2.function_evals,
+    )
+
+
 def test_target_parts_of_the_wrong_shape_are_rejected_when_built() -> None:
     with pytest.raises(InvalidProblem, match="'tool'.*3 numbers"):
         Target(effector="tool", position=np.zeros(2))
