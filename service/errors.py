@@ -219,13 +219,24 @@ _HTTP_CODES = {
 }
 
 
+def _count(request: Request, code: ErrorCode) -> None:
+    """Count an HTTP error answer in ``ik_errors_total`` (transport ``http``), as the
+    WebSocket's errors and batch entries are counted where they are answered. Read
+    from the app's state: this module sits below the one that defines it."""
+    services = getattr(request.app.state, "ik", None)
+    if services is not None:
+        services.metrics.error(code, "http")
+
+
 async def _service_error(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, ServiceError)
+    _count(request, exc.code)
     return ORJSONResponse(exc.body(), status_code=exc.status_code, headers=exc.headers())
 
 
 async def _validation_error(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, RequestValidationError)
+    _count(request, ErrorCode.INVALID_FORMAT)
     detail = validation_errors(exc.errors())
     body: dict[str, Any] = {"detail": detail, "code": ErrorCode.INVALID_FORMAT}
     if detail and (field := _field_of(detail[0])) is not None:
@@ -242,6 +253,7 @@ def solver_error(exc: IKError) -> ServiceError:
 async def _solver_error(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, IKError)
     err = solver_error(exc)
+    _count(request, err.code)
     return ORJSONResponse(err.body(), status_code=err.status_code)
 
 
@@ -251,6 +263,7 @@ async def _http_error(request: Request, exc: Exception) -> Response:
         # FastAPI answers 400 when the body cannot be decoded at all (invalid UTF-8,
         # nesting deeper than the parser's recursion limit, an integer literal of
         # thousands of digits); to a client that is the same as malformed JSON.
+        _count(request, ErrorCode.INVALID_FORMAT)
         return ORJSONResponse(
             {
                 "detail": [{"loc": ["body"], "msg": str(exc.detail), "type": "json_invalid"}],
@@ -259,6 +272,7 @@ async def _http_error(request: Request, exc: Exception) -> Response:
             status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
         )
     code = _HTTP_CODES.get(exc.status_code, ErrorCode.HTTP_ERROR)
+    _count(request, code)
     headers = dict(exc.headers or {})
     if exc.status_code == status.HTTP_405_METHOD_NOT_ALLOWED:
         headers["Allow"] = _allowed_methods(request)
@@ -292,6 +306,7 @@ _METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"
 
 async def _internal_error(request: Request, exc: Exception) -> Response:
     # Starlette's ServerErrorMiddleware logs the traceback once and re-raises.
+    _count(request, ErrorCode.INTERNAL_ERROR)
     return ORJSONResponse(
         {"detail": "internal server error", "code": ErrorCode.INTERNAL_ERROR},
         status_code=status.HTTP_500_INTERNAL_SERVER_ERROR,

@@ -130,6 +130,19 @@ def test_metrics_series(client: TestClient, session: Created) -> None:
     assert "ik_websockets 0.0" in after
 
 
+def test_http_errors_are_counted(client: TestClient, session: Created) -> None:
+    """ik_errors_total counts HTTP answers too: each kind of handler's (a ServiceError,
+    a validation error, starlette's 404), not only the WebSocket's and batch entries'."""
+    frames = f"/v1/sessions/{session.id}/frames"
+    assert client.post(frames, json=hand_frame(1)).status_code == 401  # no token
+    assert client.post(frames, json={"targets": []}, headers=session.headers).status_code == 422
+    assert client.get("/v1/no-such-path").status_code == 404
+    text = client.get("/metrics").text
+    assert 'ik_errors_total{code="unauthorized",transport="http"} 1.0' in text
+    assert 'ik_errors_total{code="invalid_format",transport="http"} 1.0' in text
+    assert 'ik_errors_total{code="not_found",transport="http"} 1.0' in text
+
+
 def test_metrics_count_sessions(client: TestClient) -> None:
     a = create(client)
     create(client)
