@@ -16,8 +16,9 @@ import time  # noqa: E402
 from typing import Any  # noqa: E402
 
 import uvicorn  # noqa: E402
+from pydantic import ValidationError  # noqa: E402
 
-from .config import get_settings  # noqa: E402
+from .config import get_settings, settings_errors, unknown_variables  # noqa: E402
 from .main import create_app  # noqa: E402
 from .peer_limits import PeerLimits, protocols  # noqa: E402
 
@@ -63,10 +64,15 @@ class DrainingServer(uvicorn.Server):
 
 
 def main() -> None:
-    settings = get_settings()
+    try:
+        settings = get_settings()
+    except ValidationError as e:  # said in the environment's names, not a traceback
+        raise SystemExit(settings_errors(e)) from None
     logging.basicConfig(level=settings.log_level.upper(), format="%(levelname)s:     %(message)s")
     for name in ("uvicorn.access", "uvicorn.error"):
         logging.getLogger(name).addFilter(_RedactTokens())
+    for warning in unknown_variables(os.environ):
+        logging.getLogger("service").warning(warning)
     host = f"[{settings.host}]" if ":" in settings.host else settings.host
     logging.getLogger("service").info(
         "IK service on http://%s:%d (API docs: http://%s:%d/docs)",

@@ -6,10 +6,12 @@ names and defaults); units are in the names.
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Mapping
 from functools import lru_cache
 from typing import Literal
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -22,6 +24,13 @@ class Settings(BaseSettings):
     host: str = Field(default="127.0.0.1", description="Address to bind")
     port: int = Field(default=8000, ge=0, le=65535, description="Port to bind")
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
+
+    @field_validator("log_level", mode="before")
+    @classmethod
+    def _any_case(cls, value: object) -> object:
+        """IK_LOG_LEVEL=INFO as well as info (Python's logging names are upper case)."""
+        return value.lower() if isinstance(value, str) else value
+
     graceful_shutdown_s: int = Field(
         default=5, ge=0, description="Time in-flight requests get on SIGTERM [s]"
     )
@@ -212,3 +221,36 @@ class Settings(BaseSettings):
 def get_settings() -> Settings:
     """The process's settings, read from the environment once."""
     return Settings()
+
+
+ENV_PREFIX = "IK_"
+
+
+def unknown_variables(environ: Mapping[str, str]) -> list[str]:
+    """A warning for each ``IK_`` variable that no setting reads, with the closest name.
+
+    pydantic-settings ignores them (``extra="ignore"``: the environment holds other
+    programs' variables too), so a misspelt ``IK_REDIS_UR`` would silently start a
+    worker with its sessions in memory behind a balancer that expects Redis.
+    """
+    known = [ENV_PREFIX + name.upper() for name in Settings.model_fields]
+    out = []
+    for key in sorted(environ):
+        if key.startswith(ENV_PREFIX) and key not in known:
+            close = difflib.get_close_matches(key, known, n=1)
+            guess = f" (did you mean {close[0]}?)" if close else ""
+            out.append(f"{key} is not a setting of this service and is ignored{guess}")
+    return out
+
+
+def settings_errors(exc: ValidationError) -> str:
+    """A bad setting's error in the environment's words: ``IK_MAX_SESSIONS: Input
+    should be a valid integer, got 'abc'`` rather than pydantic's field names."""
+    lines = []
+    for e in exc.errors():
+        loc = e.get("loc") or ()
+        name = ENV_PREFIX + str(loc[0]).upper() if loc else "settings"
+        got = e.get("input")
+        shown = f", got {got!r}" if isinstance(got, str | int | float) else ""
+        lines.append(f"{name}: {e.get('msg', 'invalid')}{shown}")
+    return "invalid configuration:\n  " + "\n  ".join(lines)

@@ -142,6 +142,9 @@ def default_store(settings: Settings, runner: Runner) -> SessionStore:
     """Redis when IK_REDIS_URL is set (sessions shared by every worker), else memory."""
     url = settings.redis_url.get_secret_value()
     if not url:
+        # Said at every start: behind a balancer, a worker that keeps its sessions in
+        # its own memory breaks routing (an operator checks this line).
+        log.info("sessions in this process's memory (IK_REDIS_URL is not set)")
         return InMemorySessionStore(
             max_sessions=settings.max_sessions,
             ttl_s=settings.session_ttl_s,

@@ -7,7 +7,7 @@ from collections.abc import Iterator
 import pytest
 from pydantic import ValidationError
 
-from service.config import Settings
+from service.config import Settings, settings_errors, unknown_variables
 
 
 @pytest.fixture(autouse=True)
@@ -40,6 +40,29 @@ def test_bad_values_are_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("IK_MAX_SESSIONS", "0")
     with pytest.raises(ValidationError):
         Settings()
+
+
+def test_a_bad_value_is_said_in_the_environment_s_names(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("IK_MAX_SESSIONS", "abc")
+    with pytest.raises(ValidationError) as err:
+        Settings()
+    text = settings_errors(err.value)
+    assert "IK_MAX_SESSIONS: " in text and "'abc'" in text and "max_sessions" not in text
+
+
+def test_log_level_in_any_case(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("IK_LOG_LEVEL", "WARNING")
+    assert Settings().log_level == "warning"
+
+
+def test_unknown_ik_variables_are_named_with_the_closest_setting() -> None:
+    warnings = unknown_variables(
+        {"IK_REDIS_UR": "redis://x", "IK_PORT": "1", "PATH": "/bin", "IK_ZZZZZZZZ": "1"}
+    )
+    assert len(warnings) == 2
+    typo, other = warnings
+    assert typo.startswith("IK_REDIS_UR is not a setting") and "IK_REDIS_URL?" in typo
+    assert other.startswith("IK_ZZZZZZZZ is not a setting") and "did you mean" not in other
 
 
 def test_frozen() -> None:
