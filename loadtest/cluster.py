@@ -40,19 +40,31 @@ def _wait_port(port: int, limit_s: float = START_LIMIT_S) -> None:
 
 
 class RedisServer:
-    """``redis-server`` on a free port, in memory only (no dump file)."""
+    """``redis-server`` on a free port: in memory only, or with ``data_dir`` its
+    append-only file there (as docker-compose.yml and deploy/k8s run it), so that a
+    restart (``restart``) comes back with the sessions."""
 
-    def __init__(self, port: int | None = None) -> None:
+    def __init__(self, port: int | None = None, *, data_dir: Path | None = None) -> None:
         self.port = port or free_port()
         self.url = f"redis://127.0.0.1:{self.port}/0"
+        self.data_dir = data_dir
         self.proc: subprocess.Popen[bytes] | None = None
         self.start()
 
     def start(self) -> None:
-        args = ["redis-server", "--port", str(self.port), "--bind", "127.0.0.1"]
-        args += ["--save", "", "--appendonly", "no", "--loglevel", "warning"]
+        args = ["redis-server", "--port", str(self.port), "--bind", "127.0.0.1", "--save", ""]
+        if self.data_dir is None:
+            args += ["--appendonly", "no"]
+        else:  # fsync at every write: a test restarts it right after the last frame
+            args += ["--appendonly", "yes", "--appendfsync", "always", "--dir", str(self.data_dir)]
+        args += ["--loglevel", "warning"]
         self.proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
         _wait_port(self.port)
+
+    def restart(self) -> None:
+        """Stop (SIGTERM) and start again on the same port."""
+        self.stop()
+        self.start()
 
     def pause(self) -> None:
         """SIGSTOP: Redis stops answering (connections stay open: the hard case)."""
@@ -122,7 +134,9 @@ class Cluster(StoppedOnExit):
     balancer's URL. Workers keep their ports across restarts (the balancer's list)."""
 
     def __init__(self, n: int, *, log_dir: Path, env: dict[str, str] | None = None) -> None:
-        self.redis = RedisServer()
+        redis_dir = log_dir / "redis"
+        redis_dir.mkdir(exist_ok=True)
+        self.redis = RedisServer(data_dir=redis_dir)
         self.env = {"IK_REDIS_URL": self.redis.url, **(env or {})}
         self.log_dir = log_dir
         self.workers: list[ServiceProcess] = []

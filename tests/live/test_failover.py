@@ -242,6 +242,18 @@ def test_redis_down_gives_503_and_errors_then_recovers(cluster: Cluster) -> None
     assert _frame_until_answered(worker.base, session, 3, 3).status_code == 200
 
 
+def test_sessions_survive_a_restart_of_redis(cluster: Cluster) -> None:
+    """Redis runs with its append-only file, as the shipped compose file and manifests
+    run it: restarted, it comes back with the session, which goes on from its pose."""
+    session = _session(cluster)
+    before = [_frame_until_answered(cluster.base, session, i, i).json() for i in range(3)]
+    cluster.redis.restart()
+    after = _frame_until_answered(cluster.base, session, 3, 3).json()
+    q0, q1 = before[-1]["results"][0]["q"], after["results"][0]["q"]
+    assert _largest_step([q0, q1]) < MAX_STEP_RAD
+    assert _counters(cluster, session)["frames"] == 4
+
+
 async def _ws_frame_error(base: str, session: dict[str, Any]) -> str:
     """The error code of one WebSocket frame sent to ``base`` (no reconnects), or the
     close code and reason when the socket is closed instead."""
