@@ -72,6 +72,23 @@ export class IKClientError extends Error {
   override name = "IKClientError";
 }
 
+/** A request or stream message this client cannot write, thrown before anything is
+ * sent (ik_client's `EncodeError`): a non-finite number (`field` names it, e.g.
+ * `targets[0].position.x`; JSON would send it as null, and the server refuses it), or
+ * a value the encoding cannot write (a BigInt, a cycle; `field` null, the encoder's
+ * error as `cause`). */
+export class EncodeError extends IKClientError {
+  override name = "EncodeError";
+
+  constructor(
+    message: string,
+    readonly field: string | null = null,
+    options?: { cause?: unknown },
+  ) {
+    super(message, options);
+  }
+}
+
 /** A stream's answer that this client cannot read (ik_client's `UnexpectedAnswer`): one
  * of a type it does not know, which rejects the message it answers (`id`: that
  * message's id; it counts as answered), or an answer to an id that nothing waits for

@@ -17,8 +17,9 @@
  * stable global WebSocket, it uses the `ws` package and an `Authorization` header.
  */
 
-import { decode, encode } from "@msgpack/msgpack";
+import { decode } from "@msgpack/msgpack";
 
+import { encodeBody } from "./encode.js";
 import {
   IKClientError,
   RECONNECTABLE,
@@ -239,12 +240,10 @@ export class Stream<R = FrameResult> {
     return message;
   }
 
-  /** `body` with its id, as sent; throws for a non-finite number (naming its field) and
-   * for what the encoding cannot write (a BigInt, a cycle). */
+  /** `body` with its id, as sent; throws an `EncodeError` for a non-finite number
+   * (naming its field) and for what the encoding cannot write (a BigInt, a cycle). */
   private encode(body: Record<string, unknown>, wireId: number): string | Uint8Array {
-    refuseNonFinite(body, "", new Set());
-    const payload = { ...body, id: wireId };
-    return this.encoding === "msgpack" ? encode(payload) : JSON.stringify(payload);
+    return encodeBody({ ...body, id: wireId }, this.encoding);
   }
 
   private decode(data: unknown): Envelope {
@@ -330,29 +329,6 @@ export class Stream<R = FrameResult> {
       message.reject(error instanceof Error ? error : new IKClientError(String(error)));
     }
   }
-}
-
-/**
- * Throw naming the first NaN or infinity in `value` (a message body, or its part at
- * `field`): JSON.stringify would send it as null and MessagePack as a float, and the
- * server refuses both; here the caller learns which field. An object met again inside
- * itself (`ancestors`) is left to the encoder, which throws for the cycle.
- */
-function refuseNonFinite(value: unknown, field: string, ancestors: Set<object>): void {
-  if (typeof value === "number") {
-    if (Number.isFinite(value)) return;
-    throw new IKClientError(`${field} is ${value}: the service takes finite numbers only`);
-  }
-  if (value === null || typeof value !== "object" || ancestors.has(value)) return;
-  ancestors.add(value);
-  if (Array.isArray(value)) {
-    value.forEach((item, index) => refuseNonFinite(item, `${field}[${index}]`, ancestors));
-  } else {
-    for (const [key, item] of Object.entries(value)) {
-      refuseNonFinite(item, field ? `${field}.${key}` : key, ancestors);
-    }
-  }
-  ancestors.delete(value);
 }
 
 /** Resolves when `socket` opens; rejects with its close if it closes first. */

@@ -18,6 +18,7 @@ import {
   type ErrorPayload,
   Client,
   ConnectionLost,
+  EncodeError,
   ErrorCode,
   IKClientError,
   InvalidRequest,
@@ -521,6 +522,23 @@ describe("stream", () => {
     }
   });
 
+  test("HTTP: NaN and unwritable values are an EncodeError before anything is sent", async () => {
+    const session = await ik.createSession(PANDA);
+    const nan: Target = { effector: "tool", position: { x: 0.4, y: Number.NaN, z: 0.5 } };
+    const refused = await ik.frame(session, [nan]).catch((e: unknown) => e);
+    assert.ok(refused instanceof EncodeError && refused instanceof IKClientError, String(refused));
+    assert.equal(refused.field, "targets[0].position.y");
+    assert.match(refused.message, /^targets\[0\]\.position\.y is NaN: /);
+    const far: Target = { ...tool(0.1), position_weight: Number.POSITIVE_INFINITY };
+    const clip = await ik.clip(session, [{ targets: [tool(0.1)] }, { targets: [far] }]).catch((e: unknown) => e);
+    assert.ok(clip instanceof EncodeError && clip.field === "frames[1].targets[0].position_weight");
+    const big = { ...tool(0.1), position_weight: 1n } as unknown as Target;
+    const unwritable = await ik.frame(session, [big]).catch((e: unknown) => e);
+    assert.ok(unwritable instanceof EncodeError && unwritable.field === null, String(unwritable));
+    assert.ok(unwritable.cause instanceof TypeError);
+    assert.equal((await ik.getSession(session)).counters.frames, 0);
+  });
+
   test("without reconnects, a drop rejects what is in flight", async () => {
     const session = await ik.createSession(PANDA);
     const stream = await ik.stream(session, { reconnect: { attempts: 0 } });
@@ -536,7 +554,7 @@ describe("stream", () => {
     test(`NaN and infinity are refused before anything is sent, naming the field (${encoding})`, async () => {
       const session = await ik.createSession(PANDA);
       const stream = await ik.stream(session, { encoding });
-      const named = (pattern: RegExp) => (e: unknown) => e instanceof IKClientError && pattern.test(e.message);
+      const named = (pattern: RegExp) => (e: unknown) => e instanceof EncodeError && pattern.test(e.message);
       try {
         const nan: Target = { effector: "tool", position: { x: Number.NaN, y: 0.1, z: 0.5 } };
         assert.throws(() => stream.sendFrame([nan]), named(/^targets\[0\]\.position\.x is NaN: /));
@@ -561,7 +579,10 @@ describe("stream", () => {
       const stream = await ik.stream(session, { encoding });
       try {
         const big = { ...tool(0.1), position_weight: 1n } as unknown as Target; // neither encoding writes a BigInt
-        assert.throws(() => stream.sendFrame([big]));
+        assert.throws(
+          () => stream.sendFrame([big]),
+          (e: unknown) => e instanceof EncodeError && e.field === null && e.cause instanceof Error,
+        );
         assert.equal(stream.inFlight, 0);
         (stream.socket as unknown as NodeWebSocket).terminate();
         const id = stream.sendFrame([tool(0.1)]);
