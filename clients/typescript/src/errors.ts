@@ -93,7 +93,9 @@ export class EncodeError extends IKClientError {
  * of a type it does not know, which rejects the message it answers (`id`: that
  * message's id; it counts as answered), or an answer to an id that nothing waits for
  * (`id` null: nothing is taken off the messages in flight), which the stream hands to
- * its `onUnexpected` option. `envelope` is the answer as decoded. */
+ * its `onUnexpected` option, as it does an answer it cannot decode (not JSON or
+ * MessagePack, or not an object; `data` holds it as received). `envelope` is the answer
+ * as decoded. */
 export class UnexpectedAnswer extends IKClientError {
   override name = "UnexpectedAnswer";
 
@@ -101,6 +103,9 @@ export class UnexpectedAnswer extends IKClientError {
     message: string,
     readonly id: number | null,
     readonly envelope: Readonly<Record<string, unknown>>,
+    /** The answer as received (text or bytes) when it could not be decoded to an object
+     * (`envelope` is then empty); undefined otherwise. */
+    readonly data?: unknown,
   ) {
     super(message);
   }

@@ -79,8 +79,10 @@ export interface StreamOptions {
   auth?: "header" | "subprotocol";
   /** A WebSocket class to use instead of the global one (or `ws` when there is none). */
   WebSocket?: SocketClass;
-  /** Called with an answer to an id nothing waits for (an `UnexpectedAnswer` whose `id`
-   * is null); no message's promise can take it. Default: such answers are dropped. */
+  /** Called with an answer to an id nothing waits for, or one that cannot be decoded
+   * (not JSON or MessagePack, or not an object): an `UnexpectedAnswer` whose `id` is
+   * null; no message's promise can take it, and the stream goes on. Default: such
+   * answers are dropped. */
   onUnexpected?: (error: UnexpectedAnswer) => void;
 }
 
@@ -246,15 +248,29 @@ export class Stream<R = FrameResult> {
     return encodeBody({ ...body, id: wireId }, this.encoding);
   }
 
-  private decode(data: unknown): Envelope {
-    if (typeof data === "string") return JSON.parse(data) as Envelope;
-    return decode(data as ArrayBuffer) as Envelope;
+  /** The answer `data` carries; an `UnexpectedAnswer` (`id` null) for one that is not
+   * JSON or MessagePack, or not an object. */
+  private decode(data: unknown): Envelope | UnexpectedAnswer {
+    let envelope: unknown;
+    try {
+      envelope = typeof data === "string" ? JSON.parse(data) : decode(data as ArrayBuffer);
+    } catch (error) {
+      const reason = error instanceof Error ? error.message : String(error);
+      return new UnexpectedAnswer(`an answer that cannot be decoded (${reason})`, null, {}, data);
+    }
+    if (envelope !== null && typeof envelope === "object" && !Array.isArray(envelope)) return envelope as Envelope;
+    return new UnexpectedAnswer(`an answer that is not an object: ${JSON.stringify(envelope)}`, null, {}, data);
   }
 
   private watch(socket: Socket): void {
     socket.onerror = () => {}; // the close that follows says why (and ws throws without a listener)
     socket.onmessage = (event) => {
-      if (socket === this.socketNow) this.answered(this.decode(event.data));
+      if (socket !== this.socketNow) return;
+      const envelope = this.decode(event.data);
+      // Garbled: no message can be told it is answered (its id is unreadable); the caller
+      // learns of it as of an answer to an id nothing waits for, and the stream goes on.
+      if (envelope instanceof UnexpectedAnswer) this.onUnexpected?.(envelope);
+      else this.answered(envelope);
     };
     socket.onclose = (event) => {
       if (socket === this.socketNow) this.closed(event.code, event.reason);

@@ -522,6 +522,42 @@ describe("stream", () => {
     }
   });
 
+  test("a garbled answer goes to onUnexpected, and the stream goes on", async () => {
+    // Before each echo, answers that are not JSON, not an object, not MessagePack.
+    const echo = new WebSocketServer({ host: "127.0.0.1", port: 0 });
+    echo.on("connection", (socket) => {
+      socket.on("message", (data, binary) => {
+        socket.send("not json{");
+        socket.send("[1, 2]");
+        socket.send(new Uint8Array([0xc1]), { binary: true }); // 0xc1: never used in MessagePack
+        socket.send(data, { binary });
+      });
+    });
+    await new Promise((resolve) => echo.once("listening", resolve));
+    const { port } = echo.address() as { port: number };
+    const unexpected: UnexpectedAnswer[] = [];
+    const stream = await new Client(`http://127.0.0.1:${port}`).stream(
+      { id: "s", token: "t" },
+      { reconnect: { attempts: 0 }, onUnexpected: (e) => unexpected.push(e) },
+    );
+    try {
+      for (const id of [0, 1]) {
+        const echoed = await within(5_000, stream.ping().catch((e: unknown) => e));
+        assert.ok(echoed instanceof UnexpectedAnswer && echoed.id === id, String(echoed));
+      }
+      assert.equal(stream.inFlight, 0);
+      assert.deepEqual(
+        unexpected.map((e) => [e.id, e.envelope, e.data instanceof ArrayBuffer ? [...new Uint8Array(e.data)] : e.data]),
+        Array(2).fill([[null, {}, "not json{"], [null, {}, "[1, 2]"], [null, {}, [0xc1]]]).flat(),
+      );
+      assert.match(unexpected[0]!.message, /cannot be decoded/);
+      assert.match(unexpected[1]!.message, /not an object: \[1,2\]/);
+    } finally {
+      stream.close();
+      echo.close();
+    }
+  });
+
   test("HTTP: NaN and unwritable values are an EncodeError before anything is sent", async () => {
     const session = await ik.createSession(PANDA);
     const nan: Target = { effector: "tool", position: { x: 0.4, y: Number.NaN, z: 0.5 } };
