@@ -36,7 +36,14 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake
 from websockets.sync.client import ClientConnection as SyncConnection
 from websockets.sync.client import connect as sync_connect
 
-from .errors import RECONNECTABLE, IKClientError, UnexpectedAnswer, service_error, stream_closed
+from .errors import (
+    RECONNECTABLE,
+    EncodeError,
+    IKClientError,
+    UnexpectedAnswer,
+    service_error,
+    stream_closed,
+)
 from .types import (
     Answer,
     BatchAnswer,
@@ -83,13 +90,15 @@ _MSGPACK_NON_FINITE = re.compile(rb"\xcb[\x7f\xff][\xf0-\xff]")
 def _refuse_non_finite(
     value: Any, field: str = "", ancestors: frozenset[int] = frozenset()
 ) -> None:
-    """Raise ValueError naming the first NaN or infinity in ``value`` (a message, or a
+    """Raise an EncodeError naming the first NaN or infinity in ``value`` (a message, or a
     part of it at ``field``): the server refuses them, and JSON cannot carry them (json
     refuses them, orjson writes null), so both encodings refuse them here, alike.
     A container met again inside itself is left to the encoder, which refuses it."""
     if isinstance(value, float):
         if not math.isfinite(value):
-            raise ValueError(f"{field} is {value!r}: the service takes finite numbers only")
+            raise EncodeError(
+                f"{field} is {value!r}: the service takes finite numbers only", field=field
+            )
         return
     if id(value) in ancestors:
         return
@@ -182,7 +191,8 @@ class _Pipeline:
         """Number a new message; returns its id and its encoding.
 
         Raises:
-            ValueError, TypeError: ``body`` cannot be written; nothing was counted.
+            EncodeError: ``body`` cannot be written (a ValueError and a TypeError too);
+                nothing was counted.
         """
         data = self._encode(body, self._next_wire_id)
         message = _Message(self._next_id, self._next_wire_id, data)
@@ -245,9 +255,16 @@ class _Pipeline:
 
     def _encode(self, body: dict[str, Any], wire_id: int) -> str | bytes:
         payload = {**body, "id": wire_id}
-        if self.encoding is Encoding.MSGPACK:
-            return _packb(payload)
-        return _dumps(payload)
+        try:
+            if self.encoding is Encoding.MSGPACK:
+                return _packb(payload)
+            return _dumps(payload)
+        except EncodeError:
+            raise
+        except (TypeError, ValueError, OverflowError) as exc:  # a dataclass, a cycle, 2**64
+            raise EncodeError(
+                f"the message cannot be written as {self.encoding.value}: {exc}"
+            ) from exc
 
 
 def _frame(targets: list[Target], bones: BoneOutput | None) -> dict[str, Any]:
