@@ -7,14 +7,17 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import datetime
+import enum
 import json
 import socket
 import time
+import uuid
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import httpx
 import ik_client
+import msgpack
 import pytest
 from ik_client import (
     AsyncClient,
@@ -435,6 +438,10 @@ def test_json_refuses_the_same_with_or_without_orjson(
     assert result.id == 0
 
 
+class Side(enum.Enum):
+    TOOL = "tool"
+
+
 CODECS = ["orjson", "json", "msgpack"]
 CYCLE: list[object] = []
 CYCLE.append(CYCLE)
@@ -445,6 +452,21 @@ def pipeline(codec: str, monkeypatch: pytest.MonkeyPatch) -> ik_client.stream._P
     if codec == "json":
         monkeypatch.setattr("ik_client.stream._orjson_dumps", None)
     return ik_client.stream._Pipeline(Encoding.MSGPACK if codec == "msgpack" else Encoding.JSON)
+
+
+@pytest.mark.parametrize("codec", CODECS)
+def test_uuids_and_enums_written_alike(codec: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """orjson writes a UUID as its string and an enum member as its value; json and
+    msgpack, which would refuse them, write them so too: one message whichever writes."""
+    body = {"type": "frame", "targets": [{"effector": Side.TOOL}], "tag": uuid.UUID(int=7)}
+    _, data = pipeline(codec, monkeypatch).add(body)
+    decoded = msgpack.unpackb(data) if isinstance(data, bytes) else json.loads(data)
+    assert decoded == {
+        "type": "frame",
+        "targets": [{"effector": "tool"}],
+        "tag": "00000000-0000-0000-0000-000000000007",
+        "id": 0,
+    }
 
 
 @pytest.mark.parametrize("codec", CODECS)

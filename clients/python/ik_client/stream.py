@@ -18,12 +18,14 @@ budget) hold all of that without I/O; ``AsyncStream`` (websockets' asyncio clien
 from __future__ import annotations
 
 import asyncio
+import enum
 import functools
 import json
 import math
 import re
 import socket
 import time
+import uuid
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -71,7 +73,8 @@ try:
     _loads = orjson.loads
     # orjson writes dataclasses and datetimes itself, which json refuses: passed
     # through, orjson refuses them too (TypeError) and json decides, so that a target
-    # is accepted or refused the same with and without orjson.
+    # is accepted or refused the same with and without orjson. UUIDs and enum members,
+    # which orjson always writes, json and msgpack write alike (``_default``).
     _orjson_dumps = functools.partial(
         orjson.dumps,
         option=orjson.OPT_PASSTHROUGH_DATACLASS | orjson.OPT_PASSTHROUGH_DATETIME,
@@ -112,6 +115,17 @@ def _refuse_non_finite(
             _refuse_non_finite(item, f"{field}[{index}]", inner)
 
 
+def _default(value: Any) -> Any:
+    """What json and msgpack write for the two types orjson writes natively and they do
+    not: a UUID as its canonical string, an enum member as its value (orjson's forms), so
+    that a message is written the same in every encoding, with orjson or without."""
+    if isinstance(value, uuid.UUID):
+        return str(value)
+    if isinstance(value, enum.Enum):
+        return value.value
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
+
+
 def _dumps(payload: dict[str, Any]) -> str:
     """``payload`` as compact JSON; NaN and infinity refused (ValueError naming the
     field), as the server refuses them, here where the caller is."""
@@ -124,7 +138,7 @@ def _dumps(payload: dict[str, Any]) -> str:
             if b"null" not in data:  # orjson writes NaN and infinity as null: json decides
                 return data.decode()
     try:
-        return json.dumps(payload, separators=(",", ":"), allow_nan=False)
+        return json.dumps(payload, separators=(",", ":"), allow_nan=False, default=_default)
     except ValueError:
         _refuse_non_finite(payload)  # when a NaN or infinity is why, the same error as msgpack's
         raise
@@ -132,7 +146,7 @@ def _dumps(payload: dict[str, Any]) -> str:
 
 def _packb(payload: dict[str, Any]) -> bytes:
     """``payload`` as MessagePack; NaN and infinity refused as by ``_dumps``."""
-    data: bytes = msgpack.packb(payload)
+    data: bytes = msgpack.packb(payload, default=_default)
     if _MSGPACK_NON_FINITE.search(data):  # perhaps one: the full check decides
         _refuse_non_finite(payload)
     return data
