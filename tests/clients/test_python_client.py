@@ -7,14 +7,17 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import datetime
+import enum
 import json
 import socket
 import time
+import uuid
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import httpx
 import ik_client
+import msgpack
 import pytest
 from ik_client import (
     AsyncClient,
@@ -23,10 +26,12 @@ from ik_client import (
     Client,
     ClipAnswer,
     ConnectionLost,
+    EncodeError,
     Encoding,
     ErrorCode,
     FrameAnswer,
     FrameResult,
+    IKClientError,
     InvalidRequest,
     NotFound,
     Pong,
@@ -433,6 +438,61 @@ def test_json_refuses_the_same_with_or_without_orjson(
     assert result.id == 0
 
 
+class Side(enum.Enum):
+    TOOL = "tool"
+
+
+CODECS = ["orjson", "json", "msgpack"]
+CYCLE: list[object] = []
+CYCLE.append(CYCLE)
+
+
+def pipeline(codec: str, monkeypatch: pytest.MonkeyPatch) -> ik_client.stream._Pipeline:
+    """A stream's encoder (no I/O): orjson, json (orjson not installed) or msgpack."""
+    if codec == "json":
+        monkeypatch.setattr("ik_client.stream._orjson_dumps", None)
+    return ik_client.stream._Pipeline(Encoding.MSGPACK if codec == "msgpack" else Encoding.JSON)
+
+
+@pytest.mark.parametrize("codec", CODECS)
+def test_uuids_and_enums_written_alike(codec: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """orjson writes a UUID as its string and an enum member as its value; json and
+    msgpack, which would refuse them, write them so too: one message whichever writes."""
+    body = {"type": "frame", "targets": [{"effector": Side.TOOL}], "tag": uuid.UUID(int=7)}
+    _, data = pipeline(codec, monkeypatch).add(body)
+    decoded = msgpack.unpackb(data) if isinstance(data, bytes) else json.loads(data)
+    assert decoded == {
+        "type": "frame",
+        "targets": [{"effector": "tool"}],
+        "tag": "00000000-0000-0000-0000-000000000007",
+        "id": 0,
+    }
+
+
+@pytest.mark.parametrize("codec", CODECS)
+@pytest.mark.parametrize(
+    "value",
+    [Point(0.4, 0.1, 0.5), datetime.datetime(2026, 1, 1), CYCLE, float("nan")],
+    ids=["dataclass", "datetime", "cycle", "nan"],
+)
+def test_encode_errors_are_encode_error(
+    codec: str, value: object, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """What cannot be written raises EncodeError (an IKClientError, and the ValueError and
+    TypeError the encoders raised), the encoder's error as its cause; nothing counted."""
+    stream = pipeline(codec, monkeypatch)
+    body = {"type": "frame", "targets": [{"effector": "tool", "position_weight": value}]}
+    with pytest.raises(EncodeError) as error:
+        stream.add(body)
+    assert isinstance(error.value, IKClientError) and isinstance(error.value, ValueError)
+    assert isinstance(error.value, TypeError)
+    if value != value:  # NaN
+        assert error.value.field == "targets[0].position_weight"
+    else:
+        assert error.value.field is None and error.value.__cause__ is not None
+    assert stream.in_flight == 0 and stream.add({"type": "ping"})[0] == 0
+
+
 @pytest.mark.parametrize("encoding", list(Encoding))
 def test_non_finite_numbers_refused_alike(ik: Client, session: Session, encoding: Encoding) -> None:
     """NaN and infinity, in a frame or a clip, in any encoding: the same ValueError
@@ -440,8 +500,10 @@ def test_non_finite_numbers_refused_alike(ik: Client, session: Session, encoding
     far: Target = {**tool(0.1), "position_weight": float("inf")}
     nan: Target = {"effector": "tool", "position": {"x": float("nan"), "y": 0.1, "z": 0.5}}
     with ik.stream(session, encoding=encoding) as stream:
-        with pytest.raises(ValueError, match=r"^targets\[0\]\.position\.x is nan: "):
+        with pytest.raises(EncodeError, match=r"^targets\[0\]\.position\.x is nan: ") as error:
             stream.send_frame([nan])
+        assert error.value.field == "targets[0].position.x"
+        assert isinstance(error.value, ValueError)
         with pytest.raises(
             ValueError, match=r"^frames\[1\]\.targets\[0\]\.position_weight is inf: "
         ):

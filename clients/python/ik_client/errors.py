@@ -51,6 +51,24 @@ class IKClientError(Exception):
     """Base of every error this client raises."""
 
 
+class EncodeError(IKClientError, ValueError, TypeError):
+    """A stream message this client cannot write, raised before anything is sent or
+    counted: a NaN or infinity (``field`` names it, e.g. ``targets[0].position.x``; the
+    server refuses them and JSON cannot carry them), or a value the encoding cannot write
+    (a dataclass, a datetime, a cycle, an int beyond 64 bits; ``field`` None, the
+    encoder's error as ``__cause__``). A ``ValueError`` and a ``TypeError`` too, as the
+    encoders' errors it replaces were, so that ``except ValueError`` (or ``TypeError``)
+    still catches it.
+
+    Attributes:
+        field: Where the non-finite number is; None for a value that cannot be written.
+    """
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        super().__init__(message)
+        self.field = field
+
+
 class UnexpectedAnswer(IKClientError):
     """A stream's answer that this client cannot read: an answer to an id that waits
     for none (``id`` None: nothing was taken off the stream's in-flight messages), or an

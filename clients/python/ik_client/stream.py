@@ -18,12 +18,14 @@ budget) hold all of that without I/O; ``AsyncStream`` (websockets' asyncio clien
 from __future__ import annotations
 
 import asyncio
+import enum
 import functools
 import json
 import math
 import re
 import socket
 import time
+import uuid
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -36,7 +38,14 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake
 from websockets.sync.client import ClientConnection as SyncConnection
 from websockets.sync.client import connect as sync_connect
 
-from .errors import RECONNECTABLE, IKClientError, UnexpectedAnswer, service_error, stream_closed
+from .errors import (
+    RECONNECTABLE,
+    EncodeError,
+    IKClientError,
+    UnexpectedAnswer,
+    service_error,
+    stream_closed,
+)
 from .types import (
     Answer,
     BatchAnswer,
@@ -64,7 +73,8 @@ try:
     _loads = orjson.loads
     # orjson writes dataclasses and datetimes itself, which json refuses: passed
     # through, orjson refuses them too (TypeError) and json decides, so that a target
-    # is accepted or refused the same with and without orjson.
+    # is accepted or refused the same with and without orjson. UUIDs and enum members,
+    # which orjson always writes, json and msgpack write alike (``_default``).
     _orjson_dumps = functools.partial(
         orjson.dumps,
         option=orjson.OPT_PASSTHROUGH_DATACLASS | orjson.OPT_PASSTHROUGH_DATETIME,
@@ -83,13 +93,15 @@ _MSGPACK_NON_FINITE = re.compile(rb"\xcb[\x7f\xff][\xf0-\xff]")
 def _refuse_non_finite(
     value: Any, field: str = "", ancestors: frozenset[int] = frozenset()
 ) -> None:
-    """Raise ValueError naming the first NaN or infinity in ``value`` (a message, or a
+    """Raise an EncodeError naming the first NaN or infinity in ``value`` (a message, or a
     part of it at ``field``): the server refuses them, and JSON cannot carry them (json
     refuses them, orjson writes null), so both encodings refuse them here, alike.
     A container met again inside itself is left to the encoder, which refuses it."""
     if isinstance(value, float):
         if not math.isfinite(value):
-            raise ValueError(f"{field} is {value!r}: the service takes finite numbers only")
+            raise EncodeError(
+                f"{field} is {value!r}: the service takes finite numbers only", field=field
+            )
         return
     if id(value) in ancestors:
         return
@@ -101,6 +113,17 @@ def _refuse_non_finite(
         inner = ancestors | {id(value)}
         for index, item in enumerate(value):
             _refuse_non_finite(item, f"{field}[{index}]", inner)
+
+
+def _default(value: Any) -> Any:
+    """What json and msgpack write for the two types orjson writes natively and they do
+    not: a UUID as its canonical string, an enum member as its value (orjson's forms), so
+    that a message is written the same in every encoding, with orjson or without."""
+    if isinstance(value, uuid.UUID):
+        return str(value)
+    if isinstance(value, enum.Enum):
+        return value.value
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
 
 
 def _dumps(payload: dict[str, Any]) -> str:
@@ -115,7 +138,7 @@ def _dumps(payload: dict[str, Any]) -> str:
             if b"null" not in data:  # orjson writes NaN and infinity as null: json decides
                 return data.decode()
     try:
-        return json.dumps(payload, separators=(",", ":"), allow_nan=False)
+        return json.dumps(payload, separators=(",", ":"), allow_nan=False, default=_default)
     except ValueError:
         _refuse_non_finite(payload)  # when a NaN or infinity is why, the same error as msgpack's
         raise
@@ -123,7 +146,7 @@ def _dumps(payload: dict[str, Any]) -> str:
 
 def _packb(payload: dict[str, Any]) -> bytes:
     """``payload`` as MessagePack; NaN and infinity refused as by ``_dumps``."""
-    data: bytes = msgpack.packb(payload)
+    data: bytes = msgpack.packb(payload, default=_default)
     if _MSGPACK_NON_FINITE.search(data):  # perhaps one: the full check decides
         _refuse_non_finite(payload)
     return data
@@ -182,7 +205,8 @@ class _Pipeline:
         """Number a new message; returns its id and its encoding.
 
         Raises:
-            ValueError, TypeError: ``body`` cannot be written; nothing was counted.
+            EncodeError: ``body`` cannot be written (a ValueError and a TypeError too);
+                nothing was counted.
         """
         data = self._encode(body, self._next_wire_id)
         message = _Message(self._next_id, self._next_wire_id, data)
@@ -245,9 +269,16 @@ class _Pipeline:
 
     def _encode(self, body: dict[str, Any], wire_id: int) -> str | bytes:
         payload = {**body, "id": wire_id}
-        if self.encoding is Encoding.MSGPACK:
-            return _packb(payload)
-        return _dumps(payload)
+        try:
+            if self.encoding is Encoding.MSGPACK:
+                return _packb(payload)
+            return _dumps(payload)
+        except EncodeError:
+            raise
+        except (TypeError, ValueError, OverflowError) as exc:  # a dataclass, a cycle, 2**64
+            raise EncodeError(
+                f"the message cannot be written as {self.encoding.value}: {exc}"
+            ) from exc
 
 
 def _frame(targets: list[Target], bones: BoneOutput | None) -> dict[str, Any]:

@@ -4,6 +4,7 @@
  * `ServiceError` subclass carrying the server's `code`, `field` and `retryAfterS`.
  */
 
+import { encodeBody } from "./encode.js";
 import { serviceError } from "./errors.js";
 import { Stream, type StreamOptions } from "./stream.js";
 import type {
@@ -189,6 +190,8 @@ export class Client {
     path: string,
     init: { session?: SessionRef; body?: Json; compact?: boolean },
   ): Promise<T> {
+    // Written first: a body that cannot be (NaN, a BigInt) throws an EncodeError, unsent.
+    const body = init.body === undefined ? null : encodeBody(init.body, "json");
     const headers: Record<string, string> = {};
     if (this.apiKey !== undefined) headers["X-API-Key"] = this.apiKey;
     if (init.session !== undefined) headers["Authorization"] = `Bearer ${init.session.token}`;
@@ -197,7 +200,7 @@ export class Client {
     const response = await fetch(`${this.baseUrl}${path}${query}`, {
       method,
       headers,
-      body: init.body === undefined ? null : JSON.stringify(init.body),
+      body,
       signal: AbortSignal.timeout(this.timeoutMs),
     });
     await raiseForError(response);

@@ -72,11 +72,30 @@ export class IKClientError extends Error {
   override name = "IKClientError";
 }
 
+/** A request or stream message this client cannot write, thrown before anything is
+ * sent (ik_client's `EncodeError`): a non-finite number (`field` names it, e.g.
+ * `targets[0].position.x`; JSON would send it as null, and the server refuses it), or
+ * a value the encoding cannot write (a BigInt, a cycle; `field` null, the encoder's
+ * error as `cause`). */
+export class EncodeError extends IKClientError {
+  override name = "EncodeError";
+
+  constructor(
+    message: string,
+    readonly field: string | null = null,
+    options?: { cause?: unknown },
+  ) {
+    super(message, options);
+  }
+}
+
 /** A stream's answer that this client cannot read (ik_client's `UnexpectedAnswer`): one
  * of a type it does not know, which rejects the message it answers (`id`: that
  * message's id; it counts as answered), or an answer to an id that nothing waits for
  * (`id` null: nothing is taken off the messages in flight), which the stream hands to
- * its `onUnexpected` option. `envelope` is the answer as decoded. */
+ * its `onUnexpected` option, as it does an answer it cannot decode (not JSON or
+ * MessagePack, or not an object; `data` holds it as received). `envelope` is the answer
+ * as decoded. */
 export class UnexpectedAnswer extends IKClientError {
   override name = "UnexpectedAnswer";
 
@@ -84,6 +103,9 @@ export class UnexpectedAnswer extends IKClientError {
     message: string,
     readonly id: number | null,
     readonly envelope: Readonly<Record<string, unknown>>,
+    /** The answer as received (text or bytes) when it could not be decoded to an object
+     * (`envelope` is then empty); undefined otherwise. */
+    readonly data?: unknown,
   ) {
     super(message);
   }

@@ -17,8 +17,9 @@
  * stable global WebSocket, it uses the `ws` package and an `Authorization` header.
  */
 
-import { decode, encode } from "@msgpack/msgpack";
+import { decode } from "@msgpack/msgpack";
 
+import { encodeBody } from "./encode.js";
 import {
   IKClientError,
   RECONNECTABLE,
@@ -78,8 +79,10 @@ export interface StreamOptions {
   auth?: "header" | "subprotocol";
   /** A WebSocket class to use instead of the global one (or `ws` when there is none). */
   WebSocket?: SocketClass;
-  /** Called with an answer to an id nothing waits for (an `UnexpectedAnswer` whose `id`
-   * is null); no message's promise can take it. Default: such answers are dropped. */
+  /** Called with an answer to an id nothing waits for, or one that cannot be decoded
+   * (not JSON or MessagePack, or not an object): an `UnexpectedAnswer` whose `id` is
+   * null; no message's promise can take it, and the stream goes on. Default: such
+   * answers are dropped. */
   onUnexpected?: (error: UnexpectedAnswer) => void;
 }
 
@@ -239,23 +242,35 @@ export class Stream<R = FrameResult> {
     return message;
   }
 
-  /** `body` with its id, as sent; throws for a non-finite number (naming its field) and
-   * for what the encoding cannot write (a BigInt, a cycle). */
+  /** `body` with its id, as sent; throws an `EncodeError` for a non-finite number
+   * (naming its field) and for what the encoding cannot write (a BigInt, a cycle). */
   private encode(body: Record<string, unknown>, wireId: number): string | Uint8Array {
-    refuseNonFinite(body, "", new Set());
-    const payload = { ...body, id: wireId };
-    return this.encoding === "msgpack" ? encode(payload) : JSON.stringify(payload);
+    return encodeBody({ ...body, id: wireId }, this.encoding);
   }
 
-  private decode(data: unknown): Envelope {
-    if (typeof data === "string") return JSON.parse(data) as Envelope;
-    return decode(data as ArrayBuffer) as Envelope;
+  /** The answer `data` carries; an `UnexpectedAnswer` (`id` null) for one that is not
+   * JSON or MessagePack, or not an object. */
+  private decode(data: unknown): Envelope | UnexpectedAnswer {
+    let envelope: unknown;
+    try {
+      envelope = typeof data === "string" ? JSON.parse(data) : decode(data as ArrayBuffer);
+    } catch (error) {
+      const reason = error instanceof Error ? error.message : String(error);
+      return new UnexpectedAnswer(`an answer that cannot be decoded (${reason})`, null, {}, data);
+    }
+    if (envelope !== null && typeof envelope === "object" && !Array.isArray(envelope)) return envelope as Envelope;
+    return new UnexpectedAnswer(`an answer that is not an object: ${JSON.stringify(envelope)}`, null, {}, data);
   }
 
   private watch(socket: Socket): void {
     socket.onerror = () => {}; // the close that follows says why (and ws throws without a listener)
     socket.onmessage = (event) => {
-      if (socket === this.socketNow) this.answered(this.decode(event.data));
+      if (socket !== this.socketNow) return;
+      const envelope = this.decode(event.data);
+      // Garbled: no message can be told it is answered (its id is unreadable); the caller
+      // learns of it as of an answer to an id nothing waits for, and the stream goes on.
+      if (envelope instanceof UnexpectedAnswer) this.onUnexpected?.(envelope);
+      else this.answered(envelope);
     };
     socket.onclose = (event) => {
       if (socket === this.socketNow) this.closed(event.code, event.reason);
@@ -330,29 +345,6 @@ export class Stream<R = FrameResult> {
       message.reject(error instanceof Error ? error : new IKClientError(String(error)));
     }
   }
-}
-
-/**
- * Throw naming the first NaN or infinity in `value` (a message body, or its part at
- * `field`): JSON.stringify would send it as null and MessagePack as a float, and the
- * server refuses both; here the caller learns which field. An object met again inside
- * itself (`ancestors`) is left to the encoder, which throws for the cycle.
- */
-function refuseNonFinite(value: unknown, field: string, ancestors: Set<object>): void {
-  if (typeof value === "number") {
-    if (Number.isFinite(value)) return;
-    throw new IKClientError(`${field} is ${value}: the service takes finite numbers only`);
-  }
-  if (value === null || typeof value !== "object" || ancestors.has(value)) return;
-  ancestors.add(value);
-  if (Array.isArray(value)) {
-    value.forEach((item, index) => refuseNonFinite(item, `${field}[${index}]`, ancestors));
-  } else {
-    for (const [key, item] of Object.entries(value)) {
-      refuseNonFinite(item, field ? `${field}.${key}` : key, ancestors);
-    }
-  }
-  ancestors.delete(value);
 }
 
 /** Resolves when `socket` opens; rejects with its close if it closes first. */

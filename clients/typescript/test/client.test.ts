@@ -18,6 +18,7 @@ import {
   type ErrorPayload,
   Client,
   ConnectionLost,
+  EncodeError,
   ErrorCode,
   IKClientError,
   InvalidRequest,
@@ -521,6 +522,59 @@ describe("stream", () => {
     }
   });
 
+  test("a garbled answer goes to onUnexpected, and the stream goes on", async () => {
+    // Before each echo, answers that are not JSON, not an object, not MessagePack.
+    const echo = new WebSocketServer({ host: "127.0.0.1", port: 0 });
+    echo.on("connection", (socket) => {
+      socket.on("message", (data, binary) => {
+        socket.send("not json{");
+        socket.send("[1, 2]");
+        socket.send(new Uint8Array([0xc1]), { binary: true }); // 0xc1: never used in MessagePack
+        socket.send(data, { binary });
+      });
+    });
+    await new Promise((resolve) => echo.once("listening", resolve));
+    const { port } = echo.address() as { port: number };
+    const unexpected: UnexpectedAnswer[] = [];
+    const stream = await new Client(`http://127.0.0.1:${port}`).stream(
+      { id: "s", token: "t" },
+      { reconnect: { attempts: 0 }, onUnexpected: (e) => unexpected.push(e) },
+    );
+    try {
+      for (const id of [0, 1]) {
+        const echoed = await within(5_000, stream.ping().catch((e: unknown) => e));
+        assert.ok(echoed instanceof UnexpectedAnswer && echoed.id === id, String(echoed));
+      }
+      assert.equal(stream.inFlight, 0);
+      assert.deepEqual(
+        unexpected.map((e) => [e.id, e.envelope, e.data instanceof ArrayBuffer ? [...new Uint8Array(e.data)] : e.data]),
+        Array(2).fill([[null, {}, "not json{"], [null, {}, "[1, 2]"], [null, {}, [0xc1]]]).flat(),
+      );
+      assert.match(unexpected[0]!.message, /cannot be decoded/);
+      assert.match(unexpected[1]!.message, /not an object: \[1,2\]/);
+    } finally {
+      stream.close();
+      echo.close();
+    }
+  });
+
+  test("HTTP: NaN and unwritable values are an EncodeError before anything is sent", async () => {
+    const session = await ik.createSession(PANDA);
+    const nan: Target = { effector: "tool", position: { x: 0.4, y: Number.NaN, z: 0.5 } };
+    const refused = await ik.frame(session, [nan]).catch((e: unknown) => e);
+    assert.ok(refused instanceof EncodeError && refused instanceof IKClientError, String(refused));
+    assert.equal(refused.field, "targets[0].position.y");
+    assert.match(refused.message, /^targets\[0\]\.position\.y is NaN: /);
+    const far: Target = { ...tool(0.1), position_weight: Number.POSITIVE_INFINITY };
+    const clip = await ik.clip(session, [{ targets: [tool(0.1)] }, { targets: [far] }]).catch((e: unknown) => e);
+    assert.ok(clip instanceof EncodeError && clip.field === "frames[1].targets[0].position_weight");
+    const big = { ...tool(0.1), position_weight: 1n } as unknown as Target;
+    const unwritable = await ik.frame(session, [big]).catch((e: unknown) => e);
+    assert.ok(unwritable instanceof EncodeError && unwritable.field === null, String(unwritable));
+    assert.ok(unwritable.cause instanceof TypeError);
+    assert.equal((await ik.getSession(session)).counters.frames, 0);
+  });
+
   test("without reconnects, a drop rejects what is in flight", async () => {
     const session = await ik.createSession(PANDA);
     const stream = await ik.stream(session, { reconnect: { attempts: 0 } });
@@ -536,7 +590,7 @@ describe("stream", () => {
     test(`NaN and infinity are refused before anything is sent, naming the field (${encoding})`, async () => {
       const session = await ik.createSession(PANDA);
       const stream = await ik.stream(session, { encoding });
-      const named = (pattern: RegExp) => (e: unknown) => e instanceof IKClientError && pattern.test(e.message);
+      const named = (pattern: RegExp) => (e: unknown) => e instanceof EncodeError && pattern.test(e.message);
       try {
         const nan: Target = { effector: "tool", position: { x: Number.NaN, y: 0.1, z: 0.5 } };
         assert.throws(() => stream.sendFrame([nan]), named(/^targets\[0\]\.position\.x is NaN: /));
@@ -561,7 +615,10 @@ describe("stream", () => {
       const stream = await ik.stream(session, { encoding });
       try {
         const big = { ...tool(0.1), position_weight: 1n } as unknown as Target; // neither encoding writes a BigInt
-        assert.throws(() => stream.sendFrame([big]));
+        assert.throws(
+          () => stream.sendFrame([big]),
+          (e: unknown) => e instanceof EncodeError && e.field === null && e.cause instanceof Error,
+        );
         assert.equal(stream.inFlight, 0);
         (stream.socket as unknown as NodeWebSocket).terminate();
         const id = stream.sendFrame([tool(0.1)]);
