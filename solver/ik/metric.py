@@ -85,9 +85,11 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     ni, nd, ei, ed, dd, misc = data
     n = q.shape[0]
     rows = 0
+    active = 0
     for e in range(ei.shape[0]):
         if ei[e, EI_ACTIVE] != 0:
             rows += 3 if ei[e, EI_MODE] == MODE_POSITION else 6
+            active += 1
     if n > METRIC_MAX_DOF and 2 * rows > n:
         return False
     # The line search has usually just evaluated q: its frames are still in nd.
@@ -113,8 +115,10 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     # An effector's Jacobian is zero outside the variables on its path to the root, so
     # only their pairs are summed: on a tree of many limbs (a humanoid's 9 effectors,
     # 29 variables) each limb's block instead of every n x n pair per effector. The
-    # sums are the same, term for term (the pairs skipped add exact zeros).
-    listed = dd.shape[0] > DD_STACK  # a row to list the path's variables in
+    # sums are the same, term for term (the pairs skipped add exact zeros). One
+    # effector's path is usually the whole chain: listing it cost a single-tip arm's
+    # solve 4-5% (bench.ab_core), so it keeps the plain loop.
+    listed = active > 1 and dd.shape[0] > DD_STACK  # a row to list the path's variables in
     for e in range(ei.shape[0]):
         if ei[e, EI_ACTIVE] == 0:
             continue
