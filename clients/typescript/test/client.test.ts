@@ -27,6 +27,7 @@ import {
   ServerFault,
   SessionGone,
   Status,
+  type Stream,
   StreamAuthError,
   Termination,
   UnexpectedAnswer,
@@ -88,6 +89,32 @@ function within<T>(ms: number, promise: Promise<T>): Promise<T> {
     timer = setTimeout(() => reject(new Error(`no answer in ${ms} ms`)), ms);
   });
   return Promise.race([promise, timeout]).finally(() => clearTimeout(timer));
+}
+
+/** A stream to a fake server on 127.0.0.1 that answers each message with `answer`;
+ * answers no message waits for are collected in `unexpected`. */
+async function streamToFake(
+  answer: (socket: NodeWebSocket, data: unknown, binary: boolean) => void,
+): Promise<{ stream: Stream; unexpected: UnexpectedAnswer[]; close: () => void }> {
+  const fake = new WebSocketServer({ host: "127.0.0.1", port: 0 });
+  fake.on("connection", (socket) => {
+    socket.on("message", (data, binary) => answer(socket, data, binary));
+  });
+  await new Promise((resolve) => fake.once("listening", resolve));
+  const { port } = fake.address() as { port: number };
+  const unexpected: UnexpectedAnswer[] = [];
+  const stream = await new Client(`http://127.0.0.1:${port}`).stream(
+    { id: "s", token: "t" },
+    { reconnect: { attempts: 0 }, onUnexpected: (e) => unexpected.push(e) },
+  );
+  return {
+    stream,
+    unexpected,
+    close: () => {
+      stream.close();
+      fake.close();
+    },
+  };
 }
 
 function assertSolved(result: CompactFrameResult): void {
@@ -488,22 +515,12 @@ describe("stream", () => {
   test("answers the client cannot read: UnexpectedAnswer, and the stream goes on", async () => {
     // A server that echoes each message (a type the client does not read; loadtest's
     // floors do so), and after the first answers an id nothing waits for.
-    const echo = new WebSocketServer({ host: "127.0.0.1", port: 0 });
-    echo.on("connection", (socket) => {
-      let first = true;
-      socket.on("message", (data, binary) => {
-        socket.send(data, { binary });
-        if (first) socket.send(JSON.stringify({ id: 99, type: "pong" }));
-        first = false;
-      });
+    let first = true;
+    const { stream, unexpected, close } = await streamToFake((socket, data, binary) => {
+      socket.send(data as Buffer, { binary });
+      if (first) socket.send(JSON.stringify({ id: 99, type: "pong" }));
+      first = false;
     });
-    await new Promise((resolve) => echo.once("listening", resolve));
-    const { port } = echo.address() as { port: number };
-    const unexpected: UnexpectedAnswer[] = [];
-    const stream = await new Client(`http://127.0.0.1:${port}`).stream(
-      { id: "s", token: "t" },
-      { reconnect: { attempts: 0 }, onUnexpected: (e) => unexpected.push(e) },
-    );
     try {
       const echoed = await stream.frame([tool(0.1)]).catch((e: unknown) => e);
       assert.ok(echoed instanceof UnexpectedAnswer && echoed instanceof IKClientError);
@@ -517,29 +534,18 @@ describe("stream", () => {
         [[null, { id: 99, type: "pong" }]],
       );
     } finally {
-      stream.close();
-      echo.close();
+      close();
     }
   });
 
   test("a garbled answer goes to onUnexpected, and the stream goes on", async () => {
     // Before each echo, answers that are not JSON, not an object, not MessagePack.
-    const echo = new WebSocketServer({ host: "127.0.0.1", port: 0 });
-    echo.on("connection", (socket) => {
-      socket.on("message", (data, binary) => {
-        socket.send("not json{");
-        socket.send("[1, 2]");
-        socket.send(new Uint8Array([0xc1]), { binary: true }); // 0xc1: never used in MessagePack
-        socket.send(data, { binary });
-      });
+    const { stream, unexpected, close } = await streamToFake((socket, data, binary) => {
+      socket.send("not json{");
+      socket.send("[1, 2]");
+      socket.send(new Uint8Array([0xc1]), { binary: true }); // 0xc1: never used in MessagePack
+      socket.send(data as Buffer, { binary });
     });
-    await new Promise((resolve) => echo.once("listening", resolve));
-    const { port } = echo.address() as { port: number };
-    const unexpected: UnexpectedAnswer[] = [];
-    const stream = await new Client(`http://127.0.0.1:${port}`).stream(
-      { id: "s", token: "t" },
-      { reconnect: { attempts: 0 }, onUnexpected: (e) => unexpected.push(e) },
-    );
     try {
       for (const id of [0, 1]) {
         const echoed = await within(5_000, stream.ping().catch((e: unknown) => e));
@@ -553,8 +559,7 @@ describe("stream", () => {
       assert.match(unexpected[0]!.message, /cannot be decoded/);
       assert.match(unexpected[1]!.message, /not an object: \[1,2\]/);
     } finally {
-      stream.close();
-      echo.close();
+      close();
     }
   });
 
