@@ -626,6 +626,39 @@ def test_answers_the_client_cannot_read() -> None:
     assert unknown.id is None and unknown.envelope == {"id": 99, "type": "pong"}
 
 
+def test_a_garbled_answer_is_unexpected_and_the_stream_goes_on() -> None:
+    """Answers that are not JSON, not an object, not MessagePack: each an
+    ``UnexpectedAnswer`` with the data as received; the message still waits for its own."""
+    garbled: list[str | bytes] = ["not json{", "[1, 2]", b"\xc1"]  # 0xc1: never MessagePack
+
+    async def answer(ws: ServerConnection) -> None:
+        async for _ in ws:
+            for data in garbled:
+                await ws.send(data)
+            await ws.send('{"id": 0, "type": "pong"}')
+
+    async def run() -> tuple[list[UnexpectedAnswer], int]:
+        async with serve(answer, "127.0.0.1", 0) as server:
+            port = server.sockets[0].getsockname()[1]
+            async with AsyncClient(f"http://127.0.0.1:{port}") as ik:
+                ref = dataclasses.make_dataclass("Ref", ["id", "token"])("s", "t")
+                async with ik.stream(ref, reconnect=Reconnect(attempts=0)) as stream:
+                    await stream.send_ping()
+                    seen = []
+                    for _ in garbled:
+                        with pytest.raises(UnexpectedAnswer) as e:
+                            await stream.receive()
+                        seen.append(e.value)
+                    in_flight = stream.in_flight
+                    await stream.receive()  # the ping's own answer
+                    return seen, in_flight
+
+    seen, in_flight = asyncio.run(asyncio.wait_for(run(), 30.0))
+    assert [e.data for e in seen] == garbled
+    assert all(e.id is None and e.envelope == {} for e in seen)
+    assert in_flight == 1
+
+
 def frames_on_the_server(ik: Client, session: Session) -> int:
     return ik.get_session(session).counters.frames
 

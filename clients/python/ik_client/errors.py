@@ -73,17 +73,28 @@ class UnexpectedAnswer(IKClientError):
     """A stream's answer that this client cannot read: an answer to an id that waits
     for none (``id`` None: nothing was taken off the stream's in-flight messages), or an
     answer of a type it does not know (``id``: the message it answers, which counts as
-    answered). The stream goes on; ``envelope`` is the message as decoded.
+    answered), or an answer that does not decode to an object (not JSON, not
+    MessagePack, an array: ``id`` None, ``envelope`` empty, ``data`` the answer as
+    received). The stream goes on; ``envelope`` is the message as decoded.
 
     Attributes:
         id: The caller's id of the message answered; None when no message waited for it.
         envelope: The decoded message (JSON or MessagePack).
+        data: The answer as received when it could not be decoded to an object, else None.
     """
 
-    def __init__(self, message: str, *, id: int | None, envelope: dict[str, Any]) -> None:
+    def __init__(
+        self,
+        message: str,
+        *,
+        id: int | None,
+        envelope: dict[str, Any],
+        data: str | bytes | None = None,
+    ) -> None:
         super().__init__(message)
         self.id = id
         self.envelope = envelope
+        self.data = data
 
 
 @dataclass(eq=False)  # an exception equals only itself

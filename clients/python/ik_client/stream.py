@@ -228,14 +228,11 @@ class _Pipeline:
         Raises:
             ServiceError: The message was answered with an error (its subclass by code).
         """
-        if isinstance(data, bytes):
-            envelope = msgpack.unpackb(data, raw=False)
-        else:
-            envelope = _loads(data)
+        envelope = _envelope(data)
         wire_id = envelope.get("id")
         if wire_id is None and self._waiting:  # the server could not read the id: in order
             wire_id = next(iter(self._waiting))
-        message = self._waiting.pop(wire_id, None)
+        message = self._waiting.pop(wire_id, None) if isinstance(wire_id, int) else None
         if message is None:
             raise UnexpectedAnswer(
                 f"an answer to id {wire_id!r}, which is not waiting: {envelope}",
@@ -290,6 +287,29 @@ def _frame(targets: list[Target], bones: BoneOutput | None) -> dict[str, Any]:
 
 def _clip(frames: list[Frame], plan: bool) -> dict[str, Any]:
     return {"type": "clip", "frames": frames, "plan": plan}
+
+
+def _envelope(data: str | bytes) -> dict[str, Any]:
+    """An answer decoded (MessagePack when binary, else JSON) to the object it must be.
+
+    Raises:
+        UnexpectedAnswer: It is not one (garbled, or an array or a number): nothing is
+            taken off the in-flight messages, and the stream goes on.
+    """
+    try:
+        envelope = msgpack.unpackb(data, raw=False) if isinstance(data, bytes) else _loads(data)
+    except Exception as e:  # each decoder has its own errors; all mean the same here
+        raise UnexpectedAnswer(
+            f"an answer that does not decode ({type(e).__name__}): {data[:80]!r}",
+            id=None,
+            envelope={},
+            data=data,
+        ) from e
+    if not isinstance(envelope, dict):
+        raise UnexpectedAnswer(
+            f"an answer that is not an object: {data[:80]!r}", id=None, envelope={}, data=data
+        )
+    return envelope
 
 
 def _batch(frames: list[BatchFrame]) -> dict[str, Any]:
