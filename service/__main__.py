@@ -37,6 +37,25 @@ class _RedactTokens(logging.Filter):
         return True
 
 
+# Health checks a balancer or a kubelet sends every 0.5-10 s per worker.
+_PROBES = frozenset(("/healthz", "/readyz"))
+
+
+class QuietProbes(logging.Filter):
+    """Drops uvicorn's access-log line of a health check that passed: a balancer's
+    probes were most of an idle worker's log (925 /readyz lines in a few minutes); a
+    probe that fails (503 while warming up or without Redis) is still logged."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        args = record.args
+        # uvicorn.access: (client address, method, path, HTTP version, status code)
+        if isinstance(args, tuple) and len(args) == 5:
+            path, status_code = args[2], args[4]
+            if path in _PROBES and isinstance(status_code, int) and status_code < 400:
+                return False
+        return True
+
+
 class DrainingServer(uvicorn.Server):
     """uvicorn's server, with one step before its shutdown: stop accepting, then let the
     WebSocket messages in flight be answered (each such socket then closes 1012),
@@ -71,6 +90,7 @@ def main() -> None:
     logging.basicConfig(level=settings.log_level.upper(), format="%(levelname)s:     %(message)s")
     for name in ("uvicorn.access", "uvicorn.error"):
         logging.getLogger(name).addFilter(_RedactTokens())
+    logging.getLogger("uvicorn.access").addFilter(QuietProbes())
     for warning in unknown_variables(os.environ):
         logging.getLogger("service").warning(warning)
     host = f"[{settings.host}]" if ":" in settings.host else settings.host

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections.abc import Callable
 
@@ -165,3 +166,21 @@ def test_openapi_documents_every_route(client: TestClient) -> None:
     }
     assert "HTTPBearer" in spec["components"]["securitySchemes"]
     assert client.get("/docs").status_code == 200 and client.get("/redoc").status_code == 200
+
+
+def test_passed_health_checks_are_left_out_of_the_access_log() -> None:
+    """uvicorn's access-log record (its args as uvicorn passes them): a balancer's
+    passed probes are dropped, failed ones and every other request kept."""
+    from service.__main__ import QuietProbes
+
+    def record(path: str, status: int) -> logging.LogRecord:
+        args = ("127.0.0.1:5000", "GET", path, "1.1", status)
+        msg = '%s - "%s %s HTTP/%s" %d'
+        return logging.LogRecord("uvicorn.access", logging.INFO, "", 0, msg, args, None)
+
+    quiet = QuietProbes()
+    assert not quiet.filter(record("/readyz", 200))
+    assert not quiet.filter(record("/healthz", 200))
+    assert quiet.filter(record("/readyz", 503))
+    assert quiet.filter(record("/v1/sessions", 201))
+    assert quiet.filter(record("/readyz?x=1", 200))  # not a probe the balancers send
