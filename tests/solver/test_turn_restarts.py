@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from solver import IKOptions, IKSolver, MinimizeOptions, PassStart, Target, build_chain
-from solver.ik import pose_targets
+from solver.ik import STREAM_DEFAULTS, pose_targets
 from solver.ik.settled import variable_periods
 from solver.model import EffectorMode
 from solver.model.examples import panda_arm
@@ -205,3 +205,40 @@ def test_one_turn_restart_per_best_point() -> None:
     starts = [p.start for p in r.pass_log]
     assert starts.count(PassStart.RESTART_TURN) == 1, starts
     assert starts.count(PassStart.RESTART_RANDOM) >= 1, starts
+
+
+def test_a_streams_local_restarts_take_no_turn_restart() -> None:
+    """A tracked stream restarts within ``restart_radius_rad`` (0.3) of its start: the
+    twelve wrists of the test above, tracked from 2.9 rad towards -3.0 rad, stop at
+    their upper limit, where a turn restart would move each to -3.05 rad, 6.1 rad
+    away. Every frame's restarts are local draws, never a turn (review: with the
+    radius rule of ``turn_values`` removed, the first frame's first restart turned)."""
+    count = 12
+    urdf_chain = chain_from_urdf(
+        _wrists(count), base_link="base", tip_links=[f"tip{k}" for k in range(count)]
+    )
+    chain = build_chain(
+        list(urdf_chain.joints),
+        [dataclasses.replace(e, mode=EffectorMode.POSITION) for e in urdf_chain.effectors],
+    )
+    goal = np.full(count, -3.0)
+    targets = [
+        Target(effector=e.name, position=pose[:3, 3])
+        for e, pose in zip(chain.effectors, effector_poses(chain, goal), strict=True)
+    ]
+    # No global fallback: it would retry the frame with the radius widened to the
+    # whole box, where a turn is allowed.
+    options = dataclasses.replace(
+        STREAM_DEFAULTS, time_budget_us=None, max_restarts=6, global_fallback=False
+    )
+    solver = IKSolver(chain, options, seed=5)
+    start = np.full(count, 2.9)
+    solver.set_pose(start)
+    starts = []
+    for _ in range(3):
+        r = solver.track(targets)
+        starts += [p.start for p in r.pass_log]
+        assert PassStart.RESTART_TURN not in starts, starts
+        # SMOOTH: at most 0.1 rad a frame, so no wrist ever left its upper limit's side.
+        assert np.all(r.q > 2.5), r.q
+    assert starts.count(PassStart.RESTART_RANDOM) + starts.count(PassStart.RESTART_PARTIAL) >= 1
