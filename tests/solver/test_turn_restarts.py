@@ -13,7 +13,7 @@ import pytest
 from solver import IKOptions, IKSolver, MinimizeOptions, PassStart, Target, build_chain
 from solver.ik import STREAM_DEFAULTS, pose_targets
 from solver.ik.settled import variable_periods
-from solver.model import EffectorMode
+from solver.model import Chain, EffectorMode
 from solver.model.examples import panda_arm
 from solver.model.forward import effector_poses
 from solver.model.urdf import chain_from_urdf
@@ -183,19 +183,24 @@ def test_turn_restarts_are_on_by_default(make: type) -> None:
     assert make().turn_restarts is True
 
 
+def _wrist_chain(count: int) -> Chain:
+    """``count`` wrists of ``_wrists``, each tip a position effector."""
+    urdf_chain = chain_from_urdf(
+        _wrists(count), base_link="base", tip_links=[f"tip{k}" for k in range(count)]
+    )
+    return build_chain(
+        list(urdf_chain.joints),
+        [dataclasses.replace(e, mode=EffectorMode.POSITION) for e in urdf_chain.effectors],
+    )
+
+
 def test_one_turn_restart_per_best_point() -> None:
     """Targets in the gap the limits forbid: each wrist stops at a limit, and turning it
     lands on the other limit, no better. The turn is tried once from that best point;
     the later restarts are random draws, not the same turned pass again (review: with
     the once-per-best-point rule removed, every restart was ``restart_turn``)."""
     count = 3
-    urdf_chain = chain_from_urdf(
-        _wrists(count), base_link="base", tip_links=[f"tip{k}" for k in range(count)]
-    )
-    chain = build_chain(
-        list(urdf_chain.joints),
-        [dataclasses.replace(e, mode=EffectorMode.POSITION) for e in urdf_chain.effectors],
-    )
+    chain = _wrist_chain(count)
     targets = [
         Target(effector=e.name, position=np.array([-0.3, 0.5 * k, 0.0]))
         for k, e in enumerate(chain.effectors)
@@ -214,13 +219,7 @@ def test_a_streams_local_restarts_take_no_turn_restart() -> None:
     away. Every frame's restarts are local draws, never a turn (review: with the
     radius rule of ``turn_values`` removed, the first frame's first restart turned)."""
     count = 12
-    urdf_chain = chain_from_urdf(
-        _wrists(count), base_link="base", tip_links=[f"tip{k}" for k in range(count)]
-    )
-    chain = build_chain(
-        list(urdf_chain.joints),
-        [dataclasses.replace(e, mode=EffectorMode.POSITION) for e in urdf_chain.effectors],
-    )
+    chain = _wrist_chain(count)
     goal = np.full(count, -3.0)
     targets = [
         Target(effector=e.name, position=pose[:3, 3])
