@@ -328,6 +328,16 @@ def main() -> None:
         help="IKOptions.turn_restarts=False (restarts as before turn restarts)",
     )
     parser.add_argument(
+        "--no-split-limbs",
+        action="store_true",
+        help="IKOptions.split_limbs=False (every effector group in one solve, as before)",
+    )
+    parser.add_argument(
+        "--no-inner-first",
+        action="store_true",
+        help="IKOptions.inner_first=False (a group's trunk effectors not solved first)",
+    )
+    parser.add_argument(
         "--metric-every",
         type=int,
         default=None,
@@ -338,6 +348,8 @@ def main() -> None:
         time_budget_us=args.budget_us,
         full_restart_every=args.full_restart_every,
         turn_restarts=not args.no_turn_restarts,
+        split_limbs=not args.no_split_limbs,
+        inner_first=not args.no_inner_first,
     )
     if args.metric_every is not None:
         options = dataclasses.replace(options, metric_every=args.metric_every)

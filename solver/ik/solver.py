@@ -26,10 +26,9 @@ import numpy as np
 from .._jit import compiled_entry
 from ..arrays import Matrix, Vector
 from ..errors import DimensionMismatch
-from ..model import Chain, EffectorMode
+from ..model import Chain
 from ..optim import Termination, register_objective
 from ..optim import codes as C
-from ..optim.minimize import pack_options
 from .blend import blend_rows, solve_blended
 from .continuity import NO_STEP, Continuity, FrameStep, largest_step, narrow_bounds
 from .frame import (
@@ -56,10 +55,12 @@ from .kinematics import (
 )
 from .metric import ik_metric
 from .options import IKOptions
+from .packing import OptionPacks
 from .pole_term import pole_block_size
 from .poles import PoleShaper
-from .result import STATUSES, EffectorError, IKResult, IKStatus, ResultLayout
+from .result import STATUSES, EffectorError, IKResult, IKStatus
 from .settled import settled_variables, variable_periods
+from .split import LimbSplit
 from .targets import Target
 from .task import Task
 
@@ -76,17 +77,6 @@ class StreamState(NamedTuple):
 
 
 _tuple_new = tuple.__new__
-
-
-class _Packed(NamedTuple):
-    """One IKOptions object as the core takes it, built once per solver and options."""
-
-    options: IKOptions
-    fopt: np.ndarray
-    iopt: np.ndarray  # iopt[I_SEED] carries this solver's restart generator along
-    policy: np.ndarray
-    out_size: int  # length of a frame's output block
-    layout: ResultLayout
 
 
 _F64 = np.dtype(np.float64)
@@ -123,17 +113,11 @@ class IKSolver:
         self._data: IKData = (cc.ni, cc.nd.copy(), ei, cc.ed.copy(), self._dd, self._misc)
         _register_once(self._data)
         self._task = Task(chain, ei, self._data[3], self._dd)
-        self._effector_names = chain.effector_names
-        # The task's rows with every effector targeted, as the metric counts them
-        # (3 for a position effector, 6 otherwise): they choose metric_every's default.
-        self._task_rows = sum(3 if e.mode is EffectorMode.POSITION else 6 for e in chain.effectors)
         self._misc_for: IKOptions | None = None
         self._mid = chain.mid_limits()
         self._identity = np.eye(n)
         self._shape = (n,)
-        self._packed: dict[int, _Packed] = {}
-        self._last_packed: _Packed | None = None
-        self._rng = np.random.default_rng(0 if seed is None else seed)
+        self._packs = OptionPacks(chain, np.random.default_rng(0 if seed is None else seed))
         self.q = self._mid.copy()  # the stream's current pose
         self._dd[DD_REST] = self._mid
         self._h: Matrix | None = None
@@ -145,6 +129,7 @@ class IKSolver:
         self._narrow_bounds: Callable[..., None] = narrow_bounds
         self.last_step: FrameStep = NO_STEP  # how far the last ``track`` frame moved
         self._answered = False  # has ``track`` answered since the pose was set?
+        self._split = LimbSplit(chain, lambda limb: IKSolver(limb, self.options, seed=seed))
 
     # -- public API ------------------------------------------------------------
     def solve(
@@ -172,7 +157,31 @@ class IKSolver:
         """
         opts = options or self.options
         q0 = self._mid if seed is None else self.check_seed(seed)
+        # Several targets: independent groups, or a trunk to place first (``split``).
+        if len(targets) > 1 and opts.split_limbs and initial_inverse_hessian is None:
+            split = self._split
+            groups = split.groups(targets)
+            if (
+                groups
+                and (len(groups) > 1 or (opts.inner_first and split.inner(groups[0])))
+                and np.isfinite(q0).all()  # else the whole solve words the error
+            ):
+                packed = self._packs.get(opts)
+                return split.solve(groups, targets, q0, opts, rng, packed.layout, packed.out_size)
         return self._frame(targets, q0, opts, rng, initial_inverse_hessian, 0.0)
+
+    def solve_within(
+        self,
+        targets: Sequence[Target],
+        seed: Vector,
+        options: IKOptions,
+        rng: np.random.Generator | None,
+        time_left_us: float | None,
+    ) -> IKResult:
+        """``solve`` of one group of effectors (``split``) in what the frame's budget
+        has left (None: no limit), without looking for groups."""
+        q0 = self.check_seed(seed)
+        return self._frame(targets, q0, options, rng, None, 0.0, time_left_us=time_left_us)
 
     def track(
         self,
@@ -275,7 +284,7 @@ class IKSolver:
         """
         opts = options or self.options
         self._task.load(targets, opts)
-        packed = self._packed_options(opts)
+        packed = self._packs.get(opts)
         raw = np.full(packed.out_size, math.nan)
         q = self.check_seed(q)
         bad, measure = report_only(self._data, q, raw)
@@ -331,34 +340,6 @@ class IKSolver:
         self._answered = True
 
     # -- internals -------------------------------------------------------------
-    def _packed_options(self, opts: IKOptions) -> _Packed:
-        """Option vectors, policy table and result layout, built once per IKOptions."""
-        last = self._last_packed
-        if last is not None and last.options is opts:
-            return last
-        hit = self._packed.get(id(opts))
-        if hit is None or hit.options is not opts:
-            mopts = opts.minimize_options(self._n, self._task_rows)
-            seed = int(self._rng.integers(0, 2**31 - 1))
-            fopt, iopt = pack_options(mopts, seed=seed)
-            if len(self._packed) > 32:
-                self._packed.clear()
-            n = self._n
-            m = len(self._effector_names)
-            layout = ResultLayout(
-                self.chain.dof_names,
-                self._effector_names,
-                (opts.position_tolerance_m, opts.rotation_tolerance_rad),
-                n,
-                m,
-                self.chain.followers,
-            )
-            out_size = 3 * m + n * n + mopts.max_passes * C.N_LOG
-            hit = _Packed(opts, fopt, iopt, opts.policy.as_array(), out_size, layout)
-            self._packed[id(opts)] = hit
-        self._last_packed = hit
-        return hit
-
     def _frame(
         self,
         targets: Sequence[Target],
@@ -368,6 +349,8 @@ class IKSolver:
         h0: Matrix | None,
         null_space_step_rad: float,
         box: float = 0.0,
+        *,
+        time_left_us: float | None = None,
     ) -> IKResult:
         task = self._task
         task.load(targets, opts)
@@ -392,11 +375,15 @@ class IKSolver:
             if call_narrow is narrow_bounds:
                 self._narrow_bounds = compiled_entry(narrow_bounds, (self._dd, q0, box))
             task.bounds_are_limits = False
-        packed = self._last_packed
+        packed = self._packs.last
         if packed is None or packed.options is not opts:
-            packed = self._packed_options(opts)
+            packed = self._packs.get(opts)
         if rng is not None:
             packed.iopt[C.I_SEED] = int(rng.integers(0, 2**31 - 1))
+        fopt = packed.fopt
+        if time_left_us is not None:  # a group of a split frame: what the others left
+            fopt = fopt.copy()
+            fopt[C.F_BUDGET] = max(time_left_us, 0.0) * 1e-6
         out = np.empty(packed.out_size)
         if self._n == 0:
             # An all-fixed chain: nothing to solve, only errors to report.
@@ -426,7 +413,7 @@ class IKSolver:
             self._data,
             q0,
             h0,
-            packed.fopt,
+            fopt,
             packed.iopt,
             packed.policy,
             out_x,

@@ -96,7 +96,10 @@ def test_metric_is_the_damped_gauss_newton_inverse(
     rng = np.random.default_rng(11)
     lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
     hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
-    solver = IKSolver(chain, IKOptions(damping=damping, damping_scale=damping_scale))
+    # One solve of the whole chain (two_arm_torso's arms share no variable: split, each
+    # arm would be solved on its own limb's solver) loads the options into its arrays.
+    options = IKOptions(damping=damping, damping_scale=damping_scale, split_limbs=False)
+    solver = IKSolver(chain, options)
     targets = pose_targets(chain, rng.uniform(lo, hi) * 0.5)
     solver.solve(targets)  # loads the targets and options into the compiled arrays
     data = solver.load_frame(targets, chain.mid_limits())  # as the solve loaded them

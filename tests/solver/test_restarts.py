@@ -162,7 +162,8 @@ def test_partial_restarts_solve_targets_whole_box_restarts_miss() -> None:
     chain = panda_limbs(4)
     rng = np.random.default_rng(11)
     goals = rng.uniform(chain.lower, chain.upper, size=(40, chain.n_dof))
-    base = IKOptions(time_budget_us=None, max_restarts=4, turn_restarts=False)
+    # The limbs in one solve (split, each limb would restart on its own: ik.split).
+    base = IKOptions(time_budget_us=None, max_restarts=4, turn_restarts=False, split_limbs=False)
     whole, whole_starts = _solved(chain, dataclasses.replace(base, full_restart_every=1), goals)
     partial, partial_starts = _solved(chain, base, goals)
     assert PassStart.RESTART_PARTIAL not in whole_starts

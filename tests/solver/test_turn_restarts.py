@@ -141,7 +141,8 @@ def test_a_turn_restart_solves_what_random_restarts_miss() -> None:
         for e, pose in zip(chain.effectors, tips, strict=True)
     ]
     seed = np.full(count, 2.9)
-    base = IKOptions(time_budget_us=None, max_restarts=1)
+    # The wrists in one solve: each would be solved apart otherwise (ik.split).
+    base = IKOptions(time_budget_us=None, max_restarts=1, split_limbs=False)
     before = IKSolver(chain, dataclasses.replace(base, turn_restarts=False), seed=5)
     after = IKSolver(chain, base, seed=5)
     missed = before.solve(targets, seed)
@@ -161,7 +162,8 @@ def test_single_tip_solves_change_only_where_a_turn_restart_was_taken() -> None:
     runs the same either way)."""
     chain = panda_arm()
     goals = np.random.default_rng(4).uniform(chain.lower, chain.upper, size=(40, chain.n_dof))
-    base = IKOptions(time_budget_us=None, max_restarts=20)
+    # The wrists in one solve: each would be solved apart otherwise (ik.split).
+    base = IKOptions(time_budget_us=None, max_restarts=20, split_limbs=False)
     turned = 0
     for q in goals:
         targets = pose_targets(chain, q)
@@ -205,7 +207,8 @@ def test_one_turn_restart_per_best_point() -> None:
         Target(effector=e.name, position=np.array([-0.3, 0.5 * k, 0.0]))
         for k, e in enumerate(chain.effectors)
     ]
-    options = IKOptions(time_budget_us=None, max_restarts=6)
+    # The wrists in one solve: each would be solved apart otherwise (ik.split).
+    options = IKOptions(time_budget_us=None, max_restarts=6, split_limbs=False)
     r = IKSolver(chain, options, seed=5).solve(targets, np.full(count, 2.9))
     starts = [p.start for p in r.pass_log]
     assert starts.count(PassStart.RESTART_TURN) == 1, starts

@@ -1,0 +1,289 @@
+"""A cold solve takes the targeted effectors in groups that share no free variable one
+group at a time, each on its limb's own chain (``ik.split``, ``model.limbs``)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from solver import (
+    Chain,
+    IKOptions,
+    IKSolver,
+    IKStatus,
+    InvalidProblem,
+    Target,
+    Transform,
+    build_chain,
+)
+from solver.ik import pose_targets
+from solver.model import Effector, EffectorMode, Joint, JointKind, Mimic
+from solver.model.limbs import limb_chain
+
+X, Y, Z = np.eye(3)
+
+
+def _joint(name: str, parent: str, child: str, at: list[float], **kw: object) -> Joint:
+    return Joint(name=name, parent=parent, child=child, origin=Transform(np.array(at)), **kw)  # type: ignore[arg-type]
+
+
+def biped(*, knees_mimic: bool = False, lock_waist: bool = False, neck: bool = False) -> Chain:
+    """A pelvis (the base) with two 6-DOF legs under foot poses and, above a waist
+    joint, a head (position) and two 4-DOF arms (hand positions): three groups, legs
+    and upper body, whose head is inside both hands' paths. ``knees_mimic``: the
+    right knee follows the left (one leg group); ``lock_waist``: the waist cannot
+    move (the head and hands share no free variable); ``neck``: the head is a pose
+    on a 2-joint neck."""
+    w = 0.0 if lock_waist else 2.0
+    joints = [
+        _joint(
+            "waist",
+            "pelvis",
+            "chest",
+            [0, 0, 0.2],
+            kind=JointKind.REVOLUTE,
+            axis=Z,
+            lower=(-w,),
+            upper=(w,),
+        ),
+        _joint(
+            "neck",
+            "chest",
+            "head",
+            [0.05, 0, 0.5],
+            kind=JointKind.ROTATIONAL,
+            axes="zy",
+            lower=(-1.0, -0.5),
+            upper=(1.0, 0.5),
+        )
+        if neck
+        else _joint("neck", "chest", "head", [0.05, 0, 0.5], kind=JointKind.FIXED),
+    ]
+    head_mode = EffectorMode.POSE if neck else EffectorMode.POSITION
+    effectors = [Effector(name="head", link="head", mode=head_mode)]
+    for side, y in (("left", 1.0), ("right", -1.0)):
+        knee_mimic = Mimic("left_knee") if knees_mimic and side == "right" else None
+        joints += [
+            _joint(
+                f"{side}_hip",
+                "pelvis",
+                f"{side}_thigh",
+                [0, 0.1 * y, -0.1],
+                kind=JointKind.ROTATIONAL,
+                axes="zxy",
+                lower=(-1.0, -0.6, -1.5),
+                upper=(1.0, 0.6, 1.0),
+            ),
+            _joint(
+                f"{side}_knee",
+                f"{side}_thigh",
+                f"{side}_shin",
+                [0, 0, -0.4],
+                kind=JointKind.REVOLUTE,
+                axis=Y,
+                lower=(0.0,),
+                upper=(2.2,),
+                mimic=knee_mimic,
+            ),
+            _joint(
+                f"{side}_ankle",
+                f"{side}_shin",
+                f"{side}_foot",
+                [0, 0, -0.4],
+                kind=JointKind.ROTATIONAL,
+                axes="yx",
+                lower=(-0.8, -0.4),
+                upper=(0.6, 0.4),
+            ),
+            _joint(
+                f"{side}_shoulder",
+                "chest",
+                f"{side}_upper",
+                [0, 0.2 * y, 0.4],
+                kind=JointKind.ROTATIONAL,
+                axes="xyz",
+                lower=(-2.0,) * 3,
+                upper=(2.0,) * 3,
+            ),
+            _joint(
+                f"{side}_elbow",
+                f"{side}_upper",
+                f"{side}_fore",
+                [0, 0, -0.3],
+                kind=JointKind.REVOLUTE,
+                axis=Y,
+                lower=(0.0,),
+                upper=(2.5,),
+            ),
+            _joint(
+                f"{side}_wrist", f"{side}_fore", f"{side}_hand", [0, 0, -0.25], kind=JointKind.FIXED
+            ),
+        ]
+        effectors += [
+            Effector(name=f"{side}_foot", link=f"{side}_foot", mode=EffectorMode.POSE),
+            Effector(name=f"{side}_hand", link=f"{side}_hand", mode=EffectorMode.POSITION),
+        ]
+    return build_chain(joints, effectors)
+
+
+def _groups(chain: Chain, targets: list[Target]) -> list[list[str]] | None:
+    groups = IKSolver(chain)._split.groups(targets)
+    names = chain.effector_names
+    return None if groups is None else [[names[i] for i in g] for g in groups]
+
+
+def test_effectors_that_share_no_free_variable_form_groups() -> None:
+    chain = biped()
+    targets = pose_targets(chain, chain.mid_limits())
+    assert _groups(chain, targets) == [
+        ["head", "left_hand", "right_hand"],
+        ["left_foot"],
+        ["right_foot"],
+    ]
+    # A follower moves with its leader: the right foot moves with the left knee.
+    mimic = biped(knees_mimic=True)
+    assert _groups(mimic, pose_targets(mimic, mimic.mid_limits()))[1:] == [  # type: ignore[index]
+        ["left_foot", "right_foot"]
+    ]
+    # A locked joint moves nothing: the head and the hands no longer interact.
+    locked = biped(lock_waist=True)
+    assert _groups(locked, pose_targets(locked, locked.mid_limits())) == [
+        ["head"],
+        ["left_foot"],
+        ["left_hand"],
+        ["right_foot"],
+        ["right_hand"],
+    ]
+    # One target: nothing to split.
+    assert _groups(chain, targets[:1]) is None
+
+
+def test_a_groups_trunk_effectors_come_first() -> None:
+    for chain in (biped(), biped(neck=True)):
+        split = IKSolver(chain)._split
+        head, left, right = (chain.effector_index(n) for n in ("head", "left_hand", "right_hand"))
+        # The waist (the trunk: it moves every effector) alone moves the head; on a
+        # neck, the head's two joints cannot turn it to a pose (6 rows): the waist must.
+        assert split.inner((head, left, right)) == (head,)
+        # Each hand has 4 joints beyond the waist for its 3 rows: neither is inner.
+        assert split.inner((left, right)) == ()
+    # Every effector inner (the head alone; the feet share no trunk): nothing first.
+    assert IKSolver(biped())._split.inner((0,)) == ()
+    chain = biped()
+    feet = tuple(chain.effector_index(n) for n in ("left_foot", "right_foot"))
+    assert IKSolver(chain)._split.inner(feet) == ()
+
+
+def test_a_limb_chain_keeps_the_paths_the_whole_chains_limits_and_mimic_leaders() -> None:
+    chain = biped(knees_mimic=True)
+    right_foot = chain.effector_index("right_foot")
+    limb, variables = limb_chain(chain, [right_foot])
+    # The right leg, and the left knee that its knee follows (with the path to it).
+    assert {j.name for j in limb.joints} == {
+        "right_hip",
+        "right_knee",
+        "right_ankle",
+        "left_hip",
+        "left_knee",
+    }
+    assert [chain.dof_names[i] for i in variables] == list(limb.dof_names)
+    assert "left_knee" in limb.dof_names
+    np.testing.assert_array_equal(limb.lower, chain.lower[variables])
+    np.testing.assert_array_equal(limb.upper, chain.upper[variables])
+    assert limb.effector_names == ("right_foot",)
+
+
+@pytest.mark.parametrize("inner_first", [False, True])
+def test_a_split_solve_answers_for_the_whole_chain(inner_first: bool) -> None:
+    chain = biped()
+    options = IKOptions(time_budget_us=None, inner_first=inner_first)
+    solver = IKSolver(chain, options)
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        goal = rng.uniform(chain.lower, chain.upper)
+        r = solver.solve(pose_targets(chain, goal))
+        assert r.status is IKStatus.SOLVED
+        assert [e.name for e in r.effectors] == list(chain.effector_names)
+        assert all(e.within_tolerance for e in r.effectors)
+        # The errors reported are those of the answer, judged on the whole chain.
+        again = solver.judge(r.q, pose_targets(chain, goal))
+        np.testing.assert_allclose(
+            [e.position_error_m for e in r.effectors],
+            [e.position_error_m for e in again.effectors],
+            rtol=1e-9,
+            atol=1e-15,
+        )
+        # Each group's passes, one after another; the work is the groups' sum.
+        assert len(r.pass_log) == r.passes >= 3
+        assert sum(p.iterations for p in r.pass_log) == r.iterations
+
+
+def test_variables_of_no_targeted_group_stay_at_the_seed() -> None:
+    chain = biped()
+    solver = IKSolver(chain)
+    seed = chain.mid_limits() + 0.1
+    goal = np.random.default_rng(2).uniform(chain.lower, chain.upper)
+    feet = [t for t in pose_targets(chain, goal) if t.effector.endswith("_foot")]
+    r = solver.solve(feet, seed=seed)
+    assert r.success
+    legs = np.array(
+        [
+            n.startswith(
+                ("left_hip", "left_knee", "left_ankle", "right_hip", "right_knee", "right_ankle")
+            )
+            for n in chain.dof_names
+        ]
+    )
+    np.testing.assert_array_equal(r.q[~legs], seed[~legs])
+    assert not np.array_equal(r.q[legs], seed[legs])
+    # Untargeted effectors are not reported.
+    assert {e.name for e in r.effectors} == {"left_foot", "right_foot"}
+
+
+def test_the_groups_share_the_budget() -> None:
+    """With no time left the first group stops at once and the rest get nothing: the
+    frame ends BUDGET_EXHAUSTED, as the whole solve would."""
+    chain = biped()
+    goal = np.random.default_rng(4).uniform(chain.lower, chain.upper)
+    for split in (True, False):
+        r = IKSolver(chain, IKOptions(time_budget_us=0.0, split_limbs=split)).solve(
+            pose_targets(chain, goal)
+        )
+        assert r.status is IKStatus.BUDGET_EXHAUSTED, split
+
+
+def test_split_limbs_off_solves_the_whole_tree_at_once() -> None:
+    chain = biped()
+    goal = np.random.default_rng(6).uniform(chain.lower, chain.upper)
+    targets = pose_targets(chain, goal)
+    split = IKSolver(chain, IKOptions(time_budget_us=None))
+    whole = IKSolver(chain, IKOptions(time_budget_us=None, split_limbs=False))
+    assert split.solve(targets).success and whole.solve(targets).success
+    # Split: one solver per group's limb chain; whole: none.
+    assert sorted(len(g.solver.chain.dof_names) for g in split._split._limbs.values()) == [6, 6, 9]
+    assert not whole._split._limbs
+
+
+@pytest.mark.parametrize(
+    ("targets", "message"),
+    [
+        (lambda t: [*t, t[0]], "two targets for effector 'head'"),
+        (lambda t: [*t, dataclasses.replace(t[1], effector="nose")], "unknown effector 'nose'"),
+    ],
+)
+def test_bad_target_sets_are_refused_as_before(targets: object, message: str) -> None:
+    chain = biped()
+    base = pose_targets(chain, chain.mid_limits())
+    with pytest.raises(InvalidProblem, match=message):
+        IKSolver(chain).solve(targets(base))  # type: ignore[operator]
+
+
+def test_a_bad_target_in_a_later_group_names_its_effector() -> None:
+    chain = biped()
+    targets = pose_targets(chain, chain.mid_limits())
+    i = chain.effector_index("right_foot")
+    targets[i] = Target(effector="right_foot", position=[np.nan, 0.0, 0.0], rotation=np.eye(3))
+    with pytest.raises(InvalidProblem, match="right_foot"):
+        IKSolver(chain).solve(targets)
