@@ -25,8 +25,23 @@ from solver.model.limbs import limb_chain
 X, Y, Z = np.eye(3)
 
 
-def _joint(name: str, parent: str, child: str, at: list[float], **kw: object) -> Joint:
-    return Joint(name=name, parent=parent, child=child, origin=Transform(np.array(at)), **kw)  # type: ignore[arg-type]
+def _joint(spec: tuple, **kw: object) -> Joint:  # type: ignore[type-arg]
+    """A joint from (name, parent, child, origin, kind, axes or axis, lower, upper)."""
+    name, parent, child, at, kind, axes, lower, upper = spec
+    motion = {"axes": axes} if isinstance(axes, str) else {"axis": axes}
+    if kind is JointKind.FIXED:
+        motion = {}
+    return Joint(
+        name=name,
+        parent=parent,
+        child=child,
+        origin=Transform(np.array(at, dtype=float)),
+        kind=kind,
+        lower=lower,
+        upper=upper,
+        **motion,
+        **kw,  # type: ignore[arg-type]
+    )
 
 
 def biped(*, knees_mimic: bool = False, lock_waist: bool = False, neck: bool = False) -> Chain:
@@ -37,95 +52,64 @@ def biped(*, knees_mimic: bool = False, lock_waist: bool = False, neck: bool = F
     move (the head and hands share no free variable); ``neck``: the head is a pose
     on a 2-joint neck."""
     w = 0.0 if lock_waist else 2.0
-    joints = [
-        _joint(
-            "waist",
-            "pelvis",
-            "chest",
-            [0, 0, 0.2],
-            kind=JointKind.REVOLUTE,
-            axis=Z,
-            lower=(-w,),
-            upper=(w,),
-        ),
-        _joint(
+    r, rot, fixed = JointKind.REVOLUTE, JointKind.ROTATIONAL, JointKind.FIXED
+    specs = [
+        ("waist", "pelvis", "chest", [0, 0, 0.2], r, Z, (-w,), (w,)),
+        (
             "neck",
             "chest",
             "head",
             [0.05, 0, 0.5],
-            kind=JointKind.ROTATIONAL,
-            axes="zy",
-            lower=(-1.0, -0.5),
-            upper=(1.0, 0.5),
-        )
-        if neck
-        else _joint("neck", "chest", "head", [0.05, 0, 0.5], kind=JointKind.FIXED),
+            *((rot, "zy", (-1.0, -0.5), (1.0, 0.5)) if neck else (fixed, "", (), ())),
+        ),
     ]
-    head_mode = EffectorMode.POSE if neck else EffectorMode.POSITION
-    effectors = [Effector(name="head", link="head", mode=head_mode)]
+    effectors = [
+        Effector(
+            name="head", link="head", mode=EffectorMode.POSE if neck else EffectorMode.POSITION
+        )
+    ]
     for side, y in (("left", 1.0), ("right", -1.0)):
-        knee_mimic = Mimic("left_knee") if knees_mimic and side == "right" else None
-        joints += [
-            _joint(
+        specs += [
+            (
                 f"{side}_hip",
                 "pelvis",
                 f"{side}_thigh",
                 [0, 0.1 * y, -0.1],
-                kind=JointKind.ROTATIONAL,
-                axes="zxy",
-                lower=(-1.0, -0.6, -1.5),
-                upper=(1.0, 0.6, 1.0),
+                rot,
+                "zxy",
+                (-1.0, -0.6, -1.5),
+                (1.0, 0.6, 1.0),
             ),
-            _joint(
-                f"{side}_knee",
-                f"{side}_thigh",
-                f"{side}_shin",
-                [0, 0, -0.4],
-                kind=JointKind.REVOLUTE,
-                axis=Y,
-                lower=(0.0,),
-                upper=(2.2,),
-                mimic=knee_mimic,
-            ),
-            _joint(
+            (f"{side}_knee", f"{side}_thigh", f"{side}_shin", [0, 0, -0.4], r, Y, (0.0,), (2.2,)),
+            (
                 f"{side}_ankle",
                 f"{side}_shin",
                 f"{side}_foot",
                 [0, 0, -0.4],
-                kind=JointKind.ROTATIONAL,
-                axes="yx",
-                lower=(-0.8, -0.4),
-                upper=(0.6, 0.4),
+                rot,
+                "yx",
+                (-0.8, -0.4),
+                (0.6, 0.4),
             ),
-            _joint(
+            (
                 f"{side}_shoulder",
                 "chest",
                 f"{side}_upper",
                 [0, 0.2 * y, 0.4],
-                kind=JointKind.ROTATIONAL,
-                axes="xyz",
-                lower=(-2.0,) * 3,
-                upper=(2.0,) * 3,
+                rot,
+                "xyz",
+                (-2.0,) * 3,
+                (2.0,) * 3,
             ),
-            _joint(
-                f"{side}_elbow",
-                f"{side}_upper",
-                f"{side}_fore",
-                [0, 0, -0.3],
-                kind=JointKind.REVOLUTE,
-                axis=Y,
-                lower=(0.0,),
-                upper=(2.5,),
-            ),
-            _joint(
-                f"{side}_wrist", f"{side}_fore", f"{side}_hand", [0, 0, -0.25], kind=JointKind.FIXED
-            ),
+            (f"{side}_elbow", f"{side}_upper", f"{side}_fore", [0, 0, -0.3], r, Y, (0.0,), (2.5,)),
+            (f"{side}_wrist", f"{side}_fore", f"{side}_hand", [0, 0, -0.25], fixed, "", (), ()),
         ]
         effectors += [
             Effector(name=f"{side}_foot", link=f"{side}_foot", mode=EffectorMode.POSE),
             Effector(name=f"{side}_hand", link=f"{side}_hand", mode=EffectorMode.POSITION),
         ]
-    return build_chain(joints, effectors)
+    follows = {"right_knee": Mimic("left_knee")} if knees_mimic else {}
+    return build_chain([_joint(j, mimic=follows.get(j[0])) for j in specs], effectors)
 
 
 def _groups(chain: Chain, targets: list[Target]) -> list[list[str]] | None:
