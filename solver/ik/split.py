@@ -15,7 +15,8 @@ sweep's g1 (29 variables, 9 effectors: two legs and a torso with arms, 3 groups)
 the median solve fell from ~1.2 ms to ~0.3 ms at the same iterations
 (bench/history/2026-11-28-limb-split.md).
 
-The groups share the frame's time budget: each gets what the ones before it left.
+The groups share the frame's time budget: each gets what the ones before it left
+(their time inside the compiled solve, as a whole solve counts its own).
 The result is the whole chain's: its q (variables in no group at the seed, as a
 whole solve freezes them), each effector's errors, the work summed, the status of
 the first group that failed (else SOLVED), the groups' inverse Hessians as the
@@ -26,11 +27,10 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -42,8 +42,22 @@ from .options import IKOptions
 from .result import IKResult, IKStatus, ResultLayout
 from .targets import Target
 
-if TYPE_CHECKING:
-    from .solver import IKSolver
+
+class GroupSolver(Protocol):
+    """What ``LimbSplit`` needs of a limb's solver (an ``IKSolver``: passed in, so
+    that this module does not import the solver that uses it)."""
+
+    chain: Chain
+
+    def solve_within(
+        self,
+        targets: Sequence[Target],
+        seed: Vector,
+        options: IKOptions,
+        rng: np.random.Generator | None,
+        time_left_us: float | None,
+    ) -> IKResult: ...
+
 
 # The rows of an effector's target: a position's 3, a pose's 6, an aim's 3 + 2.
 TASK_ROWS = {EffectorMode.POSITION: 3, EffectorMode.POSE: 6, EffectorMode.AIM: 5}
@@ -53,7 +67,7 @@ TASK_ROWS = {EffectorMode.POSITION: 3, EffectorMode.POSE: 6, EffectorMode.AIM: 5
 class LimbGroup:
     """One group of effectors and the solver of its limb chain."""
 
-    solver: IKSolver
+    solver: GroupSolver
     variables: np.ndarray  # the limb's variables' indexes in the whole q
     effectors: np.ndarray  # the limb's effectors' indexes in the whole chain
 
@@ -61,7 +75,7 @@ class LimbGroup:
 class LimbSplit:
     """Finds a frame's independent groups of effectors and solves them one by one."""
 
-    def __init__(self, chain: Chain, make_solver: Callable[[Chain], IKSolver]) -> None:
+    def __init__(self, chain: Chain, make_solver: Callable[[Chain], GroupSolver]) -> None:
         self._chain = chain
         self._make_solver = make_solver
         movable = chain.lower < chain.upper
@@ -146,7 +160,6 @@ class LimbSplit:
         out_size: int,
     ) -> IKResult:
         """Each group's solve from q0 in turn, as one result of the whole chain."""
-        started = time.perf_counter()
         by_effector = {t.effector: t for t in targets}
         q = np.clip(q0, self._chain.lower, self._chain.upper)
         n, m = layout.n_dof, layout.n_effectors
@@ -171,7 +184,9 @@ class LimbSplit:
                 if inner:
                     stages.insert(0, [t for t, i in zip(mine, group, strict=True) if i in inner])
             for stage in stages:
-                left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
+                # The budget is counted inside the compiled solves, as a whole solve's
+                # is: the Python between them (and a first call's loading) is not.
+                left = None if budget is None else budget - work[4]
                 r = limb.solver.solve_within(stage, seed, opts, rng, left)
                 seed = r.q
                 rows = r.raw_pass_log[: r.passes].reshape(-1)[: log.shape[0] - logged]

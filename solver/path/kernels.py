@@ -30,7 +30,8 @@ from ..ik.kinematics import (
     goal_measure,
     pose_rotation_error,
 )
-from ..ik.metric import cholesky_in_place, weighted_jacobian
+from ..ik.metric import weighted_jacobian
+from ..ik.spd import cholesky_in_place
 from ..model.forward import effector_frame
 from ..model.layout import (
     ED_AIM,

@@ -11,7 +11,8 @@ from numpy.testing import assert_allclose
 from solver import EffectorMode, IKOptions, IKSolver
 from solver.ik import pose_targets
 from solver.ik.kinematics import DD_HI, DD_LO, ik_objective
-from solver.ik.metric import _invert_spd_by_blocks, _invert_spd_in_place, ik_metric
+from solver.ik.metric import ik_metric
+from solver.ik.spd import invert_spd_by_blocks, invert_spd_in_place
 from solver.model import Chain, Effector, build_chain
 from solver.model.examples import humanoid_arm, panda_arm, tail, two_arm_torso
 from solver.model.forward import effector_poses
@@ -134,22 +135,22 @@ def test_the_inverse_by_blocks_is_the_whole_inverse_bit_for_bit() -> None:
     a = rng.normal(size=(n, 2 * n))
     m = a @ a.T * (label[:, None] == label[None, :]) + 1e-3 * np.eye(n)
     whole = m.copy()
-    assert _invert_spd_in_place(whole)
+    assert invert_spd_in_place(whole)
     blocks = m.copy()
     root = np.zeros(n)
     order = np.zeros(n)
-    assert _invert_spd_by_blocks(blocks, root, order)
+    assert invert_spd_by_blocks(blocks, root, order)
     np.testing.assert_array_equal(blocks, whole)
     np.testing.assert_allclose(blocks @ m, np.eye(n), atol=1e-9)
     np.testing.assert_array_equal(root, [0, 1, 2, 0, 1, 2, 0, 1, 2, 9, 2, 2, 1])
     # One block: the whole matrix's own loops.
     full = a @ a.T + 1e-3 * np.eye(n)
     one = full.copy()
-    assert _invert_spd_by_blocks(one, root, order)
+    assert invert_spd_by_blocks(one, root, order)
     expected = full.copy()
-    assert _invert_spd_in_place(expected)
+    assert invert_spd_in_place(expected)
     np.testing.assert_array_equal(one, expected)
     # Not positive definite: False, as the whole inverse says.
     bad = m.copy()
     bad[9, 9] = -1.0
-    assert not _invert_spd_by_blocks(bad, root, order)
+    assert not invert_spd_by_blocks(bad, root, order)
