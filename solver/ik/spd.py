@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from .._jit import jit_inline
+from .._jit import jit_inline, jit_leaf
 
 
 @jit_inline
@@ -66,7 +66,7 @@ def invert_spd_in_place(m):  # type: ignore[no-untyped-def]
     return True
 
 
-@jit_inline
+@jit_leaf  # a call, not inlined: the metric of a 7-joint arm never takes it
 def invert_spd_by_blocks(m, root, order):  # type: ignore[no-untyped-def]
     """``invert_spd_in_place`` on each diagonal block of m separately; False if not SPD.
 
