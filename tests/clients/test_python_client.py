@@ -493,6 +493,23 @@ def test_encode_errors_are_encode_error(
     assert stream.in_flight == 0 and stream.add({"type": "ping"})[0] == 0
 
 
+def test_http_calls_refuse_what_a_stream_refuses(ik: Client, session: Session) -> None:
+    """The HTTP calls write their bodies as a stream writes its messages: NaN and
+    infinity are an EncodeError naming the field, a value JSON cannot hold one with the
+    encoder's error as its cause, raised before anything is sent; the session answers
+    the next frame as before."""
+    nan: Target = {"effector": "tool", "position": {"x": float("nan"), "y": 0.1, "z": 0.5}}
+    with pytest.raises(EncodeError, match=r"^targets\[0\]\.position\.x is nan: ") as error:
+        ik.frame(session, [nan])
+    assert error.value.field == "targets[0].position.x" and isinstance(error.value, ValueError)
+    with pytest.raises(EncodeError, match=r"^seed\.q\[1\] is inf: "):
+        ik.solve(PANDA, [tool(0.1)], seed={"q": [0.0, float("inf")] + [0.0] * 5})
+    with pytest.raises(EncodeError, match="cannot be written as JSON") as error:
+        ik.frame(session, [{**tool(0.1), "position_weight": object()}])  # type: ignore[typeddict-item]
+    assert isinstance(error.value.__cause__, TypeError)
+    assert_solved(ik.frame(session, [tool(0.1)]))
+
+
 @pytest.mark.parametrize("encoding", list(Encoding))
 def test_non_finite_numbers_refused_alike(ik: Client, session: Session, encoding: Encoding) -> None:
     """NaN and infinity, in a frame or a clip, in any encoding: the same ValueError

@@ -12,6 +12,7 @@ from typing import Any, Generic, Protocol, TypeVar
 import httpx
 
 from .errors import service_error
+from .stream import json_body
 from .types import (
     BatchEntryResult,
     BatchFrame,
@@ -54,9 +55,22 @@ class Call(Generic[T]):
     headers: dict[str, str] = field(default_factory=dict)
 
     def request(self, http: httpx.Client | httpx.AsyncClient) -> httpx.Request:
-        """The request, built by the client that sends it (its base URL and headers)."""
+        """The request, built by the client that sends it (its base URL and headers).
+
+        Raises:
+            EncodeError: The body cannot be written (NaN or infinity, named by field;
+                a value JSON cannot hold), as a stream refuses it; nothing is sent.
+        """
+        if self.json is None:
+            return http.build_request(
+                self.method, self.path, params=self.params, headers=self.headers
+            )
         return http.build_request(
-            self.method, self.path, json=self.json, params=self.params, headers=self.headers
+            self.method,
+            self.path,
+            content=json_body(self.json),
+            params=self.params,
+            headers={**self.headers, "Content-Type": "application/json"},
         )
 
     def result(self, response: httpx.Response) -> T:

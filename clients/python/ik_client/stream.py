@@ -115,6 +115,19 @@ def _refuse_non_finite(
             _refuse_non_finite(item, f"{field}[{index}]", inner)
 
 
+def json_body(body: Any, what: str = "the body") -> str:
+    """``body`` as the JSON the service reads, written as a stream writes its messages:
+    NaN and infinity refused naming the field, a UUID or enum member as orjson writes
+    it; anything else that cannot be written is an EncodeError with the encoder's
+    error as its cause. Raised here, before anything is sent."""
+    try:
+        return _dumps(body)
+    except EncodeError:
+        raise
+    except (TypeError, ValueError, OverflowError) as exc:  # a dataclass, a cycle, 2**64
+        raise EncodeError(f"{what} cannot be written as JSON: {exc}") from exc
+
+
 def _default(value: Any) -> Any:
     """What json and msgpack write for the two types orjson writes natively and they do
     not: a UUID as its canonical string, an enum member as its value (orjson's forms), so
@@ -126,7 +139,7 @@ def _default(value: Any) -> Any:
     raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
 
 
-def _dumps(payload: dict[str, Any]) -> str:
+def _dumps(payload: Any) -> str:
     """``payload`` as compact JSON; NaN and infinity refused (ValueError naming the
     field), as the server refuses them, here where the caller is."""
     if _orjson_dumps is not None:
