@@ -5,6 +5,7 @@ Where things are:
     joints.py     ``JointKind``, ``EffectorMode``, ``Transform``, ``Joint``, ``Effector``
     chain.py      ``Chain``, ``build_chain`` (validation) and its compiled arrays
     mimic.py      mimic joints: ``Followers``, leaders resolved, leaders' ranges narrowed
+    limbs.py      ``limb_chain``: a chain cut down to some effectors' paths
     notes.py      ``ModelNote``, ``NoteKind``: what an importer read by a convention
     layout.py     the columns of those arrays (shared with ``solver.ik``'s kernels)
     forward.py    forward kinematics (compiled, and ``link_poses`` / ``effector_poses``)
