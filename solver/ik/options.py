@@ -55,6 +55,13 @@ class IKOptions:
             (``split.LimbSplit.inner``). On 1000 targets per chain, interleaved, it
             took the alex hands from 94.1% and 97.4% to 99.8% within 5 ms, Baxter
             from 98.3% to 99.4% (bench/history/2026-11-28-limb-split.md).
+        freeze_trunk: With ``inner_first``, once the trunk effectors have met their
+            targets, the variables they move stay where they are while the group's
+            other effectors are solved in the groups that leaves (tiago_pro's and
+            PR2's two arms, independent given the torso lift and head the head
+            markers placed), each on its own limb; if one of those misses, the whole
+            group is solved from the placed trunk as without it
+            (``split.LimbSplit.limbs_given_trunk``).
         turn_restarts: The first restart from each new best pose turns the revolute
             joints that a limit stops, whose range is over three quarters of a turn and which move
             an effector off target, the other way round: to the same angle from the
@@ -139,6 +146,7 @@ class IKOptions:
     turn_restarts: bool = True
     split_limbs: bool = True
     inner_first: bool = True
+    freeze_trunk: bool = True
     max_step_rad: float = 0.5
     posture_weight: float = 0.0
     limit_weight: float = 0.0

@@ -177,11 +177,16 @@ class IKSolver:
         options: IKOptions,
         rng: np.random.Generator | None,
         time_left_us: float | None,
+        *,
+        frozen: np.ndarray | None = None,
     ) -> IKResult:
         """``solve`` of one group of effectors (``split``) in what the frame's budget
-        has left (None: no limit), without looking for groups."""
+        has left (None: no limit), without looking for groups; the variables
+        ``frozen`` marks (bool, shape (n_dof,)) stay at the seed."""
         q0 = self.check_seed(seed)
-        return self._frame(targets, q0, options, rng, None, 0.0, time_left_us=time_left_us)
+        return self._frame(
+            targets, q0, options, rng, None, 0.0, time_left_us=time_left_us, frozen=frozen
+        )
 
     def track(
         self,
@@ -351,6 +356,7 @@ class IKSolver:
         box: float = 0.0,
         *,
         time_left_us: float | None = None,
+        frozen: np.ndarray | None = None,
     ) -> IKResult:
         task = self._task
         task.load(targets, opts)
@@ -367,8 +373,10 @@ class IKSolver:
         self._misc[MISC_DAMPING] = (
             opts.damping if task.redundant or not opts.damping_redundant_only else 0.0
         )
-        if not (task.bounds_are_limits and task.every_effector_moves_all and task.active):
-            task.set_free_bounds(q0)
+        if frozen is not None or not (
+            task.bounds_are_limits and task.every_effector_moves_all and task.active
+        ):
+            task.set_free_bounds(q0, frozen)
         if box > 0.0:  # SMOOTH: the limits within box of q0 (reset by the next frame)
             call_narrow = self._narrow_bounds
             call_narrow(self._dd, q0, box)

@@ -15,6 +15,13 @@ sweep's g1 (29 variables, 9 effectors: two legs and a torso with arms, 3 groups)
 the median solve fell from ~1.2 ms to ~0.3 ms at the same iterations
 (bench/history/2026-11-28-limb-split.md).
 
+Within a group, the effectors that place its trunk go first (``inner``); where
+their targets fix the variables they move, the trunk stays there and the group's
+other effectors split again into the groups that leaves (``limbs_given_trunk``:
+tiago_pro's and PR2's two arms given the torso lift and head that the head markers
+placed; g1's arms given the waist its torso markers placed), each on its own limb
+with the trunk frozen, and the whole group is the fallback (``_solve_parts``).
+
 The groups share the frame's time budget: each gets what the ones before it left
 (their time inside the compiled solve, as a whole solve counts its own).
 The result is the whole chain's: its q (variables in no group at the seed, as a
@@ -29,7 +36,7 @@ import math
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -56,8 +63,15 @@ class GroupSolver(Protocol):
         options: IKOptions,
         rng: np.random.Generator | None,
         time_left_us: float | None,
+        *,
+        frozen: np.ndarray | None = None,
     ) -> IKResult: ...
 
+
+# Restarts of a part solved with its trunk frozen, before the whole group is tried
+# from there with none, and after (``LimbSplit._solve_parts``).
+FIRST_PART_RESTARTS = 8
+MORE_PART_RESTARTS = 24
 
 # The rows of an effector's target: a position's 3, a pose's 6, an aim's 3 + 2.
 TASK_ROWS = {EffectorMode.POSITION: 3, EffectorMode.POSE: 6, EffectorMode.AIM: 5}
@@ -87,6 +101,7 @@ class LimbSplit:
         self._slot = {name: i for i, name in enumerate(chain.effector_names)}
         self._rows = tuple(TASK_ROWS[e.mode] for e in chain.effectors)
         self._limbs: dict[tuple[int, ...], LimbGroup] = {}
+        self._variants_of: tuple[IKOptions, tuple[IKOptions, IKOptions, IKOptions]] | None = None
 
     def groups(self, targets: Sequence[Target]) -> list[tuple[int, ...]] | None:
         """The targeted effectors' indexes in groups that share no free variable (None
@@ -160,49 +175,29 @@ class LimbSplit:
         out_size: int,
     ) -> IKResult:
         """Each group's solve from q0 in turn, as one result of the whole chain."""
-        by_effector = {t.effector: t for t in targets}
-        q = np.clip(q0, self._chain.lower, self._chain.upper)
         n, m = layout.n_dof, layout.n_effectors
-        out = np.empty(out_size)
-        errors = out[: 3 * m].reshape(m, 3)
-        errors[:] = (math.nan, math.nan, 0.0)
-        h = out[3 * m : 3 * m + n * n].reshape(n, n)
-        h[:] = np.eye(n)
-        log = out[layout.log_start :]
-        logged = 0
+        run = _Run(
+            {t.effector: t for t in targets},
+            opts,
+            rng,
+            np.clip(q0, self._chain.lower, self._chain.upper),
+            np.empty(out_size),
+            layout.log_start,
+        )
+        run.errors(m)[:] = (math.nan, math.nan, 0.0)
+        run.hessian(n, m)[:] = np.eye(n)
         failed: IKResult | None = None
         last: IKResult | None = None
-        work = np.zeros(5)  # iterations, evaluations, passes, restarts, solve time
-        budget = opts.time_budget_us
         for group in groups:
-            limb = self._limb(group)
-            mine = [by_effector[limb.solver.chain.effectors[k].name] for k in range(len(group))]
-            seed = q0[limb.variables]
-            stages = [mine]
-            if opts.inner_first:
-                inner = set(self.inner(group))
-                if inner:
-                    stages.insert(0, [t for t, i in zip(mine, group, strict=True) if i in inner])
-            for stage in stages:
-                # The budget is counted inside the compiled solves, as a whole solve's
-                # is: the Python between them (and a first call's loading) is not.
-                left = None if budget is None else budget - work[4]
-                r = limb.solver.solve_within(stage, seed, opts, rng, left)
-                seed = r.q
-                rows = r.raw_pass_log[: r.passes].reshape(-1)[: log.shape[0] - logged]
-                log[logged : logged + rows.shape[0]] = rows
-                logged += rows.shape[0]
-                work += (r.iterations, r.function_evals, r.passes, r.restarts, r.solve_us)
-            q[limb.variables] = r.q
-            errors[limb.effectors] = r.raw_errors
-            h[np.ix_(limb.variables, limb.variables)] = r.inverse_hessian
+            r = self._solve_group(group, run, n, m)
             last = r
             if failed is None and not r.success:
                 failed = r
         decisive = failed or last
         assert decisive is not None
+        work = run.work
         return IKResult(
-            q,
+            run.q,
             decisive.status if failed else IKStatus.SOLVED,
             decisive.termination if failed else Termination.GOAL_REACHED,
             int(work[0]),
@@ -210,9 +205,130 @@ class LimbSplit:
             int(work[2]),
             int(work[3]),
             float(work[4]),
-            out,
+            run.out,
             layout,
         )
+
+    def _solve_group(self, group: tuple[int, ...], run: _Run, n: int, m: int) -> IKResult:
+        """One group: its trunk effectors first (``inner``), then with the trunk they
+        placed frozen, the rest in the groups that leaves (``limbs_given_trunk``);
+        the whole group from there if that split does not apply or a part fails."""
+        limb = self._limb(group)
+        inner = self.inner(group) if run.opts.inner_first else ()
+        if inner:
+            r = run.solve(limb, [i for i in group if i in inner], None)
+            run.q[limb.variables] = r.q
+            if r.success and run.opts.freeze_trunk:
+                parts = self.limbs_given_trunk(group, inner)
+                if parts:
+                    solved = self._solve_parts(limb, group, inner, parts, r, run, n, m)
+                    if solved is not None:
+                        return solved
+        r = run.solve(limb, list(group), None)
+        run.keep(limb, r, n, m)
+        return r
+
+    def limbs_given_trunk(
+        self, group: tuple[int, ...], inner: tuple[int, ...]
+    ) -> list[tuple[int, ...]]:
+        """The group's other effectors in groups that share no variable once the inner
+        effectors' variables are frozen (tiago_pro's and PR2's two arms, given the
+        torso lift the head markers placed); [] if that leaves fewer than two, or if
+        the inner targets have fewer rows than the variables they move: those
+        targets leave the trunk a family of places, and the one the inner stage
+        found is arbitrary (the human's head pose on a 5-joint spine and a 3-joint
+        neck: with it frozen, the arms missed more often than not)."""
+        trunk = 0
+        for i in inner:
+            trunk |= self._masks[i]
+        if sum(self._rows[i] for i in inner) < trunk.bit_count():
+            return []
+        parts: list[tuple[int, list[int]]] = []
+        for i in group:
+            if i in inner:
+                continue
+            mask, members = self._masks[i] & ~trunk, [i]
+            rest = []
+            for g in parts:
+                if g[0] & mask:
+                    mask |= g[0]
+                    members += g[1]
+                else:
+                    rest.append(g)
+            parts = [*rest, (mask, members)]
+        if len(parts) < 2:
+            return []
+        return sorted(tuple(sorted(members)) for _, members in parts)
+
+    def _solve_parts(
+        self,
+        limb: LimbGroup,
+        group: tuple[int, ...],
+        inner: tuple[int, ...],
+        parts: list[tuple[int, ...]],
+        placed: IKResult,
+        run: _Run,
+        n: int,
+        m: int,
+    ) -> IKResult | None:
+        """The parts of a group on their own limbs, its trunk frozen where the inner
+        stage (``placed``) left it; None if one misses (the whole group then goes on
+        from where they left it).
+
+        A part that misses in its first ``FIRST_PART_RESTARTS`` restarts has one of
+        two causes. Its trunk may be just off: the inner targets met within their
+        tolerance, and a part with more target rows than joints (PR2's arm under
+        eight frames) cannot absorb the rest; the whole group from there, with no
+        restart, then solves at once (PR2: in 40-110 us, where the frozen parts
+        ran out of 32 restarts each). Or the trunk is right and the part a hard
+        problem of its own (tiago_pro's arm under four finger poses): it restarts
+        on its own limb (``MORE_PART_RESTARTS``), cheaper than restarts of the
+        whole group (~0.1 ms against ~0.5 ms).
+        """
+        trunk = np.zeros(self._chain.n_dof, dtype=bool)
+        for i in inner:
+            trunk[self._chain.compiled.eff_dofs[i]] = True
+        first, more, local = self._variants(run.opts)
+        solved: dict[tuple[int, ...], tuple[LimbGroup, IKResult]] = {}
+        missed: list[tuple[int, ...]] = []
+        for part in parts:
+            sub = self._limb(part)
+            r = run.solve(sub, list(part), trunk[sub.variables], first)
+            run.q[sub.variables] = r.q  # kept when it misses: the nearest it came
+            if r.success:
+                solved[part] = (sub, r)
+            else:
+                missed.append(part)
+        if missed:
+            before = run.q[limb.variables].copy()
+            r = run.solve(limb, list(group), None, local)
+            if r.success:
+                run.keep(limb, r, n, m)
+                return r
+            run.q[limb.variables] = before
+            for part in missed:
+                sub = self._limb(part)
+                r = run.solve(sub, list(part), trunk[sub.variables], more)
+                run.q[sub.variables] = r.q
+                if not r.success:
+                    return None
+                solved[part] = (sub, r)
+        run.keep(limb, placed, n, m)  # the inner effectors' errors and the trunk
+        for sub, r in solved.values():
+            run.keep(sub, r, n, m)
+        return placed
+
+    def _variants(self, opts: IKOptions) -> tuple[IKOptions, IKOptions, IKOptions]:
+        """``opts`` with a part's first and further restarts, and with none; one
+        object each per ``opts`` (a solver packs its options once per object)."""
+        hit = self._variants_of
+        if hit is None or hit[0] is not opts:
+            restarts = (FIRST_PART_RESTARTS, MORE_PART_RESTARTS, 0)
+            first, more, local = (
+                replace(opts, max_restarts=min(opts.max_restarts, k)) for k in restarts
+            )
+            hit = self._variants_of = (opts, (first, more, local))
+        return hit[1]
 
     def _limb(self, group: tuple[int, ...]) -> LimbGroup:
         limb = self._limbs.get(group)
@@ -223,6 +339,67 @@ class LimbSplit:
             limb = LimbGroup(self._make_solver(chain), variables, np.array(group, dtype=np.int64))
             self._limbs[group] = limb
         return limb
+
+
+class _Run:
+    """A split frame's running state: the whole q, the result's array, the work and
+    the budget the groups share."""
+
+    def __init__(
+        self,
+        by_effector: dict[str, Target],
+        opts: IKOptions,
+        rng: np.random.Generator | None,
+        q: Vector,
+        out: np.ndarray,
+        log_start: int,
+    ) -> None:
+        self.by_effector = by_effector
+        self.opts = opts
+        self.rng = rng
+        self.q = q
+        self.out = out
+        self.log = out[log_start:]
+        self.logged = 0
+        self.work = np.zeros(5)  # iterations, evaluations, passes, restarts, solve time
+
+    def errors(self, m: int) -> np.ndarray:
+        return self.out[: 3 * m].reshape(m, 3)
+
+    def hessian(self, n: int, m: int) -> np.ndarray:
+        return self.out[3 * m : 3 * m + n * n].reshape(n, n)
+
+    def solve(
+        self,
+        limb: LimbGroup,
+        effectors: list[int],
+        frozen: np.ndarray | None,
+        opts: IKOptions | None = None,
+    ) -> IKResult:
+        """The targets of ``effectors`` (whole-chain indexes) on ``limb`` from the
+        current q, in what the budget has left; its work and pass log counted."""
+        names = limb.solver.chain.effectors
+        index = {int(e): k for k, e in enumerate(limb.effectors)}
+        targets = [self.by_effector[names[index[i]].name] for i in effectors]
+        budget = self.opts.time_budget_us
+        # The budget is counted inside the compiled solves, as a whole solve's is: the
+        # Python between them (and a first call's loading) is not.
+        left = None if budget is None else budget - self.work[4]
+        r = limb.solver.solve_within(
+            targets, self.q[limb.variables], opts or self.opts, self.rng, left, frozen=frozen
+        )
+        rows = r.raw_pass_log[: r.passes].reshape(-1)[: self.log.shape[0] - self.logged]
+        self.log[self.logged : self.logged + rows.shape[0]] = rows
+        self.logged += rows.shape[0]
+        self.work += (r.iterations, r.function_evals, r.passes, r.restarts, r.solve_us)
+        return r
+
+    def keep(self, limb: LimbGroup, r: IKResult, n: int, m: int) -> None:
+        """``r`` as the answer of ``limb``'s variables and targeted effectors."""
+        self.q[limb.variables] = r.q
+        targeted = r.raw_errors[:, 2] != 0.0
+        self.errors(m)[limb.effectors[targeted]] = r.raw_errors[targeted]
+        self.hessian(n, m)[np.ix_(limb.variables, limb.variables)] = r.inverse_hessian
 
 
 # Limb chains built so far, by whole chain and group: building one is ~1 ms for a

@@ -212,12 +212,12 @@ class Task:
             free = int(self._movable[dofs].sum())
         return free - rows
 
-    def set_free_bounds(self, q0: Vector) -> None:
-        """Limits for this frame (DD rows): variables outside every targeted chain are
-        frozen at q0."""
+    def set_free_bounds(self, q0: Vector, frozen: np.ndarray | None = None) -> None:
+        """Limits for this frame (DD rows): variables outside every targeted chain, and
+        those ``frozen`` marks, are fixed at q0."""
         lo = self.chain.lower
         hi = self.chain.upper
-        if self.every_effector_moves_all and self.active:
+        if frozen is None and self.every_effector_moves_all and self.active:
             if not self.bounds_are_limits:
                 self._dd[DD_LO] = lo
                 self._dd[DD_HI] = hi
@@ -226,6 +226,8 @@ class Task:
         free = np.zeros(self._n, dtype=bool)
         for i in self.active:
             free[self._chain_dofs[i]] = True
+        if frozen is not None:
+            free &= ~frozen
         q = np.clip(q0, lo, hi)
         self._dd[DD_LO] = np.where(free, lo, q)
         self._dd[DD_HI] = np.where(free, hi, q)

@@ -246,8 +246,10 @@ def test_split_limbs_off_solves_the_whole_tree_at_once() -> None:
     split = IKSolver(chain, IKOptions(time_budget_us=None))
     whole = IKSolver(chain, IKOptions(time_budget_us=None, split_limbs=False))
     assert split.solve(targets).success and whole.solve(targets).success
-    # Split: one solver per group's limb chain; whole: none.
-    assert sorted(len(g.solver.chain.dof_names) for g in split._split._limbs.values()) == [6, 6, 9]
+    # Split: one solver per group's limb chain (each leg, the upper body), and with
+    # the waist the head placed frozen, each arm's (waist and arm); whole: none.
+    limbs = split._split._limbs.values()
+    assert sorted(len(g.solver.chain.dof_names) for g in limbs) == [5, 5, 6, 6, 9]
     assert not whole._split._limbs
 
 
@@ -290,3 +292,107 @@ def test_time_outside_the_compiled_solves_is_not_budget() -> None:
     r = solver.solve(pose_targets(chain, goal))
     assert r.status is IKStatus.SOLVED
     assert r.solve_us < 5000.0
+
+
+def test_a_placed_trunk_leaves_the_limbs_it_separates() -> None:
+    for chain in (biped(), biped(neck=True)):
+        split = IKSolver(chain)._split
+        head, left, right = (chain.effector_index(n) for n in ("head", "left_hand", "right_hand"))
+        # The head's target fixes the waist (3 rows for 1 variable; a pose for the
+        # waist and the 2-joint neck): given it, the arms share nothing.
+        assert split.limbs_given_trunk((head, left, right), (head,)) == [(left,), (right,)]
+        # One limb left: nothing to separate.
+        assert split.limbs_given_trunk((head, left), (head,)) == []
+        # A left hand's position (3 rows) leaves its 5 variables a family of places:
+        # frozen where one solve left them, they would be an arbitrary choice.
+        assert split.limbs_given_trunk((head, left, right), (left,)) == []
+
+
+def test_solve_within_keeps_frozen_variables_at_the_seed() -> None:
+    chain = biped()
+    solver = IKSolver(chain, IKOptions(time_budget_us=None))
+    goal = np.random.default_rng(8).uniform(chain.lower, chain.upper)
+    hands = [t for t in pose_targets(chain, goal) if t.effector.endswith("_hand")]
+    waist = np.array([name == "waist" for name in chain.dof_names])
+    seed = chain.mid_limits()
+    seed[waist] = goal[waist]
+    r = solver.solve_within(hands, seed, solver.options, None, None, frozen=waist)
+    assert r.success
+    np.testing.assert_array_equal(r.q[waist], seed[waist])
+    # Moved from elsewhere, the waist must move for the hands (their own arms
+    # cannot reach): frozen there, they miss.
+    seed[waist] = goal[waist] + 1.5
+    frozen = solver.solve_within(hands, seed, solver.options, None, None, frozen=waist)
+    free = solver.solve_within(hands, seed, solver.options, None, None)
+    assert free.success and not np.array_equal(free.q[waist], seed[waist])
+    assert not frozen.success
+    np.testing.assert_array_equal(frozen.q[waist], seed[waist])
+
+
+class _Recorder:
+    """A limb's real solver whose calls are written down: (limb variables, targeted
+    effectors, frozen variables, restarts allowed, solved, the answer by variable)."""
+
+    def __init__(self, limb: Chain, calls: list[tuple[object, ...]]) -> None:
+        self._solver = IKSolver(limb)
+        self.chain = limb
+        self._calls = calls
+
+    def solve_within(self, targets, seed, options, rng, time_left_us, *, frozen=None):  # type: ignore[no-untyped-def]
+        r = self._solver.solve_within(targets, seed, options, rng, time_left_us, frozen=frozen)
+        frozen_names = () if frozen is None else tuple(np.array(self.chain.dof_names)[frozen])
+        self._calls.append(
+            (
+                len(self.chain.dof_names),
+                tuple(t.effector for t in targets),
+                frozen_names,
+                options.max_restarts,
+                r.success,
+                dict(zip(self.chain.dof_names, r.q.tolist(), strict=True)),
+            )
+        )
+        return r
+
+
+def test_the_trunk_is_placed_first_then_frozen_under_each_limb() -> None:
+    chain = biped()
+    solver = IKSolver(chain, IKOptions(time_budget_us=None))
+    calls: list[tuple[object, ...]] = []
+    solver._split._make_solver = lambda limb: _Recorder(limb, calls)
+    goal = np.random.default_rng(6).uniform(chain.lower, chain.upper)
+    upper = [t for t in pose_targets(chain, goal) if not t.effector.endswith("_foot")]
+    r = solver.solve(upper)
+    assert r.success
+    assert [c[:3] for c in calls] == [
+        (9, ("head",), ()),  # the head alone places the waist
+        (5, ("left_hand",), ("waist",)),
+        (5, ("right_hand",), ("waist",)),
+    ]
+    # The answer keeps the waist where the head's solve put it (the arms' solves
+    # could not move it), and the pass logs of the three solves, one after another.
+    placed = calls[0][5]["waist"]  # type: ignore[index]
+    assert r.q[chain.dof_names.index("waist")] == placed
+    assert calls[1][5]["waist"] == calls[2][5]["waist"] == placed  # type: ignore[index]
+    assert len(r.pass_log) == r.passes >= 3
+
+
+def test_a_limb_that_misses_under_the_placed_trunk_falls_back_to_the_whole_group() -> None:
+    chain = biped()
+    solver = IKSolver(chain, IKOptions(time_budget_us=None))
+    calls: list[tuple[object, ...]] = []
+    solver._split._make_solver = lambda limb: _Recorder(limb, calls)
+    goal = np.random.default_rng(6).uniform(chain.lower, chain.upper)
+    upper = [t for t in pose_targets(chain, goal) if not t.effector.endswith("_foot")]
+    far = [*upper[:2], dataclasses.replace(upper[2], position=np.array([3.0, 0.0, 0.0]))]
+    r = solver.solve(far)
+    assert r.status is IKStatus.NOT_REACHED
+    everyone = ("head", "left_hand", "right_hand")
+    assert [c[:5] for c in calls] == [
+        (9, ("head",), (), 126, True),
+        (5, ("left_hand",), ("waist",), 8, True),
+        (5, ("right_hand",), ("waist",), 8, False),
+        (9, everyone, (), 0, False),  # the trunk given back for one local solve
+        (5, ("right_hand",), ("waist",), 24, False),  # the limb's own further restarts
+        (9, everyone, (), 126, False),  # the whole group, as without the split
+    ]
+    assert not {e.name: e for e in r.effectors}["right_hand"].within_tolerance
