@@ -1,8 +1,10 @@
-"""Interleaved A/B of one boolean IKOptions field on one sweep chain: the same targets,
-each solved with the option off and on in one process, alternating which goes first.
+"""Interleaved A/B of one IKOptions field on one sweep chain: the same targets, each
+solved with both values in one process, alternating which goes first. The field is
+a boolean (off and on) or ``name=a,b`` (two numbers).
 
     SEED=1 OPENBLAS_NUM_THREADS=1 python bench/history/split_option_ab.py freeze_trunk pr2.urdf 1000
     TIPS=left_hand,right_hand,middle_head ... split_option_ab.py freeze_trunk human.urdf 1000
+    ... split_option_ab.py full_restart_every=8,4 human.urdf 1000
 """
 
 # ruff: noqa: E402  (the repository root goes on sys.path before the imports)
@@ -24,6 +26,11 @@ from solver.model.forward import link_poses
 from solver.model.urdf import chain_from_urdf
 
 option, name, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
+values: tuple[object, object] = (False, True)
+if "=" in option:
+    option, pair = option.split("=")
+    a, b = (float(v) if "." in v else int(v) for v in pair.split(","))
+    values = (a, b)
 TIPS = [x for x in os.environ.get("TIPS", "").split(",") if x]
 f = [f for f in us.urdf_files(pathlib.Path("/tmp/pyb/pybullet_data")) if f[1].name == name][0]
 text = us.read_text(f[1])
@@ -32,11 +39,12 @@ base, tips = us.chains_of(tree)
 chain = us.with_modes(chain_from_urdf(text, base_link=base, tip_links=TIPS or [t[0] for t in tips]))
 full = {e.name: e.mode is EffectorMode.POSE for e in chain.effectors}
 solvers = {
-    on: IKSolver(chain, IKOptions(time_budget_us=100000.0, **{option: on})) for on in (False, True)
+    v: IKSolver(chain, IKOptions(time_budget_us=100000.0, **{option: v}))  # type: ignore[arg-type]
+    for v in values
 }
 seed = chain.mid_limits()
 rng = np.random.default_rng(int(os.environ.get("SEED", "11")))
-res: dict[bool, list[tuple[bool, float, int, int]]] = {False: [], True: []}
+res: dict[object, list[tuple[bool, float, int, int]]] = {v: [] for v in values}
 for k in range(n + 2):
     frames = link_poses(chain, us.random_q(chain, rng))
     targets = [
@@ -47,7 +55,7 @@ for k in range(n + 2):
         )
         for e in chain.effectors
     ]
-    for on in (True, False) if k % 2 else (False, True):
+    for on in values[::-1] if k % 2 else values:
         c0 = time.thread_time()
         r = solvers[on].solve(targets, seed=seed)
         cpu = (time.thread_time() - c0) * 1e6

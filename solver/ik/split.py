@@ -68,10 +68,15 @@ class GroupSolver(Protocol):
     ) -> IKResult: ...
 
 
-# Restarts of a part solved with its trunk frozen, before the whole group is tried
-# from there with none, and after (``LimbSplit._solve_parts``).
+# Restarts of a part solved with its trunk frozen (``LimbSplit._solve_parts``): under
+# a trunk its targets fix, FIRST before the whole group is tried from there with
+# none, MORE after; under one they do not fix, LOOSE before the same, and then the
+# whole group (the trunk is the likely cause). Interleaved A/Bs of 600 targets
+# (bench/history/2026-11-28-freeze-trunk.md): the human's hands and head within 5 ms
+# 98.8% with 8, 99.2% with 2, 99.5% with 4 loose restarts.
 FIRST_PART_RESTARTS = 8
 MORE_PART_RESTARTS = 24
+LOOSE_PART_RESTARTS = 4
 
 # The rows of an effector's target: a position's 3, a pose's 6, an aim's 3 + 2.
 TASK_ROWS = {EffectorMode.POSITION: 3, EffectorMode.POSE: 6, EffectorMode.AIM: 5}
@@ -101,7 +106,7 @@ class LimbSplit:
         self._slot = {name: i for i, name in enumerate(chain.effector_names)}
         self._rows = tuple(TASK_ROWS[e.mode] for e in chain.effectors)
         self._limbs: dict[tuple[int, ...], LimbGroup] = {}
-        self._variants_of: tuple[IKOptions, tuple[IKOptions, IKOptions, IKOptions]] | None = None
+        self._variants_of: dict[bool, tuple[IKOptions, tuple[IKOptions, IKOptions, IKOptions]]] = {}
 
     def groups(self, targets: Sequence[Target]) -> list[tuple[int, ...]] | None:
         """The targeted effectors' indexes in groups that share no free variable (None
@@ -233,16 +238,18 @@ class LimbSplit:
     ) -> list[tuple[int, ...]]:
         """The group's other effectors in groups that share no variable once the inner
         effectors' variables are frozen (tiago_pro's and PR2's two arms, given the
-        torso lift the head markers placed); [] if that leaves fewer than two, or if
-        the inner targets have fewer rows than the variables they move: those
-        targets leave the trunk a family of places, and the one the inner stage
-        found is arbitrary (the human's head pose on a 5-joint spine and a 3-joint
-        neck: with it frozen, the arms missed more often than not)."""
-        trunk = 0
-        for i in inner:
-            trunk |= self._masks[i]
-        if sum(self._rows[i] for i in inner) < trunk.bit_count():
-            return []
+        torso lift the head markers placed); [] if that leaves fewer than two.
+
+        Also [] where the inner targets leave the trunk more directions open (its
+        variables minus their rows) than some part has spare joints of its own (its
+        variables beyond the trunk minus its rows): frozen at one place of that
+        family, the part could not make up for the choice. Tiago's thumb pose
+        leaves 7 of the torso's, arm's and thumb's 13 variables open, and each other
+        finger has 1 spare joint: frozen there, nearly every finger missed (median
+        solve 0.3 -> 1.3 ms); the human's head pose leaves 2 of the spine's and
+        neck's 8 open, and each arm has 2 spare joints.
+        """
+        trunk = self._trunk_bits(inner)
         parts: list[tuple[int, list[int]]] = []
         for i in group:
             if i in inner:
@@ -258,7 +265,24 @@ class LimbSplit:
             parts = [*rest, (mask, members)]
         if len(parts) < 2:
             return []
+        open_directions = trunk.bit_count() - sum(self._rows[i] for i in inner)
+        spare = min(mask.bit_count() - sum(self._rows[i] for i in m) for mask, m in parts)
+        if open_directions > max(spare, 0):
+            return []
         return sorted(tuple(sorted(members)) for _, members in parts)
+
+    def trunk_is_fixed(self, inner: tuple[int, ...]) -> bool:
+        """Do the inner targets have as many rows as the variables they move? Then
+        they fix the trunk (up to a few discrete choices); with fewer (the human's
+        head pose on a 5-joint spine and a 3-joint neck) they leave it a family of
+        places, and the one the inner stage found is one of many."""
+        return sum(self._rows[i] for i in inner) >= self._trunk_bits(inner).bit_count()
+
+    def _trunk_bits(self, inner: tuple[int, ...]) -> int:
+        trunk = 0
+        for i in inner:
+            trunk |= self._masks[i]
+        return trunk
 
     def _solve_parts(
         self,
@@ -275,20 +299,23 @@ class LimbSplit:
         stage (``placed``) left it; None if one misses (the whole group then goes on
         from where they left it).
 
-        A part that misses in its first ``FIRST_PART_RESTARTS`` restarts has one of
-        two causes. Its trunk may be just off: the inner targets met within their
-        tolerance, and a part with more target rows than joints (PR2's arm under
-        eight frames) cannot absorb the rest; the whole group from there, with no
-        restart, then solves at once (PR2: in 40-110 us, where the frozen parts
-        ran out of 32 restarts each). Or the trunk is right and the part a hard
-        problem of its own (tiago_pro's arm under four finger poses): it restarts
-        on its own limb (``MORE_PART_RESTARTS``), cheaper than restarts of the
-        whole group (~0.1 ms against ~0.5 ms).
+        A part that misses in its first few restarts has one of two causes. The
+        trunk may be off: one place of a family the inner targets leave open (the
+        human's spine under its head), or where they fix it, met within their
+        tolerance but just off for a part with more target rows than joints (PR2's
+        arm under eight frames). The whole group from there, with the trunk free and
+        no restart, then mostly solves at once (PR2: in 40-110 us, where frozen parts
+        ran out of 32 restarts each; the human: 171 of 189 parts that missed). Or,
+        under a trunk its targets fix, the part is a hard problem of its own
+        (tiago_pro's arm under four finger poses): it restarts on its own limb
+        (``MORE_PART_RESTARTS``), cheaper than restarts of the whole group (~0.1 ms
+        against ~0.5 ms).
         """
         trunk = np.zeros(self._chain.n_dof, dtype=bool)
         for i in inner:
             trunk[self._chain.compiled.eff_dofs[i]] = True
-        first, more, local = self._variants(run.opts)
+        fixed = self.trunk_is_fixed(inner)
+        first, more, local = self._variants(run.opts, fixed)
         solved: dict[tuple[int, ...], tuple[LimbGroup, IKResult]] = {}
         missed: list[tuple[int, ...]] = []
         for part in parts:
@@ -305,6 +332,8 @@ class LimbSplit:
             if r.success:
                 run.keep(limb, r, n, m)
                 return r
+            if not fixed:
+                return None
             run.q[limb.variables] = before
             for part in missed:
                 sub = self._limb(part)
@@ -318,16 +347,21 @@ class LimbSplit:
             run.keep(sub, r, n, m)
         return placed
 
-    def _variants(self, opts: IKOptions) -> tuple[IKOptions, IKOptions, IKOptions]:
-        """``opts`` with a part's first and further restarts, and with none; one
-        object each per ``opts`` (a solver packs its options once per object)."""
-        hit = self._variants_of
+    def _variants(self, opts: IKOptions, fixed: bool) -> tuple[IKOptions, IKOptions, IKOptions]:
+        """``opts`` with a part's first and further restarts under a trunk its targets
+        fix or not, and with none; one object each (a solver packs its options once
+        per object)."""
+        hit = self._variants_of.get(fixed)
         if hit is None or hit[0] is not opts:
-            restarts = (FIRST_PART_RESTARTS, MORE_PART_RESTARTS, 0)
+            restarts = (
+                FIRST_PART_RESTARTS if fixed else LOOSE_PART_RESTARTS,
+                MORE_PART_RESTARTS,
+                0,
+            )
             first, more, local = (
                 replace(opts, max_restarts=min(opts.max_restarts, k)) for k in restarts
             )
-            hit = self._variants_of = (opts, (first, more, local))
+            hit = self._variants_of[fixed] = (opts, (first, more, local))
         return hit[1]
 
     def _limb(self, group: tuple[int, ...]) -> LimbGroup:

@@ -45,17 +45,29 @@ def _joint(spec: tuple, **kw: object) -> Joint:  # type: ignore[type-arg]
     )
 
 
-def biped(*, knees_mimic: bool = False, lock_waist: bool = False, neck: bool = False) -> Chain:
+def biped(
+    *,
+    knees_mimic: bool = False,
+    lock_waist: bool = False,
+    neck: bool = False,
+    bending_waist: bool = False,
+) -> Chain:
     """A pelvis (the base) with two 6-DOF legs under foot poses and, above a waist
     joint, a head (position) and two 4-DOF arms (hand positions): three groups, legs
     and upper body, whose head is inside both hands' paths. ``knees_mimic``: the
     right knee follows the left (one leg group); ``lock_waist``: the waist cannot
     move (the head and hands share no free variable); ``neck``: the head is a pose
-    on a 2-joint neck."""
+    on a 2-joint neck; ``bending_waist``: the waist turns and bends (2 variables)."""
     w = 0.0 if lock_waist else 2.0
     r, rot, fixed = JointKind.REVOLUTE, JointKind.ROTATIONAL, JointKind.FIXED
     specs = [
-        ("waist", "pelvis", "chest", [0, 0, 0.2], r, Z, (-w,), (w,)),
+        (
+            "waist",
+            "pelvis",
+            "chest",
+            [0, 0, 0.2],
+            *((rot, "zy", (-w, -0.5), (w, 0.5)) if bending_waist else (r, Z, (-w,), (w,))),
+        ),
         (
             "neck",
             "chest",
@@ -303,9 +315,26 @@ def test_a_placed_trunk_leaves_the_limbs_it_separates() -> None:
         assert split.limbs_given_trunk((head, left, right), (head,)) == [(left,), (right,)]
         # One limb left: nothing to separate.
         assert split.limbs_given_trunk((head, left), (head,)) == []
-        # A left hand's position (3 rows) leaves its 5 variables a family of places:
-        # frozen where one solve left them, they would be an arbitrary choice.
-        assert split.limbs_given_trunk((head, left, right), (left,)) == []
+        assert split.trunk_is_fixed((head,))
+        # A left hand's position (3 rows) leaves its 5 variables a family of places.
+        assert not split.trunk_is_fixed((left,))
+    # The head's position on a bending waist and a 2-joint neck: 3 rows, 4 variables.
+    loose = _head_position(biped(neck=True, bending_waist=True))
+    split = IKSolver(loose)._split
+    head, left, right = (loose.effector_index(n) for n in ("head", "left_hand", "right_hand"))
+    assert split.inner((head, left, right)) == (head,)
+    assert split.limbs_given_trunk((head, left, right), (head,)) == [(left,), (right,)]
+    assert not split.trunk_is_fixed((head,))
+    # Hand poses: 6 rows on 4 arm joints leave an arm no spare joint to make up for
+    # the one direction the head's position leaves the trunk: no freezing there.
+    stiff = build_chain(
+        list(loose.joints),
+        [
+            dataclasses.replace(e, mode=EffectorMode.POSE) if e.name.endswith("_hand") else e
+            for e in loose.effectors
+        ],
+    )
+    assert IKSolver(stiff)._split.limbs_given_trunk((head, left, right), (head,)) == []
 
 
 def test_solve_within_keeps_frozen_variables_at_the_seed() -> None:
@@ -340,7 +369,11 @@ class _Recorder:
 
     def solve_within(self, targets, seed, options, rng, time_left_us, *, frozen=None):  # type: ignore[no-untyped-def]
         r = self._solver.solve_within(targets, seed, options, rng, time_left_us, frozen=frozen)
-        frozen_names = () if frozen is None else tuple(np.array(self.chain.dof_names)[frozen])
+        frozen_names = (
+            tuple(n for n, f in zip(self.chain.dof_names, frozen, strict=True) if f)
+            if frozen is not None
+            else ()
+        )
         self._calls.append(
             (
                 len(self.chain.dof_names),
@@ -396,3 +429,40 @@ def test_a_limb_that_misses_under_the_placed_trunk_falls_back_to_the_whole_group
         (9, everyone, (), 126, False),  # the whole group, as without the split
     ]
     assert not {e.name: e for e in r.effectors}["right_hand"].within_tolerance
+
+
+def test_under_a_trunk_its_targets_leave_open_a_missed_limb_goes_to_the_whole_group() -> None:
+    """No further restarts of the limb alone: the trunk is the likely cause."""
+    chain = _head_position(biped(neck=True, bending_waist=True))
+    solver = IKSolver(chain, IKOptions(time_budget_us=None))
+    calls: list[tuple[object, ...]] = []
+    solver._split._make_solver = lambda limb: _Recorder(limb, calls)
+    goal = np.random.default_rng(6).uniform(chain.lower, chain.upper)
+    upper = [t for t in pose_targets(chain, goal) if not t.effector.endswith("_foot")]
+    far = [*upper[:2], dataclasses.replace(upper[2], position=np.array([3.0, 0.0, 0.0]))]
+    assert solver.solve(far).status is IKStatus.NOT_REACHED
+    everyone = ("head", "left_hand", "right_hand")
+    trunk = ("waist.z", "waist.y")  # an arm's limb holds the waist, not the neck
+    assert [c[:5] for c in calls] == [
+        (12, ("head",), (), 126, True),
+        (6, ("left_hand",), trunk, 4, True),
+        (6, ("right_hand",), trunk, 4, False),
+        (12, everyone, (), 0, False),
+        (12, everyone, (), 126, False),
+    ]
+    # Reachable, the limbs solve under the trunk the head's solve placed.
+    calls.clear()
+    assert solver.solve(upper).success
+    assert [c[:3] for c in calls[1:3]] == [
+        (6, ("left_hand",), trunk),
+        (6, ("right_hand",), trunk),
+    ]
+
+
+def _head_position(chain: Chain) -> Chain:
+    """The chain with its head as a position effector."""
+    effectors = [
+        dataclasses.replace(e, mode=EffectorMode.POSITION) if e.name == "head" else e
+        for e in chain.effectors
+    ]
+    return build_chain(list(chain.joints), effectors)
