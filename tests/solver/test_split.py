@@ -313,8 +313,8 @@ def test_a_placed_trunk_leaves_the_limbs_it_separates() -> None:
         # The head's target fixes the waist (3 rows for 1 variable; a pose for the
         # waist and the 2-joint neck): given it, the arms share nothing.
         assert split.limbs_given_trunk((head, left, right), (head,)) == [(left,), (right,)]
-        # One limb left: nothing to separate.
-        assert split.limbs_given_trunk((head, left), (head,)) == []
+        # One limb left, under a trunk its targets fix: it is solved under it too.
+        assert split.limbs_given_trunk((head, left), (head,)) == [(left,)]
         assert split.trunk_is_fixed((head,))
         # A left hand's position (3 rows) leaves its 5 variables a family of places.
         assert not split.trunk_is_fixed((left,))
@@ -325,6 +325,8 @@ def test_a_placed_trunk_leaves_the_limbs_it_separates() -> None:
     assert split.inner((head, left, right)) == (head,)
     assert split.limbs_given_trunk((head, left, right), (head,)) == [(left,), (right,)]
     assert not split.trunk_is_fixed((head,))
+    # One limb under a trunk its targets leave open: solved with the trunk free.
+    assert split.limbs_given_trunk((head, left), (head,)) == []
     # Hand poses: 6 rows on 4 arm joints leave an arm no spare joint to make up for
     # the one direction the head's position leaves the trunk: no freezing there.
     stiff = build_chain(
