@@ -72,7 +72,7 @@ class GroupSolver(Protocol):
 # a trunk its targets fix, FIRST before the whole group is tried from there with
 # none, MORE after; under one they do not fix, LOOSE before the same, and then the
 # whole group (the trunk is the likely cause). Interleaved A/Bs of 600 targets
-# (bench/history/2026-11-28-freeze-trunk.md): the human's hands and head within 5 ms
+# (bench/history/2026-11-29-freeze-trunk.md): the human's hands and head within 5 ms
 # 98.8% with 8, 99.2% with 2, 99.5% with 4 loose restarts.
 FIRST_PART_RESTARTS = 8
 MORE_PART_RESTARTS = 24
