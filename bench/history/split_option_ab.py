@@ -3,6 +3,7 @@ solved with both values in one process, alternating which goes first. The field 
 a boolean (off and on) or ``name=a,b`` (two numbers).
 
     SEED=1 OPENBLAS_NUM_THREADS=1 python bench/history/split_option_ab.py freeze_trunk pr2.urdf 1000
+    ... split_option_ab.py inner_first baxter.urdf 1000   (2026-11-28-limb-split.md)
     TIPS=left_hand,right_hand,middle_head ... split_option_ab.py freeze_trunk human.urdf 1000
     ... split_option_ab.py full_restart_every=8,4 human.urdf 1000
 """
@@ -20,9 +21,7 @@ import numpy as np
 warnings.simplefilter("ignore")
 sys.path.insert(0, ".")
 from bench import urdf_sweep as us
-from solver.ik import IKOptions, IKSolver, Target
-from solver.model import EffectorMode
-from solver.model.forward import link_poses
+from solver.ik import IKOptions, IKSolver, pose_targets
 from solver.model.urdf import chain_from_urdf
 
 option, name, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
@@ -37,7 +36,6 @@ text = us.read_text(f[1])
 tree = us.tree_of(text)
 base, tips = us.chains_of(tree)
 chain = us.with_modes(chain_from_urdf(text, base_link=base, tip_links=TIPS or [t[0] for t in tips]))
-full = {e.name: e.mode is EffectorMode.POSE for e in chain.effectors}
 solvers = {
     v: IKSolver(chain, IKOptions(time_budget_us=100000.0, **{option: v}))  # type: ignore[arg-type]
     for v in values
@@ -46,15 +44,7 @@ seed = chain.mid_limits()
 rng = np.random.default_rng(int(os.environ.get("SEED", "11")))
 res: dict[object, list[tuple[bool, float, int, int]]] = {v: [] for v in values}
 for k in range(n + 2):
-    frames = link_poses(chain, us.random_q(chain, rng))
-    targets = [
-        Target(
-            effector=e.name,
-            position=frames[e.link][:3, 3].copy(),
-            rotation=frames[e.link][:3, :3].copy() if full[e.name] else None,
-        )
-        for e in chain.effectors
-    ]
+    targets = pose_targets(chain, us.random_q(chain, rng))
     for on in values[::-1] if k % 2 else values:
         c0 = time.thread_time()
         r = solvers[on].solve(targets, seed=seed)

@@ -121,15 +121,7 @@ class LimbSplit:
             if i < 0 or i in seen:
                 return None
             seen.add(i)
-            mask, members = self._masks[i], [i]
-            rest = []
-            for g in groups:
-                if g[0] & mask:
-                    mask |= g[0]
-                    members += g[1]
-                else:
-                    rest.append(g)
-            groups = [*rest, (mask, members)]
+            groups = _joined(groups, self._masks[i], i)
         return sorted(tuple(sorted(members)) for _, members in groups)
 
     def inner(self, group: tuple[int, ...]) -> tuple[int, ...]:
@@ -258,15 +250,7 @@ class LimbSplit:
         for i in group:
             if i in inner:
                 continue
-            mask, members = self._masks[i] & ~trunk, [i]
-            rest = []
-            for g in parts:
-                if g[0] & mask:
-                    mask |= g[0]
-                    members += g[1]
-                else:
-                    rest.append(g)
-            parts = [*rest, (mask, members)]
+            parts = _joined(parts, self._masks[i] & ~trunk, i)
         if not parts or (len(parts) < 2 and not self.trunk_is_fixed(inner)):
             return []
         open_directions = trunk.bit_count() - sum(self._rows[i] for i in inner)
@@ -377,6 +361,22 @@ class LimbSplit:
             limb = LimbGroup(self._make_solver(chain), variables, np.array(group, dtype=np.int64))
             self._limbs[group] = limb
         return limb
+
+
+def _joined(
+    groups: list[tuple[int, list[int]]], mask: int, effector: int
+) -> list[tuple[int, list[int]]]:
+    """``groups`` (variables as bits, effectors) with ``effector``, which moves the
+    variables of ``mask``, joined to every group it shares one with."""
+    members = [effector]
+    rest = []
+    for g in groups:
+        if g[0] & mask:
+            mask |= g[0]
+            members += g[1]
+        else:
+            rest.append(g)
+    return [*rest, (mask, members)]
 
 
 class _Run:

@@ -391,11 +391,7 @@ class _Recorder:
 
 def test_the_trunk_is_placed_first_then_frozen_under_each_limb() -> None:
     chain = biped()
-    solver = IKSolver(chain, IKOptions(time_budget_us=None))
-    calls: list[tuple[object, ...]] = []
-    solver._split._make_solver = lambda limb: _Recorder(limb, calls)
-    goal = np.random.default_rng(6).uniform(chain.lower, chain.upper)
-    upper = [t for t in pose_targets(chain, goal) if not t.effector.endswith("_foot")]
+    solver, calls, upper = _recorded(chain)
     r = solver.solve(upper)
     assert r.success
     assert [c[:3] for c in calls] == [
@@ -413,12 +409,8 @@ def test_the_trunk_is_placed_first_then_frozen_under_each_limb() -> None:
 
 def test_a_limb_that_misses_under_the_placed_trunk_falls_back_to_the_whole_group() -> None:
     chain = biped()
-    solver = IKSolver(chain, IKOptions(time_budget_us=None))
-    calls: list[tuple[object, ...]] = []
-    solver._split._make_solver = lambda limb: _Recorder(limb, calls)
-    goal = np.random.default_rng(6).uniform(chain.lower, chain.upper)
-    upper = [t for t in pose_targets(chain, goal) if not t.effector.endswith("_foot")]
-    far = [*upper[:2], dataclasses.replace(upper[2], position=np.array([3.0, 0.0, 0.0]))]
+    solver, calls, upper = _recorded(chain)
+    far = _right_hand_out_of_reach(upper)
     r = solver.solve(far)
     assert r.status is IKStatus.NOT_REACHED
     everyone = ("head", "left_hand", "right_hand")
@@ -436,12 +428,8 @@ def test_a_limb_that_misses_under_the_placed_trunk_falls_back_to_the_whole_group
 def test_under_a_trunk_its_targets_leave_open_a_missed_limb_goes_to_the_whole_group() -> None:
     """No further restarts of the limb alone: the trunk is the likely cause."""
     chain = _head_position(biped(neck=True, bending_waist=True))
-    solver = IKSolver(chain, IKOptions(time_budget_us=None))
-    calls: list[tuple[object, ...]] = []
-    solver._split._make_solver = lambda limb: _Recorder(limb, calls)
-    goal = np.random.default_rng(6).uniform(chain.lower, chain.upper)
-    upper = [t for t in pose_targets(chain, goal) if not t.effector.endswith("_foot")]
-    far = [*upper[:2], dataclasses.replace(upper[2], position=np.array([3.0, 0.0, 0.0]))]
+    solver, calls, upper = _recorded(chain)
+    far = _right_hand_out_of_reach(upper)
     assert solver.solve(far).status is IKStatus.NOT_REACHED
     everyone = ("head", "left_hand", "right_hand")
     trunk = ("waist.z", "waist.y")  # an arm's limb holds the waist, not the neck
@@ -459,6 +447,21 @@ def test_under_a_trunk_its_targets_leave_open_a_missed_limb_goes_to_the_whole_gr
         (6, ("left_hand",), trunk),
         (6, ("right_hand",), trunk),
     ]
+
+
+def _recorded(chain: Chain) -> tuple[IKSolver, list[tuple[object, ...]], list[Target]]:
+    """A solver whose limbs' calls are recorded, and head and hand targets of a pose."""
+    solver = IKSolver(chain, IKOptions(time_budget_us=None))
+    calls: list[tuple[object, ...]] = []
+    solver._split._make_solver = lambda limb: _Recorder(limb, calls)
+    goal = np.random.default_rng(6).uniform(chain.lower, chain.upper)
+    upper = [t for t in pose_targets(chain, goal) if not t.effector.endswith("_foot")]
+    return solver, calls, upper
+
+
+def _right_hand_out_of_reach(upper: list[Target]) -> list[Target]:
+    head, left, right = upper
+    return [head, left, dataclasses.replace(right, position=np.array([3.0, 0.0, 0.0]))]
 
 
 def _head_position(chain: Chain) -> Chain:
