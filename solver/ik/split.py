@@ -253,6 +253,8 @@ class LimbSplit:
             parts = _joined(parts, self._masks[i] & ~trunk, i)
         if not parts or (len(parts) < 2 and not self.trunk_is_fixed(inner)):
             return []
+        if any(mask == 0 for mask, _ in parts):  # moved by the trunk alone: it must move
+            return []
         open_directions = trunk.bit_count() - sum(self._rows[i] for i in inner)
         spare = min(mask.bit_count() - sum(self._rows[i] for i in m) for mask, m in parts)
         if open_directions > max(spare, 0):
@@ -320,8 +322,8 @@ class LimbSplit:
             if r.success:
                 run.keep(limb, r, n, m)
                 return r
-            if not fixed:
-                return None
+            if not fixed or run.opts.max_restarts <= FIRST_PART_RESTARTS:
+                return None  # (or the first try had every restart the options allow)
             run.q[limb.variables] = before
             for part in missed:
                 sub = self._limb(part)
@@ -330,9 +332,10 @@ class LimbSplit:
                 if not r.success:
                     return None
                 solved[part] = (sub, r)
-        run.keep(limb, placed, n, m)  # the inner effectors' errors and the trunk
+        # The inner effectors' errors and the trunk, then each part's own.
+        run.keep(limb, placed, n, m, moved=trunk[limb.variables])
         for sub, r in solved.values():
-            run.keep(sub, r, n, m)
+            run.keep(sub, r, n, m, moved=~trunk[sub.variables])
         return placed
 
     def _variants(self, opts: IKOptions, fixed: bool) -> tuple[IKOptions, IKOptions, IKOptions]:
@@ -432,12 +435,21 @@ class _Run:
         self.work += (r.iterations, r.function_evals, r.passes, r.restarts, r.solve_us)
         return r
 
-    def keep(self, limb: LimbGroup, r: IKResult, n: int, m: int) -> None:
-        """``r`` as the answer of ``limb``'s variables and targeted effectors."""
+    def keep(
+        self, limb: LimbGroup, r: IKResult, n: int, m: int, moved: np.ndarray | None = None
+    ) -> None:
+        """``r`` as the answer of ``limb``'s variables and targeted effectors; of the
+        inverse Hessian, the block of the variables ``moved`` marks (default all).
+        Under a frozen trunk, the trunk's block comes from the solve that placed it
+        and each part's from its own solve, with nothing between them (as between
+        groups): a solve's rows for variables it could not move are not curvature,
+        and mixed in they made the whole matrix indefinite."""
         self.q[limb.variables] = r.q
         targeted = r.raw_errors[:, 2] != 0.0
         self.errors(m)[limb.effectors[targeted]] = r.raw_errors[targeted]
-        self.hessian(n, m)[np.ix_(limb.variables, limb.variables)] = r.inverse_hessian
+        own = np.arange(limb.variables.shape[0]) if moved is None else np.flatnonzero(moved)
+        variables = limb.variables[own]
+        self.hessian(n, m)[np.ix_(variables, variables)] = r.inverse_hessian[np.ix_(own, own)]
 
 
 # Limb chains built so far, by whole chain and group: building one is ~1 ms for a

@@ -405,6 +405,22 @@ def test_the_trunk_is_placed_first_then_frozen_under_each_limb() -> None:
     assert r.q[chain.dof_names.index("waist")] == placed
     assert calls[1][5]["waist"] == calls[2][5]["waist"] == placed  # type: ignore[index]
     assert len(r.pass_log) == r.passes >= 3
+    # The inverse Hessian: the waist's block from the head's solve, each arm's own
+    # block from its solve, nothing between them; positive definite as a whole.
+    h = r.inverse_hessian
+    np.testing.assert_allclose(h, h.T, rtol=1e-12)
+    assert np.linalg.eigvalsh(h).min() > 0.0
+    arm = [i for i, name in enumerate(chain.dof_names) if name.startswith("left_")]
+    np.testing.assert_array_equal(h[np.ix_(arm, [chain.dof_names.index("waist")])], 0.0)
+
+
+def test_an_effector_only_the_trunk_moves_keeps_the_trunk_free() -> None:
+    chain = biped()
+    split = IKSolver(chain)._split
+    head, left, right = (chain.effector_index(n) for n in ("head", "left_hand", "right_hand"))
+    # With the left hand's variables (the waist among them) frozen, nothing would be
+    # left to move the head.
+    assert split.limbs_given_trunk((head, left, right), (left,)) == []
 
 
 def test_a_limb_that_misses_under_the_placed_trunk_falls_back_to_the_whole_group() -> None:
