@@ -8,7 +8,7 @@ things are:
     frame.py        the compiled per-frame solve (validate, solve, report errors)
     kinematics.py   the IK objective, its exact gradient, the goal measure, errors
     metric.py       the Gauss-Newton metric handed to the optimizer; null-space step
-    spd.py          its inverses: Cholesky, whole, block by block (compiled)
+    spd.py          its inverses: whole, block by block (compiled)
     split.py        a cold solve's independent groups of effectors, solved apart,
                     a group's trunk effectors first
     packing.py      an ``IKOptions`` as the compiled core takes it, once per options

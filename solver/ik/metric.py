@@ -2,8 +2,10 @@
 
 - ``ik_metric``: the inverse of the damped Gauss-Newton matrix (2 J^T W J + mu I)^-1
   on the free variables, registered with the IK objective (``optim.objective``): the
-  optimizer re-seeds H from it (``IKOptions.metric_every``). Direct for small chains,
-  low-rank (Woodbury) while the task has at most n / 2 rows.
+  optimizer re-seeds H from it (``IKOptions.metric_every``). Direct for small chains
+  (handed over as the matrix's Cholesky factor where it is one block), low-rank
+  (Woodbury) while the task has at most n / 2 rows. ``metric_inverse``: the same as
+  H itself.
 - ``weighted_jacobian``: one effector's sqrt(W)-weighted Jacobian rows (also used by
   the planner's kernels, ``solver.path.kernels``).
 - ``null_space_step``: after a solved stream frame, a step towards the rest pose
@@ -33,6 +35,7 @@ from ..model.layout import (
     NI_PARENT,
     NODE_ROTATION,
 )
+from ..optim.codes import METRIC_FACTOR, METRIC_INVERSE, METRIC_NONE
 from .kinematics import (
     DD_GSCRATCH,
     DD_HI,
@@ -47,7 +50,13 @@ from .kinematics import (
     effector_terms,
     is_last_point,
 )
-from .spd import cholesky_in_place, invert_spd_by_blocks, invert_spd_in_place
+from .spd import (
+    block_cubes,
+    cholesky_in_place,
+    find_blocks,
+    invert_blocks,
+    invert_spd_in_place,
+)
 
 # Above this many variables the direct Gauss-Newton metric (O(n^3)) costs more than it
 # saves; the low-rank form (at most n / 2 task rows, O(n^2 rows)) is used at any size in
@@ -64,12 +73,21 @@ def _held(qi, gi, lo_i, hi_i):  # type: ignore[no-untyped-def]
 
 @jit_leaf
 def ik_metric(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
-    """The registered metric (see ``_metric``), damped with mu = scale x f + 1e-9."""
-    return _metric(q, g, lo, hi, data, h, -1.0)
+    """The registered metric (see ``_metric``), damped with mu = scale x f + 1e-9; a
+    ``codes.MetricKind``: where the direct form is one block, the Cholesky factor of
+    its matrix (``METRIC_FACTOR``: the optimizer's step is then two triangular
+    solves, and the inverse's other two thirds are done only if H itself is read)."""
+    return _metric(q, g, lo, hi, data, h, -1.0, True)
+
+
+@jit_leaf
+def metric_inverse(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
+    """``ik_metric`` as the inverse H itself; False where there is none."""
+    return _metric(q, g, lo, hi, data, h, -1.0, False) != METRIC_NONE
 
 
 @jit_inline
-def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
+def _metric(q, g, lo, hi, data, h, mu_fixed, factor):  # type: ignore[no-untyped-def]
     """Inverse Hessian for the free variables from the exact Jacobian: (2 J^T W J + mu I)^-1.
 
     BFGS from H = I takes dozens of iterations on a pose problem; seeding a pass (or
@@ -80,8 +98,10 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     pushing out) are left out of the coupling: the direction then uses the inverse of
     the free block, as a projected Newton method must (Bertsekas 1982), instead of a
     block of the full inverse, which crawled for 1000+ iterations with one joint on
-    its limit. Returns False (caller keeps H = I) when the direct O(n^3) form would be
-    needed for more than METRIC_MAX_DOF variables.
+    its limit. Returns what it wrote (``codes.MetricKind``): with ``factor``, the
+    direct form's Cholesky factor where its matrix is one block; METRIC_NONE (the
+    caller keeps H = I) when the direct O(n^3) form would be needed for more than
+    METRIC_MAX_DOF variables.
     """
     ni, nd, ei, ed, dd, misc = data
     n = q.shape[0]
@@ -92,7 +112,7 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
             rows += 3 if ei[e, EI_MODE] == MODE_POSITION else 6
             active += 1
     if n > METRIC_MAX_DOF and 2 * rows > n:
-        return False
+        return METRIC_NONE
     # The line search has usually just evaluated q: its frames are still in nd.
     if is_last_point(q, dd):
         f = misc[MISC_LAST_F]
@@ -109,7 +129,8 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
         mu = mu_fixed
     c = mu + 2.0 * misc[MISC_POSTURE]
     if 2 * rows <= n:
-        return _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h)
+        ok = _low_rank_metric(ni, nd, ei, ed, dd, free, c, rows, h)
+        return METRIC_INVERSE if ok else METRIC_NONE
     for i in range(n):
         for j in range(n):
             h[i, j] = 0.0
@@ -131,10 +152,20 @@ def _metric(q, g, lo, hi, data, h, mu_fixed):  # type: ignore[no-untyped-def]
     for i in range(n):
         h[i, i] += c
     # From 13 variables (many limbs; an arm's 7 are one block, and finding the blocks
-    # cost a single-tip Panda solve 17%), with two rows of DD to list the blocks in.
+    # cost a single-tip Panda solve 17%), with two rows of DD to list the blocks in:
+    # blocks are inverted one by one (g1: 29^3 -> 17^3 + 2 x 6^3), unless the factor
+    # of the whole (n^3 / 6) is less work than their inverses (the sum of their cubes
+    # / 2): a held variable is a block of its own, and Tiago's fingertips (27
+    # variables, one block but for the joints on their limits) take the factor.
     if n >= 13 and dd.shape[0] > DD_STACK + 2:
-        return invert_spd_by_blocks(h, dd[DD_STACK + 1], dd[DD_STACK + 2])
-    return invert_spd_in_place(h)
+        root = dd[DD_STACK + 1]
+        order = dd[DD_STACK + 2]
+        if find_blocks(h, root) > 1 and not (factor and n**3 < 3.0 * block_cubes(root, order)):
+            ok = invert_blocks(h, root, order)
+            return METRIC_INVERSE if ok else METRIC_NONE
+    if factor:
+        return METRIC_FACTOR if cholesky_in_place(h, n) else METRIC_NONE
+    return METRIC_INVERSE if invert_spd_in_place(h) else METRIC_NONE
 
 
 @jit_inline
@@ -326,7 +357,7 @@ def null_space_step(q, data, rest, max_step, out, h, g):  # type: ignore[no-unty
     for i in range(n):
         g[i] = 0.0  # nothing is held by a gradient: only frozen variables stay out
     mu = 1e-6
-    if not _metric(q, g, lo, hi, data, h, mu):
+    if _metric(q, g, lo, hi, data, h, mu, False) == METRIC_NONE:
         return False
     big = 0.0
     for i in range(n):

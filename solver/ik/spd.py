@@ -1,68 +1,38 @@
 """Inverses of symmetric positive definite matrices in place, with no allocation
-(compiled): the Cholesky factor, the whole inverse, and the inverse block by block
-where the matrix is block diagonal up to a permutation (a tree's limbs that share no
-variable). The Gauss-Newton metric (``metric``) and the planner's kernels use them."""
+(compiled): the whole inverse (from ``optim.cholesky``'s factor), and the inverse
+block by block where the matrix is block diagonal up to a permutation (a tree's
+limbs that share no variable). The Gauss-Newton metric (``metric``) and the
+planner's kernels use them."""
 
 from __future__ import annotations
 
 import math
 
 from .._jit import jit_inline, jit_leaf
+from ..optim.cholesky import cholesky_in_place, inverse_from_cholesky
 
-
-@jit_inline
-def cholesky_in_place(m, rows):  # type: ignore[no-untyped-def]
-    """m's leading rows x rows block (symmetric; its lower triangle is read) <- its
-    lower Cholesky factor L, in the lower triangle; False if not positive definite."""
-    for j in range(rows):
-        s = m[j, j]
-        for k in range(j):
-            s -= m[j, k] * m[j, k]
-        if not s > 0.0:
-            return False
-        d = math.sqrt(s)
-        m[j, j] = d
-        for i in range(j + 1, rows):
-            s = m[i, j]
-            for k in range(j):
-                s -= m[i, k] * m[j, k]
-            m[i, j] = s / d
-    return True
+__all__ = [
+    "block_cubes",
+    "cholesky_in_place",
+    "find_blocks",
+    "invert_blocks",
+    "invert_spd_by_blocks",
+    "invert_spd_in_place",
+]
 
 
 @jit_inline
 def invert_spd_in_place(m):  # type: ignore[no-untyped-def]
     """m <- m^-1 for a symmetric positive definite m (Cholesky); False if not SPD.
 
-    Allocation-free, as LAPACK's potrf + potri: L goes into the lower triangle, is
-    inverted there, and inv(L)^T inv(L) is written column by column into the upper
-    triangle (each column's diagonal last: it is the only inv(L) entry that column
-    still reads), then mirrored. It runs once per solver iteration; an n x n
-    scratch allocation per call cost more than the arithmetic at 6-7 joints.
+    Allocation-free, as LAPACK's potrf + potri (``optim.cholesky``): L goes into the
+    lower triangle, is inverted there, and inv(L)^T inv(L) fills the matrix. It runs
+    once per solver iteration; an n x n scratch allocation per call cost more than
+    the arithmetic at 6-7 joints.
     """
-    n = m.shape[0]
-    if not cholesky_in_place(m, n):
+    if not cholesky_in_place(m, m.shape[0]):
         return False
-    # inv(L) in place (lower triangle).
-    for j in range(n):
-        m[j, j] = 1.0 / m[j, j]
-        for i in range(j + 1, n):
-            s = 0.0
-            for k in range(j, i):
-                s -= m[i, k] * m[k, j]
-            m[i, j] = s / m[i, i]
-    # (m^-1)[i, j] = sum_{k >= j} inv(L)[k, i] inv(L)[k, j] for i <= j, into the upper
-    # triangle; column j's diagonal overwrites inv(L)[j, j], which later columns do
-    # not read (they sum over rows k > j only).
-    for j in range(n):
-        for i in range(j + 1):
-            s = 0.0
-            for k in range(j, n):
-                s += m[k, i] * m[k, j]
-            m[i, j] = s
-    for j in range(n):
-        for i in range(j):
-            m[j, i] = m[i, j]
+    inverse_from_cholesky(m)
     return True
 
 
@@ -73,15 +43,24 @@ def invert_spd_by_blocks(m, root, order):  # type: ignore[no-untyped-def]
     A tree's limbs that share no variable give J^T W J exact zeros between them (g1,
     its pelvis the base: each leg's 6 variables couple with nothing else), so m is
     block diagonal up to a permutation and so is its inverse. The blocks are the
-    components of the graph of m's nonzero entries (``root[i]``: the smallest index
-    in i's; ``order``: the indices, block by block, ascending within each). Each
-    block runs the same three loops as the whole matrix, in the same index order,
-    minus the terms with a factor from another block: those are exact zeros (their
+    components of the graph of m's nonzero entries (``find_blocks``). Each block
+    runs the same three loops as the whole matrix, in the same index order, minus
+    the terms with a factor from another block: those are exact zeros (their
     Cholesky and inverse entries come out +0.0, and adding +-0.0 to a sum that is
     never -0.0 changes nothing), so every entry is the same, bit for bit, and the
     work falls from n^3 to the sum of the blocks' cubes (g1: 29^3 -> 17^3 + 2 x 6^3).
     One block: ``invert_spd_in_place`` itself.
     """
+    if find_blocks(m, root) == 1:
+        return invert_spd_in_place(m)
+    return invert_blocks(m, root, order)
+
+
+@jit_leaf
+def find_blocks(m, root):  # type: ignore[no-untyped-def]
+    """The diagonal blocks of m up to a permutation: the components of the graph of
+    its nonzero entries (its lower triangle is read). ``root[i]`` <- the smallest
+    index in i's component; returns how many there are."""
     n = m.shape[0]
     for i in range(n):
         root[i] = i
@@ -103,8 +82,29 @@ def invert_spd_by_blocks(m, root, order):  # type: ignore[no-untyped-def]
         root[i] = root[int(root[i])]
         if root[i] == i:
             blocks += 1
-    if blocks == 1:
-        return invert_spd_in_place(m)
+    return blocks
+
+
+@jit_inline
+def block_cubes(root, counts):  # type: ignore[no-untyped-def]
+    """The sum of the cubes of the blocks' sizes (``find_blocks``'s roots; ``counts``
+    is scratch): the work of inverting them one by one, in units of n^3 / 2."""
+    n = root.shape[0]
+    for i in range(n):
+        counts[i] = 0.0
+    for i in range(n):
+        counts[int(root[i])] += 1.0
+    total = 0.0
+    for i in range(n):
+        total += counts[i] * counts[i] * counts[i]
+    return total
+
+
+@jit_leaf
+def invert_blocks(m, root, order):  # type: ignore[no-untyped-def]
+    """``invert_spd_by_blocks`` given ``find_blocks``'s roots (``order``: the indices,
+    block by block, ascending within each); False if not SPD."""
+    n = m.shape[0]
     count = 0
     for r in range(n):
         if root[r] != r:

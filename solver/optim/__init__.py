@@ -6,6 +6,7 @@ Knows nothing of kinematics. Where things are:
     loop.py         the compiled pass loop (termination check, step, analyzer call)
     line_search.py  the cubic backtrack and the article's curvature phase
     bfgs.py         the inverse BFGS update and the projected descent direction
+    cholesky.py     the Cholesky factor a metric may hand over instead of H, its solve, H from it
     evaluate.py     f and g (analytic or finite differences), box projection
     restart.py      the seeded random restarts, partial restarts (keep what is settled),
                     turn restarts (a periodic variable a bound stops, the other way round)

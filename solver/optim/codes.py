@@ -73,6 +73,21 @@ LS_ACCEPTED = int(LineSearchStatus.ACCEPTED)
 LS_STEP_TOO_SMALL = int(LineSearchStatus.STEP_TOO_SMALL)
 LS_BUDGET_SPENT = int(LineSearchStatus.BUDGET_SPENT)
 
+
+class MetricKind(enum.IntEnum):
+    """What an objective's metric wrote into H (``objective.call_metric``); never
+    leaves the core."""
+
+    NONE = 0  # no metric here: H is as it was (or, after a failed factorisation, not)
+    INVERSE = 1  # H itself: the inverse of the metric's matrix A
+    FACTOR = 2  # A's lower Cholesky factor L (A = L L^T) in H's lower triangle
+
+
+METRIC_NONE = int(MetricKind.NONE)
+METRIC_INVERSE = int(MetricKind.INVERSE)
+METRIC_FACTOR = int(MetricKind.FACTOR)
+
+
 GRAD_ANALYTIC = 0
 GRAD_FORWARD = 1
 GRAD_CENTRAL = 2

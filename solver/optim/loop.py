@@ -40,7 +40,17 @@ from .._clock import now_s
 from .._jit import jit, jit_inline, jit_leaf
 from . import codes as C
 from .analyzer import decide
-from .bfgs import bfgs_update, descent_direction, scale_initial_h, set_identity
+from .bfgs import (
+    bfgs_update,
+    descent_direction,
+    factor_direction,
+    is_identity,
+    metric_due,
+    scale_initial_h,
+    set_identity,
+    step_vectors,
+)
+from .cholesky import inverse_from_cholesky
 from .evaluate import all_finite, evaluate, project, projected_gradient_norm
 from .line_search import line_search
 from .objective import call_goal, call_metric, call_restart_keep, call_restart_period
@@ -112,36 +122,6 @@ def record_step(trace, row, f, f_trial, lam, g, x, x_new, lo, hi):  # type: igno
 
 
 @jit_inline
-def step_vectors(x, x_new, g, g_new, s, y):  # type: ignore[no-untyped-def]
-    """s = x+ - x and y = g+ - g for the H update; returns the step's largest
-    component relative to max(|x+_i|, 1) (the xtol test)."""
-    step_rel = 0.0
-    for i in range(x.shape[0]):
-        s[i] = x_new[i] - x[i]
-        y[i] = g_new[i] - g[i]
-        r = abs(s[i]) / max(abs(x_new[i]), 1.0)
-        if r > step_rel:
-            step_rel = r
-    return step_rel
-
-
-@jit_inline
-def metric_due(every, until, final_metric, pass_iters, goal_met):  # type: ignore[no-untyped-def]
-    """Whether this iteration re-seeds H from the objective's metric (if it has one)
-    instead of the BFGS update: every ``every`` iterations of a pass, during its first
-    ``until`` (0: always). Not at a point that meets the goal: the pass ends there,
-    and a metric for a step never taken would be wasted (a third of a warm-started
-    stream frame's work) unless the caller carries this H to its next solve
-    (``final_metric``)."""
-    return (
-        every > 0
-        and pass_iters % every == 0
-        and (until == 0 or pass_iters < until)
-        and (final_metric or not goal_met)
-    )
-
-
-@jit_inline
 def better(f, m, f_best, m_best, has_goal, f_goal):  # type: ignore[no-untyped-def]
     """Order of points: meeting the goal first, then lower f."""
     if has_goal:
@@ -157,16 +137,6 @@ def copy_point(x, g, out_x, out_g):  # type: ignore[no-untyped-def]
     for i in range(x.shape[0]):
         out_x[i] = x[i]
         out_g[i] = g[i]
-
-
-@jit_inline
-def is_identity(h):  # type: ignore[no-untyped-def]
-    n = h.shape[0]
-    for i in range(n):
-        for j in range(n):
-            if h[i, j] != (1.0 if i == j else 0.0):
-                return False
-    return True
 
 
 @jit_inline
@@ -291,8 +261,15 @@ def solve_passes(  # type: ignore[no-untyped-def]
     # "Fresh": H = I or the objective's own metric, i.e. no curvature learnt yet
     # (a caller's H carried from a previous solve is not fresh).
     h_fresh = h_is_identity
-    if h_is_identity and call_metric(fg, x, g, lo, hi, data, h):
-        h_is_identity = False
+    # H may hold the Cholesky factor of its inverse instead (a metric's METRIC_FACTOR):
+    # the direction solves with it, and H itself is completed only where it is read
+    # (a BFGS update, the H handed back).
+    h_factored = False
+    if h_is_identity:
+        kind = call_metric(fg, x, g, lo, hi, data, h)
+        if kind != C.METRIC_NONE:
+            h_is_identity = False
+            h_factored = kind == C.METRIC_FACTOR
 
     while True:
         # ---- one pass -------------------------------------------------------
@@ -324,11 +301,15 @@ def solve_passes(  # type: ignore[no-untyped-def]
                 code = C.DEADLINE
                 break
             # The step: the projected descent direction, capped, and the line search.
-            slope = descent_direction(h, g, x, lo, hi, d, gm)
+            if h_factored:
+                slope = factor_direction(h, g, x, lo, hi, d, gm)
+            else:
+                slope = descent_direction(h, g, x, lo, hi, d, gm)
             if not (slope < 0.0):
                 # H lost positive definiteness numerically: fall back to steepest descent.
                 set_identity(h)
                 h_is_identity = True
+                h_factored = False
                 slope = descent_direction(h, g, x, lo, hi, d, gm)
             big = 0.0
             for i in range(n):
@@ -363,16 +344,22 @@ def solve_passes(  # type: ignore[no-untyped-def]
             # The goal at the new point first: it decides whether a metric is due.
             m_new = call_goal(fg, f_trial, x_new, data) if has_goal else f_trial
             goal_met = has_goal and m_new <= f_goal
-            if metric_due(
-                metric_every, metric_until, final_metric, pass_iters, goal_met
-            ) and call_metric(fg, x_new, g_new, lo, hi, data, h):
+            kind = C.METRIC_NONE
+            if metric_due(metric_every, metric_until, final_metric, pass_iters, goal_met):
+                kind = call_metric(fg, x_new, g_new, lo, hi, data, h)
+            if kind != C.METRIC_NONE:
                 # Re-seed H from the objective's metric (every step: damped Gauss-Newton).
                 h_is_identity = False
-            elif bfgs_update(h, s, y, hy, eps_curv):
-                h_is_identity = False
-                h_fresh = False
+                h_factored = kind == C.METRIC_FACTOR
             else:
-                n_skipped += 1
+                if h_factored:
+                    inverse_from_cholesky(h)
+                    h_factored = False
+                if bfgs_update(h, s, y, hy, eps_curv):
+                    h_is_identity = False
+                    h_fresh = False
+                else:
+                    n_skipped += 1
             improvement = f - f_trial
             f = f_trial
             copy_point(x_new, g_new, x, g)
@@ -467,11 +454,17 @@ def solve_passes(  # type: ignore[no-untyped-def]
                 m_best = m
                 copy_point(x, g, out_x, out_g)
         h_fresh = True
-        if call_metric(fg, x, g, lo, hi, data, h):
+        kind = call_metric(fg, x, g, lo, hi, data, h)
+        if kind != C.METRIC_NONE:
             h_is_identity = False
+            h_factored = kind == C.METRIC_FACTOR
         else:
             set_identity(h)
             h_is_identity = True
+            h_factored = False
+
+    if h_factored:  # the caller reads H itself
+        inverse_from_cholesky(h)
 
     pg = projected_gradient_norm(out_x, out_g, lo, hi)
     elapsed = now_s() - t_start

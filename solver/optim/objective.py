@@ -43,8 +43,11 @@ def register_objective(
         fg: ``fg(x, g, need_grad, data) -> f``.
         goal_fn: Optional ``goal_fn(f, x, data) -> m``: the goal is m <= f_goal.
         data_example: A data tuple of the type the objective will receive.
-        metric_fn: Optional ``metric_fn(x, g, lower, upper, data, h) -> bool`` that
-            writes an inverse Hessian for the free variables into h (True when it did).
+        metric_fn: Optional ``metric_fn(x, g, lower, upper, data, h) -> int`` that
+            writes a metric for the free variables into h and says what it wrote
+            (``codes.MetricKind``): 0 nothing, 1 the inverse Hessian H, 2 the lower
+            Cholesky factor L of H's inverse (H = (L L^T)^-1, L in h's lower
+            triangle: the optimizer solves with it, ``cholesky``).
         restart_keep_fn: Optional ``restart_keep_fn(x, data, keep) -> int`` for random
             restarts (``restart``): writes into keep[i] how settled variable i is at
             x, from 0.0 (re-draw it) to 1.0 (keep its value: for the IK, a variable
@@ -124,13 +127,14 @@ def _call_goal_compiled(fg, f, x, data):  # type: ignore[no-untyped-def]
     return impl_f
 
 
-def call_metric(fg: Any, x: Any, g: Any, lo: Any, hi: Any, data: Any, h: Any) -> bool:
-    """Write the registered inverse-Hessian metric at x into h; False if there is none."""
+def call_metric(fg: Any, x: Any, g: Any, lo: Any, hi: Any, data: Any, h: Any) -> int:
+    """Write the registered metric at x into h; what it wrote (``codes.MetricKind``),
+    0 if there is none."""
     if fg is None:
         metric = _lookup(numba.typeof(data))[2]
         if metric is not None:
-            return bool(metric(x, g, lo, hi, data, h))
-    return False
+            return int(metric(x, g, lo, hi, data, h))
+    return 0
 
 
 @overload(call_metric, inline="always")
@@ -145,7 +149,7 @@ def _call_metric_compiled(fg, x, g, lo, hi, data, h):  # type: ignore[no-untyped
             return impl_metric
 
     def impl_none(fg, x, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
-        return False
+        return 0
 
     return impl_none
 

@@ -30,7 +30,7 @@ from solver import (
 from solver.ik import STREAM_DEFAULTS, IKResult, pose_targets
 from solver.ik.frame import solve_frame
 from solver.ik.kinematics import DD_HI, DD_LO, MISC_SIZE, ik_objective
-from solver.ik.metric import ik_metric
+from solver.ik.metric import metric_inverse
 from solver.ik.pole_term import POLE_NODE, POLE_POINT, POLE_WEIGHT
 from solver.model.examples import bolt, humanoid_arm, panda_arm, tail, two_arm_torso
 from solver.model.forward import effector_poses
@@ -532,7 +532,7 @@ def test_carried_h_is_the_metric_at_the_answer(carry: bool) -> None:
     h = np.empty((chain.n_dof, chain.n_dof))
     g = np.zeros(chain.n_dof)  # the answer is inside the limits: nothing is held
     ik_objective(result.q, np.empty(chain.n_dof), True, data)
-    assert ik_metric(result.q, g, data[4][DD_LO], data[4][DD_HI], data, h)
+    assert metric_inverse(result.q, g, data[4][DD_LO], data[4][DD_HI], data, h)
     same = np.allclose(result.inverse_hessian, h, rtol=1e-9, atol=1e-12)
     assert same is carry
 

@@ -11,13 +11,14 @@ from numpy.testing import assert_allclose
 from solver import EffectorMode, IKOptions, IKSolver
 from solver.ik import pose_targets
 from solver.ik.kinematics import DD_HI, DD_LO, ik_objective
-from solver.ik.metric import ik_metric
+from solver.ik.metric import ik_metric, metric_inverse
 from solver.ik.spd import invert_spd_by_blocks, invert_spd_in_place
 from solver.model import Chain, Effector, build_chain
 from solver.model.examples import humanoid_arm, panda_arm, tail, two_arm_torso
 from solver.model.forward import effector_poses
 from solver.model.layout import ED_WP, ED_WR
 from solver.model.urdf import chain_from_urdf
+from solver.optim.codes import MetricKind
 
 
 def _weighted_jacobian_fd(chain: Chain, q: np.ndarray, eps: float = 1e-6) -> np.ndarray:
@@ -108,7 +109,7 @@ def test_metric_is_the_damped_gauss_newton_inverse(
     g = np.empty(chain.n_dof)
     f = ik_objective(q, g, True, data)
     h = np.empty((chain.n_dof, chain.n_dof))
-    assert ik_metric(q, np.zeros(chain.n_dof), data[4][DD_LO], data[4][DD_HI], data, h)
+    assert metric_inverse(q, np.zeros(chain.n_dof), data[4][DD_LO], data[4][DD_HI], data, h)
     jac = _weighted_jacobian_fd(chain, q)
     # Variables no targeted effector moves (above a terminator) are frozen for the
     # solve: they stay out of the coupling and get 1/c on the diagonal.
@@ -154,3 +155,41 @@ def test_the_inverse_by_blocks_is_the_whole_inverse_bit_for_bit() -> None:
     bad = m.copy()
     bad[9, 9] = -1.0
     assert not invert_spd_by_blocks(bad, root, order)
+
+
+@pytest.mark.parametrize(
+    ("factory", "kind"),
+    [
+        (panda_arm, MetricKind.FACTOR),  # the direct form, one block
+        (humanoid_arm, MetricKind.FACTOR),
+        (lambda: tail(20), MetricKind.INVERSE),  # the low-rank form writes H itself
+    ],
+)
+def test_the_registered_metric_hands_over_the_factor_of_the_same_matrix(
+    factory, kind: MetricKind
+) -> None:  # type: ignore[no-untyped-def]
+    """Where the direct form is one block, the metric the optimizer receives is the
+    Cholesky factor L of H's inverse (its step is then two triangular solves): the
+    lower triangle of what ``ik_metric`` writes, and (L L^T)^-1 is the H that
+    ``metric_inverse`` writes at the same point."""
+    chain = factory()
+    rng = np.random.default_rng(5)
+    lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
+    hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
+    solver = IKSolver(chain, IKOptions(split_limbs=False))
+    targets = pose_targets(chain, rng.uniform(lo, hi) * 0.5)
+    solver.solve(targets)
+    data = solver.load_frame(targets, chain.mid_limits())
+    q = rng.uniform(lo, hi) * 0.8
+    g = np.zeros(chain.n_dof)
+    ik_objective(q, np.empty(chain.n_dof), True, data)
+    h = np.empty((chain.n_dof, chain.n_dof))
+    assert metric_inverse(q, g, data[4][DD_LO], data[4][DD_HI], data, h)
+    written = np.empty_like(h)
+    assert ik_metric(q, g, data[4][DD_LO], data[4][DD_HI], data, written) == kind
+    if kind is MetricKind.FACTOR:
+        low = np.tril(written)
+        assert (np.diag(low) > 0).all()
+        assert_allclose(np.linalg.inv(low @ low.T), h, rtol=0, atol=1e-9 * np.abs(h).max())
+    else:
+        np.testing.assert_array_equal(written, h)
