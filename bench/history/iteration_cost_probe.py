@@ -25,7 +25,7 @@ from bench.urdf_sweep import (
 )
 from solver import IKOptions, IKSolver, Target
 from solver.ik.kinematics import ik_objective
-from solver.ik.metric import ik_metric
+from solver.ik.metric import metric_inverse
 from solver.model.forward import forward_kinematics, link_poses
 from solver.model.urdf import chain_from_urdf
 from solver.optim.bfgs import bfgs_update, descent_direction
@@ -61,7 +61,7 @@ def t_metric(q, g, lo, hi, data, h, reps):  # type: ignore[no-untyped-def]
     ok = True
     for _ in range(reps):
         q[0] += 1e-12
-        ok = ik_metric(q, g, lo, hi, data, h)
+        ok = metric_inverse(q, g, lo, hi, data, h)
     return ok
 
 

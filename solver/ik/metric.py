@@ -3,7 +3,8 @@
 - ``ik_metric``: the inverse of the damped Gauss-Newton matrix (2 J^T W J + mu I)^-1
   on the free variables, registered with the IK objective (``optim.objective``): the
   optimizer re-seeds H from it (``IKOptions.metric_every``). Direct for small chains
-  (handed over as the matrix's Cholesky factor where it is one block), low-rank
+  (handed over as the matrix's Cholesky factor, except where blocks inverted one by
+  one are less work), low-rank
   (Woodbury) while the task has at most n / 2 rows. ``metric_inverse``: the same as
   H itself.
 - ``weighted_jacobian``: one effector's sqrt(W)-weighted Jacobian rows (also used by
@@ -74,9 +75,10 @@ def _held(qi, gi, lo_i, hi_i):  # type: ignore[no-untyped-def]
 @jit_leaf
 def ik_metric(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
     """The registered metric (see ``_metric``), damped with mu = scale x f + 1e-9; a
-    ``codes.MetricKind``: where the direct form is one block, the Cholesky factor of
-    its matrix (``METRIC_FACTOR``: the optimizer's step is then two triangular
-    solves, and the inverse's other two thirds are done only if H itself is read)."""
+    ``codes.MetricKind``: on the direct form, the Cholesky factor of its matrix
+    (``METRIC_FACTOR``: the optimizer's step is then two triangular solves, and the
+    inverse's other two thirds are done only if H itself is read), unless its
+    blocks inverted one by one are less work."""
     return _metric(q, g, lo, hi, data, h, -1.0, True)
 
 
@@ -99,7 +101,7 @@ def _metric(q, g, lo, hi, data, h, mu_fixed, factor):  # type: ignore[no-untyped
     the free block, as a projected Newton method must (Bertsekas 1982), instead of a
     block of the full inverse, which crawled for 1000+ iterations with one joint on
     its limit. Returns what it wrote (``codes.MetricKind``): with ``factor``, the
-    direct form's Cholesky factor where its matrix is one block; METRIC_NONE (the
+    direct form's Cholesky factor (unless its blocks are less work); METRIC_NONE (the
     caller keeps H = I) when the direct O(n^3) form would be needed for more than
     METRIC_MAX_DOF variables.
     """
@@ -154,18 +156,65 @@ def _metric(q, g, lo, hi, data, h, mu_fixed, factor):  # type: ignore[no-untyped
     # From 13 variables (many limbs; an arm's 7 are one block, and finding the blocks
     # cost a single-tip Panda solve 17%), with two rows of DD to list the blocks in:
     # blocks are inverted one by one (g1: 29^3 -> 17^3 + 2 x 6^3), unless the factor
-    # of the whole (n^3 / 6) is less work than their inverses (the sum of their cubes
-    # / 2): a held variable is a block of its own, and Tiago's fingertips (27
-    # variables, one block but for the joints on their limits) take the factor.
+    # of the whole is less work than their inverses (the sum of their cubes / 2). The
+    # factor costs n^3 / 6 where the metric is re-seeded every iteration, but n^3 / 2
+    # with its completion where BFGS updates come between (by default from as many
+    # task rows as variables, ``IKOptions.metric_interval``: g1). A held variable is a
+    # block of its own: Tiago's fingertips (27 variables, 18 rows; one block but for
+    # the joints on their limits) take the factor. The effectors' paths give the
+    # blocks for the price of a walk along them (the search over the n^2 entries was
+    # 1.6 us of Tiago's ~9 us iteration): where even those (the matrix's blocks or
+    # coarser) make the factor the less work, there is no search.
     if n >= 13 and dd.shape[0] > DD_STACK + 2:
         root = dd[DD_STACK + 1]
         order = dd[DD_STACK + 2]
-        if find_blocks(h, root) > 1 and not (factor and n**3 < 3.0 * block_cubes(root, order)):
+        weight = 3.0 if rows < n else 1.0  # (sum of cubes / 2) / (factor's cost / n^3)
+        if factor and n**3 < weight * _path_block_cubes(ni, ei, free, root, order):
+            return METRIC_FACTOR if cholesky_in_place(h, n) else METRIC_NONE
+        if find_blocks(h, root) > 1 and not (factor and n**3 < weight * block_cubes(root, order)):
             ok = invert_blocks(h, root, order)
             return METRIC_INVERSE if ok else METRIC_NONE
     if factor:
         return METRIC_FACTOR if cholesky_in_place(h, n) else METRIC_NONE
     return METRIC_INVERSE if invert_spd_in_place(h) else METRIC_NONE
+
+
+@jit_inline
+def _path_block_cubes(ni, ei, free, root, counts):  # type: ignore[no-untyped-def]
+    """``spd.block_cubes`` of the blocks that the targeted effectors' paths make (the
+    free variables on one path are one block; a held variable, or one on no path, is
+    a block of its own): the matrix's own blocks or coarser, where an entry of two
+    variables on one path happens to be exactly zero. ``root`` and ``counts`` are
+    scratch; root pointers go to smaller indexes, as ``spd.find_blocks``'s."""
+    n = root.shape[0]
+    for i in range(n):
+        root[i] = i
+    for e in range(ei.shape[0]):
+        if ei[e, EI_ACTIVE] == 0:
+            continue
+        first = -1
+        k = ei[e, EI_NODE]
+        while k >= 0:
+            d = ni[k, NI_DOF]
+            k = ni[k, NI_PARENT]
+            if d < 0 or free[d] == 0.0:
+                continue
+            if first < 0:
+                first = d
+                continue
+            a = int(root[first])
+            while root[a] != a:
+                a = int(root[a])
+            b = int(root[d])
+            while root[b] != b:
+                b = int(root[b])
+            if a < b:
+                root[b] = a
+            elif b < a:
+                root[a] = b
+    for i in range(n):  # root[i] < i is final already: point i straight at it
+        root[i] = root[int(root[i])]
+    return block_cubes(root, counts)
 
 
 @jit_inline

@@ -6,8 +6,8 @@ the inverse H = A^-1 (``codes.METRIC_FACTOR``): the step is then two triangular
 solves, n^2 multiply-adds, and the inverse (inv(L), then inv(L)^T inv(L): n^3 / 3
 more, two thirds of the whole inverse's work) is completed only when something
 needs H itself, a BFGS update or the H handed back at the end (``loop``). On a
-27-variable tree re-seeded every iteration the inverse was ~11 of ~16 us per
-iteration (bench/history/2026-11-29-metric-factor.md).
+27-variable tree (Tiago's three fingertips, re-seeded every iteration) an iteration
+of the whole group went from ~31 to 14-16 us (bench/history/2026-11-29-metric-factor.md).
 """
 
 from __future__ import annotations

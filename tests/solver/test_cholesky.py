@@ -7,6 +7,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from solver import IKOptions, IKSolver
+from solver.ik import pose_targets
+from solver.ik.kinematics import DD_HI, DD_LO, ik_objective
+from solver.ik.metric import metric_inverse
+from solver.model.examples import panda_arm
 from solver.optim.bfgs import descent_direction, factor_direction
 from solver.optim.cholesky import cholesky_in_place, cholesky_solve, inverse_from_cholesky
 
@@ -49,7 +54,8 @@ def test_the_step_from_the_factor_is_the_step_from_the_inverse() -> None:
     lo = np.full(n, -1.0)
     hi = np.full(n, 1.0)
     x = np.array([0.2, 1.0, -0.3, -1.0, 0.0, 0.5])
-    g = np.array([0.3, -2.0, 0.1, 0.4, -0.7, 0.2])  # x[1] held (pushed up at hi), x[3] not
+    # x[1] held (at hi, pushed up); x[3] at lo but pulled inside: free.
+    g = np.array([0.3, -2.0, 0.1, -0.4, -0.7, 0.2])
     held = np.array([False, True, False, False, False, False])
     a[held, :] = 0.0
     a[:, held] = 0.0
@@ -61,6 +67,28 @@ def test_the_step_from_the_factor_is_the_step_from_the_inverse() -> None:
     slope_inv = descent_direction(inv, g, x, lo, hi, d_inv, np.empty(n))
     slope_fac = factor_direction(factor, g, x, lo, hi, d_fac, np.empty(n))
     assert d_fac[1] == 0.0 and d_inv[1] == 0.0
+    assert d_fac[3] > 0.0
     assert_allclose(d_fac, d_inv, rtol=1e-10, atol=1e-14)
     assert slope_fac < 0.0
     assert slope_fac == pytest.approx(slope_inv, rel=1e-10)
+
+
+def test_a_solve_hands_back_an_inverse_when_its_last_metric_was_a_factor() -> None:
+    """A solve cut off right after a metric re-seeded H (as its factor) hands back H
+    itself: the factor completed, symmetric positive definite, and the metric's
+    inverse at the point where it stopped."""
+    chain = panda_arm()
+    targets = pose_targets(chain, chain.mid_limits() + 0.6)
+    options = IKOptions(max_iter=1, max_restarts=0, time_budget_us=None)
+    solver = IKSolver(chain, options)
+    result = solver.solve(targets)
+    assert not result.success and result.iterations == 1
+    h = result.inverse_hessian
+    np.testing.assert_array_equal(h, h.T)
+    assert np.linalg.eigvalsh(h).min() > 0.0
+    data = solver.load_frame(targets, chain.mid_limits())  # as the solve loaded them
+    g = np.empty(chain.n_dof)
+    ik_objective(result.q, g, True, data)
+    expected = np.empty_like(h)
+    assert metric_inverse(result.q, g, data[4][DD_LO], data[4][DD_HI], data, expected)
+    assert_allclose(h, expected, rtol=0, atol=1e-9 * np.abs(expected).max())

@@ -4,6 +4,8 @@ most half as many rows as variables."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
@@ -157,21 +159,61 @@ def test_the_inverse_by_blocks_is_the_whole_inverse_bit_for_bit() -> None:
     assert not invert_spd_by_blocks(bad, root, order)
 
 
+def _tree(trunk: int, limbs: int, limb_joints: int) -> Chain:
+    """A tree: ``trunk`` joints from the base, then ``limbs`` limbs of ``limb_joints``
+    joints each, a pose effector at each limb's tip."""
+    axes = ("1 0 0", "0 1 0", "0 0 1")
+    links = ['<link name="base"/>']
+    joints = []
+    count = 0
+
+    def joint(parent: str, child: str) -> None:
+        nonlocal count
+        links.append(f'<link name="{child}"/>')
+        joints.append(
+            f'<joint name="j{count}" type="revolute"><parent link="{parent}"/>'
+            f'<child link="{child}"/><origin xyz="0.05 0 0.2" rpy="0.3 0 0"/>'
+            f'<axis xyz="{axes[count % 3]}"/><limit lower="-2" upper="2"/></joint>'
+        )
+        count += 1
+
+    parent = "base"
+    for k in range(trunk):
+        joint(parent, f"t{k}")
+        parent = f"t{k}"
+    tips = []
+    for limb in range(limbs):
+        up = parent
+        for k in range(limb_joints):
+            joint(up, f"l{limb}_{k}")
+            up = f"l{limb}_{k}"
+        tips.append(up)
+    urdf = f'<robot name="tree">{"".join(links)}{"".join(joints)}</robot>'
+    chain = chain_from_urdf(urdf, base_link="base", tip_links=tips)
+    effectors = [dataclasses.replace(e, mode=EffectorMode.POSE) for e in chain.effectors]
+    return build_chain(list(chain.joints), effectors)
+
+
 @pytest.mark.parametrize(
     ("factory", "kind"),
     [
-        (panda_arm, MetricKind.FACTOR),  # the direct form, one block
+        (panda_arm, MetricKind.FACTOR),  # the direct form
         (humanoid_arm, MetricKind.FACTOR),
+        # From 13 variables the blocks decide: one (a torso and two arms) or two
+        # that cost less inverted apart than the whole's factor (two legs on the base).
+        (lambda: _tree(1, 2, 6), MetricKind.FACTOR),
+        (lambda: _tree(0, 2, 7), MetricKind.INVERSE),
         (lambda: tail(20), MetricKind.INVERSE),  # the low-rank form writes H itself
     ],
 )
 def test_the_registered_metric_hands_over_the_factor_of_the_same_matrix(
     factory, kind: MetricKind
 ) -> None:  # type: ignore[no-untyped-def]
-    """Where the direct form is one block, the metric the optimizer receives is the
-    Cholesky factor L of H's inverse (its step is then two triangular solves): the
-    lower triangle of what ``ik_metric`` writes, and (L L^T)^-1 is the H that
-    ``metric_inverse`` writes at the same point."""
+    """On the direct form (unless its blocks inverted one by one are less work), the
+    metric the optimizer receives is the Cholesky factor L of H's inverse (its step is
+    then two triangular solves): the lower triangle of what ``ik_metric`` writes, and
+    (L L^T)^-1 is the H that ``metric_inverse`` writes at the same point, a held
+    variable uncoupled in both."""
     chain = factory()
     rng = np.random.default_rng(5)
     lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
@@ -182,9 +224,13 @@ def test_the_registered_metric_hands_over_the_factor_of_the_same_matrix(
     data = solver.load_frame(targets, chain.mid_limits())
     q = rng.uniform(lo, hi) * 0.8
     g = np.zeros(chain.n_dof)
+    # One variable held: on its lower limit, the gradient pushing further down.
+    q[1] = data[4][DD_LO][1]
+    g[1] = 1.0
     ik_objective(q, np.empty(chain.n_dof), True, data)
     h = np.empty((chain.n_dof, chain.n_dof))
     assert metric_inverse(q, g, data[4][DD_LO], data[4][DD_HI], data, h)
+    assert h[1, 1] > 0.0 and not h[1, np.arange(chain.n_dof) != 1].any()  # uncoupled
     written = np.empty_like(h)
     assert ik_metric(q, g, data[4][DD_LO], data[4][DD_HI], data, written) == kind
     if kind is MetricKind.FACTOR:
