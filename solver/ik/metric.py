@@ -57,6 +57,7 @@ from .spd import (
     find_blocks,
     invert_blocks,
     invert_spd_in_place,
+    join_roots,
 )
 
 # Above this many variables the direct Gauss-Newton metric (O(n^3)) costs more than it
@@ -201,17 +202,8 @@ def _path_block_cubes(ni, ei, free, root, counts):  # type: ignore[no-untyped-de
                 continue
             if first < 0:
                 first = d
-                continue
-            a = int(root[first])
-            while root[a] != a:
-                a = int(root[a])
-            b = int(root[d])
-            while root[b] != b:
-                b = int(root[b])
-            if a < b:
-                root[b] = a
-            elif b < a:
-                root[a] = b
+            else:
+                join_roots(root, first, d)
     for i in range(n):  # root[i] < i is final already: point i straight at it
         root[i] = root[int(root[i])]
     return block_cubes(root, counts)

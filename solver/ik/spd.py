@@ -18,6 +18,7 @@ __all__ = [
     "invert_blocks",
     "invert_spd_by_blocks",
     "invert_spd_in_place",
+    "join_roots",
 ]
 
 
@@ -56,6 +57,23 @@ def invert_spd_by_blocks(m, root, order):  # type: ignore[no-untyped-def]
     return invert_blocks(m, root, order)
 
 
+@jit_inline
+def join_roots(root, i, j):  # type: ignore[no-untyped-def]
+    """Union-find: i's and j's components joined under the smaller of their roots
+    (so that every pointer goes to a smaller index, which ``find_blocks``'s last
+    pass relies on)."""
+    a = int(root[i])
+    while root[a] != a:
+        a = int(root[a])
+    b = int(root[j])
+    while root[b] != b:
+        b = int(root[b])
+    if a < b:
+        root[b] = a
+    elif b < a:
+        root[a] = b
+
+
 @jit_leaf
 def find_blocks(m, root):  # type: ignore[no-untyped-def]
     """The diagonal blocks of m up to a permutation: the components of the graph of
@@ -67,16 +85,7 @@ def find_blocks(m, root):  # type: ignore[no-untyped-def]
     for i in range(n):
         for j in range(i):
             if m[i, j] != 0.0:
-                a = int(root[i])
-                while root[a] != a:
-                    a = int(root[a])
-                b = int(root[j])
-                while root[b] != b:
-                    b = int(root[b])
-                if a < b:
-                    root[b] = a
-                elif b < a:
-                    root[a] = b
+                join_roots(root, i, j)
     blocks = 0
     for i in range(n):  # root[i] < i is final already: point i straight at it
         root[i] = root[int(root[i])]
