@@ -23,6 +23,7 @@ def run_decide(
     fresh: bool = False,
     improved: bool = True,
     was_reset: bool = False,
+    kept_fresh: bool = False,
     policy: AnalyzerPolicy | None = None,
 ) -> Action:
     table = (policy or AnalyzerPolicy.default()).as_array()
@@ -35,6 +36,7 @@ def run_decide(
         fresh,
         improved,
         was_reset,
+        kept_fresh,
     )
     return C.ACTIONS[int(out)]
 
@@ -83,6 +85,22 @@ def test_second_reset_in_a_row_with_goal_missed_escalates_to_restart() -> None:
         run_decide(Termination.STALLED, GoalStatus.NO_GOAL, fresh=True, was_reset=True)
         is Action.RESET_H
     )
+
+
+def test_reset_after_a_pass_that_kept_its_fresh_h_escalates() -> None:
+    # Every H of the pass was the objective's metric (or I): a reset rebuilds it, so
+    # the reset pass would be the same descent with its stall count cleared.
+    for code in (Termination.STALLED, Termination.LINE_SEARCH_FAILED, Termination.STEP_SMALL):
+        assert run_decide(code, GoalStatus.MISSED, fresh=True, kept_fresh=True) is (
+            Action.RESTART_RANDOM
+        )
+        assert run_decide(code, GoalStatus.NO_GOAL, fresh=True, kept_fresh=True) is (Action.ACCEPT)
+        assert (
+            run_decide(code, GoalStatus.MISSED, fresh=True, kept_fresh=True, restarts_left=0)
+            is Action.STOP
+        )
+        # The same pass after BFGS updates: the article's reset first.
+        assert run_decide(code, GoalStatus.MISSED, fresh=True) is Action.RESET_H
 
 
 def test_restart_without_restarts_left_stops() -> None:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from solver import (
+    Action,
     Chain,
     IKOptions,
     IKSolver,
@@ -16,6 +17,7 @@ from solver import (
     MinimizeOptions,
     PassStart,
     Target,
+    Termination,
     Transform,
     build_chain,
 )
@@ -161,14 +163,14 @@ def test_partial_restarts_solve_targets_whole_box_restarts_miss() -> None:
     both kinds, test_turn_restarts.py)."""
     chain = panda_limbs(4)
     rng = np.random.default_rng(11)
-    goals = rng.uniform(chain.lower, chain.upper, size=(40, chain.n_dof))
+    goals = rng.uniform(chain.lower, chain.upper, size=(80, chain.n_dof))
     # The limbs in one solve (split, each limb would restart on its own: ik.split).
     base = IKOptions(time_budget_us=None, max_restarts=4, turn_restarts=False, split_limbs=False)
     whole, whole_starts = _solved(chain, dataclasses.replace(base, full_restart_every=1), goals)
     partial, partial_starts = _solved(chain, base, goals)
     assert PassStart.RESTART_PARTIAL not in whole_starts
     assert PassStart.RESTART_PARTIAL in partial_starts
-    assert partial >= whole + 8, (whole, partial)
+    assert partial >= whole + 10, (whole, partial)  # measured: 59 against 73
 
 
 def test_one_effector_restarts_as_before() -> None:
@@ -201,3 +203,30 @@ def test_the_answer_meets_every_target() -> None:
 def test_full_restart_every_must_not_be_negative(make: type) -> None:
     with pytest.raises(InvalidProblem, match="full_restart_every"):
         make(full_restart_every=-1)
+
+
+def test_a_stalled_gauss_newton_pass_restarts_instead_of_resetting() -> None:
+    # A target out of reach: every pass misses. With the metric re-seeded at every
+    # iteration (the panda's default) a reset would rebuild the pass's own H, so the
+    # analyzer restarts; with BFGS updates (metric_every=0), or a metric phase a reset
+    # would begin again (metric_until=8, the streams'), the article's reset comes first.
+    chain = panda_arm()
+    effector = chain.effectors[0].name
+    far = Target(effector=effector, position=np.array([2.0, 0.0, 0.5]), rotation=np.eye(3))
+    resettable = (Termination.STALLED, Termination.LINE_SEARCH_FAILED, Termination.STEP_SMALL)
+    logs = []
+    for changes in ({}, {"metric_every": 0}, {"metric_until": 8}):
+        options = IKOptions(time_budget_us=None, max_restarts=6, **changes)  # type: ignore[arg-type]
+        result = IKSolver(chain, options).solve([far])
+        assert not result.success
+        logs.append(result.pass_log)
+    gauss_newton, bfgs, metric_phase = logs
+    assert any(p.termination in resettable for p in gauss_newton)
+    assert all(p.start is not PassStart.RESET_H for p in gauss_newton)
+    assert all(
+        p.action in (Action.RESTART_RANDOM, Action.STOP)
+        for p in gauss_newton
+        if p.termination in resettable
+    )
+    assert any(p.start is PassStart.RESET_H for p in bfgs)
+    assert any(p.start is PassStart.RESET_H for p in metric_phase)
