@@ -344,7 +344,9 @@ def main() -> None:
         default=None,
         help="IKOptions.metric_every (default: IKOptions' own)",
     )
-    parser.add_argument("--ftol", type=float, default=IKOptions().ftol, help="IKOptions.ftol")
+    parser.add_argument(
+        "--ftol", type=float, default=None, help="IKOptions.ftol (default: a solve's, 3e-2)"
+    )
     parser.add_argument(
         "--stall-window", type=int, default=IKOptions().stall_window, help="IKOptions.stall_window"
     )

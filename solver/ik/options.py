@@ -13,6 +13,9 @@ from .continuity import Continuity
 # re-seeds H every second iteration by default (``IKOptions.metric_interval``): the
 # 7-DOF arms of bench/ik/ keep every iteration, where the metric is cheap.
 EVERY_SECOND_METRIC_DOF = 13
+# ``IKOptions.ftol``'s default: a solve's and a stream frame's (``IKSolver.track``).
+SOLVE_FTOL = 3e-2
+STREAM_FTOL = 1e-3
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -79,11 +82,14 @@ class IKOptions:
             stretched against its elbow stop).
         limit_margin: Width of that band as a fraction of the range.
         stall_window: Multi-pass trigger (iterations); 0 for a single pass.
-        ftol: Relative improvement below which an iteration counts as stalled. 3%:
-            a damped Gauss-Newton pass that reaches its target cuts f by orders of
-            magnitude per iteration at the end, so five in a row under 3% is a pass
-            crawling into a local minimum, better left for a restart (Tiago's three
-            fingertips: 0.1% crawled up to 215 iterations; RESULTS.md, URDF sweep).
+        ftol: Relative improvement below which an iteration counts as stalled; None
+            (default): 3% for a solve, 0.1% for a stream frame (``track``). A damped
+            Gauss-Newton pass that reaches its target cuts f by orders of magnitude
+            per iteration at the end, so five in a row under 3% is a pass crawling
+            into a local minimum, better left for a restart (Tiago's three
+            fingertips: at 0.1% a pass crawled for 215 iterations). A stream frame
+            that crawls is better finished from the previous answer than restarted,
+            which is a jump (bench/history/2026-11-29-stall-restarts.md).
         gtol: Projected-gradient tolerance (a stationary point ends the pass).
         scale_initial_h: Nocedal-Wright initial scaling of H at each pass.
         curvature: The article's curvature condition in the line search.
@@ -158,7 +164,7 @@ class IKOptions:
     limit_weight: float = 0.0
     limit_margin: float = 0.05
     stall_window: int = 5
-    ftol: float = 3e-2
+    ftol: float | None = None
     gtol: float = 1e-14
     scale_initial_h: bool = True
     curvature: bool = False
@@ -193,10 +199,11 @@ class IKOptions:
             v = getattr(self, name)
             if not v > 0.0 or math.isnan(v):
                 raise InvalidProblem(f"{name} must be > 0, got {v!r}")
+        if self.ftol is not None and not (math.isfinite(self.ftol) and self.ftol >= 0.0):
+            raise InvalidProblem(f"ftol must be finite and >= 0, got {self.ftol!r}")
         for name in (
             "posture_weight",
             "limit_weight",
-            "ftol",
             "gtol",
             "damping",
             "damping_scale",
@@ -225,13 +232,19 @@ class IKOptions:
             return self.metric_every
         return 2 if task_rows >= n_dof >= EVERY_SECOND_METRIC_DOF else 1
 
-    def minimize_options(self, n_dof: int = 0, task_rows: int = 0) -> MinimizeOptions:
+    def minimize_options(
+        self, n_dof: int = 0, task_rows: int = 0, *, stream: bool = False
+    ) -> MinimizeOptions:
         """The optimizer's options for a chain of ``n_dof`` variables and
-        ``task_rows`` task rows (they choose ``metric_every`` when it is None)."""
+        ``task_rows`` task rows (they choose ``metric_every`` when it is None), for a
+        solve or, with ``stream``, a stream frame (``ftol``'s default)."""
         budget = None if self.time_budget_us is None else self.time_budget_us * 1e-6
+        ftol = self.ftol
+        if ftol is None:
+            ftol = STREAM_FTOL if stream else SOLVE_FTOL
         return MinimizeOptions(
             gtol=self.gtol,
-            ftol=self.ftol,
+            ftol=ftol,
             stall_window=self.stall_window,
             f_goal=1.0,  # the goal measure is max(error / tolerance)
             max_step=self.max_step_rad,
@@ -268,11 +281,6 @@ class IKOptions:
 # drifted along its self-motion into a limit or a singular pose, then the global
 # fallback jumped); SMOOTH never steps more than the limit and answers NOT_REACHED on
 # the frames it cannot follow (figures: bench/RESULTS.md, tracking without pops).
-# ftol=1e-3, not a cold solve's 3%: a frame that crawls is better finished from the
-# previous answer than restarted (a restart is a jump); with 3% the REACH tracker
-# followed 2 of 20 iiwa pose streams within twice the reference's step instead of 12,
-# and SMOOTH met 95.7% of Baxter's pose frames instead of 98.0% (bench.tracking
-# --streams 20 --budget-us 0 --no-peer).
 STREAM_DEFAULTS = IKOptions(
     continuity=Continuity.SMOOTH,
     max_joint_step_rad=0.1,
@@ -286,5 +294,4 @@ STREAM_DEFAULTS = IKOptions(
     metric_until=8,
     damping_scale=1.0,
     max_restarts=50,
-    ftol=1e-3,
 )

@@ -18,6 +18,7 @@ class Packed(NamedTuple):
     """One IKOptions object as the core takes it."""
 
     options: IKOptions
+    stream: bool  # packed for stream frames (``track``: ``IKOptions.ftol``'s default)
     fopt: np.ndarray
     iopt: np.ndarray  # iopt[I_SEED] carries this solver's restart generator along
     policy: np.ndarray
@@ -27,7 +28,8 @@ class Packed(NamedTuple):
 
 class OptionPacks:
     """Option vectors, policy table and result layout of one solver, per IKOptions
-    object (keyed by identity: the options a session reuses frame after frame)."""
+    object (keyed by identity: the options a session reuses frame after frame) and
+    kind of call (a solve, or a stream frame: ``IKOptions.minimize_options``)."""
 
     def __init__(self, chain: Chain, rng: np.random.Generator) -> None:
         self._chain = chain
@@ -35,18 +37,18 @@ class OptionPacks:
         # The task's rows with every effector targeted, as the metric counts them
         # (3 for a position effector, 6 otherwise): they choose metric_every's default.
         self._task_rows = sum(3 if e.mode is EffectorMode.POSITION else 6 for e in chain.effectors)
-        self._packed: dict[int, Packed] = {}
+        self._packed: dict[tuple[int, bool], Packed] = {}
         self.last: Packed | None = None
 
-    def get(self, opts: IKOptions) -> Packed:
+    def get(self, opts: IKOptions, stream: bool = False) -> Packed:
         last = self.last
-        if last is not None and last.options is opts:
+        if last is not None and last.options is opts and last.stream == stream:
             return last
-        hit = self._packed.get(id(opts))
+        hit = self._packed.get((id(opts), stream))
         if hit is None or hit.options is not opts:
             chain = self._chain
             n = chain.n_dof
-            mopts = opts.minimize_options(n, self._task_rows)
+            mopts = opts.minimize_options(n, self._task_rows, stream=stream)
             seed = int(self._rng.integers(0, 2**31 - 1))
             fopt, iopt = pack_options(mopts, seed=seed)
             if len(self._packed) > 32:
@@ -61,7 +63,7 @@ class OptionPacks:
                 chain.followers,
             )
             out_size = 3 * m + n * n + mopts.max_passes * C.N_LOG
-            hit = Packed(opts, fopt, iopt, opts.policy.as_array(), out_size, layout)
-            self._packed[id(opts)] = hit
+            hit = Packed(opts, stream, fopt, iopt, opts.policy.as_array(), out_size, layout)
+            self._packed[(id(opts), stream)] = hit
         self.last = hit
         return hit

@@ -213,14 +213,14 @@ class IKSolver:
         # near: it is solved as REACH would.
         smooth = opts.continuity is Continuity.SMOOTH and self._answered
         box = float(opts.max_joint_step_rad) if smooth else 0.0
-        result = self._frame(targets, q0, opts, rng, h0, step, box)
+        result = self._frame(targets, q0, opts, rng, h0, step, box, stream=True)
         fallback = opts.global_fallback and math.isfinite(opts.restart_radius_rad)
         if fallback and not smooth and not result.success:
             budget = opts.time_budget_us
             left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
             if left is None or left > 0.0:
                 wide = replace(opts, restart_radius_rad=_GLOBAL_RADIUS, time_budget_us=left)
-                retry = self._frame(targets, q0, wide, rng, None, step)
+                retry = self._frame(targets, q0, wide, rng, None, step, stream=True)
                 if retry.success:
                     result = retry
         self.q = result.q.copy()
@@ -357,6 +357,7 @@ class IKSolver:
         *,
         time_left_us: float | None = None,
         frozen: np.ndarray | None = None,
+        stream: bool = False,
     ) -> IKResult:
         task = self._task
         task.load(targets, opts)
@@ -384,8 +385,8 @@ class IKSolver:
                 self._narrow_bounds = compiled_entry(narrow_bounds, (self._dd, q0, box))
             task.bounds_are_limits = False
         packed = self._packs.last
-        if packed is None or packed.options is not opts:
-            packed = self._packs.get(opts)
+        if packed is None or packed.options is not opts or packed.stream != stream:
+            packed = self._packs.get(opts, stream)
         if rng is not None:
             packed.iopt[C.I_SEED] = int(rng.integers(0, 2**31 - 1))
         fopt = packed.fopt

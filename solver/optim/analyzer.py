@@ -10,10 +10,11 @@ Guards sit on top of the table, because the table alone could loop:
 - RESET_H after a pass that began from H = I and did not lower f cannot help;
 - with a goal that is still missed, a second RESET_H in a row (the reset pass
   itself stalled) is not helping either: a local minimum is crawled along, not left;
-- RESET_H after a pass that made no BFGS update (every H it used was I or the
-  objective's metric, re-seeded at every iteration of every pass: the IK's damped
-  Gauss-Newton steps on a cold solve) would rebuild the very H the pass used, so the
-  reset pass is the stalled pass again with its stall count cleared (on Tiago's three
+- RESET_H after a pass whose every H was the objective's metric, re-seeded at each
+  iteration (``metric_every=1``, no ``metric_until``, no BFGS update in between: the
+  IK's damped Gauss-Newton steps) would rebuild the very H the next iteration
+  would have used, so the reset pass is the stalled pass again with its stall count
+  cleared (on Tiago's three
   fingertips, 1000 targets, such reset passes met the goal 5 times in 193 and took
   17% of the iterations of the passes that missed it).
   All three escalate: to RESTART_RANDOM when the goal was missed and restarts remain,
@@ -152,12 +153,14 @@ def decide(
         restarts_left: Random restarts still allowed.
         budget_left: False once iterations, evaluations or time are spent.
         pass_began_with_identity: The pass started with a fresh H (I or the
-            objective's metric: no curvature learnt yet).
+            objective's metric: no curvature learnt yet; the name is the article's
+            case, H = I).
         pass_improved: f at the end of the pass is below f at its start.
         pass_was_reset: The pass itself began with a RESET_H.
-        pass_kept_fresh_h: The pass began with a fresh H (I or the objective's
-            metric) and made no BFGS update, and the next pass would do the same
-            (no ``metric_until`` phase to restart): a reset would rebuild the same H.
+        pass_kept_fresh_h: Every H of the pass was the objective's metric,
+            re-seeded at each iteration, and the next pass would do the same
+            (``metric_every=1``, no ``metric_until`` phase a reset would begin
+            again): a reset would rebuild the same H.
     """
     action = policy[code, goal]
     futile = pass_kept_fresh_h or (

@@ -391,9 +391,10 @@ def solve_passes(  # type: ignore[no-untyped-def]
             began_fresh,
             f < f_pass_start,
             start_kind == C.START_RESET_H,
-            # A reset rebuilds this pass's H only where every H of the pass was the
-            # fresh one and the next would be too (no metric_until phase to restart).
-            began_fresh and h_fresh and metric_until == 0,
+            # A reset rebuilds this pass's H only where the metric re-seeded it at every
+            # iteration (no BFGS update came between) and would go on doing so: no
+            # metric_until phase that a reset would begin again.
+            h_fresh and metric_every == 1 and metric_until == 0,
         )
         log_pass(
             log,

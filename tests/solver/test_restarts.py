@@ -22,6 +22,7 @@ from solver import (
     build_chain,
 )
 from solver.ik import pose_targets
+from solver.ik.options import SOLVE_FTOL, STREAM_FTOL
 from solver.ik.settled import settled_variables
 from solver.model import EffectorMode
 from solver.model.examples import panda_arm
@@ -230,3 +231,28 @@ def test_a_stalled_gauss_newton_pass_restarts_instead_of_resetting() -> None:
     )
     assert any(p.start is PassStart.RESET_H for p in bfgs)
     assert any(p.start is PassStart.RESET_H for p in metric_phase)
+
+
+def test_a_solve_stalls_at_3_percent_and_a_stream_frame_at_0_1() -> None:
+    opts = IKOptions()
+    assert opts.ftol is None
+    assert opts.minimize_options(7, 6).ftol == SOLVE_FTOL == 3e-2
+    assert opts.minimize_options(7, 6, stream=True).ftol == STREAM_FTOL == 1e-3
+    fixed = IKOptions(ftol=0.2)
+    assert fixed.minimize_options(stream=True).ftol == fixed.minimize_options().ftol == 0.2
+    with pytest.raises(InvalidProblem, match="ftol"):
+        IKOptions(ftol=-1.0)
+    # Through the solver: from the same pose, towards a target out of reach, a solve's
+    # first pass gives up while a tracked frame's goes on crawling.
+    chain = panda_arm()
+    effector = chain.effectors[0].name
+    far = Target(effector=effector, position=np.array([2.0, 0.0, 0.5]), rotation=np.eye(3))
+    once = IKOptions(time_budget_us=None, max_restarts=0)
+    solver = IKSolver(chain, once)
+    start = chain.mid_limits()
+    solved = solver.solve([far], seed=start)
+    solver.set_pose(start)
+    tracked = solver.track([far])
+    assert solved.pass_log[0].termination is Termination.STALLED
+    assert tracked.pass_log[0].start is PassStart.INITIAL
+    assert solved.pass_log[0].iterations < tracked.pass_log[0].iterations
