@@ -5,11 +5,13 @@ connection dropped mid-pipeline with no answer lost or repeated."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import datetime
 import enum
 import json
 import socket
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator
@@ -763,3 +765,88 @@ def test_stream_url_and_token_from_session(server: Server, session: Session) -> 
     # The token travels in a header, never in the URL (proxies log URLs).
     assert session.token not in url
     assert httpx.URL(url).params.get("token") is None
+
+
+class _DroppingRelay:
+    """A TCP relay on 127.0.0.1 in front of the server that closes the next ``drops``
+    connections once a request has arrived on them, unanswered (what a client sees of a
+    worker killed mid-request behind a balancer), and relays the others."""
+
+    def __init__(self, upstream: str, drops: int) -> None:
+        url = httpx.URL(upstream)
+        self._upstream = (url.host, url.port)
+        self.drops = drops
+        self.dropped = 0
+        self._listener = socket.create_server(("127.0.0.1", 0))
+        self.base = f"http://127.0.0.1:{self._listener.getsockname()[1]}"
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                conn, _ = self._listener.accept()
+            except OSError:  # closed
+                return
+            if self.drops > 0:
+                self.drops -= 1
+                self.dropped += 1  # before the close the client reacts to
+                with conn:
+                    conn.recv(65536)  # the request, never answered
+                continue
+            threading.Thread(target=self._relay, args=(conn,), daemon=True).start()
+
+    def _relay(self, conn: socket.socket) -> None:
+        with conn, socket.create_connection(self._upstream) as upstream:
+            back = threading.Thread(target=self._pump, args=(upstream, conn))
+            back.start()
+            self._pump(conn, upstream)
+            back.join()
+
+    @staticmethod
+    def _pump(source: socket.socket, sink: socket.socket) -> None:
+        with contextlib.suppress(OSError):
+            while data := source.recv(65536):
+                sink.sendall(data)
+        with contextlib.suppress(OSError):
+            sink.shutdown(socket.SHUT_WR)
+
+    def close(self) -> None:
+        self._listener.close()
+
+
+def test_a_frame_with_an_id_is_sent_again_after_a_dropped_connection(
+    ik: Client, session: Session
+) -> None:
+    quick = Reconnect(attempts=3, initial_delay_s=0.01)
+    relay = _DroppingRelay(ik.base_url, drops=2)
+    try:
+        with Client(relay.base, reconnect=quick) as through:
+            result = through.frame(session, [tool(0.1)], id=7)
+        assert relay.dropped == 2 and result.id == 7
+        assert ik.get_session(session).counters.frames == 1  # the server saw it once
+
+        async def run() -> FrameResult:
+            async with AsyncClient(relay.base, reconnect=quick) as through:
+                return await through.frame(session, [tool(0.11)], id=8)
+
+        relay.drops = 1
+        assert asyncio.run(run()).id == 8 and relay.dropped == 3
+
+        # Without an id a frame is not sent again (a server could solve it twice), nor
+        # with reconnecting off; neither reached the server.
+        for client, kwargs in (
+            (Client(relay.base, reconnect=quick), {}),
+            (Client(relay.base, reconnect=Reconnect(attempts=0)), {"id": 9}),
+        ):
+            relay.drops = 1
+            with client, pytest.raises(httpx.TransportError):
+                client.frame(session, [tool(0.12)], **kwargs)
+        assert relay.dropped == 5
+        # More drops than attempts: the last error is raised.
+        relay.drops = 4
+        with Client(relay.base, reconnect=quick) as through, pytest.raises(httpx.TransportError):
+            through.frame(session, [tool(0.12)], id=10)
+        assert relay.dropped == 9
+        assert ik.get_session(session).counters.frames == 2
+    finally:
+        relay.close()

@@ -45,7 +45,11 @@ class SessionRef(Protocol):
 
 @dataclass(frozen=True, slots=True)
 class Call(Generic[T]):
-    """One HTTP request and the parser of its successful answer."""
+    """One HTTP request and the parser of its successful answer. ``repeatable``: sending
+    it again has the effect of sending it once (a read, a pose or options set to given
+    values, a stateless solve, a frame with an ``id``: a server with a shared store
+    answers a frame sent again from its stored answer), so a client may send it again
+    when it got no answer."""
 
     method: str
     path: str
@@ -53,6 +57,7 @@ class Call(Generic[T]):
     json: Any = None
     params: dict[str, str] = field(default_factory=dict)
     headers: dict[str, str] = field(default_factory=dict)
+    repeatable: bool = False
 
     def request(self, http: httpx.Client | httpx.AsyncClient) -> httpx.Request:
         """The request, built by the client that sends it (its base URL and headers).
@@ -121,18 +126,39 @@ def _on_session(
     *,
     json: Any = None,
     params: dict[str, str] | None = None,
+    repeatable: bool = False,
 ) -> Call[T]:
     """A call on ``/v1/sessions/{id}{subpath}``, with the session's token."""
     path = f"/v1/sessions/{session.id}{subpath}"
     headers = {"Authorization": f"Bearer {session.token}"}
-    return Call(method, path, parse, json=json, params=params or {}, headers=headers)
+    return Call(
+        method,
+        path,
+        parse,
+        json=json,
+        params=params or {},
+        headers=headers,
+        repeatable=repeatable,
+    )
 
 
 def _post_frames(
-    session: SessionRef, body: Any, compact: bool, parse: Callable[[httpx.Response], T]
+    session: SessionRef,
+    body: Any,
+    compact: bool,
+    parse: Callable[[httpx.Response], T],
+    repeatable: bool = False,
 ) -> Call[T]:
     """``POST /v1/sessions/{id}/frames``: one frame or a clip."""
-    return _on_session(session, "POST", "/frames", parse, json=body, params=_results(compact))
+    return _on_session(
+        session,
+        "POST",
+        "/frames",
+        parse,
+        json=body,
+        params=_results(compact),
+        repeatable=repeatable,
+    )
 
 
 def _session_info(response: httpx.Response) -> SessionInfo:
@@ -162,12 +188,12 @@ def create_session(
 
 def get_session(session: SessionRef) -> Call[SessionInfo]:
     """The session's chain summary, options, pose and counters."""
-    return _on_session(session, "GET", "", _session_info)
+    return _on_session(session, "GET", "", _session_info, repeatable=True)
 
 
 def patch_session(session: SessionRef, options: SolverOptionsPatch) -> Call[SessionInfo]:
     """Change solver options; the options left out keep their value."""
-    return _on_session(session, "PATCH", "", _session_info, json=options)
+    return _on_session(session, "PATCH", "", _session_info, json=options, repeatable=True)
 
 
 def set_pose(
@@ -178,7 +204,9 @@ def set_pose(
 ) -> Call[Pose]:
     """Set the pose the next frame starts from: every DOF (``q``) or some by name."""
     pose = _pose_in(q, joints)
-    return _on_session(session, "PUT", "/pose", lambda r: Pose.from_json(r.json()), json=pose)
+    return _on_session(
+        session, "PUT", "/pose", lambda r: Pose.from_json(r.json()), json=pose, repeatable=True
+    )
 
 
 def delete_session(session: SessionRef) -> Call[None]:
@@ -193,10 +221,16 @@ def frame(
     compact: bool = False,
 ) -> Call[FrameResult]:
     """Solve one frame from the session's pose (``compact``: no joints by name and no
-    per-effector errors)."""
+    per-effector errors). With an ``id`` the client sends the frame again, same id, when
+    it got no answer (a dropped connection, a 502, 503 or 504: the client's
+    ``reconnect``); behind a balancer with a shared store it is then answered once."""
     body = _without_none(id=id, targets=targets)
     return _post_frames(
-        session, body, compact, lambda r: FrameResult.from_json(r.json()["results"][0])
+        session,
+        body,
+        compact,
+        lambda r: FrameResult.from_json(r.json()["results"][0]),
+        repeatable=id is not None,
     )
 
 
@@ -236,7 +270,9 @@ def solve(
 ) -> Call[FrameResult]:
     """A stateless one-shot solve (no session)."""
     body = _without_none(chain=chain, targets=targets, seed=seed, options=options, id=id)
-    return Call("POST", "/v1/solve", lambda r: FrameResult.from_json(r.json()), json=body)
+    return Call(
+        "POST", "/v1/solve", lambda r: FrameResult.from_json(r.json()), json=body, repeatable=True
+    )
 
 
 def _pose_in(q: list[float] | None, joints: dict[str, float] | None) -> PoseIn:

@@ -4,15 +4,21 @@ Every call is written once, in calls.py (its signature, documentation, request a
 answer), and listed once, in ``_BaseClient``; each client only sends (``_send``: httpx's
 blocking or asyncio transport), so ``Client.frame`` returns what ``AsyncClient.frame``
 awaits. Every call returns a typed answer or raises a ``ServiceError`` subclass carrying
-the server's ``code``, ``field`` and ``retry_after_s``. ``stream()`` opens the session's
-WebSocket (``Stream`` / ``AsyncStream``).
+the server's ``code``, ``field`` and ``retry_after_s``. A call that got no answer (the
+connection dropped, or a balancer's or the server's 502, 503 or 504) is sent again when
+it is repeatable (``calls.Call``: reads, a pose or options set, a stateless solve, a
+frame with an id), as often and as patiently as the client's ``reconnect`` says and no
+sooner than a ``Retry-After``. ``stream()`` opens the session's WebSocket (``Stream`` /
+``AsyncStream``).
 """
 
 from __future__ import annotations
 
 import abc
+import asyncio
 import functools
 import socket
+import time
 from collections.abc import Callable, Coroutine
 from typing import Any, Generic, ParamSpec, TypeVar, overload
 
@@ -29,6 +35,9 @@ HTTP = TypeVar("HTTP", httpx.Client, httpx.AsyncClient)
 S = TypeVar("S", Stream, AsyncStream)
 DEFAULT_TIMEOUT_S = 30.0
 DEFAULT_RECONNECT = Reconnect()
+# What a balancer answers for a worker it lost, and the server for a store or solver it
+# cannot reach yet: no answer to the call itself.
+_NO_ANSWER_STATUSES = frozenset({502, 503, 504})
 
 
 class _Endpoint(Generic[P, T]):
@@ -73,6 +82,8 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
         base_url: The service, e.g. ``http://127.0.0.1:8000``.
         api_key: Sent as ``X-API-Key`` when the server has API keys (``IK_API_KEYS``).
         timeout_s: Per-request timeout [s].
+        reconnect: How often and how patiently a repeatable call that got no answer is
+            sent again (``Reconnect(attempts=0)``: never; the error is raised at once).
         **httpx_options: Passed on to the httpx client (e.g. ``transport``, ``verify``).
     """
 
@@ -84,9 +95,11 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
         *,
         api_key: str | None = None,
         timeout_s: float = DEFAULT_TIMEOUT_S,
+        reconnect: Reconnect = DEFAULT_RECONNECT,
         **httpx_options: Any,
     ) -> None:
         self.base_url = base_url
+        self.reconnect = reconnect
         headers = {"X-API-Key": api_key} if api_key is not None else {}
         self._http: HTTP = self._http_client(
             base_url=base_url, headers=headers, timeout=timeout_s, **httpx_options
@@ -94,6 +107,22 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
 
     @abc.abstractmethod
     def _http_client(self, **options: Any) -> HTTP: ...
+
+    def _wait_before_resending(
+        self, call: Call[Any], attempt: int, response: httpx.Response | None
+    ) -> float | None:
+        """Seconds to wait before sending ``call`` again after ``attempt`` sends that got
+        ``response`` (None: the connection failed), or None: do not send it again."""
+        if not call.repeatable or attempt >= self.reconnect.attempts:
+            return None
+        wait = self.reconnect.delay_s(attempt)
+        if response is not None:
+            if response.status_code not in _NO_ANSWER_STATUSES:
+                return None
+            retry_after = response.headers.get("Retry-After", "")
+            if retry_after.isdigit():
+                wait = max(wait, float(retry_after))
+        return wait
 
     create_session = _Endpoint(calls.create_session)
     get_session = _Endpoint(calls.get_session)
@@ -170,7 +199,20 @@ class Client(_BaseClient[httpx.Client, Stream]):
         self._http.close()
 
     def _send(self, call: Call[T]) -> T:
-        return call.result(self._http.send(call.request(self._http)))
+        attempt = 0
+        while True:
+            try:
+                response = self._http.send(call.request(self._http))
+            except httpx.TransportError:
+                wait = self._wait_before_resending(call, attempt, None)
+                if wait is None:
+                    raise
+            else:
+                wait = self._wait_before_resending(call, attempt, response)
+                if wait is None:
+                    return call.result(response)
+            time.sleep(wait)
+            attempt += 1
 
 
 class AsyncClient(_BaseClient[httpx.AsyncClient, AsyncStream]):
@@ -191,4 +233,17 @@ class AsyncClient(_BaseClient[httpx.AsyncClient, AsyncStream]):
         await self._http.aclose()
 
     async def _send(self, call: Call[T]) -> T:
-        return call.result(await self._http.send(call.request(self._http)))
+        attempt = 0
+        while True:
+            try:
+                response = await self._http.send(call.request(self._http))
+            except httpx.TransportError:
+                wait = self._wait_before_resending(call, attempt, None)
+                if wait is None:
+                    raise
+            else:
+                wait = self._wait_before_resending(call, attempt, response)
+                if wait is None:
+                    return call.result(response)
+            await asyncio.sleep(wait)
+            attempt += 1

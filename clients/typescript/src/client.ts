@@ -1,12 +1,17 @@
 /**
  * `Client`: the IK service over HTTP (the platform's `fetch`), and `stream()` for a
  * session's WebSocket. Every call resolves to a typed answer or rejects with a
- * `ServiceError` subclass carrying the server's `code`, `field` and `retryAfterS`.
+ * `ServiceError` subclass carrying the server's `code`, `field` and `retryAfterS`. A call
+ * that got no answer (the connection failed, or a balancer's or the server's 502, 503 or
+ * 504) is sent again when it is repeatable (reads, a pose or options set, a stateless
+ * solve, a frame with an `id`: behind a balancer with a shared store a frame sent again
+ * is answered once), as often and as patiently as `reconnect` says and no sooner than a
+ * `Retry-After`.
  */
 
 import { encodeBody } from "./encode.js";
 import { serviceError } from "./errors.js";
-import { Stream, type StreamOptions } from "./stream.js";
+import { DEFAULT_RECONNECT, type Reconnect, Stream, type StreamOptions } from "./stream.js";
 import type {
   BatchEntry,
   BatchFrame,
@@ -32,6 +37,17 @@ export interface ClientOptions {
   apiKey?: string;
   /** Per-request timeout [ms]. */
   timeoutMs?: number;
+  /** How often and how patiently a repeatable call that got no answer is sent again
+   * (`{attempts: 0}`: never; the error is thrown at once). */
+  reconnect?: Partial<Reconnect>;
+}
+
+// What a balancer answers for a worker it lost, and the server for a store or solver it
+// cannot reach yet: no answer to the call itself.
+const NO_ANSWER_STATUSES = new Set([502, 503, 504]);
+
+function sleep(ms: number): Promise<void> {
+  return new Promise((resolve) => setTimeout(resolve, ms));
 }
 
 export interface CreateSessionOptions {
@@ -86,12 +102,14 @@ export class Client {
   readonly baseUrl: string;
   private readonly apiKey: string | undefined;
   private readonly timeoutMs: number;
+  readonly reconnect: Reconnect;
 
   /** @param baseUrl The service, e.g. `http://127.0.0.1:8000`. */
   constructor(baseUrl: string, options: ClientOptions = {}) {
     this.baseUrl = baseUrl.replace(/\/+$/, "");
     this.apiKey = options.apiKey;
     this.timeoutMs = options.timeoutMs ?? 30_000;
+    this.reconnect = { ...DEFAULT_RECONNECT, ...options.reconnect };
   }
 
   /** A new session on `chain` (e.g. `{format: "example", name: "panda_arm"}`). */
@@ -107,24 +125,33 @@ export class Client {
   }
 
   getSession(session: SessionRef): Promise<SessionInfo> {
-    return this.request("GET", `/v1/sessions/${session.id}`, { session });
+    return this.request("GET", `/v1/sessions/${session.id}`, { session, repeatable: true });
   }
 
   /** Change solver options; the options left out keep their value. */
   patchSession(session: SessionRef, options: OptionsPatch): Promise<SessionInfo> {
-    return this.request("PATCH", `/v1/sessions/${session.id}`, { session, body: options as Json });
+    return this.request("PATCH", `/v1/sessions/${session.id}`, {
+      session,
+      body: options as Json,
+      repeatable: true,
+    });
   }
 
   /** Set the pose the next frame starts from: `{q}` (every DOF) or `{joints}` (some, by name). */
   setPose(session: SessionRef, pose: PoseIn): Promise<Pose> {
-    return this.request("PUT", `/v1/sessions/${session.id}/pose`, { session, body: pose as Json });
+    return this.request("PUT", `/v1/sessions/${session.id}/pose`, {
+      session,
+      body: pose as Json,
+      repeatable: true,
+    });
   }
 
   async deleteSession(session: SessionRef): Promise<void> {
     await this.request("DELETE", `/v1/sessions/${session.id}`, { session });
   }
 
-  /** Solve one frame from the session's pose (`compact`: no joints by name, no effector errors). */
+  /** Solve one frame from the session's pose (`compact`: no joints by name, no effector
+   * errors). With an `id` a frame that got no answer is sent again, same id (`reconnect`). */
   async frame<C extends boolean = false>(
     session: SessionRef,
     targets: Target[],
@@ -134,6 +161,7 @@ export class Client {
       session,
       body: withoutUndefined({ id: options.id, targets }),
       compact: options.compact ?? false,
+      repeatable: options.id !== undefined,
     });
     return out.results[0] as Result<C>;
   }
@@ -171,7 +199,7 @@ export class Client {
   /** A stateless one-shot solve (no session). */
   solve(chain: Chain, targets: Target[], options: SolveOptions = {}): Promise<FrameResult> {
     const body = withoutUndefined({ chain, targets, seed: options.seed, options: options.options, id: options.id });
-    return this.request("POST", "/v1/solve", { body });
+    return this.request("POST", "/v1/solve", { body, repeatable: true });
   }
 
   /** The session's WebSocket, open (see `Stream`). */
@@ -188,7 +216,7 @@ export class Client {
   private async request<T>(
     method: string,
     path: string,
-    init: { session?: SessionRef; body?: Json; compact?: boolean },
+    init: { session?: SessionRef; body?: Json; compact?: boolean; repeatable?: boolean },
   ): Promise<T> {
     // Written first: a body that cannot be (NaN, a BigInt) throws an EncodeError, unsent.
     const body = init.body === undefined ? null : encodeBody(init.body, "json");
@@ -197,13 +225,41 @@ export class Client {
     if (init.session !== undefined) headers["Authorization"] = `Bearer ${init.session.token}`;
     if (init.body !== undefined) headers["Content-Type"] = "application/json";
     const query = init.compact ? "?results=compact" : "";
-    const response = await fetch(`${this.baseUrl}${path}${query}`, {
-      method,
-      headers,
-      body,
-      signal: AbortSignal.timeout(this.timeoutMs),
-    });
-    await raiseForError(response);
-    return (response.status === 204 ? undefined : await response.json()) as T;
+    for (let attempt = 0; ; attempt++) {
+      let response: Response;
+      try {
+        response = await fetch(`${this.baseUrl}${path}${query}`, {
+          method,
+          headers,
+          body,
+          signal: AbortSignal.timeout(this.timeoutMs),
+        });
+      } catch (error) {
+        const wait = this.waitBeforeResending(init.repeatable ?? false, attempt, null);
+        if (wait === null) throw error;
+        await sleep(wait);
+        continue;
+      }
+      const wait = this.waitBeforeResending(init.repeatable ?? false, attempt, response);
+      if (wait === null) {
+        await raiseForError(response);
+        return (response.status === 204 ? undefined : await response.json()) as T;
+      }
+      await response.body?.cancel();
+      await sleep(wait);
+    }
+  }
+
+  /** Milliseconds to wait before sending a call again after `attempt` sends that got
+   * `response` (null: the connection failed), or null: do not send it again. */
+  private waitBeforeResending(repeatable: boolean, attempt: number, response: Response | null): number | null {
+    if (!repeatable || attempt >= this.reconnect.attempts) return null;
+    let wait = Math.min(this.reconnect.initialDelayMs * 2 ** attempt, this.reconnect.maxDelayMs);
+    if (response !== null) {
+      if (!NO_ANSWER_STATUSES.has(response.status)) return null;
+      const retryAfterS = Number(response.headers.get("Retry-After") ?? Number.NaN);
+      if (Number.isFinite(retryAfterS)) wait = Math.max(wait, 1000 * retryAfterS);
+    }
+    return wait;
   }
 }

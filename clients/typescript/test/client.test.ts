@@ -6,6 +6,7 @@
  */
 
 import assert from "node:assert/strict";
+import { type AddressInfo, connect, createServer, type Socket as NetSocket } from "node:net";
 import { after, before, describe, test } from "node:test";
 
 import { WebSocket as NodeWebSocket, WebSocketServer } from "ws";
@@ -294,7 +295,74 @@ describe("errors", () => {
 });
 
 // --- HTTP ------------------------------------------------------------------------------------
+/** A TCP relay on 127.0.0.1 in front of the server that closes its first `drops`
+ * connections once a request has arrived on them, unanswered (what a client sees of a
+ * worker killed mid-request behind a balancer), and relays the others. */
+async function droppingRelay(upstream: string, drops: number) {
+  const target = new URL(upstream);
+  const open = new Set<NetSocket>();
+  let dropped = 0;
+  const relay = createServer((conn) => {
+    open.add(conn);
+    conn.on("close", () => open.delete(conn));
+    conn.on("error", () => conn.destroy());
+    if (dropped < drops) {
+      dropped += 1;
+      conn.once("data", () => conn.destroy());
+      return;
+    }
+    const up = connect(Number(target.port), target.hostname);
+    open.add(up);
+    up.on("close", () => open.delete(up));
+    up.on("error", () => conn.destroy());
+    conn.on("close", () => up.destroy());
+    up.on("close", () => conn.destroy());
+    conn.pipe(up);
+    up.pipe(conn);
+  });
+  await new Promise<void>((resolve) => relay.listen(0, "127.0.0.1", resolve));
+  return {
+    url: `http://127.0.0.1:${(relay.address() as AddressInfo).port}`,
+    dropped: () => dropped,
+    close: () => {
+      for (const socket of open) socket.destroy();
+      relay.close();
+    },
+  };
+}
+
 describe("http", () => {
+  test("a frame with an id is sent again after a dropped connection; without one it is not", async () => {
+    const session = await ik.createSession(PANDA);
+    const quick = { attempts: 3, initialDelayMs: 10 };
+    const twice = await droppingRelay(ik.baseUrl, 2);
+    try {
+      const result = await new Client(twice.url, { reconnect: quick }).frame(session, [tool(0.1)], { id: 7 });
+      assert.equal(result.id, 7);
+      assert.equal(twice.dropped(), 2);
+    } finally {
+      twice.close();
+    }
+    assert.equal((await ik.getSession(session)).counters.frames, 1); // the server saw it once
+    // Without an id (a server could solve it twice), or with reconnecting off, it is not;
+    // with more drops than attempts the last error is thrown.
+    const cases: [number, { id?: number }, { attempts: number; initialDelayMs: number }, number][] = [
+      [1, {}, quick, 1],
+      [1, { id: 9 }, { attempts: 0, initialDelayMs: 10 }, 1],
+      [9, { id: 10 }, quick, 4],
+    ];
+    for (const [drops, options, reconnect, sends] of cases) {
+      const relay = await droppingRelay(ik.baseUrl, drops);
+      try {
+        await assert.rejects(new Client(relay.url, { reconnect }).frame(session, [tool(0.12)], options));
+        assert.equal(relay.dropped(), sends);
+      } finally {
+        relay.close();
+      }
+    }
+    assert.equal((await ik.getSession(session)).counters.frames, 1);
+  });
+
   test("session calls", async () => {
     const session = await ik.createSession(PANDA, { options: { time_budget_us: 5000 } });
     assert.equal(session.n_dof, 7);
