@@ -770,13 +770,16 @@ def test_stream_url_and_token_from_session(server: Server, session: Session) -> 
 class _DroppingRelay:
     """A TCP relay on 127.0.0.1 in front of the server that closes the next ``drops``
     connections once a request has arrived on them, unanswered (what a client sees of a
-    worker killed mid-request behind a balancer), and relays the others."""
+    worker killed mid-request behind a balancer), answers the next ``busy`` with a
+    balancer's 503 and ``Retry-After: retry_after``, and relays the others."""
 
     def __init__(self, upstream: str, drops: int) -> None:
         url = httpx.URL(upstream)
         self._upstream = (url.host, url.port)
         self.drops = drops
         self.dropped = 0
+        self.busy = 0
+        self.retry_after = 0
         self._listener = socket.create_server(("127.0.0.1", 0))
         self.base = f"http://127.0.0.1:{self._listener.getsockname()[1]}"
         threading.Thread(target=self._accept, daemon=True).start()
@@ -792,6 +795,16 @@ class _DroppingRelay:
                 self.dropped += 1  # before the close the client reacts to
                 with conn:
                     conn.recv(65536)  # the request, never answered
+                continue
+            if self.busy > 0:
+                self.busy -= 1
+                self.dropped += 1
+                with conn:
+                    conn.recv(65536)
+                    conn.sendall(
+                        b"HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\n"
+                        b"Retry-After: %d\r\nConnection: close\r\n\r\n" % self.retry_after
+                    )
                 continue
             threading.Thread(target=self._relay, args=(conn,), daemon=True).start()
 
@@ -847,6 +860,19 @@ def test_a_frame_with_an_id_is_sent_again_after_a_dropped_connection(
         with Client(relay.base, reconnect=quick) as through, pytest.raises(httpx.TransportError):
             through.frame(session, [tool(0.12)], id=10)
         assert relay.dropped == 9
-        assert ik.get_session(session).counters.frames == 2
+        # A balancer's 503: sent again after its Retry-After, unless that is longer than
+        # the client waits (the caller gets the error at once).
+        relay.busy = 2
+        with Client(relay.base, reconnect=quick) as through:
+            assert through.frame(session, [tool(0.13)], id=11).id == 11
+        relay.busy, relay.retry_after = 1, 60
+        with (
+            Client(relay.base, reconnect=quick) as through,
+            pytest.raises(ik_client.ServiceError) as busy,
+        ):
+            through.frame(session, [tool(0.13)], id=12)
+        assert busy.value.status_code == 503 and busy.value.retry_after_s == 60
+        assert relay.dropped == 12
+        assert ik.get_session(session).counters.frames == 3
     finally:
         relay.close()

@@ -45,11 +45,11 @@ class SessionRef(Protocol):
 
 @dataclass(frozen=True, slots=True)
 class Call(Generic[T]):
-    """One HTTP request and the parser of its successful answer. ``repeatable``: sending
-    it again has the effect of sending it once (a read, a pose or options set to given
-    values, a stateless solve, a frame with an ``id``: a server with a shared store
-    answers a frame sent again from its stored answer), so a client may send it again
-    when it got no answer."""
+    """One HTTP request and the parser of its successful answer. ``repeatable``: a call
+    a client may send again when it got no answer: a read, a pose or options set to given
+    values, a stateless solve, a frame with an ``id`` (a server with a shared store
+    answers a frame sent again from its stored answer; without one, a frame whose answer
+    was lost after it was solved is solved again)."""
 
     method: str
     path: str
@@ -222,7 +222,7 @@ def frame(
 ) -> Call[FrameResult]:
     """Solve one frame from the session's pose (``compact``: no joints by name and no
     per-effector errors). With an ``id`` the client sends the frame again, same id, when
-    it got no answer (a dropped connection, a 502, 503 or 504: the client's
+    it got no answer (a failed or dropped connection, a 502 or 503: the client's
     ``reconnect``); behind a balancer with a shared store it is then answered once."""
     body = _without_none(id=id, targets=targets)
     return _post_frames(

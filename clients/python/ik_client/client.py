@@ -5,11 +5,12 @@ answer), and listed once, in ``_BaseClient``; each client only sends (``_send``:
 blocking or asyncio transport), so ``Client.frame`` returns what ``AsyncClient.frame``
 awaits. Every call returns a typed answer or raises a ``ServiceError`` subclass carrying
 the server's ``code``, ``field`` and ``retry_after_s``. A call that got no answer (the
-connection dropped, or a balancer's or the server's 502, 503 or 504) is sent again when
-it is repeatable (``calls.Call``: reads, a pose or options set, a stateless solve, a
-frame with an id), as often and as patiently as the client's ``reconnect`` says and no
-sooner than a ``Retry-After``. ``stream()`` opens the session's WebSocket (``Stream`` /
-``AsyncStream``).
+connection failed or dropped, not a timeout; or a balancer's or the server's 502 or 503)
+is sent again, as first encoded, when it is repeatable (``calls.Call``: reads, a pose
+or options set, a stateless solve, a frame with an id), as often and as patiently as
+the client's ``reconnect`` says, no sooner than a ``Retry-After`` and not at all when
+that is longer than ``reconnect.max_delay_s``. ``stream()`` opens the session's
+WebSocket (``Stream`` / ``AsyncStream``; its own ``reconnect`` argument).
 """
 
 from __future__ import annotations
@@ -35,9 +36,15 @@ HTTP = TypeVar("HTTP", httpx.Client, httpx.AsyncClient)
 S = TypeVar("S", Stream, AsyncStream)
 DEFAULT_TIMEOUT_S = 30.0
 DEFAULT_RECONNECT = Reconnect()
-# What a balancer answers for a worker it lost, and the server for a store or solver it
-# cannot reach yet: no answer to the call itself.
-_NO_ANSWER_STATUSES = frozenset({502, 503, 504})
+# What a balancer answers for a worker it cannot reach, and the server for a store or
+# solver it cannot reach yet: the call itself was not answered. (Not 504: the worker may
+# still be solving it.)
+_NO_ANSWER_STATUSES = frozenset({502, 503})
+# The connection failed before the call was answered, and not because it took too long
+# (a timeout may leave the server solving it: sent again, a server without a shared
+# store would solve it twice).
+# NetworkError: ConnectError, ReadError, WriteError, CloseError.
+_NO_ANSWER_ERRORS = (httpx.NetworkError, httpx.ConnectTimeout, httpx.RemoteProtocolError)
 
 
 class _Endpoint(Generic[P, T]):
@@ -82,8 +89,10 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
         base_url: The service, e.g. ``http://127.0.0.1:8000``.
         api_key: Sent as ``X-API-Key`` when the server has API keys (``IK_API_KEYS``).
         timeout_s: Per-request timeout [s].
-        reconnect: How often and how patiently a repeatable call that got no answer is
-            sent again (``Reconnect(attempts=0)``: never; the error is raised at once).
+        reconnect: How often and how patiently a repeatable HTTP call that got no
+            answer is sent again (``Reconnect(attempts=0)``: never; the error is raised
+            at once). ``timeout_s`` bounds each attempt. A stream's reconnects are
+            ``stream()``'s own argument.
         **httpx_options: Passed on to the httpx client (e.g. ``transport``, ``verify``).
     """
 
@@ -121,6 +130,8 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
                 return None
             retry_after = response.headers.get("Retry-After", "")
             if retry_after.isdigit():
+                if float(retry_after) > self.reconnect.max_delay_s:
+                    return None  # longer than the client waits: the caller decides
                 wait = max(wait, float(retry_after))
         return wait
 
@@ -200,10 +211,11 @@ class Client(_BaseClient[httpx.Client, Stream]):
 
     def _send(self, call: Call[T]) -> T:
         attempt = 0
+        request = call.request(self._http)  # encoded once: sent again as first sent
         while True:
             try:
-                response = self._http.send(call.request(self._http))
-            except httpx.TransportError:
+                response = self._http.send(request)
+            except _NO_ANSWER_ERRORS:
                 wait = self._wait_before_resending(call, attempt, None)
                 if wait is None:
                     raise
@@ -234,10 +246,11 @@ class AsyncClient(_BaseClient[httpx.AsyncClient, AsyncStream]):
 
     async def _send(self, call: Call[T]) -> T:
         attempt = 0
+        request = call.request(self._http)  # encoded once: sent again as first sent
         while True:
             try:
-                response = await self._http.send(call.request(self._http))
-            except httpx.TransportError:
+                response = await self._http.send(request)
+            except _NO_ANSWER_ERRORS:
                 wait = self._wait_before_resending(call, attempt, None)
                 if wait is None:
                     raise

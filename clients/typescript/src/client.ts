@@ -2,11 +2,13 @@
  * `Client`: the IK service over HTTP (the platform's `fetch`), and `stream()` for a
  * session's WebSocket. Every call resolves to a typed answer or rejects with a
  * `ServiceError` subclass carrying the server's `code`, `field` and `retryAfterS`. A call
- * that got no answer (the connection failed, or a balancer's or the server's 502, 503 or
- * 504) is sent again when it is repeatable (reads, a pose or options set, a stateless
- * solve, a frame with an `id`: behind a balancer with a shared store a frame sent again
- * is answered once), as often and as patiently as `reconnect` says and no sooner than a
- * `Retry-After`.
+ * that got no answer (fetch failed: the connection failed or dropped, not the timeout; or
+ * a balancer's or the server's 502 or 503) is sent again when it is repeatable (reads, a
+ * pose or options set, a stateless solve, a frame with an `id`: behind a balancer with a
+ * shared store a frame sent again is answered once; without one, a frame whose answer
+ * was lost after it was solved is solved again), as often and as patiently as
+ * `reconnect` says, no sooner than a `Retry-After` and not at all when that is longer
+ * than `reconnect.maxDelayMs`.
  */
 
 import { encodeBody } from "./encode.js";
@@ -37,14 +39,16 @@ export interface ClientOptions {
   apiKey?: string;
   /** Per-request timeout [ms]. */
   timeoutMs?: number;
-  /** How often and how patiently a repeatable call that got no answer is sent again
-   * (`{attempts: 0}`: never; the error is thrown at once). */
+  /** How often and how patiently a repeatable HTTP call that got no answer is sent again
+   * (`{attempts: 0}`: never; the error is thrown at once); `timeoutMs` bounds each
+   * attempt. A stream's reconnects are `stream()`'s own option. */
   reconnect?: Partial<Reconnect>;
 }
 
-// What a balancer answers for a worker it lost, and the server for a store or solver it
-// cannot reach yet: no answer to the call itself.
-const NO_ANSWER_STATUSES = new Set([502, 503, 504]);
+// What a balancer answers for a worker it cannot reach, and the server for a store or
+// solver it cannot reach yet: the call itself was not answered. (Not 504: the worker may
+// still be solving it.)
+const NO_ANSWER_STATUSES = new Set([502, 503]);
 
 function sleep(ms: number): Promise<void> {
   return new Promise((resolve) => setTimeout(resolve, ms));
@@ -235,7 +239,9 @@ export class Client {
           signal: AbortSignal.timeout(this.timeoutMs),
         });
       } catch (error) {
-        const wait = this.waitBeforeResending(init.repeatable ?? false, attempt, null);
+        // fetch rejects with a TypeError when the network fails; the timeout is a
+        // DOMException, not sent again (the server may still be solving the call).
+        const wait = error instanceof TypeError ? this.waitBeforeResending(init.repeatable ?? false, attempt, null) : null;
         if (wait === null) throw error;
         await sleep(wait);
         continue;
@@ -258,7 +264,10 @@ export class Client {
     if (response !== null) {
       if (!NO_ANSWER_STATUSES.has(response.status)) return null;
       const retryAfterS = Number(response.headers.get("Retry-After") ?? Number.NaN);
-      if (Number.isFinite(retryAfterS)) wait = Math.max(wait, 1000 * retryAfterS);
+      if (Number.isFinite(retryAfterS)) {
+        if (1000 * retryAfterS > this.reconnect.maxDelayMs) return null; // the caller decides
+        wait = Math.max(wait, 1000 * retryAfterS);
+      }
     }
     return wait;
   }

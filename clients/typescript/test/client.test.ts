@@ -297,8 +297,9 @@ describe("errors", () => {
 // --- HTTP ------------------------------------------------------------------------------------
 /** A TCP relay on 127.0.0.1 in front of the server that closes its first `drops`
  * connections once a request has arrived on them, unanswered (what a client sees of a
- * worker killed mid-request behind a balancer), and relays the others. */
-async function droppingRelay(upstream: string, drops: number) {
+ * worker killed mid-request behind a balancer), answers the next `busy` with a
+ * balancer's 503 and `Retry-After: retryAfterS`, and relays the others. */
+async function droppingRelay(upstream: string, drops: number, busy = 0, retryAfterS = 0) {
   const target = new URL(upstream);
   const open = new Set<NetSocket>();
   let dropped = 0;
@@ -309,6 +310,15 @@ async function droppingRelay(upstream: string, drops: number) {
     if (dropped < drops) {
       dropped += 1;
       conn.once("data", () => conn.destroy());
+      return;
+    }
+    if (dropped < drops + busy) {
+      dropped += 1;
+      conn.once("data", () =>
+        conn.end(
+          `HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\nRetry-After: ${retryAfterS}\r\nConnection: close\r\n\r\n`,
+        ),
+      );
       return;
     }
     const up = connect(Number(target.port), target.hostname);
@@ -360,7 +370,28 @@ describe("http", () => {
         relay.close();
       }
     }
-    assert.equal((await ik.getSession(session)).counters.frames, 1);
+    // A balancer's 503: sent again after its Retry-After, unless that is longer than the
+    // client waits (the error is thrown at once).
+    const busy = await droppingRelay(ik.baseUrl, 0, 2);
+    try {
+      assert.equal((await new Client(busy.url, { reconnect: quick }).frame(session, [tool(0.13)], { id: 11 })).id, 11);
+      assert.equal(busy.dropped(), 2);
+    } finally {
+      busy.close();
+    }
+    const patient = await droppingRelay(ik.baseUrl, 0, 1, 60);
+    try {
+      const error = await new Client(patient.url, { reconnect: quick })
+        .frame(session, [tool(0.13)], { id: 12 })
+        .catch((e: unknown) => e);
+      assert.ok(error instanceof ServerFault);
+      assert.equal(error.status, 503);
+      assert.equal(error.retryAfterS, 60);
+      assert.equal(patient.dropped(), 1);
+    } finally {
+      patient.close();
+    }
+    assert.equal((await ik.getSession(session)).counters.frames, 2);
   });
 
   test("session calls", async () => {
