@@ -14,9 +14,8 @@ Guards sit on top of the table, because the table alone could loop:
   iteration (``metric_every=1``, no ``metric_until``, no BFGS update in between: the
   IK's damped Gauss-Newton steps) would rebuild the very H the next iteration
   would have used, so the reset pass is the stalled pass again with its stall count
-  cleared (on Tiago's three
-  fingertips, 1000 targets, such reset passes met the goal 5 times in 193 and took
-  17% of the iterations of the passes that missed it).
+  cleared (on Tiago's three fingertips, 1000 targets, such reset passes met the goal
+  5 times in 193 and took 17% of the iterations of the passes that missed it).
   All three escalate: to RESTART_RANDOM when the goal was missed and restarts remain,
   otherwise to STOP (ACCEPT when no goal was set);
 - RESTART_RANDOM with no restarts left becomes STOP;
