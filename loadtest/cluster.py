@@ -44,10 +44,14 @@ class RedisServer:
     append-only file there (as docker-compose.yml and deploy/k8s run it), so that a
     restart (``restart``) comes back with the sessions."""
 
-    def __init__(self, port: int | None = None, *, data_dir: Path | None = None) -> None:
+    def __init__(
+        self, port: int | None = None, *, data_dir: Path | None = None, password: str = ""
+    ) -> None:
         self.port = port or free_port()
-        self.url = f"redis://127.0.0.1:{self.port}/0"
+        auth = f":{password}@" if password else ""
+        self.url = f"redis://{auth}127.0.0.1:{self.port}/0"
         self.data_dir = data_dir
+        self.password = password  # requirepass: clients without it are refused
         self.proc: subprocess.Popen[bytes] | None = None
         self.start()
 
@@ -57,6 +61,8 @@ class RedisServer:
             args += ["--appendonly", "no"]
         else:  # fsync at every write: a test restarts it right after the last frame
             args += ["--appendonly", "yes", "--appendfsync", "always", "--dir", str(self.data_dir)]
+        if self.password:
+            args += ["--requirepass", self.password]
         args += ["--loglevel", "warning"]
         self.proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
         _wait_port(self.port)

@@ -10,6 +10,7 @@ import difflib
 from collections.abc import Mapping
 from functools import lru_cache
 from typing import Literal
+from urllib.parse import urlsplit
 
 from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -107,6 +108,17 @@ class Settings(BaseSettings):
         "worker (docs/operations.md, 'Several workers'); empty = sessions in this process's "
         "memory. Never logged (it may hold a password).",
     )
+
+    @field_validator("redis_url")
+    @classmethod
+    def _redis_url_form(cls, value: SecretStr) -> SecretStr:
+        """A URL redis-py can open, checked at start: a typo is a clear configuration
+        error naming IK_REDIS_URL, not a traceback from the first connection."""
+        url = value.get_secret_value()
+        if url and (problem := redis_url_problem(url)) is not None:
+            raise ValueError(problem)
+        return value
+
     redis_write_behind_ms: float = Field(
         default=0.0,
         ge=0,
@@ -243,14 +255,44 @@ def unknown_variables(environ: Mapping[str, str]) -> list[str]:
     return out
 
 
+REDIS_SCHEMES = ("redis", "rediss", "unix")
+
+
+def redis_url_problem(url: str) -> str | None:
+    """What makes ``url`` a URL redis-py's ``from_url`` cannot open, else None; the URL
+    itself is never in the answer (it may hold a password)."""
+    try:
+        parts = urlsplit(url)
+        parts.port  # noqa: B018  (raises ValueError when not a number in 0-65535)
+    except ValueError as e:
+        return f"not a URL redis-py can read ({e})"
+    if parts.scheme not in REDIS_SCHEMES:
+        return "must start with redis://, rediss:// or unix://"
+    if parts.scheme == "unix":
+        return None if parts.path else "unix:// needs the socket's path"
+    # redis-py reads any other path as database 0 without a word.
+    db = parts.path.lstrip("/")
+    if db and not db.isdigit():
+        return "the path is the database number (/0, /1, ...)"
+    return None
+
+
+# Settings whose value is never echoed in an error (passwords, keys).
+_SECRET_FIELDS = frozenset(
+    name for name, field in Settings.model_fields.items() if field.annotation is SecretStr
+)
+
+
 def settings_errors(exc: ValidationError) -> str:
     """A bad setting's error in the environment's words: ``IK_MAX_SESSIONS: Input
-    should be a valid integer, got 'abc'`` rather than pydantic's field names."""
+    should be a valid integer, got 'abc'`` rather than pydantic's field names. A
+    secret's value is not shown."""
     lines = []
     for e in exc.errors():
         loc = e.get("loc") or ()
         name = ENV_PREFIX + str(loc[0]).upper() if loc else "settings"
         got = e.get("input")
-        shown = f", got {got!r}" if isinstance(got, str | int | float) else ""
+        secret = bool(loc) and loc[0] in _SECRET_FIELDS
+        shown = f", got {got!r}" if isinstance(got, str | int | float) and not secret else ""
         lines.append(f"{name}: {e.get('msg', 'invalid')}{shown}")
     return "invalid configuration:\n  " + "\n  ".join(lines)

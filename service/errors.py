@@ -165,10 +165,13 @@ def too_many_plans(limit: int) -> ServiceError:
     )
 
 
-def store_unavailable(retry_after_s: float = 1.0) -> ServiceError:
+def store_unavailable(retry_after_s: float = 1.0, *, detail: str | None = None) -> ServiceError:
+    """Redis failed a call; ``detail`` replaces the clients' words (``/readyz`` says the
+    operator's cause there)."""
     return ServiceError(
         ErrorCode.STORE_UNAVAILABLE,
-        "the session store (Redis) does not answer; nothing was solved: send it again "
+        detail
+        or "the session store (Redis) does not answer; nothing was solved: send it again "
         "after Retry-After",
         status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
         retry_after_s=retry_after_s,

@@ -4,16 +4,23 @@ The script creates a session (checking the session and per-key caps) or commits 
 new state, version and answers if the version is still the one the worker started
 from; either way it renews every key's expiry. ``GroupCommit`` runs the script for
 every caller that arrives while a round trip is under way in one pipeline; ``connect``
-makes the client they use.
+makes the client they use; ``ReadinessProbe`` is ``/readyz``'s check, which says why
+Redis failed (``redis_cause``).
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 from typing import Any
 
 import redis.asyncio as aioredis
-from redis.exceptions import NoScriptError
+from redis.exceptions import AuthenticationError, NoScriptError, RedisError, ResponseError
+from redis.exceptions import TimeoutError as RedisTimeout
+
+from .errors import store_unavailable
+
+log = logging.getLogger("service")
 
 # KEYS: s, a, o, chain, all, owner (all again when none); ARGV: version expected ('new':
 # create), state, ttl [ms], kept answers, session id, meta ('' keeps it), then pairs of
@@ -134,3 +141,43 @@ def connect(url: str, timeout_s: float) -> aioredis.Redis:
         health_check_interval=0,
         retry_on_timeout=False,
     )
+
+
+def refuses(e: RedisError) -> bool:
+    """Redis answered, and refused: a configuration to fix, not an outage to wait out
+    (redis-py's AuthenticationError is a ConnectionError, so it is tested first)."""
+    return isinstance(e, AuthenticationError | ResponseError)
+
+
+def redis_cause(e: RedisError) -> str:
+    """Why Redis failed a call, in an operator's words (the URL is not in it)."""
+    what = f"{type(e).__name__}: {e}"
+    if refuses(e):
+        return (
+            f"Redis refuses this worker ({what}): check the user, password and database "
+            "number in IK_REDIS_URL"
+        )
+    if isinstance(e, RedisTimeout):
+        return f"Redis did not answer within IK_REDIS_TIMEOUT_S ({what})"
+    return f"Redis cannot be reached ({what})"
+
+
+class ReadinessProbe:
+    """``/readyz``'s check of Redis: a PING; when it fails, ``store_unavailable`` whose
+    detail is the operator's cause (``redis_cause``). A refusal is logged at ERROR once
+    per cause, not at every probe."""
+
+    def __init__(self, client: aioredis.Redis) -> None:
+        self.client = client
+        self.last_cause: str | None = None
+
+    async def check(self) -> None:
+        try:
+            await self.client.ping()
+        except RedisError as e:
+            cause = redis_cause(e)
+            if refuses(e) and cause != self.last_cause:
+                log.error("%s", cause)
+            self.last_cause = cause
+            raise store_unavailable(detail=cause) from None
+        self.last_cause = None

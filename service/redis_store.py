@@ -51,6 +51,7 @@ from redis.exceptions import RedisError
 
 from solver.ik import IKOptions, IKSolver, StreamState
 
+from . import redis_commit
 from .convert import ChainView, FrameJob, SolvedFrame
 from .errors import ServiceError, not_found, store_unavailable
 from .redis_commit import COMMIT_SCRIPT, GONE, MOVED, OWNER_FULL, SESSIONS_FULL, GroupCommit
@@ -127,6 +128,7 @@ class RedisSessionStore(SessionStore):
         # Written behind (IK_REDIS_WRITE_BEHIND_MS > 0): None when written through.
         self.behind = WriteBehind(write_behind_s, self._write_behind) if write_behind_s else None
         self._count = 0
+        self._probe = redis_commit.ReadinessProbe(client)
 
     def __len__(self) -> int:
         """Sessions in Redis at the last sweep (every worker's)."""
@@ -484,10 +486,7 @@ class RedisSessionStore(SessionStore):
         self._restore(session, stored, answers)
 
     async def check(self) -> None:
-        try:
-            await self.client.ping()
-        except RedisError as e:
-            raise _unavailable(e) from None
+        await self._probe.check()
 
     async def close(self) -> None:
         if self.behind is not None:  # what is written behind goes before the exit

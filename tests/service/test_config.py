@@ -50,6 +50,36 @@ def test_a_bad_value_is_said_in_the_environment_s_names(monkeypatch: pytest.Monk
     assert "IK_MAX_SESSIONS: " in text and "'abc'" in text and "max_sessions" not in text
 
 
+@pytest.mark.parametrize(
+    ("url", "says"),
+    [
+        ("http://:hunter2@cache:6379/0", "must start with redis://, rediss:// or unix://"),
+        ("redis://:hunter2@cache:99999/0", "Port out of range"),
+        ("redis://:hunter2@cache:6379/sessions", "the path is the database number"),
+        ("unix://", "unix:// needs the socket's path"),
+    ],
+)
+def test_a_redis_url_redis_py_cannot_open_is_refused_at_start_without_its_password(
+    monkeypatch: pytest.MonkeyPatch, url: str, says: str
+) -> None:
+    monkeypatch.setenv("IK_REDIS_URL", url)
+    with pytest.raises(ValidationError) as err:
+        Settings()
+    text = settings_errors(err.value)
+    assert text.startswith("invalid configuration:\n  IK_REDIS_URL: "), text
+    assert says in text
+    assert "hunter2" not in text and "cache" not in text
+
+
+@pytest.mark.parametrize(
+    "url",
+    ["redis://127.0.0.1:6379/0", "rediss://user:pw@cache/3", "redis://cache", "unix:///run/r.sock"],
+)
+def test_redis_urls_redis_py_opens_are_taken(monkeypatch: pytest.MonkeyPatch, url: str) -> None:
+    monkeypatch.setenv("IK_REDIS_URL", url)
+    assert Settings().redis_url.get_secret_value() == url
+
+
 def test_log_level_in_any_case(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("IK_LOG_LEVEL", "WARNING")
     assert Settings().log_level == "warning"

@@ -14,6 +14,7 @@ import contextlib
 import json
 import os
 import shutil
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -377,3 +378,88 @@ def test_ws_batch_is_stored_and_a_resent_batch_gets_its_stored_answers(
         again = _ws_batch(ws, 1, sent)
     assert [r["result"]["q"] for r in again] == [r["result"]["q"] for r in first]
     assert _in_redis(workers, s1)["counters"]["frames"] == 2
+
+
+@pytest.fixture(scope="module")
+def guarded_redis() -> Iterator[RedisServer]:
+    """A redis-server that requires a password."""
+    _need_redis()
+    server = RedisServer(password="s3cret-pw")
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+def _readyz_and_create(client: TestClient) -> tuple[dict[str, Any], dict[str, Any]]:
+    """/readyz's 503 body and a session create's 503 body, both ``store_unavailable``
+    with ``Retry-After``."""
+    ready = client.get("/readyz")
+    created = client.post(
+        "/v1/sessions", json={"chain": {"format": "example", "name": "panda_arm"}}
+    )
+    for r in (ready, created):
+        assert r.status_code == 503, r.text
+        assert r.json()["code"] == "store_unavailable" and r.headers["retry-after"] == "1"
+    return ready.json(), created.json()
+
+
+def test_readyz_says_redis_refuses_a_wrong_password_and_the_right_one_is_ready(
+    make_client: Callable[..., TestClient], guarded_redis: RedisServer
+) -> None:
+    """A configuration error is not an outage: /readyz tells the operator what to fix
+    (without the password), a client still gets the plain 503 it retries."""
+    wrong = guarded_redis.url.replace("s3cret-pw", "not-the-pw")
+    ready, created = _readyz_and_create(make_client(Settings(redis_url=SecretStr(wrong))))
+    assert "Redis refuses this worker (AuthenticationError" in ready["detail"], ready
+    assert "IK_REDIS_URL" in ready["detail"]
+    assert "not-the-pw" not in ready["detail"] and "s3cret" not in ready["detail"]
+    assert created["detail"].startswith("the session store (Redis) does not answer")
+    none = guarded_redis.url.replace(":s3cret-pw@", "")
+    ready, _ = _readyz_and_create(make_client(Settings(redis_url=SecretStr(none))))
+    assert "Redis refuses this worker (AuthenticationError" in ready["detail"], ready
+    right = make_client(Settings(redis_url=SecretStr(guarded_redis.url)))
+    assert right.get("/readyz").status_code == 200
+    assert (
+        right.post(
+            "/v1/sessions", json={"chain": {"format": "example", "name": "panda_arm"}}
+        ).status_code
+        == 201
+    )
+
+
+def test_readyz_says_a_database_number_redis_lacks_and_a_port_nobody_serves(
+    make_client: Callable[..., TestClient], redis_url: str
+) -> None:
+    ready, _ = _readyz_and_create(
+        make_client(Settings(redis_url=SecretStr(redis_url.removesuffix("/0") + "/99")))
+    )
+    assert "Redis refuses this worker (ResponseError: DB index is out of range)" in ready["detail"]
+    with socket.socket() as unused:  # bound, never listening: connections are refused
+        unused.bind(("127.0.0.1", 0))
+        port = unused.getsockname()[1]
+        closed = f"redis://127.0.0.1:{port}/0"
+        ready, _ = _readyz_and_create(make_client(Settings(redis_url=SecretStr(closed))))
+    assert ready["detail"].startswith("Redis cannot be reached (ConnectionError: "), ready
+
+
+def _gauge(client: TestClient, name: str) -> float:
+    for line in client.get("/metrics").text.splitlines():
+        if line.startswith(name + " "):
+            return float(line.split()[1])
+    raise AssertionError(f"{name} not in /metrics")
+
+
+def test_active_sessions_is_the_count_in_redis_on_every_worker(
+    workers: Workers, redis_url: str
+) -> None:
+    """ik_active_sessions with Redis: every worker's sessions, the same figure on each
+    worker after its sweep (an operator aggregates it with max, not sum)."""
+    a, b = workers()
+    for worker in (a, a, b):
+        create(worker)
+    for w in (a, b):
+        w.portal.call(_store(w).expire)
+    in_redis = redis.Redis.from_url(redis_url).zcard("ik:all")
+    assert in_redis >= 3
+    assert _gauge(a, "ik_active_sessions") == _gauge(b, "ik_active_sessions") == in_redis
