@@ -1,6 +1,6 @@
 # IK service image: python -m service (uvicorn + create_app) as a non-root user.
 # Configure with IK_* variables (docs/operations.md, "Configuration"). One process per container:
-# the session store is in memory, so scale with replicas, not workers.
+# scale with replicas (sessions in Redis with IK_REDIS_URL, docker-compose.yml).
 FROM python:3.11.7-slim-bookworm
 
 ENV PYTHONDONTWRITEBYTECODE=1 \
@@ -9,6 +9,7 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     OPENBLAS_NUM_THREADS=1 \
     NUMBA_CACHE_DIR=/app/numba-cache \
+    NUMBA_CPU_NAME=generic \
     IK_HOST=0.0.0.0 \
     IK_PORT=8000
 
@@ -25,7 +26,9 @@ COPY service/ service/
 
 # Install; drop the sources so that everything imports from site-packages; compile
 # the solver once so its numba cache ships in the image, owned by the runtime user
-# (a container is ready in about a second instead of after a 30-60 s compile).
+# (a container is ready in about a second instead of after a 3-4 minute compile).
+# NUMBA_CPU_NAME=generic: numba keys its cache by CPU, and generic x86-64 code loads on
+# any node (no slower here: docs/operations.md, "Container").
 RUN pip install --constraint constraints.txt '.[redis]' \
     && rm -rf /app/solver /app/schemas /app/service \
     && python -c "import solver; print(f'solver warm in {solver.warmup():.1f} s')" \

@@ -15,6 +15,9 @@ from service.config import Settings
 
 ROOT = Path(__file__).resolve().parents[1]
 SETTINGS = {f"IK_{name.upper()}" for name in Settings.model_fields}
+# The peak RSS of a cold start (the solver compiled in its two compile processes),
+# `python -m bench.cold_start --cold-runs 1` (bench/RESULTS.md, "Cold start"): 2475 MB.
+COLD_COMPILE_PEAK_MIB = 2475 * 1e6 / 2**20
 
 
 def _compose() -> dict[str, Any]:
@@ -42,9 +45,17 @@ def test_compose_runs_the_shipped_balancer_config_in_front_of_workers_on_redis()
     assert worker["deploy"]["replicas"] == 4
 
 
+def _k8s_worker_pod() -> dict[str, Any]:
+    (deployment,) = [
+        d for d in _k8s() if (d["kind"], d["metadata"]["name"]) == ("Deployment", "ik")
+    ]
+    pod: dict[str, Any] = deployment["spec"]["template"]["spec"]
+    return pod
+
+
 def test_k8s_workers_use_redis_and_the_health_routes() -> None:
     by_kind = {(d["kind"], d["metadata"]["name"]): d for d in _k8s()}
-    pod = by_kind[("Deployment", "ik")]["spec"]["template"]["spec"]
+    pod = _k8s_worker_pod()
     (container,) = pod["containers"]
     env = {e["name"]: e["value"] for e in container["env"]}
     assert env["IK_REDIS_URL"].startswith("redis://ik-redis:")
@@ -54,3 +65,12 @@ def test_k8s_workers_use_redis_and_the_health_routes() -> None:
     assert ("Service", "ik-redis") in by_kind and ("Service", "ik") in by_kind
     ingress = by_kind[("Ingress", "ik")]["metadata"]["annotations"]
     assert "upstream-hash-by" in " ".join(ingress)
+
+
+def test_k8s_memory_limit_lets_a_cold_start_compile() -> None:
+    """A pod that must compile the solver (an image without its cache) is not killed
+    for memory on every start: a crash loop no log line explains."""
+    (container,) = _k8s_worker_pod()["containers"]
+    limit = container["resources"]["limits"]["memory"]
+    assert limit.endswith("Gi")
+    assert float(limit.removesuffix("Gi")) * 1024 >= 1.1 * COLD_COMPILE_PEAK_MIB
