@@ -10,16 +10,21 @@ import difflib
 from collections.abc import Mapping
 from functools import lru_cache
 from typing import Literal
-from urllib.parse import urlsplit
 
 from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from .redis_url import redis_url_problem
 
 
 class Settings(BaseSettings):
     """Server configuration; build one per app (tests pass their own)."""
 
-    model_config = SettingsConfigDict(env_prefix="IK_", frozen=True, extra="ignore")
+    # hide_input_in_errors: a ValidationError's text never holds a value (IK_REDIS_URL and
+    # IK_API_KEYS are secrets); settings_errors shows the others' from errors().
+    model_config = SettingsConfigDict(
+        env_prefix="IK_", frozen=True, extra="ignore", hide_input_in_errors=True
+    )
 
     # Network (used by ``python -m service``).
     host: str = Field(default="127.0.0.1", description="Address to bind")
@@ -253,28 +258,6 @@ def unknown_variables(environ: Mapping[str, str]) -> list[str]:
             guess = f" (did you mean {close[0]}?)" if close else ""
             out.append(f"{key} is not a setting of this service and is ignored{guess}")
     return out
-
-
-REDIS_SCHEMES = ("redis", "rediss", "unix")
-
-
-def redis_url_problem(url: str) -> str | None:
-    """What makes ``url`` a URL redis-py's ``from_url`` cannot open, else None; the URL
-    itself is never in the answer (it may hold a password)."""
-    try:
-        parts = urlsplit(url)
-        parts.port  # noqa: B018  (raises ValueError when not a number in 0-65535)
-    except ValueError as e:
-        return f"not a URL redis-py can read ({e})"
-    if parts.scheme not in REDIS_SCHEMES:
-        return "must start with redis://, rediss:// or unix://"
-    if parts.scheme == "unix":
-        return None if parts.path else "unix:// needs the socket's path"
-    # redis-py reads any other path as database 0 without a word.
-    db = parts.path.lstrip("/")
-    if db and not db.isdigit():
-        return "the path is the database number (/0, /1, ...)"
-    return None
 
 
 # Settings whose value is never echoed in an error (passwords, keys).

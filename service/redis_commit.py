@@ -150,22 +150,24 @@ def refuses(e: RedisError) -> bool:
 
 
 def redis_cause(e: RedisError) -> str:
-    """Why Redis failed a call, in an operator's words (the URL is not in it)."""
-    what = f"{type(e).__name__}: {e}"
+    """Why Redis failed a call, in an operator's words, for ``/readyz`` (which the
+    balancer may serve to anyone): a refusal with Redis's own reason; an outage by its
+    kind only, since redis-py's message names the host and port (the log has it)."""
+    name = type(e).__name__
     if refuses(e):
         return (
-            f"Redis refuses this worker ({what}): check the user, password and database "
-            "number in IK_REDIS_URL"
+            f"Redis refuses this worker ({name}: {e}): check the user, password and "
+            "database number in IK_REDIS_URL"
         )
     if isinstance(e, RedisTimeout):
-        return f"Redis did not answer within IK_REDIS_TIMEOUT_S ({what})"
-    return f"Redis cannot be reached ({what})"
+        return f"Redis did not answer within IK_REDIS_TIMEOUT_S ({name})"
+    return f"Redis cannot be reached ({name}; the worker's log says where it tried)"
 
 
 class ReadinessProbe:
     """``/readyz``'s check of Redis: a PING; when it fails, ``store_unavailable`` whose
-    detail is the operator's cause (``redis_cause``). A refusal is logged at ERROR once
-    per cause, not at every probe."""
+    detail is the operator's cause (``redis_cause``), logged when the cause changes
+    (a refusal at ERROR: it needs a fix), not at every probe."""
 
     def __init__(self, client: aioredis.Redis) -> None:
         self.client = client
@@ -176,8 +178,9 @@ class ReadinessProbe:
             await self.client.ping()
         except RedisError as e:
             cause = redis_cause(e)
-            if refuses(e) and cause != self.last_cause:
-                log.error("%s", cause)
+            if cause != self.last_cause:
+                level = logging.ERROR if refuses(e) else logging.WARNING
+                log.log(level, "not ready: %s (%s)", cause, e)
             self.last_cause = cause
             raise store_unavailable(detail=cause) from None
         self.last_cause = None

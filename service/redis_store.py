@@ -131,7 +131,8 @@ class RedisSessionStore(SessionStore):
         self._probe = redis_commit.ReadinessProbe(client)
 
     def __len__(self) -> int:
-        """Sessions in Redis at the last sweep (every worker's)."""
+        """Sessions in Redis (every worker's) at this worker's last sweep, give or take
+        the sessions it created or deleted since: up to IK_SWEEP_INTERVAL_S old."""
         return self._count
 
     # -- keys ------------------------------------------------------------------------
@@ -495,5 +496,5 @@ class RedisSessionStore(SessionStore):
 
 
 def _unavailable(e: RedisError) -> ServiceError:
-    log.warning("Redis does not answer: %s: %s", type(e).__name__, e)
+    log.warning("%s (%s)", redis_commit.redis_cause(e), e)
     return store_unavailable()

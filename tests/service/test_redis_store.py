@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import os
 import shutil
 import socket
@@ -428,6 +429,21 @@ def test_readyz_says_redis_refuses_a_wrong_password_and_the_right_one_is_ready(
     )
 
 
+def test_a_refusal_is_logged_once_at_error_not_at_every_probe(
+    make_client: Callable[..., TestClient],
+    guarded_redis: RedisServer,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    wrong = guarded_redis.url.replace("s3cret-pw", "not-the-pw")
+    client = make_client(Settings(redis_url=SecretStr(wrong)))
+    with caplog.at_level(logging.WARNING, logger="service"):
+        for _ in range(3):
+            assert client.get("/readyz").status_code == 503
+    refusals = [r for r in caplog.records if "refuses this worker" in r.getMessage()]
+    assert [r.levelno for r in refusals] == [logging.ERROR], caplog.text
+    assert "not-the-pw" not in caplog.text
+
+
 def test_readyz_says_a_database_number_redis_lacks_and_a_port_nobody_serves(
     make_client: Callable[..., TestClient], redis_url: str
 ) -> None:
@@ -440,7 +456,8 @@ def test_readyz_says_a_database_number_redis_lacks_and_a_port_nobody_serves(
         port = unused.getsockname()[1]
         closed = f"redis://127.0.0.1:{port}/0"
         ready, _ = _readyz_and_create(make_client(Settings(redis_url=SecretStr(closed))))
-    assert ready["detail"].startswith("Redis cannot be reached (ConnectionError: "), ready
+    assert ready["detail"].startswith("Redis cannot be reached (ConnectionError; "), ready
+    assert str(port) not in ready["detail"]  # /readyz may be public: no address in it
 
 
 def _gauge(client: TestClient, name: str) -> float:
