@@ -3,7 +3,7 @@ example chain shipped with the server. One of them is chosen by ``format``."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 from pydantic import ConfigDict, Field, model_validator
 
@@ -304,6 +304,12 @@ ChainSpec = Annotated[
     HierarchyChain | UrdfChain | ExampleChain | GltfChain | BvhChain,
     Field(discriminator="format", description="The chain, in one of five formats"),
 ]
+# The values of ``format``. pydantic puts the chosen one in an error's location
+# (``chain.bvh.unit_m``), where it reads as a field: the service leaves it out.
+CHAIN_FORMATS: frozenset[str] = frozenset(
+    get_args(spec.model_fields["format"].annotation)[0]
+    for spec in (HierarchyChain, UrdfChain, ExampleChain, GltfChain, BvhChain)
+)
 
 # The hierarchy used by the /docs examples and the README: a 3-DOF arm whose hand
 # reaches points within 0.75 m of the shoulder.

@@ -50,6 +50,7 @@ from starlette.responses import Response
 from starlette.routing import compile_path
 
 from schemas import ErrorCode
+from schemas.chain import CHAIN_FORMATS
 from solver.errors import IKError
 
 from .hints import JSON_INVALID, hint
@@ -202,8 +203,13 @@ def validation_errors(errors: Any) -> list[dict[str, Any]]:
 
 def dotted_field(loc: Sequence[Any]) -> str | None:
     """The dotted path of a validation error's ``loc`` (``frame.targets.0.orientation``),
-    without FastAPI's leading ``body``."""
+    without FastAPI's leading ``body`` and without the chain's ``format`` that pydantic
+    puts after ``chain`` (``chain.unit_m``, not ``chain.bvh.unit_m``: ``chain.bvh`` is
+    the BVH text)."""
     parts = list(loc[1:] if loc and loc[0] == "body" else loc)
+    parts = [
+        p for i, p in enumerate(parts) if not (i and parts[i - 1] == "chain" and p in CHAIN_FORMATS)
+    ]
     return ".".join(str(p) for p in parts) or None
 
 

@@ -27,7 +27,7 @@ from solver.model import (
     build_chain,
 )
 from solver.model.examples import EXAMPLES
-from solver.model.skeleton import SkeletonChain, unknown_bone
+from solver.model.skeleton import SkeletonChain, unknown_bone_message
 from solver.model.urdf import chain_from_urdf
 
 from ..config import Settings
@@ -159,8 +159,8 @@ def check_bone_output(output: S.BoneOutput, skeleton: SkeletonChain | None, wher
     known = set(skeleton.skeleton.names)
     for i, name in enumerate(output.world):
         if name not in known:
-            e = unknown_bone(name, skeleton.skeleton.names, field="world")
-            raise invalid_problem(str(e), f"{where}.world[{i}]")
+            message = unknown_bone_message(name, skeleton.skeleton.names)
+            raise invalid_problem(message, f"{where}.world[{i}]")
 
 
 def _urdf_chain(spec: S.UrdfChain, settings: Settings) -> Chain:

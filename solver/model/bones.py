@@ -153,6 +153,12 @@ _LISTED_BONES = 12
 
 def unknown_bone(name: str, names: Iterable[str], *, field: str) -> InvalidModel:
     """The error for a bone name that is not in the skeleton, with close names."""
+    return InvalidModel(unknown_bone_message(name, names), joint=name, field=field)
+
+
+def unknown_bone_message(name: str, names: Iterable[str]) -> str:
+    """``unknown bone 'x'`` with the close names (or, when none is alike, the names
+    there are): for a caller that names the field itself."""
     known = list(names)
     close = difflib.get_close_matches(name, known, n=5, cutoff=0.5)
     if close:
@@ -163,4 +169,4 @@ def unknown_bone(name: str, names: Iterable[str], *, field: str) -> InvalidModel
         shown = ", ".join(repr(n) for n in known[:_LISTED_BONES])
         more = f", ... ({len(known)} in all)" if len(known) > _LISTED_BONES else ""
         hint = f"; the skeleton's bones are {shown}{more}" if known else ""
-    return InvalidModel(f"unknown bone {name!r}{hint}", joint=name, field=field)
+    return f"unknown bone {name!r}{hint}"

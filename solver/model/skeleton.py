@@ -67,6 +67,7 @@ from solver.model.bones import (
     Motion,
     Skeleton,
     unknown_bone,
+    unknown_bone_message,
 )
 from solver.model.forward import forward_kinematics
 from solver.model.layout import ND_R, ND_T
@@ -95,6 +96,7 @@ __all__ = [
     "chain_from_skeleton",
     "default_limits",
     "unknown_bone",
+    "unknown_bone_message",
 ]
 
 _AXIS_INDEX = {"x": 0, "y": 1, "z": 2}

@@ -207,7 +207,7 @@ def test_errors_carry_code_and_field(ik: Client, session: Session) -> None:
     with pytest.raises(InvalidRequest) as schema:
         ik.create_session({"format": "example", "name": "no_such_arm"})
     assert schema.value.code is ErrorCode.INVALID_FORMAT
-    assert schema.value.field == "chain.example.name"
+    assert schema.value.field == "chain.name"
     assert schema.value.status_code == 422
 
     with pytest.raises(InvalidRequest) as problem:

@@ -84,7 +84,7 @@ def test_an_array_quaternion_in_a_chain_is_422_with_the_object_form(client: Test
     assert r.status_code == 422, r.text
     body = r.json()
     assert body["code"] == "invalid_format"
-    assert body["field"] == "chain.hierarchy.joints.1.origin.rotation"
+    assert body["field"] == "chain.joints.1.origin.rotation"
     (error,) = body["detail"]
     message = error["msg"]
     assert QUATERNION_FORM in message and "x, y, z, w" in message, message

@@ -246,7 +246,20 @@ def test_unknown_bone_names_say_which_setting_and_suggest(client: TestClient) ->
     body = error(client, walk_chain(bones={"Nek": {"axes": "x"}}))
     assert body["field"] == "chain.bones.Nek"
     body = error(client, walk_chain(), bones={"world": ["Hed"]})
-    assert body["field"] == "bones.world[0]" and "Head" in body["detail"]
+    assert body["field"] == "bones.world[0]"
+    # Where, then what: no "Hed.world:" of the solver's own in between.
+    assert body["detail"].startswith("bones.world[0]: unknown bone 'Hed'; did you mean 'Head'")
+
+
+def test_a_schema_error_names_the_chain_s_field_not_its_format(client: TestClient) -> None:
+    """pydantic's location holds the chain's format (``chain.bvh.unit_m``), which reads
+    as a field inside the BVH text: the field named is the one the request has."""
+    body = error(client, walk_chain(unit_m=0))
+    assert (body["code"], body["field"]) == ("invalid_format", "chain.unit_m"), body
+    body = error(client, walk_chain(effectors=[{"bone": "LeftHand", "mode": "poze"}]))
+    assert body["field"] == "chain.effectors.0.mode", body
+    body = error(client, {"format": "bvh", "effectors": [{"bone": "Head"}]})  # no text
+    assert body["field"] == "chain.bvh", body
 
 
 def test_an_unknown_bone_like_no_other_lists_the_bones_there_are(client: TestClient) -> None:

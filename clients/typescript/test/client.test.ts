@@ -482,7 +482,7 @@ describe("http", () => {
     const schema = await ik.createSession(bad).catch((e: unknown) => e);
     assert.ok(schema instanceof InvalidRequest);
     assert.equal(schema.code, ErrorCode.InvalidFormat);
-    assert.equal(schema.field, "chain.example.name");
+    assert.equal(schema.field, "chain.name");
     assert.equal(schema.status, 422);
 
     const session = await ik.createSession(PANDA);
