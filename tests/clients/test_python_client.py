@@ -114,6 +114,7 @@ MIRRORS: list[tuple[type, tuple[str, ...]]] = [
     (ik_client.ConventionsOut, ("ConventionsOut",)),
     (ik_client.Conventions, ("Conventions",)),
     (ik_client.BoneOutput, ("BoneOutput",)),
+    (ik_client.FkResult, ("FkResult",)),
 ]
 
 
@@ -201,6 +202,38 @@ def test_one_shot_solve(ik: Client) -> None:
     result = ik.solve(PANDA, [tool(0.1)], seed={"q": [0.0] * 7}, id=3)
     assert_solved(result)
     assert result.id == 3 and len(result.q) == 7
+
+
+def test_bones_conventions_and_fk_over_http(ik: Client) -> None:
+    """What a game client asks of HTTP: a frame's bone output, a one-shot solve in an
+    engine's conventions, and forward kinematics of a pose (docs/engines.md). A point
+    FK gives in Unreal's axes and centimetres is solved back to, in the same terms."""
+    from schemas.chain import EXAMPLE_GLTF_LEG
+
+    unreal: ik_client.Conventions = {"preset": "unreal"}
+    session = ik.create_session(EXAMPLE_GLTF_LEG, conventions=unreal)
+    try:
+        start = ik.get_session(session).pose.q
+        near = ik.fk(session, joints={"hip.x": 0.05, "knee.x": 1.25}, bones={"world": ["ankle"]})
+        assert ik.get_session(session).pose.q == start  # FK leaves the pose alone
+        assert near.q != start and set(near.bones) == {"world"}
+        ankle = near.bones["world"]["ankle"]["position"]
+        foot: Target = {"effector": "foot", "position": ankle}
+        asked = ik.frame(session, [foot], bones={"world": ["ankle"], "local_rotations": True})
+        plain = ik.frame(session, [foot])
+        here = ik.fk(session)  # the session's pose, local rotations by default
+    finally:
+        ik.delete_session(session)
+    assert asked.success and plain.bones is None and asked.bones is not None
+    got = asked.bones["world"]["ankle"]["position"]
+    # Centimetres: the 1e-4 m tolerance is 0.01 of a unit.
+    assert [got[k] for k in "xyz"] == pytest.approx([ankle[k] for k in "xyz"], abs=0.02)
+    assert set(asked.bones["local"]) >= {"hip", "knee"} and set(here.bones) == {"local"}
+    assert here.q == pytest.approx(plain.q, abs=1e-12)
+    one_shot = ik.solve(EXAMPLE_GLTF_LEG, [foot], conventions=unreal, bones={"world": ["ankle"]})
+    assert one_shot.success and one_shot.bones is not None
+    got = one_shot.bones["world"]["ankle"]["position"]
+    assert [got[k] for k in "xyz"] == pytest.approx([ankle[k] for k in "xyz"], abs=0.02)
 
 
 def test_errors_carry_code_and_field(ik: Client, session: Session) -> None:

@@ -20,6 +20,7 @@ from .types import (
     Chain,
     ClipResult,
     Conventions,
+    FkResult,
     Frame,
     FrameResult,
     Pose,
@@ -219,12 +220,14 @@ def frame(
     *,
     id: int | None = None,
     compact: bool = False,
+    bones: BoneOutput | None = None,
 ) -> Call[FrameResult]:
     """Solve one frame from the session's pose (``compact``: no joints by name and no
-    per-effector errors). With an ``id`` the client sends the frame again, same id, when
-    it got no answer (a failed or dropped connection, a 502 or 503: the client's
-    ``reconnect``); behind a balancer with a shared store it is then answered once."""
-    body = _without_none(id=id, targets=targets)
+    per-effector errors; ``bones``: this frame's bone output, in place of the session's).
+    With an ``id`` the client sends the frame again, same id, when it got no answer (a
+    failed or dropped connection, a 502 or 503: the client's ``reconnect``); behind a
+    balancer with a shared store it is then answered once."""
+    body = _without_none(id=id, targets=targets, bones=bones)
     return _post_frames(
         session,
         body,
@@ -267,11 +270,39 @@ def solve(
     seed: PoseIn | None = None,
     options: SolverOptionsPatch | None = None,
     id: int | None = None,
+    conventions: Conventions | None = None,
+    bones: BoneOutput | None = None,
 ) -> Call[FrameResult]:
-    """A stateless one-shot solve (no session)."""
-    body = _without_none(chain=chain, targets=targets, seed=seed, options=options, id=id)
+    """A stateless one-shot solve (no session), speaking ``conventions`` (targets in,
+    bones out), answering with ``bones``."""
+    body = _without_none(
+        chain=chain,
+        targets=targets,
+        seed=seed,
+        options=options,
+        id=id,
+        conventions=conventions,
+        bones=bones,
+    )
     return Call(
         "POST", "/v1/solve", lambda r: FrameResult.from_json(r.json()), json=body, repeatable=True
+    )
+
+
+def fk(
+    session: SessionRef,
+    *,
+    q: list[float] | None = None,
+    joints: dict[str, float] | None = None,
+    bones: BoneOutput | None = None,
+) -> Call[FkResult]:
+    """Forward kinematics: the bone data of a pose (``q``, or some DOFs by name in
+    ``joints``; neither: the session's current pose), in the session's conventions
+    (``bones``: what to return; the server's default is the local rotations). The
+    session's pose does not change."""
+    body = _without_none(q=q, joints=joints, bones=bones)
+    return _on_session(
+        session, "POST", "/fk", lambda r: FkResult.from_json(r.json()), json=body, repeatable=True
     )
 
 

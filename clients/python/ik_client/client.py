@@ -144,6 +144,7 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
     clip = _Endpoint(calls.clip)
     batch = _Endpoint(calls.batch)
     solve = _Endpoint(calls.solve)
+    fk = _Endpoint(calls.fk)
 
     def stream(
         self,

@@ -221,6 +221,19 @@ class FrameResult:
         )
 
 
+@dataclass(frozen=True, slots=True)
+class FkResult:
+    """Schema ``FkResult``: the bone data of a pose (``POST .../fk``)."""
+
+    q: list[float]  # the pose used, in DOF order
+    # Schema ``BonesOut`` as sent: {"local": {bone: {w,x,y,z}}, "world": {bone: {...}}}.
+    bones: dict[str, Any]
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> FkResult:
+        return cls(d["q"], d["bones"])
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PlanSummary:
     """Schema ``PlanSummary``: what planning a clip achieved."""

@@ -22,6 +22,7 @@ import type {
   Chain,
   Conventions,
   CompactFrameResult,
+  FkResult,
   Frame,
   FrameResult,
   FrameResults,
@@ -67,6 +68,19 @@ export interface SolveOptions {
   seed?: PoseIn;
   options?: OptionsPatch;
   id?: number;
+  /** The client's coordinates (docs/engines.md): targets in, bone output out. */
+  conventions?: Conventions;
+  /** Bone output on the answer (skeleton chains). */
+  bones?: BoneOutput;
+}
+
+/** `fk`'s pose: `q` (every DOF), or `joints` (some, by name; the others: the session's
+ * current pose), or neither (the current pose); `bones`: what to return (the server's
+ * default: the local rotations). */
+export interface FkOptions {
+  q?: number[];
+  joints?: Record<string, number>;
+  bones?: BoneOutput;
 }
 
 type Json = Record<string, unknown>;
@@ -155,15 +169,16 @@ export class Client {
   }
 
   /** Solve one frame from the session's pose (`compact`: no joints by name, no effector
-   * errors). With an `id` a frame that got no answer is sent again, same id (`reconnect`). */
+   * errors; `bones`: this frame's bone output, in place of the session's). With an `id`
+   * a frame that got no answer is sent again, same id (`reconnect`). */
   async frame<C extends boolean = false>(
     session: SessionRef,
     targets: Target[],
-    options: { id?: number; compact?: C } = {},
+    options: { id?: number; compact?: C; bones?: BoneOutput } = {},
   ): Promise<Result<C>> {
     const out: FrameResults<Result<C>> = await this.request("POST", `/v1/sessions/${session.id}/frames`, {
       session,
-      body: withoutUndefined({ id: options.id, targets }),
+      body: withoutUndefined({ id: options.id, targets, bones: options.bones }),
       compact: options.compact ?? false,
       repeatable: options.id !== undefined,
     });
@@ -200,10 +215,25 @@ export class Client {
     return out.results;
   }
 
-  /** A stateless one-shot solve (no session). */
+  /** A stateless one-shot solve (no session), in `conventions`, answering with `bones`. */
   solve(chain: Chain, targets: Target[], options: SolveOptions = {}): Promise<FrameResult> {
-    const body = withoutUndefined({ chain, targets, seed: options.seed, options: options.options, id: options.id });
+    const body = withoutUndefined({
+      chain,
+      targets,
+      seed: options.seed,
+      options: options.options,
+      id: options.id,
+      conventions: options.conventions,
+      bones: options.bones,
+    });
     return this.request("POST", "/v1/solve", { body, repeatable: true });
+  }
+
+  /** Forward kinematics: the bone data of a pose in the session's conventions; the
+   * session's pose does not change. */
+  fk(session: SessionRef, options: FkOptions = {}): Promise<FkResult> {
+    const body = withoutUndefined({ q: options.q, joints: options.joints, bones: options.bones });
+    return this.request("POST", `/v1/sessions/${session.id}/fk`, { session, body, repeatable: true });
   }
 
   /** The session's WebSocket, open (see `Stream`). */

@@ -119,6 +119,13 @@ export interface BonesOut {
   world?: Record<string, { position: Vec3; rotation: Quaternion }> | null;
 }
 
+/** Schema `FkResult`: the bone data of a pose (`POST .../fk`). */
+export interface FkResult {
+  /** The pose used, in DOF order. */
+  q: number[];
+  bones: BonesOut;
+}
+
 /** Schema `PoseIn`: exactly one of `q` (every DOF, in order) or `joints` (some, by name). */
 export type PoseIn =
   | { q: number[]; joints?: null }

@@ -44,7 +44,9 @@ import {
   type ErrorBody,
   type BoneEffectorSpec,
   type BoneSettingsSpec,
+  type BonesOut,
   type BvhChain,
+  type FkResult,
   type ExampleChain,
   type GltfChain,
   type FollowerInfo,
@@ -263,6 +265,7 @@ const DECLARED: Record<string, string[]> = {
   BatchEntryResult: k<BatchEntryResult>({ session: true, id: true, success: true, result: true }),
   BatchEntryError: k<BatchEntryError>({ session: true, id: true, success: true, error: true }),
   ErrorPayload: k<ErrorPayload>({ code: true, message: true, field: true, retry_after_s: true }),
+  FkResult: k<FkResult>({ q: true, bones: true }),
 };
 
 describe("types", () => {
@@ -340,6 +343,21 @@ async function droppingRelay(upstream: string, drops: number, busy = 0, retryAft
     },
   };
 }
+
+// schemas.chain.EXAMPLE_BVH_LEG: a two-bone leg, no bone output by default.
+const BVH_LEG: BvhChain = {
+  format: "bvh",
+  bvh: [
+    "HIERARCHY", "ROOT Hips", "{", "  OFFSET 0 0 0",
+    "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+    "  JOINT LeftUpLeg", "  {", "    OFFSET 10 0 0", "    CHANNELS 3 Zrotation Xrotation Yrotation",
+    "    JOINT LeftLeg", "    {", "      OFFSET 0 -45 0", "      CHANNELS 3 Zrotation Xrotation Yrotation",
+    "      End Site", "      {", "        OFFSET 0 -45 0", "      }", "    }", "  }", "}",
+  ].join("\n"),
+  unit_m: 0.01,
+  moving: ["LeftUpLeg", "LeftLeg"],
+  effectors: [{ bone: "LeftLeg_end", name: "left_foot" }],
+};
 
 describe("http", () => {
   test("a frame with an id is sent again after a dropped connection; without one it is not", async () => {
@@ -477,6 +495,38 @@ describe("http", () => {
     assert.equal(result.q.length, 7);
   });
 
+  test("bones, conventions and FK over HTTP", async () => {
+    // A point FK gives in Unreal's axes and centimetres is solved back to, in the same terms.
+    const unreal = { preset: "unreal" } as const;
+    const session = await ik.createSession(BVH_LEG, { conventions: unreal });
+    const ankle = (r: { bones?: BonesOut | null }): Vec3 => {
+      const world = r.bones?.world?.["LeftLeg_end"];
+      assert.ok(world !== undefined, JSON.stringify(r));
+      return world.position;
+    };
+    const near = (a: Vec3, b: Vec3) =>
+      assert.ok(Math.max(Math.abs(a.x - b.x), Math.abs(a.y - b.y), Math.abs(a.z - b.z)) <= 0.02, JSON.stringify([a, b]));
+    try {
+      const start = (await ik.getSession(session)).pose.q;
+      const moved = await ik.fk(session, { joints: { "LeftUpLeg.x": 0.05, "LeftLeg.x": 0.05 }, bones: { world: ["LeftLeg_end"] } });
+      assert.deepEqual((await ik.getSession(session)).pose.q, start); // FK leaves the pose alone
+      assert.notDeepEqual(moved.q, start);
+      const foot: Target = { effector: "left_foot", position: ankle(moved) };
+      const asked = await ik.frame(session, [foot], { bones: { world: ["LeftLeg_end"], local_rotations: true } });
+      const plain = await ik.frame(session, [foot]);
+      const here = await ik.fk(session);
+      assert.ok(asked.success && plain.bones == null, JSON.stringify(plain));
+      near(ankle(asked), ankle(moved));
+      assert.ok(asked.bones?.local?.["LeftLeg"] !== undefined && here.bones.world == null);
+      assert.deepEqual(here.q, plain.q);
+      const oneShot = await ik.solve(BVH_LEG, [foot], { conventions: unreal, bones: { world: ["LeftLeg_end"] } });
+      assert.ok(oneShot.success);
+      near(ankle(oneShot), ankle(moved));
+    } finally {
+      await ik.deleteSession(session);
+    }
+  });
+
   test("errors carry code and field", async () => {
     const bad = { format: "example", name: "no_such_arm" } as unknown as ExampleChain;
     const schema = await ik.createSession(bad).catch((e: unknown) => e);
@@ -530,21 +580,7 @@ describe("stream", () => {
     });
 
     test(`a frame may ask for bones (${encoding})`, async () => {
-      // schemas.chain.EXAMPLE_BVH_LEG: a two-bone leg, no bone output by default.
-      const leg: BvhChain = {
-        format: "bvh",
-        bvh: [
-          "HIERARCHY", "ROOT Hips", "{", "  OFFSET 0 0 0",
-          "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
-          "  JOINT LeftUpLeg", "  {", "    OFFSET 10 0 0", "    CHANNELS 3 Zrotation Xrotation Yrotation",
-          "    JOINT LeftLeg", "    {", "      OFFSET 0 -45 0", "      CHANNELS 3 Zrotation Xrotation Yrotation",
-          "      End Site", "      {", "        OFFSET 0 -45 0", "      }", "    }", "  }", "}",
-        ].join("\n"),
-        unit_m: 0.01,
-        moving: ["LeftUpLeg", "LeftLeg"],
-        effectors: [{ bone: "LeftLeg_end", name: "left_foot" }],
-      };
-      const session = await ik.createSession(leg);
+      const session = await ik.createSession(BVH_LEG);
       const stream = await ik.stream(session, { encoding });
       const foot: Target = { effector: "left_foot", position: { x: 0.1, y: -0.8, z: 0.1 } };
       try {
