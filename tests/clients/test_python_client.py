@@ -311,6 +311,36 @@ def test_stream_frame_asks_for_bones_per_frame(ik: Client, encoding: Encoding) -
 
 
 @pytest.mark.parametrize("encoding", list(Encoding))
+def test_stream_fk_is_http_fk_and_leaves_the_pose(ik: Client, encoding: Encoding) -> None:
+    """The WebSocket's ``fk`` message answers what ``POST .../fk`` does, in order with
+    the frames around it, and does not move the stream."""
+    from schemas.chain import EXAMPLE_GLTF_LEG
+
+    session = ik.create_session(EXAMPLE_GLTF_LEG, conventions={"preset": "unity"})
+    foot: Target = {"effector": "foot", "position": {"x": 0.0, "y": 0.5, "z": 0.1}}
+    asked: ik_client.BoneOutput = {"world": ["ankle"], "local_rotations": True}
+    try:
+        with ik.stream(session, encoding=encoding) as stream:
+            before = stream.frame([foot])
+            bent = stream.fk(joints={"knee.x": 0.5}, bones=asked)
+            here = stream.fk()
+            over_http = ik.fk(session, joints={"knee.x": 0.5}, bones=asked)
+            after = stream.frame([foot])
+    finally:
+        ik.delete_session(session)
+    assert bent.q == pytest.approx(over_http.q, abs=1e-12)
+    got, want = (
+        bent.bones["world"]["ankle"]["position"],
+        over_http.bones["world"]["ankle"]["position"],
+    )
+    assert [got[k] for k in "xyz"] == pytest.approx([want[k] for k in "xyz"], abs=1e-9)
+    assert here.q == pytest.approx(before.q, abs=1e-12) and set(here.bones) == {"local"}
+    # fk did not move the stream: the next frame starts where the last answer was (a
+    # move to the fk pose would step the 0.1 rad limit; the null-space step is 0.005).
+    assert after.largest_step_rad is not None and after.largest_step_rad < 0.05
+
+
+@pytest.mark.parametrize("encoding", list(Encoding))
 def test_stream_pipelines_in_order(ik: Client, session: Session, encoding: Encoding) -> None:
     with ik.stream(session, encoding=encoding) as stream:
         ids = [stream.send_frame([tool(0.1 + 0.002 * i)]) for i in range(20)]

@@ -55,6 +55,8 @@ from .types import (
     ClipAnswer,
     ClipResult,
     Encoding,
+    FkAnswer,
+    FkResult,
     Frame,
     FrameAnswer,
     FrameResult,
@@ -270,6 +272,8 @@ class _Pipeline:
         if kind == "batch_result":
             results = [BatchEntryResult.from_json(e) for e in envelope["results"]]
             return BatchAnswer(message.id, results)
+        if kind == "fk_result":
+            return FkAnswer(message.id, FkResult.from_json(envelope))
         if kind == "pong":
             return Pong(message.id)
         # Not the envelope in the message: formatting it costs more than the rest.
@@ -329,6 +333,17 @@ def _batch(frames: list[BatchFrame]) -> dict[str, Any]:
     return {"type": "batch", "frames": frames}
 
 
+def _fk(
+    q: list[float] | None, joints: dict[str, float] | None, bones: BoneOutput | None
+) -> dict[str, Any]:
+    """An fk message: the pose ``q``, or ``joints`` by name, or neither (the session's)."""
+    body: dict[str, Any] = {"type": "fk"}
+    for key, value in (("q", q), ("joints", joints), ("bones", bones)):
+        if value is not None:
+            body[key] = value
+    return body
+
+
 def _close_of(exc: ConnectionClosed) -> tuple[int, str]:
     """The close code and reason the server sent; 1006 when none came."""
     if exc.rcvd is not None:
@@ -374,6 +389,12 @@ class _Retries:
 def _expect_frame(answer: Answer) -> FrameResult:
     if not isinstance(answer, FrameAnswer):
         raise IKClientError(f"expected a frame result, got {answer!r}")
+    return answer.result
+
+
+def _expect_fk(answer: Answer) -> FkResult:
+    if not isinstance(answer, FkAnswer):
+        raise IKClientError(f"expected an fk result, got {answer!r}")
     return answer.result
 
 
@@ -508,6 +529,15 @@ class AsyncStream(_BaseStream[AsyncConnection]):
     async def send_ping(self) -> int:
         return await self._send({"type": "ping"})
 
+    async def send_fk(
+        self,
+        *,
+        q: list[float] | None = None,
+        joints: dict[str, float] | None = None,
+        bones: BoneOutput | None = None,
+    ) -> int:
+        return await self._send(_fk(q, joints, bones))
+
     async def receive(self) -> Answer:
         while True:
             connection = self.connection
@@ -534,6 +564,18 @@ class AsyncStream(_BaseStream[AsyncConnection]):
     async def ping(self) -> Pong:
         await self.send_ping()
         return _expect_pong(await self.receive())
+
+    async def fk(
+        self,
+        *,
+        q: list[float] | None = None,
+        joints: dict[str, float] | None = None,
+        bones: BoneOutput | None = None,
+    ) -> FkResult:
+        """Forward kinematics of a pose (``q``, ``joints`` by name, or neither: the
+        session's current pose) in the session's conventions; the pose does not change."""
+        await self.send_fk(q=q, joints=joints, bones=bones)
+        return _expect_fk(await self.receive())
 
     async def _open(self) -> AsyncConnection:
         return await async_connect(self.url, **self._connect_options, **self._take_sock())
@@ -598,6 +640,15 @@ class Stream(_BaseStream[SyncConnection]):
     def send_ping(self) -> int:
         return self._send({"type": "ping"})
 
+    def send_fk(
+        self,
+        *,
+        q: list[float] | None = None,
+        joints: dict[str, float] | None = None,
+        bones: BoneOutput | None = None,
+    ) -> int:
+        return self._send(_fk(q, joints, bones))
+
     def receive(self) -> Answer:
         while True:
             try:
@@ -622,6 +673,18 @@ class Stream(_BaseStream[SyncConnection]):
     def ping(self) -> Pong:
         self.send_ping()
         return _expect_pong(self.receive())
+
+    def fk(
+        self,
+        *,
+        q: list[float] | None = None,
+        joints: dict[str, float] | None = None,
+        bones: BoneOutput | None = None,
+    ) -> FkResult:
+        """Forward kinematics of a pose (``q``, ``joints`` by name, or neither: the
+        session's current pose) in the session's conventions; the pose does not change."""
+        self.send_fk(q=q, joints=joints, bones=bones)
+        return _expect_fk(self.receive())
 
     def _open(self) -> SyncConnection:
         options = {**self._connect_options, **self._take_sock()}

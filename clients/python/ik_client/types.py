@@ -505,4 +505,13 @@ class Pong:
     type: Literal["pong"] = "pong"
 
 
-Answer = FrameAnswer | ClipAnswer | BatchAnswer | Pong
+@dataclass(frozen=True, slots=True)
+class FkAnswer:
+    """An ``fk_result`` message: the answer to the stream's fk ``id``."""
+
+    id: int
+    result: FkResult
+    type: Literal["fk_result"] = "fk_result"
+
+
+Answer = FrameAnswer | ClipAnswer | BatchAnswer | FkAnswer | Pong

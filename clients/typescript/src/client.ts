@@ -13,7 +13,7 @@
 
 import { encodeBody } from "./encode.js";
 import { serviceError } from "./errors.js";
-import { DEFAULT_RECONNECT, type Reconnect, Stream, type StreamOptions } from "./stream.js";
+import { DEFAULT_RECONNECT, type FkOptions, type Reconnect, Stream, type StreamOptions } from "./stream.js";
 import type {
   BatchEntry,
   BatchFrame,
@@ -74,14 +74,7 @@ export interface SolveOptions {
   bones?: BoneOutput;
 }
 
-/** `fk`'s pose: `q` (every DOF), or `joints` (some, by name; the others: the session's
- * current pose), or neither (the current pose); `bones`: what to return (the server's
- * default: the local rotations). */
-export interface FkOptions {
-  q?: number[];
-  joints?: Record<string, number>;
-  bones?: BoneOutput;
-}
+
 
 type Json = Record<string, unknown>;
 
@@ -232,7 +225,7 @@ export class Client {
   /** Forward kinematics: the bone data of a pose in the session's conventions; the
    * session's pose does not change. */
   fk(session: SessionRef, options: FkOptions = {}): Promise<FkResult> {
-    const body = withoutUndefined({ q: options.q, joints: options.joints, bones: options.bones });
+    const body = withoutUndefined({ ...options });
     return this.request("POST", `/v1/sessions/${session.id}/fk`, { session, body, repeatable: true });
   }
 

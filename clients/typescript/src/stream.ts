@@ -33,6 +33,7 @@ import type {
   BoneOutput,
   ClipAnswer,
   Encoding,
+  FkResult,
   Frame,
   FrameResult,
   FrameResults,
@@ -90,6 +91,21 @@ export interface StreamOptions {
 export interface FrameOptions {
   /** This frame's bone output instead of the session's (skeleton chains; docs/websocket.md). */
   bones?: BoneOutput;
+}
+
+/** `fk`'s pose: `q` (every DOF), or `joints` (some, by name; the others: the session's
+ * current pose), or neither (the current pose); `bones`: what to return (the server's
+ * default: the local rotations). */
+export interface FkOptions {
+  q?: number[];
+  joints?: Record<string, number>;
+  bones?: BoneOutput;
+}
+
+function fkMessage(options: FkOptions): Envelope {
+  const message: Envelope = { type: "fk" };
+  for (const [key, value] of Object.entries(options)) if (value !== undefined) message[key] = value;
+  return message;
 }
 
 function frameMessage(targets: Target[], options: FrameOptions): Envelope {
@@ -187,6 +203,12 @@ export class Stream<R = FrameResult> {
     return this.send({ type: "ping" }).id;
   }
 
+  /** Forward kinematics of `options.q`, of `options.joints` by name, or of neither (the
+   * session's current pose), in the session's conventions; the pose does not change. */
+  sendFk(options: FkOptions = {}): number {
+    return this.send(fkMessage(options)).id;
+  }
+
   /** The next answer, in the order sent; rejects with the message's `ServiceError`. */
   receive(): Promise<Answer<R>> {
     const next = this.unread.shift();
@@ -204,6 +226,12 @@ export class Stream<R = FrameResult> {
     const answer = await this.answerOf(this.send({ type: "clip", frames, plan: options.plan ?? false }));
     if (answer.type !== "clip_result") throw new IKClientError(`expected a clip result, got ${answer.type}`);
     return { results: (answer as ClipAnswer<R>).results, plan: (answer as ClipAnswer<R>).plan };
+  }
+
+  async fk(options: FkOptions = {}): Promise<FkResult> {
+    const answer = await this.answerOf(this.send(fkMessage(options)));
+    if (answer.type !== "fk_result") throw new IKClientError(`expected an fk result, got ${answer.type}`);
+    return answer.result;
   }
 
   async ping(): Promise<Pong> {
@@ -303,6 +331,9 @@ export class Stream<R = FrameResult> {
     } else if (envelope["type"] === "clip_result") {
       const clip = envelope as unknown as ClipAnswer<R>;
       message.resolve({ type: "clip_result", id, success: clip.success, results: clip.results, plan: clip.plan ?? null });
+    } else if (envelope["type"] === "fk_result") {
+      const fk = envelope as unknown as FkResult;
+      message.resolve({ type: "fk_result", id, result: { q: fk.q, bones: fk.bones } });
     } else if (envelope["type"] === "pong") {
       message.resolve({ type: "pong", id });
     } else {

@@ -466,4 +466,11 @@ export interface Pong {
   id: number;
 }
 
-export type Answer<R = FrameResult> = FrameAnswer<R> | ClipAnswer<R> | Pong;
+/** An `fk_result` message: the answer to the stream's fk `id`. */
+export interface FkAnswer {
+  type: "fk_result";
+  id: number;
+  result: FkResult;
+}
+
+export type Answer<R = FrameResult> = FrameAnswer<R> | ClipAnswer<R> | FkAnswer | Pong;

@@ -579,6 +579,30 @@ describe("stream", () => {
       }
     });
 
+    test(`fk over the stream is HTTP's fk and leaves the pose (${encoding})`, async () => {
+      const session = await ik.createSession(BVH_LEG, { conventions: { preset: "unity" } });
+      const stream = await ik.stream(session, { encoding });
+      const foot: Target = { effector: "left_foot", position: { x: 0.1, y: -0.8, z: 0.1 } };
+      const asked = { world: ["LeftLeg_end"], local_rotations: true };
+      try {
+        const before = await stream.frame([foot]);
+        const bent = await stream.fk({ joints: { "LeftLeg.x": 0.5 }, bones: asked });
+        const here = await stream.fk();
+        const overHttp = await ik.fk(session, { joints: { "LeftLeg.x": 0.5 }, bones: asked });
+        const after = await stream.frame([foot]);
+        assert.deepEqual(bent.q, overHttp.q);
+        assert.deepEqual(bent.bones.world?.["LeftLeg_end"], overHttp.bones.world?.["LeftLeg_end"]);
+        assert.deepEqual(here.q, before.q);
+        assert.ok(here.bones.local != null && here.bones.world == null);
+        // fk did not move the stream: the next frame starts where the last answer was (a
+        // move to the fk pose would step the 0.1 rad limit; the null-space step is 0.005).
+        assert.ok(after.largest_step_rad !== null && after.largest_step_rad < 0.05, JSON.stringify(after));
+      } finally {
+        stream.close();
+        await ik.deleteSession(session);
+      }
+    });
+
     test(`a frame may ask for bones (${encoding})`, async () => {
       const session = await ik.createSession(BVH_LEG);
       const stream = await ik.stream(session, { encoding });
