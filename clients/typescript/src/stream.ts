@@ -30,6 +30,8 @@ import {
 } from "./errors.js";
 import type {
   Answer,
+  BatchEntry,
+  BatchFrame,
   BoneOutput,
   ClipAnswer,
   Encoding,
@@ -203,6 +205,12 @@ export class Stream<R = FrameResult> {
     return this.send({ type: "ping" }).id;
   }
 
+  /** One frame for each of several sessions (a game server's characters), each with its
+   * session's id and token: answered by one `batch_result`, an entry per frame, in order. */
+  sendBatch(frames: BatchFrame[]): number {
+    return this.send({ type: "batch", frames }).id;
+  }
+
   /** Forward kinematics of `options.q`, of `options.joints` by name, or of neither (the
    * session's current pose), in the session's conventions; the pose does not change. */
   sendFk(options: FkOptions = {}): number {
@@ -226,6 +234,14 @@ export class Stream<R = FrameResult> {
     const answer = await this.answerOf(this.send({ type: "clip", frames, plan: options.plan ?? false }));
     if (answer.type !== "clip_result") throw new IKClientError(`expected a clip result, got ${answer.type}`);
     return { results: (answer as ClipAnswer<R>).results, plan: (answer as ClipAnswer<R>).plan };
+  }
+
+  /** Each entry's result or its own error (an entry's error does not reject: the other
+   * entries were solved). */
+  async batch(frames: BatchFrame[]): Promise<BatchEntry<R>[]> {
+    const answer = await this.answerOf(this.send({ type: "batch", frames }));
+    if (answer.type !== "batch_result") throw new IKClientError(`expected a batch result, got ${answer.type}`);
+    return answer.results;
   }
 
   async fk(options: FkOptions = {}): Promise<FkResult> {
@@ -331,6 +347,8 @@ export class Stream<R = FrameResult> {
     } else if (envelope["type"] === "clip_result") {
       const clip = envelope as unknown as ClipAnswer<R>;
       message.resolve({ type: "clip_result", id, success: clip.success, results: clip.results, plan: clip.plan ?? null });
+    } else if (envelope["type"] === "batch_result") {
+      message.resolve({ type: "batch_result", id, results: envelope["results"] as BatchEntry<R>[] });
     } else if (envelope["type"] === "fk_result") {
       const fk = envelope as unknown as FkResult;
       message.resolve({ type: "fk_result", id, result: { q: fk.q, bones: fk.bones } });

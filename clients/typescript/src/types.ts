@@ -466,6 +466,14 @@ export interface Pong {
   id: number;
 }
 
+/** A `batch_result` message: the answer to the stream's batch `id`, one entry per frame
+ * sent, in order, each a result or that entry's own error. */
+export interface BatchAnswer<R = FrameResult> {
+  type: "batch_result";
+  id: number;
+  results: BatchEntry<R>[];
+}
+
 /** An `fk_result` message: the answer to the stream's fk `id`. */
 export interface FkAnswer {
   type: "fk_result";
@@ -473,4 +481,4 @@ export interface FkAnswer {
   result: FkResult;
 }
 
-export type Answer<R = FrameResult> = FrameAnswer<R> | ClipAnswer<R> | FkAnswer | Pong;
+export type Answer<R = FrameResult> = FrameAnswer<R> | ClipAnswer<R> | BatchAnswer<R> | FkAnswer | Pong;

@@ -579,6 +579,38 @@ describe("stream", () => {
       }
     });
 
+    test(`a batch over the stream: one answer per entry, each a result or its own error (${encoding})`, async () => {
+      const a = await ik.createSession(PANDA);
+      const b = await ik.createSession(PANDA);
+      const stream = await ik.stream(a, { encoding });
+      try {
+        // Two batches pipelined, then a frame of the stream's own session: in order.
+        const firstId = stream.sendBatch([
+          { session: a.id, token: a.token, id: 1, targets: [tool(0.1)] },
+          { session: b.id, token: "not-its-token", id: 2, targets: [tool(0.1)] },
+          { session: b.id, token: b.token, id: 3, targets: [tool(0.12)] },
+        ]);
+        const secondId = stream.sendBatch([{ session: b.id, token: b.token, id: 4, targets: [tool(0.11)] }]);
+        const one = await stream.receive();
+        const two = await stream.receive();
+        assert.ok(one.type === "batch_result" && two.type === "batch_result");
+        assert.deepEqual([one.id, two.id], [firstId, secondId]);
+        const [first, wrong, third] = one.results;
+        assert.ok(first !== undefined && "result" in first && third !== undefined && "result" in third);
+        assertSolved(first.result);
+        assertSolved(third.result);
+        assert.ok(wrong !== undefined && "error" in wrong && wrong.error.code === ErrorCode.Forbidden);
+        const [again] = await stream.batch([{ session: a.id, token: a.token, id: 5, targets: [tool(0.1)] }]);
+        assert.ok(again !== undefined && "result" in again);
+        assertSolved(again.result);
+        assert.deepEqual((await ik.getSession(b)).pose.q, (two.results[0] as { result: FrameResult }).result.q);
+      } finally {
+        stream.close();
+        await ik.deleteSession(a);
+        await ik.deleteSession(b);
+      }
+    });
+
     test(`fk over the stream is HTTP's fk and leaves the pose (${encoding})`, async () => {
       const session = await ik.createSession(BVH_LEG, { conventions: { preset: "unity" } });
       const stream = await ik.stream(session, { encoding });
