@@ -9,7 +9,8 @@ the article's method unchanged in each:
    frame's seed, with the goal switched off (f_goal = -inf: the pass does not stop
    when the targets are first met, so the pole gets to swing the limb round), no
    restarts (a random restart would pick the bend side by chance) and at most
-   ``SHAPING_MAX_ITER`` iterations and half the time budget.
+   ``SHAPING_MAX_ITER`` iterations (``SHAPING_FIRST_MAX_ITER`` on a frame with no
+   previous answer) and half the time budget.
 2. The usual solve without the pole term, from the shaping pass's answer: it converges
    to the targets on the side the pole chose (a local method stays in the basin it
    starts in), and success is judged as in any frame.
@@ -56,6 +57,12 @@ POLE_WEIGHT_VALUE = 0.1
 # with four poles costs ~5x a plain one rather than ~7x with 40 (bench/RESULTS.md); a
 # stream's shaping carries on from frame to frame.
 SHAPING_MAX_ITER = 15
+# The same for a frame with no previous answer (a stream's first frame, a one-shot
+# solve): the limb starts wherever the seed put it, often on the far side of the pole,
+# and there is no next frame to carry the swing on. 15 left CesiumMan's left arm a
+# quarter turn short of a pole behind it (tests/solver/test_poles_weights.py); the cost
+# is the first frame's only.
+SHAPING_FIRST_MAX_ITER = 60
 
 
 def limb_path(chain: Chain, effector: int) -> list[str]:
@@ -142,12 +149,14 @@ class PoleShaper:
         args: tuple[Any, ...],
         poles: list[tuple[int, Pole]],
         usual: FrameCall,
+        shaping_max_iter: int = SHAPING_MAX_ITER,
     ) -> SolveResult:
         """The frame of ``args`` (``frame.solve_frame``'s arguments) with the poles'
-        shaping pass first, then ``usual`` (the frame's solve without poles: the
-        compiled call, or ``blend.solve_blended``); the answer is in ``args``' out_x
-        and out. Iterations, evaluations, restarts and time are summed over the
-        calls; passes are the answer's own (its pass log is the one in ``out``)."""
+        shaping pass first (at most ``shaping_max_iter`` iterations), then ``usual``
+        (the frame's solve without poles: the compiled call, or
+        ``blend.solve_blended``); the answer is in ``args``' out_x and out. Iterations,
+        evaluations, restarts and time are summed over the calls; passes are the
+        answer's own (its pass log is the one in ``out``)."""
         data, x0, h0, fopt, iopt, policy, out_x, out, step, scratch, ints = args
         misc = data[5]
         dd = data[4]
@@ -157,7 +166,7 @@ class PoleShaper:
         shaping_f[C.F_BUDGET] = 0.5 * fopt[C.F_BUDGET]
         shaping_i = iopt.copy()
         shaping_i[C.I_MAX_RESTARTS] = 0
-        shaping_i[C.I_MAX_ITER] = min(int(iopt[C.I_MAX_ITER]), SHAPING_MAX_ITER)
+        shaping_i[C.I_MAX_ITER] = min(int(iopt[C.I_MAX_ITER]), shaping_max_iter)
         shaped = np.empty_like(x0)
         try:
             first = usual(

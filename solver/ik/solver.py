@@ -57,7 +57,7 @@ from .metric import ik_metric
 from .options import IKOptions
 from .packing import OptionPacks
 from .pole_term import pole_block_size
-from .poles import PoleShaper
+from .poles import SHAPING_FIRST_MAX_ITER, SHAPING_MAX_ITER, PoleShaper
 from .result import STATUSES, EffectorError, IKResult, IKStatus
 from .settled import settled_variables, variable_periods
 from .split import LimbSplit
@@ -440,7 +440,10 @@ class IKSolver:
         if task.poles:  # a shaping pass first (poles)
             if self._shaper is None:
                 self._shaper = PoleShaper(self.chain, MISC_SIZE)
-            solved = self._shaper.solve(args, task.poles, usual)
+            # A stream's later frame carries on the swing of the one before it.
+            first = not (stream and self._answered)
+            cap = SHAPING_FIRST_MAX_ITER if first else SHAPING_MAX_ITER
+            solved = self._shaper.solve(args, task.poles, usual, cap)
         else:
             solved = usual(*args)
         bad, status, code, nit, nfev, npass, nrest, elapsed = solved

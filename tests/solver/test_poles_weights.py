@@ -112,6 +112,45 @@ def test_a_named_pole_bone_and_bad_poles(legs: Chain) -> None:
         Pole([0.0, math.nan, 0.0])
 
 
+def test_a_stream_s_first_frame_swings_an_arm_to_a_pole_behind_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """CesiumMan's left arm (shoulder node 16, elbow 17, hand 18) from its middle pose:
+    a pole on the far side of the shoulder-hand line. A stream's first frame has no
+    next frame to finish the swing, so its shaping pass may run longer: the elbow ends
+    on the pole's side (with a later frame's 15 iterations it stopped a quarter turn
+    short: a new user's report)."""
+    settings = SkeletonSettings(
+        effectors=[Effector(name="hand_l", link="node_18")], moving=("node_16", "node_17")
+    )
+    arm = chain_from_skeleton(read_gltf(asset_bytes("CesiumMan.glb")), settings).chain
+    start = arm.mid_limits()
+    shoulder = link_poses(arm, start)["node_16"][:3, 3]
+    hand = effector_poses(arm, start)[0][:3, 3]
+    target = shoulder + 0.7 * (hand - shoulder) + np.array([0.0, 0.05, 0.0])
+    line = (target - shoulder) / np.linalg.norm(target - shoulder)
+    across = np.cross(line, [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)
+    middle = 0.5 * (shoulder + target)
+    pole = Pole(middle + 0.5 * across, link="node_17")
+
+    def elbow_towards_pole(result_q: np.ndarray) -> float:
+        offset = link_poses(arm, result_q)["node_17"][:3, 3] - middle
+        offset -= (offset @ line) * line
+        return float(offset @ across / np.linalg.norm(offset))
+
+    def first_frame() -> np.ndarray:
+        solver = IKSolver(arm, STREAM_DEFAULTS)
+        solver.set_pose(start)
+        result = solver.track([Target(effector="hand_l", position=target, pole=pole)])
+        assert result.success, result.status
+        return result.q
+
+    assert elbow_towards_pole(first_frame()) > 0.9
+    monkeypatch.setattr("solver.ik.solver.SHAPING_FIRST_MAX_ITER", 15)
+    assert elbow_towards_pole(first_frame()) < 0.5  # the case the longer pass is for
+
+
 def test_a_pole_never_fails_a_reachable_frame(legs: Chain) -> None:
     # A pole far away on the wrong side of everything: the frame still solves.
     target, middle, across = bent_leg(legs)
