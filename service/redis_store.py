@@ -167,9 +167,9 @@ class RedisSessionStore(SessionStore):
     @staticmethod
     def _record(session: Session) -> StreamRecord:
         """The session's stream state now, copied (call it under the session's lock)."""
-        q, h = session.solver.stream_state()
+        q, h, answered = session.solver.stream_state()
         h = None if h is None else h.copy()
-        return StreamRecord(q.copy(), h, session.rest, session.frames, session.solved)
+        return StreamRecord(q.copy(), h, session.rest, session.frames, session.solved, answered)
 
     # -- the interface ---------------------------------------------------------------
     async def add(self, session: Session) -> None:
@@ -293,7 +293,7 @@ class RedisSessionStore(SessionStore):
         record = unpack_stream(stored[b"state"], n)
         if record.rest is not None:
             session.set_pose(record.rest)
-        session.solver.restore(StreamState(record.q, record.inverse_hessian))
+        session.solver.restore(StreamState(record.q, record.inverse_hessian, record.answered))
         session.frames, session.solved = record.frames, record.solved
         session.version = int(stored[b"v"])
         followers = session.view.chain.followers

@@ -72,6 +72,8 @@ class StreamRecord:
     rest: np.ndarray | None  # None: the middle of the limits
     frames: int
     solved: int
+    # A frame answered since the pose was set (solver.ik.StreamState.answered).
+    answered: bool = True
 
 
 def _array(a: np.ndarray | None) -> bytes | None:
@@ -93,17 +95,21 @@ def pack_stream(record: StreamRecord) -> bytes:
                 _array(record.rest),
                 record.frames,
                 record.solved,
+                record.answered,
             ]
         )
     )
 
 
 def unpack_stream(data: bytes, n_dof: int) -> StreamRecord:
-    q, h, rest, frames, solved = msgpack.unpackb(data)
+    values = msgpack.unpackb(data)
+    q, h, rest, frames, solved = values[:5]
+    # A record written before ``answered`` was stored holds five values.
+    answered = bool(values[5]) if len(values) > 5 else True
     q_arr = _unarray(q, (n_dof,))
     assert q_arr is not None
     return StreamRecord(
-        q_arr, _unarray(h, (n_dof, n_dof)), _unarray(rest, (n_dof,)), frames, solved
+        q_arr, _unarray(h, (n_dof, n_dof)), _unarray(rest, (n_dof,)), frames, solved, answered
     )
 
 

@@ -69,11 +69,13 @@ IKData = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.nd
 
 
 class StreamState(NamedTuple):
-    """What ``track`` carries from frame to frame: the pose, and the BFGS matrix when
-    ``IKOptions.carry_hessian`` is on (else None)."""
+    """What ``track`` carries from frame to frame: the pose, the BFGS matrix when
+    ``IKOptions.carry_hessian`` is on (else None), and whether a frame has been answered
+    since ``set_pose`` (else the next is a stream's first: solved as REACH would)."""
 
     q: Vector
     inverse_hessian: Matrix | None
+    answered: bool = True
 
 
 _tuple_new = tuple.__new__
@@ -336,13 +338,13 @@ class IKSolver:
 
     def stream_state(self) -> StreamState:
         """The pose and carried BFGS matrix the next ``track`` starts from."""
-        return StreamState(self.q, self._h)
+        return StreamState(self.q, self._h, self._answered)
 
     def restore(self, state: StreamState) -> None:
         """Continue a stream from ``state`` (the rest pose is kept: see ``set_pose``)."""
         self.q = state.q
         self._h = state.inverse_hessian
-        self._answered = True
+        self._answered = state.answered
 
     # -- internals -------------------------------------------------------------
     def _frame(

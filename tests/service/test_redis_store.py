@@ -480,3 +480,26 @@ def test_active_sessions_is_the_count_in_redis_on_every_worker(
     in_redis = redis.Redis.from_url(redis_url).zcard("ik:all")
     assert in_redis >= 3
     assert _gauge(a, "ik_active_sessions") == _gauge(b, "ik_active_sessions") == in_redis
+
+
+def _step(client: TestClient, s: Created, frame_id: int, x: float) -> float:
+    """The largest joint step of a frame sending the hand to (x, 0.1, 0.6)."""
+    r = client.post(
+        f"/v1/sessions/{s.id}/frames", json=hand_frame(frame_id, x=x), headers=s.headers
+    )
+    assert r.status_code == 200, r.text
+    step: float = r.json()["results"][0]["largest_step_rad"]
+    return step
+
+
+def test_a_stream_s_first_frame_is_first_on_every_worker(workers: Workers) -> None:
+    """Under ``smooth`` a stream's first frame (after the session's creation or a pose
+    set) is solved as ``reach`` would: on the worker that loads the session from Redis
+    too, not only on the one that set the pose."""
+    a, b = workers()
+    s = create(a)
+    assert _step(b, s, 1, -0.3) > 0.1  # the first frame, on another worker: not limited
+    assert _step(a, s, 2, 0.3) <= 0.1 + 1e-9  # a later frame: the step limit
+    r = a.put(f"/v1/sessions/{s.id}/pose", json={"q": [0.0, 0.0, 0.0]}, headers=s.headers)
+    assert r.status_code == 200, r.text
+    assert _step(b, s, 3, -0.3) > 0.1  # first again after the pose set on A

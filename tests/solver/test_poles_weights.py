@@ -7,6 +7,8 @@ from the hip-foot line along the direction from that line to the pole.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -21,6 +23,7 @@ from solver.ik import (
     default_pole_link,
     pole_node,
 )
+from solver.ik.poles import PoleShaper
 from solver.model import Chain, Effector, EffectorMode
 from solver.model.forward import effector_poses, link_poses
 from solver.model.gltf import read_gltf
@@ -139,14 +142,33 @@ def test_a_stream_s_first_frame_swings_an_arm_to_a_pole_behind_it(
         offset -= (offset @ line) * line
         return float(offset @ across / np.linalg.norm(offset))
 
+    # No time budget: the shaping pass's half of it must not be what stops it here.
+    options = replace(STREAM_DEFAULTS, time_budget_us=None)
+    frame = [Target(effector="hand_l", position=target, pole=pole)]
+
     def first_frame() -> np.ndarray:
-        solver = IKSolver(arm, STREAM_DEFAULTS)
+        solver = IKSolver(arm, options)
         solver.set_pose(start)
-        result = solver.track([Target(effector="hand_l", position=target, pole=pole)])
+        result = solver.track(frame)
         assert result.success, result.status
         return result.q
 
     assert elbow_towards_pole(first_frame()) > 0.9
+    # The cap each shaping pass got: a stream's first frame, a later one, a one-shot solve.
+    caps: list[int] = []
+    shape = PoleShaper.solve
+
+    def recording(self: PoleShaper, *args: Any) -> Any:
+        caps.append(args[3])
+        return shape(self, *args)
+
+    monkeypatch.setattr(PoleShaper, "solve", recording)
+    solver = IKSolver(arm, options)
+    solver.set_pose(start)
+    solver.track(frame)
+    solver.track(frame)
+    solver.solve(frame)
+    assert caps == [60, 15, 60]
     monkeypatch.setattr("solver.ik.solver.SHAPING_FIRST_MAX_ITER", 15)
     assert elbow_towards_pole(first_frame()) < 0.5  # the case the longer pass is for
 
