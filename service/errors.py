@@ -207,9 +207,8 @@ def dotted_field(loc: Sequence[Any]) -> str | None:
     puts after ``chain`` (``chain.unit_m``, not ``chain.bvh.unit_m``: ``chain.bvh`` is
     the BVH text)."""
     parts = list(loc[1:] if loc and loc[0] == "body" else loc)
-    parts = [
-        p for i, p in enumerate(parts) if not (i and parts[i - 1] == "chain" and p in CHAIN_FORMATS)
-    ]
+    if len(parts) > 1 and parts[0] == "chain" and parts[1] in CHAIN_FORMATS:
+        del parts[1]  # only there: a bone may be named "chain", a key "urdf"
     return ".".join(str(p) for p in parts) or None
 
 

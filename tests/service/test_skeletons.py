@@ -15,6 +15,7 @@ import pytest
 from starlette.testclient import TestClient
 
 from schemas.chain import EXAMPLE_BVH_LEG, EXAMPLE_GLTF_LEG
+from service.errors import dotted_field
 from tests.solver.skeleton_refs import (
     GLB_FILES,
     WALK_UNIT_M,
@@ -249,6 +250,13 @@ def test_unknown_bone_names_say_which_setting_and_suggest(client: TestClient) ->
     assert body["field"] == "bones.world[0]"
     # Where, then what: no "Hed.world:" of the solver's own in between.
     assert body["detail"].startswith("bones.world[0]: unknown bone 'Hed'; did you mean 'Head'")
+
+
+def test_only_the_chain_s_own_format_leaves_a_field() -> None:
+    # A bone named "chain" whose settings hold a key named like a format keeps both.
+    loc = ["body", "chain", "bvh", "bones", "chain", "urdf"]
+    assert dotted_field(loc) == "chain.bones.chain.urdf"
+    assert dotted_field(["body", "chain", "hierarchy", "joints", 0]) == "chain.joints.0"
 
 
 def test_a_schema_error_names_the_chain_s_field_not_its_format(client: TestClient) -> None:

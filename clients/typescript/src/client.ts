@@ -225,7 +225,7 @@ export class Client {
   /** Forward kinematics: the bone data of a pose in the session's conventions; the
    * session's pose does not change. */
   fk(session: SessionRef, options: FkOptions = {}): Promise<FkResult> {
-    const body = withoutUndefined({ ...options });
+    const body = withoutUndefined({ q: options.q, joints: options.joints, bones: options.bones });
     return this.request("POST", `/v1/sessions/${session.id}/fk`, { session, body, repeatable: true });
   }
 

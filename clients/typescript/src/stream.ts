@@ -105,8 +105,11 @@ export interface FkOptions {
 }
 
 function fkMessage(options: FkOptions): Envelope {
+  // The three fields by name: an object with more (a session's `pose`) sends no others.
   const message: Envelope = { type: "fk" };
-  for (const [key, value] of Object.entries(options)) if (value !== undefined) message[key] = value;
+  if (options.q !== undefined) message["q"] = options.q;
+  if (options.joints !== undefined) message["joints"] = options.joints;
+  if (options.bones !== undefined) message["bones"] = options.bones;
   return message;
 }
 
