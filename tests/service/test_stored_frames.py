@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import msgpack
 import numpy as np
 
 import schemas as S
@@ -138,3 +139,14 @@ def test_a_stored_stream_state_continues_the_stream_exactly() -> None:
     next_targets = _targets(view, 0.48)
     np.testing.assert_array_equal(second.track(next_targets).q, first.track(next_targets).q)
     assert (record.frames, record.solved, record.rest) == (3, 3, None)
+
+
+def test_a_stream_record_keeps_whether_a_frame_was_answered() -> None:
+    """A record says whether the next frame is a stream's first (``answered`` False after
+    a pose set); one written before the flag was stored holds five values and reads as
+    answered (a rolling deploy reads the old workers' records)."""
+    q = np.arange(3, dtype=np.float64)
+    fresh = unpack_stream(pack_stream(StreamRecord(q, None, None, 0, 0, False)), 3)
+    assert fresh.answered is False and np.array_equal(fresh.q, q)
+    old = msgpack.packb([q.tobytes(), None, None, 4, 4])
+    assert unpack_stream(old, 3).answered is True
