@@ -44,10 +44,10 @@ from .errors import (
     ServiceError,
     dotted_field,
     invalid_problem,
+    most_helpful,
     not_found,
     solver_error,
     store_unavailable,
-    validation_errors,
 )
 from .sessions import STALE_RETRIES, Session, SessionStore, StaleSession
 from .solving import Runner, rate_limited
@@ -112,8 +112,7 @@ def check_length(n_entries: int, limit: int) -> None:
 def invalid_entry(index: int, entry: S.InvalidEntry) -> ServiceError:
     """An entry that failed validation, as its ``invalid_format`` error (the field is
     the entry's, ``frames.<index>.<loc>``, as a whole message's validation names it)."""
-    errors = validation_errors(entry.errors)
-    first = errors[0] if errors else {"loc": [], "msg": "invalid entry"}
+    first = most_helpful(entry.errors)
     inner = dotted_field(first["loc"])
     field = f"frames.{index}" + ("" if inner is None else f".{inner}")
     return ServiceError(

@@ -64,11 +64,17 @@ WS_FORBIDDEN = 4403
 WS_NOT_FOUND = 4404
 WS_CLOSE_CODES: dict[int, str] = {
     status.WS_1000_NORMAL_CLOSURE: "normal closure",
-    status.WS_1008_POLICY_VIOLATION: "the client did not read its answers (IK_WS_SEND_TIMEOUT_S)",
+    status.WS_1008_POLICY_VIOLATION: (
+        "the client did not read its answers (IK_WS_SEND_TIMEOUT_S), or a results query "
+        "value other than full or compact (at connect)"
+    ),
     status.WS_1009_MESSAGE_TOO_BIG: "message larger than IK_WS_MAX_MESSAGE_BYTES",
     status.WS_1011_INTERNAL_ERROR: "unexpected server error (logged)",
     status.WS_1012_SERVICE_RESTART: "the server is shutting down; reconnect",
-    status.WS_1013_TRY_AGAIN_LATER: "too many open WebSockets; retry later",
+    status.WS_1013_TRY_AGAIN_LATER: (
+        "too many open WebSockets, or the session store (Redis) did not answer at connect; "
+        "retry later"
+    ),
     WS_UNAUTHORIZED: "no token (Authorization: Bearer or ?token=)",
     WS_FORBIDDEN: "wrong token for this session",
     WS_NOT_FOUND: "no such session (never existed, expired or deleted)",
@@ -199,6 +205,19 @@ def validation_errors(errors: Any) -> list[dict[str, Any]]:
         ]
         out.append({"loc": loc, "msg": clip(msg, MAX_DETAIL_CHARS), "type": e.get("type", "")})
     return out
+
+
+def most_helpful(errors: Any) -> dict[str, Any]:
+    """The one error of a WebSocket message or a batch entry (an HTTP 422 lists them
+    all), as ``validation_errors`` renders it: the first that service.hints has a
+    better message for (a field name one typo away, an array where an object belongs),
+    else the first. A misspelt ``target`` then says "did you mean 'targets'?" where the
+    first error would only say that ``targets`` is missing."""
+    errors = list(errors)
+    if not errors:
+        return {"loc": [], "msg": "invalid message", "type": ""}
+    chosen = next((e for e in errors if hint(e) is not None), errors[0])
+    return validation_errors([chosen])[0]
 
 
 def dotted_field(loc: Sequence[Any]) -> str | None:

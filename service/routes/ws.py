@@ -30,10 +30,7 @@ import math
 import time
 from typing import Annotated, Any, Unpack
 
-import msgpack
-import orjson
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
-from pydantic import TypeAdapter, ValidationError
 from starlette import status
 
 import schemas as S
@@ -41,7 +38,7 @@ from schemas import ErrorCode
 from solver.errors import IKError
 from solver.ik import Target as SolverTarget
 
-from .. import batch, convert, hints
+from .. import batch, convert
 from ..auth import authenticate, origin_allowed, websocket_subprotocol, websocket_token
 from ..convert import FastFrame
 from ..dependencies import Services, services
@@ -50,14 +47,13 @@ from ..errors import (
     WS_NOT_FOUND,
     WS_UNAUTHORIZED,
     ServiceError,
-    dotted_field,
     solver_error,
-    validation_errors,
 )
 from ..responses import dumps_message, packb_message
 from ..sessions import Session
 from ..solving import session_client
-from .ws_batch import RawBatch, batch_reply, raw_batch
+from .ws_batch import RawBatch, batch_reply
+from .ws_decode import ClientMessage, Unreadable, decode
 from .ws_messages import (
     ErrorDetails,
     clip_result_message,
@@ -75,14 +71,6 @@ log = logging.getLogger("service")
 BACKLOG_GAP_S = 1e-3
 router = APIRouter(prefix="/v1")
 
-ClientMessage = S.FrameMessage | S.ClipMessage | S.BatchMessage | S.FkMessage | S.PingMessage
-_CLIENT_MESSAGE: TypeAdapter[ClientMessage] = TypeAdapter(S.ClientMessage)
-# pydantic's error types, at the message's top level, for a message whose ``type`` is
-# missing or unknown, or that is not an object at all: answered with the types there are
-# (dict_type from JSON, model_attributes_type from MessagePack).
-_NO_MESSAGE_TYPE = frozenset(
-    {"union_tag_not_found", "union_tag_invalid", "dict_type", "model_attributes_type"}
-)
 _AUTH_CLOSE = {
     ErrorCode.UNAUTHORIZED: WS_UNAUTHORIZED,
     ErrorCode.FORBIDDEN: WS_FORBIDDEN,
@@ -90,24 +78,8 @@ _AUTH_CLOSE = {
 }
 
 
-def _raw_id(raw: Any) -> int | None:
-    """The id of a message that failed validation, if it has a usable one."""
-    v = raw.get("id") if isinstance(raw, dict) else None
-    return v if isinstance(v, int) and not isinstance(v, bool) else None
-
-
 class _SlowReader(Exception):
     """The client stopped reading its answers."""
-
-
-class _Unreadable(Exception):
-    """A message that is not a valid client message: answered ``invalid_format``."""
-
-    def __init__(self, msg_id: int | None, message: str, field: str | None = None) -> None:
-        super().__init__(message)
-        self.msg_id = msg_id
-        self.message = message
-        self.field = field
 
 
 class _Connection:
@@ -219,40 +191,12 @@ class _Connection:
         )
 
     def decode(self, data: str | bytes, binary: bool) -> FastFrame | RawBatch | ClientMessage:
-        """A well-formed frame as the fast path's ``(id, targets)`` (convert.fast_frame), a
-        batch as its entries (ws_batch.raw_batch: each is read on its own); any other
-        message validated by pydantic, which gives the documented error.
+        """The message read against this socket's session (``ws_decode.decode``).
 
         Raises:
-            _Unreadable: not JSON / MessagePack, or not a valid client message.
+            Unreadable: not JSON / MessagePack, or not a valid client message.
         """
-        raw: Any = None
-        if binary:
-            try:
-                raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
-            except Exception as e:  # msgpack's errors share no useful base class
-                raise _Unreadable(None, f"not MessagePack: {type(e).__name__}") from None
-        else:
-            try:
-                raw = orjson.loads(data)
-            except orjson.JSONDecodeError:
-                pass  # validate_json below says why
-        if raw is not None and (fast := convert.fast_frame(raw, self.session.view)) is not None:
-            return fast
-        if (envelope := raw_batch(raw)) is not None:
-            return envelope
-        try:
-            if binary:
-                return _CLIENT_MESSAGE.validate_python(raw)
-            # validate_json, not validate_python(raw): JSON mode is the documented schema
-            return _CLIENT_MESSAGE.validate_json(data)
-        except ValidationError as e:
-            errors = validation_errors(e.errors())
-            first = errors[0] if errors else {"loc": [], "msg": "invalid message", "type": ""}
-            message, field = str(first["msg"]), dotted_field(first["loc"])
-            if field is None and first["type"] in _NO_MESSAGE_TYPE:
-                message, field = hints.message_type_hint(raw), "type"
-            raise _Unreadable(_raw_id(raw), message, field) from None
+        return decode(data, binary, self.session.view)
 
     async def handle(self, data: str | bytes, t0: float, backlog: bool = False) -> None:
         """Answer one message: decode, check its id, run it, send the one reply.
@@ -261,7 +205,7 @@ class _Connection:
         binary = isinstance(data, bytes)
         try:
             msg = self.decode(data, binary)
-        except _Unreadable as e:
+        except Unreadable as e:
             reply = self.error_reply(e.msg_id, ErrorCode.INVALID_FORMAT, e.message, field=e.field)
             await self.send(reply, binary)
             return

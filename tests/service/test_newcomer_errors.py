@@ -214,6 +214,60 @@ def test_a_misspelt_field_is_told_the_near_name(client: TestClient, session: Cre
     assert "did you mean" not in r.json()["detail"][0]["msg"], r.text
 
 
+@pytest.mark.parametrize("binary", [False, True], ids=["json", "msgpack"])
+def test_a_misspelt_field_is_told_the_near_name_on_the_websocket_too(
+    client: TestClient, session: Created, binary: bool
+) -> None:
+    """A WebSocket error carries one error: the hinted one, not "targets: Field required"."""
+    message = {"type": "frame", "id": 3, "target": hand_frame(None)["targets"]}
+    error = ws_exchange(client, session, message, binary=binary)["error"]
+    assert error["code"] == "invalid_format", error
+    assert error["message"] == "unknown field 'target'; did you mean 'targets'?", error
+    assert error["field"] == "frame.target", error
+
+
+def test_a_misspelt_field_in_a_batch_entry_is_told_the_near_name(
+    client: TestClient, session: Created
+) -> None:
+    entry = {"session": session.id, "token": session.token, "id": 1, "target": []}
+    answer = ws_exchange(client, session, {"type": "batch", "id": 2, "frames": [entry]})
+    error = answer["results"][0]["error"]
+    assert error["message"] == "unknown field 'target'; did you mean 'targets'?", answer
+    assert error["field"] == "frames.0.target", answer
+
+
+@pytest.mark.parametrize("bad", ["NaN", "Infinity", "1e400"])
+def test_a_json_number_orjson_refuses_still_echoes_the_id(
+    client: TestClient, session: Created, bad: str
+) -> None:
+    """NaN, Infinity and 1e400 are not JSON to orjson, but the id beside them is readable."""
+    text = (
+        '{"type": "frame", "id": 7, "targets": [{"effector": "hand", '
+        f'"position": {{"x": {bad}, "y": 0.1, "z": 0.6}}}}]}}'
+    )
+    answer = ws_exchange(client, session, text)
+    assert answer["id"] == 7, answer
+    assert answer["error"]["code"] == "invalid_format", answer
+    assert answer["error"]["field"] == "frame.targets.0.position.x", answer
+
+
+def test_a_msgpack_map_key_that_is_not_a_string_is_named(
+    client: TestClient, session: Created
+) -> None:
+    """Valid MessagePack that msgpack refuses (an integer key) is told so, with its id."""
+    with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
+        ws.send_bytes(msgpack.packb({1: "frame", "id": 4}))
+        answer = msgpack.unpackb(ws.receive_bytes())
+        # Bytes msgpack cannot read at all keep the short answer, with no id.
+        ws.send_bytes(b"\xc1")
+        garbage = msgpack.unpackb(ws.receive_bytes())
+    assert answer["id"] == 4, answer
+    assert answer["error"]["message"] == (
+        "a MessagePack map key must be a string, and this message has a key of type int"
+    ), answer
+    assert garbage["id"] is None and garbage["error"]["message"].startswith("not MessagePack")
+
+
 @pytest.mark.parametrize("scheme", ["", "Token "])
 def test_a_token_without_bearer_is_told_the_header_form(
     client: TestClient, session: Created, scheme: str
