@@ -131,6 +131,7 @@ class ErrorPayload(StrictModel):
     field: str | None = None
     retry_after_s: float | None = Field(
         default=None,
-        description="For not_ready, rate_limited, plans_busy, too_many_plans: when to try "
-        "again [s] (HTTP's Retry-After)",
+        description="For not_ready, rate_limited, plans_busy, too_many_plans, server_busy, "
+        "too_much_work, store_unavailable and shutting_down: when to try again [s] "
+        "(HTTP's Retry-After)",
     )

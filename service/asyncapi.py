@@ -73,7 +73,7 @@ CLOSE_REASONS: Final[dict[int, tuple[ErrorCode | str, ...]]] = {
     # At shutdown uvicorn closes the sockets with no message in flight itself, with no
     # reason; a socket whose message is being answered gets shutting_down.
     1012: (ErrorCode.SHUTTING_DOWN, ""),
-    1013: (ErrorCode.TOO_MANY_WEBSOCKETS,),
+    1013: (ErrorCode.TOO_MANY_WEBSOCKETS, ErrorCode.STORE_UNAVAILABLE),
     4401: (ErrorCode.UNAUTHORIZED,),
     4403: (ErrorCode.FORBIDDEN, ErrorCode.FORBIDDEN_ORIGIN),
     4404: (ErrorCode.NOT_FOUND,),

@@ -40,7 +40,8 @@ CLOSE_CODE_MEANINGS: dict[int, str] = {
     CloseCode.MESSAGE_TOO_BIG: "message larger than IK_WS_MAX_MESSAGE_BYTES",
     CloseCode.INTERNAL_ERROR: "unexpected server error (logged)",
     CloseCode.SERVICE_RESTART: "the server is shutting down; reconnect",
-    CloseCode.TRY_AGAIN_LATER: "too many open WebSockets; retry later",
+    CloseCode.TRY_AGAIN_LATER: "too many open WebSockets, or the session store did not answer; "
+    "retry later",
     CloseCode.UNAUTHORIZED: "no token (Authorization: Bearer or ?token=)",
     CloseCode.FORBIDDEN: "wrong token for this session, or a browser Origin not allowed",
     CloseCode.NOT_FOUND: "no such session (never existed, expired or deleted)",

@@ -61,7 +61,7 @@ export const CLOSE_CODE_MEANINGS: Readonly<Record<number, string>> = {
   1009: "message larger than IK_WS_MAX_MESSAGE_BYTES",
   1011: "unexpected server error (logged)",
   1012: "the server is shutting down; reconnect",
-  1013: "too many open WebSockets; retry later",
+  1013: "too many open WebSockets, or the session store did not answer; retry later",
   4401: "no token (Authorization: Bearer, the ik.token subprotocol or ?token=)",
   4403: "wrong token for this session, or a browser Origin not allowed",
   4404: "no such session (never existed, expired or deleted)",
