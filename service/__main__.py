@@ -13,12 +13,18 @@ import logging  # noqa: E402
 import re  # noqa: E402
 import socket  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from typing import Any  # noqa: E402
 
 import uvicorn  # noqa: E402
 from pydantic import ValidationError  # noqa: E402
 
-from .config import get_settings, settings_errors, unknown_variables  # noqa: E402
+from .config import (  # noqa: E402
+    get_settings,
+    misspelt_variables,
+    settings_errors,
+    unknown_variables,
+)
 from .main import create_app  # noqa: E402
 from .peer_limits import PeerLimits, protocols  # noqa: E402
 
@@ -43,16 +49,31 @@ _PROBES = frozenset(("/healthz", "/readyz"))
 
 class QuietProbes(logging.Filter):
     """Drops uvicorn's access-log line of a health check that passed: a balancer's
-    probes were most of an idle worker's log (925 /readyz lines in a few minutes); a
-    probe that fails (503 while warming up or without Redis) is still logged."""
+    probes were most of an idle worker's log (925 /readyz lines in a few minutes). A
+    probe that fails (503 while compiling or without Redis) is logged when its status
+    changes, and then once per ``repeat_s`` at most: a first start's compile of several
+    minutes, probed every 0.5 s by two backends, once logged ~750 identical lines."""
+
+    def __init__(self, repeat_s: float = 30.0, clock: Callable[[], float] = time.monotonic):
+        super().__init__()
+        self.repeat_s = repeat_s
+        self.clock = clock
+        self._failed: dict[str, tuple[int, float]] = {}  # path -> (status, when logged)
 
     def filter(self, record: logging.LogRecord) -> bool:
         args = record.args
         # uvicorn.access: (client address, method, path, HTTP version, status code)
         if isinstance(args, tuple) and len(args) == 5:
             path, status_code = args[2], args[4]
-            if path in _PROBES and isinstance(status_code, int) and status_code < 400:
-                return False
+            if path in _PROBES and isinstance(status_code, int):
+                if status_code < 400:
+                    self._failed.pop(path, None)
+                    return False
+                now = self.clock()
+                last = self._failed.get(path)
+                if last is not None and last[0] == status_code and now - last[1] < self.repeat_s:
+                    return False
+                self._failed[path] = (status_code, now)
         return True
 
 
@@ -87,6 +108,8 @@ def main() -> None:
         settings = get_settings()
     except ValidationError as e:  # said in the environment's names, not a traceback
         raise SystemExit(settings_errors(e)) from None
+    if typos := misspelt_variables(os.environ):
+        raise SystemExit("invalid configuration:\n  " + "\n  ".join(typos))
     logging.basicConfig(level=settings.log_level.upper(), format="%(levelname)s:     %(message)s")
     for name in ("uvicorn.access", "uvicorn.error"):
         logging.getLogger(name).addFilter(_RedactTokens())

@@ -7,6 +7,8 @@ names and defaults); units are in the names.
 from __future__ import annotations
 
 import difflib
+import ipaddress
+import re
 from collections.abc import Mapping
 from functools import lru_cache
 from typing import Literal
@@ -15,6 +17,12 @@ from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from .redis_url import redis_url_problem
+
+# A host name (RFC 1123 labels) or, when it holds ':' or only digits and dots, an address.
+_HOST_NAME = re.compile(
+    r"[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?"
+)
+_LOOKS_NUMERIC = re.compile(r"[0-9.]+")
 
 
 class Settings(BaseSettings):
@@ -30,6 +38,21 @@ class Settings(BaseSettings):
     host: str = Field(default="127.0.0.1", description="Address to bind")
     port: int = Field(default=8000, ge=0, le=65535, description="Port to bind")
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
+
+    @field_validator("host")
+    @classmethod
+    def _host_form(cls, value: str) -> str:
+        """An IP address, or a host name the resolver may look up at bind: a value that
+        looks like an address must be one (256.1.1.1 would otherwise fail at bind with
+        uvicorn's "Name or service not known", which does not name IK_HOST)."""
+        if not _HOST_NAME.fullmatch(value) or _LOOKS_NUMERIC.fullmatch(value):
+            try:
+                ipaddress.ip_address(value)
+            except ValueError:
+                raise ValueError(
+                    "not an IP address (127.0.0.1, 0.0.0.0, ::) nor a host name"
+                ) from None
+        return value
 
     @field_validator("log_level", mode="before")
     @classmethod
@@ -243,19 +266,46 @@ def get_settings() -> Settings:
 ENV_PREFIX = "IK_"
 
 
-def unknown_variables(environ: Mapping[str, str]) -> list[str]:
-    """A warning for each ``IK_`` variable that no setting reads, with the closest name.
+# An unknown IK_ variable this close to a setting's name (difflib's ratio) that is not
+# set itself is a typo: IK_REDIS_UR (0.96), IK_PORTS (0.93), IK_API_KEY (0.95),
+# IK_LOGLEVEL (0.96). IK_LB_BIND (HAProxy's, docs/operations.md) is nothing like one.
+TYPO_RATIO = 0.85
 
-    pydantic-settings ignores them (``extra="ignore"``: the environment holds other
-    programs' variables too), so a misspelt ``IK_REDIS_UR`` would silently start a
-    worker with its sessions in memory behind a balancer that expects Redis.
+
+def _closest(key: str, known: list[str], cutoff: float) -> str | None:
+    close = difflib.get_close_matches(key, known, n=1, cutoff=cutoff)
+    return close[0] if close else None
+
+
+def misspelt_variables(environ: Mapping[str, str]) -> list[str]:
+    """An error for each ``IK_`` variable that no setting reads but one nearly does,
+    when that setting is not set itself: the service refuses to start on it.
+
+    pydantic-settings ignores unknown variables (``extra="ignore"``: the environment
+    holds other programs' variables too), so a misspelt ``IK_REDIS_UR`` would start a
+    worker with its sessions in memory behind a balancer that expects Redis: it passes
+    /readyz, takes traffic, and its sessions are 404 on every other worker.
     """
     known = [ENV_PREFIX + name.upper() for name in Settings.model_fields]
     out = []
     for key in sorted(environ):
         if key.startswith(ENV_PREFIX) and key not in known:
-            close = difflib.get_close_matches(key, known, n=1)
-            guess = f" (did you mean {close[0]}?)" if close else ""
+            meant = _closest(key, known, TYPO_RATIO)
+            if meant is not None and meant not in environ:
+                out.append(f"{key} is not a setting of this service: did you mean {meant}?")
+    return out
+
+
+def unknown_variables(environ: Mapping[str, str]) -> list[str]:
+    """A warning for each other ``IK_`` variable that no setting reads (those that
+    ``misspelt_variables`` refuses excepted), with the closest name if any."""
+    known = [ENV_PREFIX + name.upper() for name in Settings.model_fields]
+    refused = {line.split(" ", 1)[0] for line in misspelt_variables(environ)}
+    out = []
+    for key in sorted(environ):
+        if key.startswith(ENV_PREFIX) and key not in known and key not in refused:
+            meant = _closest(key, known, 0.6)
+            guess = f" (did you mean {meant}?)" if meant else ""
             out.append(f"{key} is not a setting of this service and is ignored{guess}")
     return out
 

@@ -167,7 +167,8 @@ def redis_cause(e: RedisError) -> str:
 class ReadinessProbe:
     """``/readyz``'s check of Redis: a PING; when it fails, ``store_unavailable`` whose
     detail is the operator's cause (``redis_cause``), logged when the cause changes
-    (a refusal at ERROR: it needs a fix), not at every probe."""
+    (a refusal at ERROR: it needs a fix), not at every probe, with where the worker
+    tried; and once when Redis answers again."""
 
     def __init__(self, client: aioredis.Redis) -> None:
         self.client = client
@@ -180,7 +181,22 @@ class ReadinessProbe:
             cause = redis_cause(e)
             if cause != self.last_cause:
                 level = logging.ERROR if refuses(e) else logging.WARNING
-                log.log(level, "not ready: %s (%s)", cause, e)
+                said = str(e)
+                detail = "" if not said or said in cause else f": {said}"
+                log.log(level, "not ready: %s (at %s%s)", cause, where(self.client), detail)
             self.last_cause = cause
             raise store_unavailable(detail=cause) from None
+        if self.last_cause is not None:
+            log.info("ready: Redis at %s answers again", where(self.client))
         self.last_cause = None
+
+
+def where(client: aioredis.Redis) -> str:
+    """The address a client connects to, for the log: host and port, or the socket's
+    path, and whether it speaks TLS (never the URL: it may hold a password)."""
+    pool = client.connection_pool
+    kwargs = pool.connection_kwargs
+    if "path" in kwargs:
+        return f"unix socket {kwargs['path']}"
+    tls = " over TLS (rediss://)" if pool.connection_class.__name__ == "SSLConnection" else ""
+    return f"{kwargs.get('host', 'localhost')}:{kwargs.get('port', 6379)}{tls}"

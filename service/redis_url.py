@@ -64,5 +64,10 @@ def redis_url_problem(url: str) -> str | None:
         try:
             int(db)
         except ValueError:
+            if "@" in parts.path:  # redis://:pa/ss@host: the password's '/' began the path
+                return (
+                    "the path is the database number (/0, /1, ...); percent-encode a "
+                    "password that holds / (%2F), ? (%3F) or # (%23)"
+                )
             return "the path is the database number (/0, /1, ...)"
     return None

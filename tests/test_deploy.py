@@ -1,11 +1,13 @@
 """docker-compose.yml and deploy/k8s/ik.yaml say what the failover test runs: the
 shipped HAProxy file, IK_REDIS_URL, /readyz for readiness, /healthz for liveness, and
-only settings the service has (a misspelt IK_ variable is ignored by the service, so it
-would fail silently in a deployment). No container engine runs here: these files are
-read, not run (dclint and kubernetes-validate checked them, docs/operations.md)."""
+only settings the service has (a misspelt IK_ variable stops the service, or is ignored
+with a warning: either way a deployment that names one is broken). No container engine
+runs here: these files are read, not run (dclint and kubernetes-validate checked them,
+docs/operations.md)."""
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -74,3 +76,13 @@ def test_k8s_memory_limit_lets_a_cold_start_compile() -> None:
     limit = container["resources"]["limits"]["memory"]
     mib = {"Gi": 1024.0, "Mi": 1.0}[limit[-2:]] * float(limit[:-2])
     assert mib >= 1.1 * COLD_COMPILE_PEAK_MIB, limit
+
+
+def test_k8s_runs_the_image_under_the_project_s_version() -> None:
+    """Not ``:latest`` (Kubernetes pulls that on every start, from Docker Hub, where
+    there is no such image): the project's version, as the comment's ``docker build
+    -t`` tags it, pulled only if the node lacks it."""
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    (container,) = _k8s_worker_pod()["containers"]
+    assert container["image"] == f"ik-service:{version}"
+    assert container["imagePullPolicy"] == "IfNotPresent"

@@ -2,18 +2,22 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 from pydantic import ValidationError
 
-from service.config import Settings, settings_errors, unknown_variables
+from service.config import Settings, misspelt_variables, settings_errors, unknown_variables
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(autouse=True)
 def clean_environ(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
-    import os
-
     for key in list(os.environ):
         if key.startswith("IK_"):
             monkeypatch.delenv(key)
@@ -57,6 +61,8 @@ def test_a_bad_value_is_said_in_the_environment_s_names(monkeypatch: pytest.Monk
         ("redis://:hunter2@cache:99999/0", "not a URL with a port redis-py can read"),
         # An unencoded / in the password: urlsplit takes what follows the : for a port.
         ("redis://:hunter2/x@cache:6379/0", "percent-encode a password"),
+        # ... and after an @ in it: the rest of the password is read as the path.
+        ("redis://:hunter2@x/y@cache:6379/0", "percent-encode a password that holds /"),
         # redis-py would read these paths as database 0 without a word.
         ("redis://:hunter2@cache:6379/sessions", "the path is the database number"),
         ("redis://:hunter2@cache:6379/\u00b2", "the path is the database number"),
@@ -105,13 +111,42 @@ def test_log_level_in_any_case(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_unknown_ik_variables_are_named_with_the_closest_setting() -> None:
-    warnings = unknown_variables(
-        {"IK_REDIS_UR": "redis://x", "IK_PORT": "1", "PATH": "/bin", "IK_ZZZZZZZZ": "1"}
+    env = {
+        "IK_REDIS_UR": "redis://x",  # a typo of a setting that is not set: refused
+        "IK_PORT": "1",
+        "IK_LOGLEVEL": "debug",  # a typo too, and IK_LOG_LEVEL is set: a warning
+        "IK_LOG_LEVEL": "info",
+        "PATH": "/bin",
+        "IK_LB_BIND": "127.0.0.1:8080",  # HAProxy's (docs/operations.md): a warning
+    }
+    assert misspelt_variables(env) == [
+        "IK_REDIS_UR is not a setting of this service: did you mean IK_REDIS_URL?"
+    ]
+    warnings = unknown_variables(env)
+    assert len(warnings) == 2, warnings
+    bind, typo = warnings
+    assert bind == "IK_LB_BIND is not a setting of this service and is ignored"
+    assert typo.startswith("IK_LOGLEVEL is not a setting") and "IK_LOG_LEVEL?" in typo
+
+
+def test_a_misspelt_setting_stops_the_start_with_its_name() -> None:
+    """``python -m service`` with IK_REDIS_UR: exit 1 before binding, saying what was
+    meant (a worker without its Redis would pass /readyz and lose sessions)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("IK_")}
+    env.update(IK_REDIS_UR="redis://127.0.0.1:1/0", IK_PORT="1")
+    done = subprocess.run(
+        [sys.executable, "-m", "service"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
-    assert len(warnings) == 2
-    typo, other = warnings
-    assert typo.startswith("IK_REDIS_UR is not a setting") and "IK_REDIS_URL?" in typo
-    assert other.startswith("IK_ZZZZZZZZ is not a setting") and "did you mean" not in other
+    assert done.returncode == 1, done
+    assert done.stderr.strip().endswith(
+        "invalid configuration:\n  IK_REDIS_UR is not a setting of this service: "
+        "did you mean IK_REDIS_URL?"
+    ), done.stderr
 
 
 def test_frozen() -> None:
@@ -132,3 +167,22 @@ def test_restarts_default_to_the_solvers_own(monkeypatch: pytest.MonkeyPatch) ->
     s = Settings()
     assert convert.oneshot_defaults(s).max_restarts == 7
     assert convert.session_defaults(s).max_restarts == 7
+
+
+@pytest.mark.parametrize("host", ["256.1.1.1", "10.0.0", "ex ample", "-worker", "a..b"])
+def test_a_host_that_is_neither_an_address_nor_a_name_is_refused_at_start(
+    monkeypatch: pytest.MonkeyPatch, host: str
+) -> None:
+    """uvicorn would fail at bind with "Name or service not known", naming no variable."""
+    monkeypatch.setenv("IK_HOST", host)
+    with pytest.raises(ValidationError) as err:
+        Settings()
+    assert settings_errors(err.value).startswith("invalid configuration:\n  IK_HOST: ")
+
+
+@pytest.mark.parametrize(
+    "host", ["127.0.0.1", "0.0.0.0", "::", "::1", "localhost", "ik.default.svc.cluster.local"]
+)
+def test_addresses_and_host_names_are_taken(monkeypatch: pytest.MonkeyPatch, host: str) -> None:
+    monkeypatch.setenv("IK_HOST", host)
+    assert Settings().host == host

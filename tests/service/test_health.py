@@ -184,3 +184,24 @@ def test_passed_health_checks_are_left_out_of_the_access_log() -> None:
     assert quiet.filter(record("/readyz", 503))
     assert quiet.filter(record("/v1/sessions", 201))
     assert quiet.filter(record("/readyz?x=1", 200))  # not a probe the balancers send
+
+
+def test_a_failing_probe_is_logged_when_it_changes_and_then_every_30_s() -> None:
+    """A compile of minutes probed twice a second: not a line per probe."""
+    from service.__main__ import QuietProbes
+
+    def record(path: str, status: int) -> logging.LogRecord:
+        args = ("127.0.0.1:5000", "GET", path, "1.1", status)
+        return logging.LogRecord("uvicorn.access", logging.INFO, "", 0, "%s", args, None)
+
+    now = [0.0]
+    quiet = QuietProbes(repeat_s=30.0, clock=lambda: now[0])
+    kept = []
+    for step in range(120):  # 60 s of probes every 0.5 s
+        now[0] = step * 0.5
+        kept.append(quiet.filter(record("/readyz", 503)))
+    assert kept.count(True) == 2 and kept[0] and kept[60]  # at 0 s and at 30 s
+    assert quiet.filter(record("/healthz", 503))  # another path: its own first line
+    assert quiet.filter(record("/readyz", 500))  # another status: logged at once
+    assert not quiet.filter(record("/readyz", 200))  # passed: dropped, and the
+    assert quiet.filter(record("/readyz", 503))  # next failure is news again

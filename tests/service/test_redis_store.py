@@ -33,7 +33,7 @@ from service.config import Settings
 from service.main import create_app
 from service.redis_store import RedisSessionStore
 from service.sessions import Session
-from service.stored_frames import StreamRecord, unpack_stream
+from service.stored_frames import KEPT_ANSWERS, StreamRecord, unpack_stream
 
 from .helpers import Created, create, hand_frame
 
@@ -442,6 +442,35 @@ def test_a_refusal_is_logged_once_at_error_not_at_every_probe(
     refusals = [r for r in caplog.records if "refuses this worker" in r.getMessage()]
     assert [r.levelno for r in refusals] == [logging.ERROR], caplog.text
     assert "not-the-pw" not in caplog.text
+    (line,) = [r.getMessage() for r in refusals]
+    assert f"(at 127.0.0.1:{guarded_redis.port}" in line, line  # where it tried
+    assert line.count("invalid username-password pair") == 1, line  # said once
+
+
+def test_an_outage_is_logged_with_where_and_the_recovery_once(
+    make_client: Callable[..., TestClient], caplog: pytest.LogCaptureFixture
+) -> None:
+    """A paused Redis: one WARNING naming the address, 503s, then one INFO line when
+    it answers again (the operator sees the outage end in the log, too)."""
+    server = RedisServer()
+    try:
+        client = make_client(Settings(redis_url=SecretStr(server.url), redis_timeout_s=0.2))
+        assert client.get("/readyz").status_code == 200
+        with caplog.at_level(logging.INFO, logger="service"):
+            server.pause()
+            try:
+                for _ in range(2):
+                    assert client.get("/readyz").status_code == 503
+            finally:
+                server.resume()
+            for _ in range(2):
+                assert client.get("/readyz").status_code == 200
+    finally:
+        server.stop()
+    lines = [r.getMessage() for r in caplog.records if r.name == "service"]
+    outages = [m for m in lines if m.startswith("not ready: Redis did not answer")]
+    assert len(outages) == 1 and f"(at 127.0.0.1:{server.port}" in outages[0], lines
+    assert lines.count(f"ready: Redis at 127.0.0.1:{server.port} answers again") == 1, lines
 
 
 def test_readyz_says_a_database_number_redis_lacks_and_a_port_nobody_serves(
@@ -503,3 +532,28 @@ def test_a_stream_s_first_frame_is_first_on_every_worker(workers: Workers) -> No
     r = a.put(f"/v1/sessions/{s.id}/pose", json={"q": [0.0, 0.0, 0.0]}, headers=s.headers)
     assert r.status_code == 200, r.text
     assert _step(b, s, 3, -0.3) > 0.1  # first again after the pose set on A
+
+
+def test_the_last_64_answered_frames_are_answered_again_and_an_older_one_is_solved(
+    workers: Workers,
+) -> None:
+    """docs/operations.md: a client with at most KEPT_ANSWERS (64) messages unanswered
+    at a failover gets each answered exactly once; an older one has left the window."""
+    a, b = workers()
+    s = create(a)
+    sent = [hand_frame(k, x=0.3 + 0.001 * k) for k in range(1, KEPT_ANSWERS + 2)]
+    first = []
+    for frame in sent:
+        r = a.post(f"/v1/sessions/{s.id}/frames", json=frame, headers=s.headers)
+        assert r.status_code == 200, r.text
+        first.append(r.json()["results"][0])
+    frames = len(sent)
+    assert _in_redis(workers, s)["counters"]["frames"] == frames
+    for frame, answer in zip(sent[1:], first[1:], strict=True):  # the last 64, on B
+        r = b.post(f"/v1/sessions/{s.id}/frames", json=frame, headers=s.headers)
+        assert r.status_code == 200, r.text
+        assert r.json()["results"][0] == answer
+    assert _in_redis(workers, s)["counters"]["frames"] == frames
+    r = b.post(f"/v1/sessions/{s.id}/frames", json=sent[0], headers=s.headers)
+    assert r.status_code == 200, r.text
+    assert _in_redis(workers, s)["counters"]["frames"] == frames + 1  # solved again
