@@ -1,8 +1,9 @@
 """Getting the compiled solver into this process at startup, and saying how far it is.
 
 The solver is numba code. The first start of a checkout or image finds no compiled
-solver on disk and compiles it (minutes); numba caches the result on disk (under
-solver/__pycache__), so every later start only loads it (about a second).
+solver on disk and compiles it (minutes); numba caches the result on disk (the
+``__pycache__`` folders under solver/, or NUMBA_CACHE_DIR), so every later start only
+loads it (about a second).
 
 ``warm_solver`` first tries to load everything from that cache. Where something is
 missing, the compile runs in child processes (``python -m service.compile_worker``),
@@ -29,16 +30,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO
 
-import solver
 from schemas import StartupPhase, StartupProgress
-from solver.precompile import STEP_NAMES, NotCached, WarmupProgress, warmup
+from solver.precompile import STEP_NAMES, NotCached, WarmupProgress, cache_location, warmup
 
 log = logging.getLogger("service")
 
 Report = Callable[[StartupProgress], None]
-
-# Where numba keeps the compiled solver (solver/_jit.py's in-tree cache locator).
-CACHE_DIR = Path(solver.__file__).resolve().parent / "__pycache__"
 
 # How the warm-up's steps are shared out. Measured (numba's compile events of each
 # step, on busy cores): the IK core (pose) is ~15% of the compile, the planner's node
@@ -72,7 +69,7 @@ def warm_solver(report: Report, *, processes: int = 2, steps: Sequence[str] = ST
     it first in child processes if the on-disk cache lacks any of it; returns the
     seconds it took."""
     start = time.perf_counter()
-    log.info("loading the compiled solver from its on-disk cache (%s)", CACHE_DIR)
+    log.info("loading the compiled solver from its on-disk cache (%s)", cache_location())
     try:
         warmup(_relay(report, StartupPhase.LOADING, start), steps=steps, load_only=True)
     except NotCached as missing:

@@ -77,8 +77,11 @@ def _package_digest() -> bytes:
 _PACKAGE_DIGEST = _package_digest()
 
 
-class _SolverPackageLocator(caching.InTreeCacheLocator):
-    """numba's in-tree locator with a package-wide source stamp (see module docstring)."""
+class _PackageStamp:
+    """A numba cache locator's source stamp over all of solver/ (module docstring),
+    for the functions ``jit`` marks only (numba's own locators serve the rest)."""
+
+    _py_file: str
 
     def get_source_stamp(self) -> Any:
         own = Path(self._py_file).read_bytes()
@@ -88,11 +91,25 @@ class _SolverPackageLocator(caching.InTreeCacheLocator):
     def from_function(cls, py_func: Any, py_file: str) -> Any:
         if not getattr(py_func, _MARK, False):
             return None
-        return super().from_function(py_func, py_file)
+        return super().from_function(py_func, py_file)  # type: ignore[misc]
 
 
-if _SolverPackageLocator not in caching.CacheImpl._locator_classes:
-    caching.CacheImpl._locator_classes.insert(0, _SolverPackageLocator)
+class _SolverUserDirLocator(_PackageStamp, caching.UserProvidedCacheLocator):
+    """``NUMBA_CACHE_DIR``, when set, as numba's own locators honour it: first."""
+
+
+class _SolverPackageLocator(_PackageStamp, caching.InTreeCacheLocator):
+    """numba's in-tree locator (each module's ``__pycache__``), when no directory is set."""
+
+
+# Ours before numba's (which would stamp by the file alone), and among ours the user's
+# directory before the tree, as numba orders its own: an image that compiles as root
+# into NUMBA_CACHE_DIR and runs as another user must find its cache there, not in a
+# site-packages __pycache__ that user cannot write (numba skips a cache directory it
+# cannot write to, and would compile again).
+for _locator in (_SolverPackageLocator, _SolverUserDirLocator):
+    if _locator not in caching.CacheImpl._locator_classes:
+        caching.CacheImpl._locator_classes.insert(0, _locator)
 
 
 def _compile(fn: Any, **options: Any) -> Any:

@@ -1,7 +1,8 @@
 """Load (or compile) the numba core before the first real frame.
 
 A fresh checkout compiles the core once (minutes on these machines) and writes it to
-``solver/__pycache__``; later processes load it in about a second. The warm-up is a
+the ``__pycache__`` folders under solver/, or to ``NUMBA_CACHE_DIR`` when set
+(``cache_location``); later processes load it in about a second. The warm-up is a
 list of named steps (``STEPS``), each a small solve that reaches one group of compiled
 functions; ``warmup()`` runs them in order (or a chosen subset, so that a caller may
 compile disjoint groups in separate processes) and reports after each one.
@@ -12,9 +13,10 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
-from numba.core import event
+from numba.core import config, event
 
 from .ik import Continuity, IKData, IKOptions, IKSolver, Target, pose_targets
 from .model import EffectorMode
@@ -137,6 +139,16 @@ class _Compiles(event.Listener):
     def on_end(self, ev: event.Event) -> None:
         self.count += 1
         self._on_compiled()
+
+
+def cache_location() -> str:
+    """Where the compiled solver is cached: ``NUMBA_CACHE_DIR`` if set, else the
+    ``__pycache__`` folders of solver/ and its subpackages (solver/_jit.py's locators,
+    which this module does not import: it is outside the cache stamp)."""
+    user_dir = getattr(config, "CACHE_DIR", "")  # numba reads it from the environment
+    if user_dir:
+        return str(user_dir)
+    return f"{Path(__file__).resolve().parent}/**/__pycache__"
 
 
 def warmup(

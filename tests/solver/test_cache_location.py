@@ -1,0 +1,67 @@
+"""The compiled solver's numba cache goes where ``NUMBA_CACHE_DIR`` says when it is set.
+
+The image (Dockerfile) compiles as root with ``NUMBA_CACHE_DIR=/app/numba-cache`` and
+runs as another user: the cache must be written there, not into a site-packages
+``__pycache__`` the runtime user cannot write to (numba skips such a folder and would
+compile again at every start). solver/_jit.py's locators once put the tree first, so
+the variable was ignored and the image's ``chown`` of the folder had nothing to chown.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# One small compiled function of the solver (ik/continuity.py), called once: its cache
+# hits and misses, and where the warm-up would load from.
+_CALL = """
+import numpy as np
+from solver.ik.continuity import largest_step
+from solver.precompile import cache_location
+largest_step(np.zeros(3), np.ones(3))
+stats = largest_step.stats
+print(sum(stats.cache_hits.values()) > 0, sum(stats.cache_misses.values()) > 0)
+print(cache_location())
+"""
+
+
+def _run(env: dict[str, str]) -> list[str]:
+    done = subprocess.run(
+        [sys.executable, "-c", _CALL],
+        cwd=ROOT,
+        env={**os.environ, "OPENBLAS_NUM_THREADS": "1", **env},
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
+    return done.stdout.split("\n")
+
+
+def test_numba_cache_dir_is_where_the_solver_compiles_to_and_loads_from(tmp_path: Path) -> None:
+    cache = tmp_path / "numba-cache"
+    first = _run({"NUMBA_CACHE_DIR": str(cache)})
+    assert first[0] == "False True", first  # compiled: nothing there yet
+    assert first[1] == str(cache)
+    written = [p.name for p in cache.rglob("*.nbi")]
+    assert any(name.startswith("continuity.largest_step") for name in written), written
+    again = _run({"NUMBA_CACHE_DIR": str(cache)})
+    assert again[0] == "True False", again  # loaded from there, not compiled
+
+
+def test_without_numba_cache_dir_the_cache_is_the_tree_s(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    out = subprocess.run(
+        [sys.executable, "-c", "from solver.precompile import cache_location as c; print(c())"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    ).stdout.strip()
+    assert out == f"{ROOT / 'solver'}/**/__pycache__"
