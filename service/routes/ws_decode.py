@@ -10,14 +10,15 @@ one chosen is the most helpful (``errors.most_helpful``): a misspelt ``target`` 
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import msgpack
 import orjson
 from pydantic import TypeAdapter, ValidationError
+from pydantic_core import from_json
 
 import schemas as S
+from schemas.solve import MAX_FRAME_ID
 
 from .. import convert, hints
 from ..convert import ChainView, FastFrame
@@ -59,7 +60,7 @@ def decode(
         try:
             raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
         except Exception as e:  # msgpack's errors share no useful base class
-            raise Unreadable(_lenient_id(data, binary), _not_msgpack(e)) from None
+            raise Unreadable(raw_id(_lenient(data, binary)), _not_msgpack(e)) from None
     else:
         try:
             raw = orjson.loads(data)
@@ -75,30 +76,32 @@ def decode(
         # validate_json, not validate_python(raw): JSON mode is the documented schema
         return _CLIENT_MESSAGE.validate_json(data)
     except ValidationError as e:
+        if raw is None:  # orjson refused it: NaN, Infinity, 1e400 (still an object)
+            raw = _lenient(data, binary)
         error = most_helpful(e.errors())
         message, field = str(error["msg"]), dotted_field(error["loc"])
         if field is None and error["type"] in _NO_MESSAGE_TYPE:
             message, field = hints.message_type_hint(raw), "type"
-        msg_id = raw_id(raw) if raw is not None else _lenient_id(data, binary)
-        raise Unreadable(msg_id, message, field) from None
+        raise Unreadable(raw_id(raw), message, field) from None
 
 
 def raw_id(raw: Any) -> int | None:
-    """The id of a message that failed validation, if it has a usable one."""
+    """The id of a message that failed validation, if it is one the schema takes (an
+    id beyond it is not echoed: orjson cannot write an int over 64 bits)."""
     v = raw.get("id") if isinstance(raw, dict) else None
-    return v if isinstance(v, int) and not isinstance(v, bool) else None
+    return v if type(v) is int and 0 <= v <= MAX_FRAME_ID else None
 
 
-def _lenient_id(data: str | bytes, binary: bool) -> int | None:
-    """The id of a message the strict decoders refused but a lenient one reads: JSON
-    with ``NaN``, ``Infinity`` or a number beyond float64 (which orjson refuses and
-    pydantic's JSON mode reports by field), MessagePack with a key that is not a
-    string. Only on the error path, so the id is echoed as the docs promise."""
+def _lenient(data: str | bytes, binary: bool) -> Any:
+    """A message the strict decoders refused, read by a lenient one, for its id and
+    type only: JSON with ``NaN``, ``Infinity`` or a number beyond float64 (which orjson
+    refuses and pydantic's JSON mode reports by field), MessagePack with a key that is
+    not a string. None if unreadable even so (or nested too deep)."""
     try:
         if binary:
-            return raw_id(msgpack.unpackb(data, raw=False, strict_map_key=False))
-        return raw_id(json.loads(data))
-    except Exception:  # unreadable even so (or nested too deep): no id to echo
+            return msgpack.unpackb(data, raw=False, strict_map_key=False)
+        return from_json(data, allow_inf_nan=True)
+    except Exception:
         return None
 
 

@@ -251,6 +251,28 @@ def test_a_json_number_orjson_refuses_still_echoes_the_id(
     assert answer["error"]["field"] == "frame.targets.0.position.x", answer
 
 
+def test_an_id_beyond_the_schema_beside_a_nan_is_not_echoed_and_the_socket_stays(
+    client: TestClient, session: Created
+) -> None:
+    """Read leniently, an id can be any integer: one over 64 bits is not echoed (orjson
+    could not write it: the socket closed 1011 with a logged traceback)."""
+    with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
+        ws.send_text('{"id": 100000000000000000000, "type": "ping", "x": NaN}')
+        answer = ws.receive_json()
+        ws.send_json({"type": "ping", "id": 1})
+        pong = ws.receive_json()
+    assert answer["id"] is None and answer["error"]["code"] == "invalid_format", answer
+    assert pong == {"id": 1, "type": "pong"}
+
+
+def test_an_unknown_type_beside_a_nan_is_told_the_types(
+    client: TestClient, session: Created
+) -> None:
+    answer = ws_exchange(client, session, '{"id": 5, "type": "frme", "x": NaN}')
+    assert answer["id"] == 5 and answer["error"]["field"] == "type", answer
+    assert 'unknown message type "frme"' in answer["error"]["message"], answer
+
+
 def test_a_msgpack_map_key_that_is_not_a_string_is_named(
     client: TestClient, session: Created
 ) -> None:
