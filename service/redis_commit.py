@@ -51,6 +51,7 @@ else
   if ARGV[6] ~= '' then redis.call('HSET', KEYS[1], 'meta', ARGV[6]) end
   for i = 7, #ARGV, 2 do
     redis.call('HSET', KEYS[2], ARGV[i], ARGV[i + 1])
+    redis.call('LREM', KEYS[3], 0, ARGV[i])  -- an id sent again moves to the end
     redis.call('RPUSH', KEYS[3], ARGV[i])
   end
   local extra = redis.call('LLEN', KEYS[3]) - tonumber(ARGV[4])

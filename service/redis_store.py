@@ -28,9 +28,8 @@ refuses, the session is reloaded and the frame solved again (``StaleSession``). 
 one worker a session is one object, whose lock orders its frames: one forgotten as idle
 while something holds it (a WebSocket's batches) is taken back, never loaded twice.
 
-Redis not answering: every call is bounded by IK_REDIS_TIMEOUT_S and becomes 503
-``store_unavailable`` (Retry-After) or the same WebSocket error; nothing waits for
-Redis to come back, and the next call after it does simply works.
+Redis not answering: every call gives up after IK_REDIS_TIMEOUT_S (503
+``store_unavailable`` with Retry-After); the first call after Redis is back works.
 """
 
 from __future__ import annotations
@@ -217,12 +216,13 @@ class RedisSessionStore(SessionStore):
             task.exception()  # retrieved: the waiters get it; with none left, nobody need
 
     async def _read_hashes(self, session_id: str) -> tuple[dict[bytes, bytes], dict[bytes, bytes]]:
-        """A session's hash and its answers' hash in one round trip (empty: not in Redis)."""
+        """A session's hash and its answers oldest first, in one round trip (or empty)."""
         async with self.client.pipeline(transaction=False) as pipe:
             pipe.hgetall(f"{self._p}s:{session_id}")
             pipe.hgetall(f"{self._p}a:{session_id}")
-            stored, answers = await pipe.execute()
-            return stored, answers
+            pipe.lrange(f"{self._p}o:{session_id}", 0, -1)
+            stored, answers, order = await pipe.execute()
+            return stored, {k: answers[k] for k in order if k in answers}
 
     async def _load(self, session_id: str) -> Session | None:
         forgotten = self._forgotten.get(session_id)
@@ -289,8 +289,7 @@ class RedisSessionStore(SessionStore):
     def _restore(
         self, session: Session, stored: dict[bytes, bytes], answers: dict[bytes, bytes]
     ) -> None:
-        n = session.view.chain.n_dof
-        record = unpack_stream(stored[b"state"], n)
+        record = unpack_stream(stored[b"state"], session.view.chain.n_dof)
         if record.rest is not None:
             session.set_pose(record.rest)
         session.solver.restore(StreamState(record.q, record.inverse_hessian, record.answered))
@@ -373,10 +372,11 @@ class RedisSessionStore(SessionStore):
             raise store_unavailable()
         else:  # the state now, under the session's lock: the flush comes later
             behind.queue(session, self._record(session), pairs)
-        if answer is not None and key is not None:
+        if answer is not None and key is not None:  # the oldest out (ids may start again)
+            session.answers.pop(key, None)
             session.answers[key] = answer
             if len(session.answers) > KEPT_ANSWERS:
-                del session.answers[min(session.answers)]
+                del session.answers[next(iter(session.answers))]
 
     async def _reload_or_unavailable(self, session: Session) -> None:
         """Reload ``session`` from Redis (503 ``store_unavailable`` if Redis is still gone)."""

@@ -557,3 +557,31 @@ def test_the_last_64_answered_frames_are_answered_again_and_an_older_one_is_solv
     r = b.post(f"/v1/sessions/{s.id}/frames", json=sent[0], headers=s.headers)
     assert r.status_code == 200, r.text
     assert _in_redis(workers, s)["counters"]["frames"] == frames + 1  # solved again
+
+
+def test_an_id_sent_again_with_new_targets_keeps_its_answer_as_the_newest(
+    workers: Workers,
+) -> None:
+    """Ids may start again on a new connection: the answer stored under a reused id is
+    the newest, so the oldest ids leave the window first, in memory and in Redis (the
+    smallest id left first in memory, and Redis's trim could delete the reused id's
+    newer answer)."""
+    a, b = workers()
+    s = create(a)
+
+    def post(client: TestClient, frame: dict[str, Any]) -> dict[str, Any]:
+        r = client.post(f"/v1/sessions/{s.id}/frames", json=frame, headers=s.headers)
+        assert r.status_code == 200, r.text
+        result: dict[str, Any] = r.json()["results"][0]
+        return result
+
+    for k in (1, 2, 3):
+        post(a, hand_frame(k, x=0.3 + 0.001 * k))
+    again = hand_frame(1, x=0.35)  # id 1 once more, other targets: solved, stored
+    answer = post(a, again)
+    for k in range(100, 100 + KEPT_ANSWERS - 1):  # the window is now full, ids 2 and 3 out
+        post(a, hand_frame(k, x=0.3 + 0.0005 * (k - 100)))
+    frames = _in_redis(workers, s)["counters"]["frames"]
+    assert post(a, again) == answer  # the worker that holds it
+    assert post(b, again) == answer  # a worker that loads it from Redis
+    assert _in_redis(workers, s)["counters"]["frames"] == frames  # neither solved it again
