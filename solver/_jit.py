@@ -1,7 +1,8 @@
 """The one decorator every compiled function of the solver uses, and its cache policy.
 
-- ``cache=True``: compiled code goes to ``__pycache__`` (about 0.2 s to load instead
-  of seconds to compile).
+- ``cache=True``: compiled code goes to ``NUMBA_CACHE_DIR`` when it is set and
+  writable, else to each module's ``__pycache__`` (about 0.2 s to load instead of
+  seconds to compile; ``solver.precompile.cache_location`` says which).
 - ``error_model="numpy"``: division by zero gives inf/nan instead of raising. The
   core detects non-finite values itself (NONFINITE), and a function that can raise
   embeds a pointer to the exception object, which stops numba from caching any
@@ -20,9 +21,9 @@ precompile.py).
 
 One gap the stamp cannot close: an objective registered from outside solver/
 (``solver.optim.register_objective``, e.g. the tests' MGH problems) is compiled into
-the core's cached code under solver/'s stamp. After editing such an objective, delete
-the ``__pycache__`` directories under solver/ (or set ``NUMBA_CACHE_DIR`` to a fresh
-directory) so that the core is compiled again with the new objective.
+the core's cached code under solver/'s stamp. After editing such an objective, empty
+the cache (the ``__pycache__`` directories under solver/, or ``NUMBA_CACHE_DIR``; or
+point ``NUMBA_CACHE_DIR`` at a fresh directory) so that the core is compiled again.
 """
 
 from __future__ import annotations

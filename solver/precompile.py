@@ -10,6 +10,8 @@ compile disjoint groups in separate processes) and reports after each one.
 
 from __future__ import annotations
 
+import os
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -142,13 +144,20 @@ class _Compiles(event.Listener):
 
 
 def cache_location() -> str:
-    """Where the compiled solver is cached: ``NUMBA_CACHE_DIR`` if set, else the
-    ``__pycache__`` folders of solver/ and its subpackages (solver/_jit.py's locators,
-    which this module does not import: it is outside the cache stamp)."""
+    """Where the compiled solver is cached: ``NUMBA_CACHE_DIR`` if set and writable (numba
+    passes over a folder it cannot write to), else the ``__pycache__`` folders of solver/
+    and its subpackages (solver/_jit.py's locators, which this module does not import:
+    it is outside the cache stamp)."""
+    tree = f"{Path(__file__).resolve().parent}/**/__pycache__"
     user_dir = getattr(config, "CACHE_DIR", "")  # numba reads it from the environment
-    if user_dir:
-        return str(user_dir)
-    return f"{Path(__file__).resolve().parent}/**/__pycache__"
+    if not user_dir:
+        return tree
+    try:  # what numba's locator checks before it uses the folder
+        os.makedirs(user_dir, exist_ok=True)
+        tempfile.TemporaryFile(dir=user_dir).close()
+    except OSError:
+        return f"{tree} (NUMBA_CACHE_DIR={user_dir} cannot be written to: numba passes over it)"
+    return str(user_dir)
 
 
 def warmup(

@@ -29,11 +29,13 @@ print(cache_location())
 """
 
 
-def _run(env: dict[str, str]) -> list[str]:
+def _run(env: dict[str, str], *, replace: bool = False) -> list[str]:
+    """``_CALL``'s two lines, in a process with ``env`` added (or as its whole
+    environment with ``replace``)."""
     done = subprocess.run(
         [sys.executable, "-c", _CALL],
         cwd=ROOT,
-        env={**os.environ, "OPENBLAS_NUM_THREADS": "1", **env},
+        env={**(env if replace else {**os.environ, **env}), "OPENBLAS_NUM_THREADS": "1"},
         capture_output=True,
         text=True,
         timeout=300,
@@ -53,15 +55,21 @@ def test_numba_cache_dir_is_where_the_solver_compiles_to_and_loads_from(tmp_path
     assert again[0] == "True False", again  # loaded from there, not compiled
 
 
-def test_without_numba_cache_dir_the_cache_is_the_tree_s(tmp_path: Path) -> None:
+def test_without_numba_cache_dir_the_cache_is_the_tree_s() -> None:
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    out = subprocess.run(
-        [sys.executable, "-c", "from solver.precompile import cache_location as c; print(c())"],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    ).stdout.strip()
-    assert out == f"{ROOT / 'solver'}/**/__pycache__"
+    out = _run(env, replace=True)
+    assert out[1] == f"{ROOT / 'solver'}/**/__pycache__", out
+    # Compiled or loaded there: the function's index is in its module's __pycache__.
+    written = [p.name for p in (ROOT / "solver" / "ik" / "__pycache__").glob("*.nbi")]
+    assert any(name.startswith("continuity.largest_step") for name in written), written
+
+
+def test_an_unwritable_numba_cache_dir_is_not_named_as_the_cache(tmp_path: Path) -> None:
+    """numba passes over a folder it cannot write to: the start's log must not say the
+    solver is cached there (a file where the folder should be, so that root cannot
+    write to it either)."""
+    blocked = tmp_path / "not-a-dir"
+    blocked.write_text("")
+    out = _run({"NUMBA_CACHE_DIR": str(blocked / "cache")})
+    assert out[1].startswith(f"{ROOT / 'solver'}/**/__pycache__ (NUMBA_CACHE_DIR="), out
+    assert "cannot be written to" in out[1]
