@@ -9,6 +9,7 @@ from __future__ import annotations
 import difflib
 import ipaddress
 import re
+import socket
 from collections.abc import Mapping
 from functools import lru_cache
 from typing import Literal
@@ -18,10 +19,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from .redis_url import redis_url_problem
 
-# A host name (RFC 1123 labels) or, when it holds ':' or only digits and dots, an address.
-_HOST_NAME = re.compile(
-    r"[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?"
-)
+# Digits and dots only: an IPv4 address, in the forms the resolver takes (127.1, 0).
 _LOOKS_NUMERIC = re.compile(r"[0-9.]+")
 
 
@@ -42,16 +40,18 @@ class Settings(BaseSettings):
     @field_validator("host")
     @classmethod
     def _host_form(cls, value: str) -> str:
-        """An IP address, or a host name the resolver may look up at bind: a value that
-        looks like an address must be one (256.1.1.1 would otherwise fail at bind with
-        uvicorn's "Name or service not known", which does not name IK_HOST)."""
-        if not _HOST_NAME.fullmatch(value) or _LOOKS_NUMERIC.fullmatch(value):
-            try:
-                ipaddress.ip_address(value)
-            except ValueError:
-                raise ValueError(
-                    "not an IP address (127.0.0.1, 0.0.0.0, ::) nor a host name"
-                ) from None
+        """A value that looks like an address must be one, as the resolver reads it:
+        256.1.1.1 would otherwise fail at bind with uvicorn's "Name or service not
+        known", which does not name IK_HOST. Host names are left to the resolver."""
+        try:
+            if _LOOKS_NUMERIC.fullmatch(value):
+                socket.inet_aton(value)  # 127.1 and 0 as getaddrinfo takes them
+            elif ":" in value:
+                ipaddress.ip_address(value)  # IPv6, with a zone id or not
+            elif value != value.strip() or " " in value:
+                raise ValueError
+        except (OSError, ValueError):
+            raise ValueError("not an IP address (127.0.0.1, 0.0.0.0, ::) nor a host name") from None
         return value
 
     @field_validator("log_level", mode="before")
@@ -277,22 +277,31 @@ def _closest(key: str, known: list[str], cutoff: float) -> str | None:
     return close[0] if close else None
 
 
-def misspelt_variables(environ: Mapping[str, str]) -> list[str]:
-    """An error for each ``IK_`` variable that no setting reads but one nearly does,
-    when that setting is not set itself: the service refuses to start on it.
+def misspelt_variables(environ: Mapping[str, str]) -> dict[str, str]:
+    """The ``IK_`` variables the service refuses to start with, each with its reason:
+    one that no setting reads but one nearly does, when that setting is not set
+    itself; and any other ``IK_REDIS_*`` while IK_REDIS_URL is not set.
 
     pydantic-settings ignores unknown variables (``extra="ignore"``: the environment
-    holds other programs' variables too), so a misspelt ``IK_REDIS_UR`` would start a
-    worker with its sessions in memory behind a balancer that expects Redis: it passes
-    /readyz, takes traffic, and its sessions are 404 on every other worker.
+    holds other programs' variables too), so a misspelt ``IK_REDIS_UR``, or an
+    ``IK_REDIS_HOST`` meant to configure Redis, would start a worker with its sessions
+    in memory behind a balancer that expects Redis: it passes /readyz, takes traffic,
+    and its sessions are 404 on every other worker.
     """
     known = [ENV_PREFIX + name.upper() for name in Settings.model_fields]
-    out = []
+    redis_url = ENV_PREFIX + "REDIS_URL"
+    out = {}
     for key in sorted(environ):
-        if key.startswith(ENV_PREFIX) and key not in known:
-            meant = _closest(key, known, TYPO_RATIO)
-            if meant is not None and meant not in environ:
-                out.append(f"{key} is not a setting of this service: did you mean {meant}?")
+        if not key.startswith(ENV_PREFIX) or key in known:
+            continue
+        meant = _closest(key, known, TYPO_RATIO)
+        if meant is not None and meant not in environ:
+            out[key] = f"{key} is not a setting of this service: did you mean {meant}?"
+        elif key.startswith(ENV_PREFIX + "REDIS_") and redis_url not in environ:
+            out[key] = (
+                f"{key} is not a setting of this service: sessions in Redis are set with "
+                f"{redis_url} alone (redis://[:password@]host:port/db)"
+            )
     return out
 
 
@@ -300,7 +309,7 @@ def unknown_variables(environ: Mapping[str, str]) -> list[str]:
     """A warning for each other ``IK_`` variable that no setting reads (those that
     ``misspelt_variables`` refuses excepted), with the closest name if any."""
     known = [ENV_PREFIX + name.upper() for name in Settings.model_fields]
-    refused = {line.split(" ", 1)[0] for line in misspelt_variables(environ)}
+    refused = misspelt_variables(environ)
     out = []
     for key in sorted(environ):
         if key.startswith(ENV_PREFIX) and key not in known and key not in refused:

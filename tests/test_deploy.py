@@ -86,3 +86,13 @@ def test_k8s_runs_the_image_under_the_project_s_version() -> None:
     (container,) = _k8s_worker_pod()["containers"]
     assert container["image"] == f"ik-service:{version}"
     assert container["imagePullPolicy"] == "IfNotPresent"
+
+
+def test_k8s_service_links_cannot_set_an_ik_setting() -> None:
+    """Service ``ik`` would inject IK_PORT=tcp://<ip>:80 (and ik-redis IK_REDIS_PORT,
+    ...) into every pod started after it: IK_PORT is a setting, and such a value stops
+    the start (exit 1), a crash loop that only appears on a real cluster."""
+    services = {d["metadata"]["name"] for d in _k8s() if d["kind"] == "Service"}
+    injected = {f"{name.upper().replace('-', '_')}_PORT" for name in services}
+    if injected & SETTINGS or any(n.upper().startswith("IK") for n in services):
+        assert _k8s_worker_pod()["enableServiceLinks"] is False

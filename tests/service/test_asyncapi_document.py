@@ -66,8 +66,11 @@ def test_the_documents_close_codes_are_those_websocket_md_lists() -> None:
 
 
 def test_retry_after_is_described_for_every_code_that_carries_it_on_the_websocket() -> None:
-    """ErrorPayload's description names each code a WebSocket error may carry
-    ``retry_after_s`` with, as docs/websocket.md does."""
+    """ErrorPayload's description and docs/websocket.md's sentence name the same codes:
+    those a WebSocket error carries ``retry_after_s`` with."""
     description = ErrorPayload.model_fields["retry_after_s"].description or ""
-    for code in RETRY_CODES:
-        assert code.value in description, code
+    page = " ".join((ROOT / "docs" / "websocket.md").read_text().split())
+    sentence = page.split(" errors carry `retry_after_s`", 1)[0].rsplit(". ", 1)[-1]
+    assert set(re.findall(r"`([a-z_]+)`", sentence)) == {c.value for c in RETRY_CODES}
+    named = {c.value for c in ErrorCode if re.search(rf"\b{c.value}\b", description)}
+    assert named == {c.value for c in RETRY_CODES}

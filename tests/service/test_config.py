@@ -119,7 +119,7 @@ def test_unknown_ik_variables_are_named_with_the_closest_setting() -> None:
         "PATH": "/bin",
         "IK_LB_BIND": "127.0.0.1:8080",  # HAProxy's (docs/operations.md): a warning
     }
-    assert misspelt_variables(env) == [
+    assert list(misspelt_variables(env).values()) == [
         "IK_REDIS_UR is not a setting of this service: did you mean IK_REDIS_URL?"
     ]
     warnings = unknown_variables(env)
@@ -127,6 +127,18 @@ def test_unknown_ik_variables_are_named_with_the_closest_setting() -> None:
     bind, typo = warnings
     assert bind == "IK_LB_BIND is not a setting of this service and is ignored"
     assert typo.startswith("IK_LOGLEVEL is not a setting") and "IK_LOG_LEVEL?" in typo
+
+
+def test_redis_variables_other_than_the_url_are_refused_without_it() -> None:
+    """IK_REDIS_HOST and the like mean Redis was wanted: without IK_REDIS_URL they stop
+    the start; beside it they are only warned of."""
+    env = {"IK_REDIS_HOST": "cache", "IK_REDIS_PASSWORD": "x"}
+    refused = misspelt_variables(env)
+    assert sorted(refused) == ["IK_REDIS_HOST", "IK_REDIS_PASSWORD"]
+    assert "IK_REDIS_URL alone" in refused["IK_REDIS_HOST"]
+    env["IK_REDIS_URL"] = "redis://cache:6379/0"
+    assert misspelt_variables(env) == {}
+    assert len(unknown_variables(env)) == 2
 
 
 def test_a_misspelt_setting_stops_the_start_with_its_name() -> None:
@@ -169,7 +181,7 @@ def test_restarts_default_to_the_solvers_own(monkeypatch: pytest.MonkeyPatch) ->
     assert convert.session_defaults(s).max_restarts == 7
 
 
-@pytest.mark.parametrize("host", ["256.1.1.1", "10.0.0", "ex ample", "-worker", "a..b"])
+@pytest.mark.parametrize("host", ["256.1.1.1", "1.2.3.4.5", "ex ample", " worker", "::g"])
 def test_a_host_that_is_neither_an_address_nor_a_name_is_refused_at_start(
     monkeypatch: pytest.MonkeyPatch, host: str
 ) -> None:
@@ -181,7 +193,18 @@ def test_a_host_that_is_neither_an_address_nor_a_name_is_refused_at_start(
 
 
 @pytest.mark.parametrize(
-    "host", ["127.0.0.1", "0.0.0.0", "::", "::1", "localhost", "ik.default.svc.cluster.local"]
+    "host",
+    [
+        "127.0.0.1",
+        "0.0.0.0",
+        "::",
+        "::1",
+        "fe80::1%eth0",
+        "127.1",
+        "localhost",
+        "ik.default.svc.cluster.local",
+        "proj_service_1",  # Docker Compose's container names
+    ],
 )
 def test_addresses_and_host_names_are_taken(monkeypatch: pytest.MonkeyPatch, host: str) -> None:
     monkeypatch.setenv("IK_HOST", host)
