@@ -43,6 +43,7 @@ from .auth import authenticate
 from .errors import (
     ServiceError,
     dotted_field,
+    echoable_id,
     invalid_problem,
     most_helpful,
     not_found,
@@ -441,5 +442,5 @@ def raw_ids(raw: Any) -> tuple[str | None, int | None]:
     session, frame_id = raw.get("session"), raw.get("id")
     return (
         session if isinstance(session, str) else None,
-        frame_id if isinstance(frame_id, int) and not isinstance(frame_id, bool) else None,
+        echoable_id(frame_id),
     )

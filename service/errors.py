@@ -51,6 +51,7 @@ from starlette.routing import compile_path
 
 from schemas import ErrorCode
 from schemas.chain import CHAIN_FORMATS
+from schemas.solve import MAX_FRAME_ID
 from solver.errors import IKError
 
 from .hints import JSON_INVALID, hint
@@ -205,6 +206,13 @@ def validation_errors(errors: Any) -> list[dict[str, Any]]:
         ]
         out.append({"loc": loc, "msg": clip(msg, MAX_DETAIL_CHARS), "type": e.get("type", "")})
     return out
+
+
+def echoable_id(value: Any) -> int | None:
+    """A frame or message id as sent, if an error may echo it: an int (not a bool) in
+    the schema's range. Read leniently (the stdlib's json, a NaN beside it) an id can be
+    any integer, and one over 64 bits cannot be written by orjson (a 500, a 1011)."""
+    return value if type(value) is int and 0 <= value <= MAX_FRAME_ID else None
 
 
 def most_helpful(errors: Any) -> dict[str, Any]:

@@ -18,11 +18,10 @@ from pydantic import TypeAdapter, ValidationError
 from pydantic_core import from_json
 
 import schemas as S
-from schemas.solve import MAX_FRAME_ID
 
 from .. import convert, hints
 from ..convert import ChainView, FastFrame
-from ..errors import dotted_field, most_helpful
+from ..errors import dotted_field, echoable_id, most_helpful
 from .ws_batch import RawBatch, raw_batch
 
 ClientMessage = S.FrameMessage | S.ClipMessage | S.BatchMessage | S.FkMessage | S.PingMessage
@@ -86,10 +85,8 @@ def decode(
 
 
 def raw_id(raw: Any) -> int | None:
-    """The id of a message that failed validation, if it is one the schema takes (an
-    id beyond it is not echoed: orjson cannot write an int over 64 bits)."""
-    v = raw.get("id") if isinstance(raw, dict) else None
-    return v if type(v) is int and 0 <= v <= MAX_FRAME_ID else None
+    """The id of a message that failed validation, if an error may echo it."""
+    return echoable_id(raw.get("id")) if isinstance(raw, dict) else None
 
 
 def _lenient(data: str | bytes, binary: bool) -> Any:

@@ -265,6 +265,30 @@ def test_an_id_beyond_the_schema_beside_a_nan_is_not_echoed_and_the_socket_stays
     assert pong == {"id": 1, "type": "pong"}
 
 
+def test_a_batch_entry_with_an_id_beyond_the_schema_is_its_own_error_not_a_500(
+    client: TestClient, session: Created
+) -> None:
+    """An entry's id is echoed in its error only within the schema's range: FastAPI's
+    json and pydantic's JSON mode (a NaN elsewhere in a WebSocket batch) keep ints of
+    any size, which orjson cannot write (a 500, a 1011 close)."""
+    entry = {"session": session.id, "token": session.token, "id": 10**20, "targets": []}
+    r = client.post("/v1/batch", json={"frames": [entry]})
+    assert r.status_code == 200, r.text
+    (result,) = r.json()["results"]
+    assert result["id"] is None and result["error"]["code"] == "invalid_format", result
+    nan_target = {"effector": "hand", "position": {"x": "NAN", "y": 0, "z": 0}}
+    message = {"type": "batch", "id": 2, "frames": [{**entry, "targets": [nan_target]}]}
+    text = json.dumps(message).replace('"NAN"', "NaN")  # a NaN: orjson refuses the text
+    with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
+        ws.send_text(text)
+        answer = ws.receive_json()
+        ws.send_json({"type": "ping", "id": 3})
+        pong = ws.receive_json()
+    assert answer["type"] == "batch_result", answer
+    assert answer["results"][0]["id"] is None, answer
+    assert pong == {"id": 3, "type": "pong"}
+
+
 def test_an_unknown_type_beside_a_nan_is_told_the_types(
     client: TestClient, session: Created
 ) -> None:
