@@ -61,6 +61,7 @@ from .stored_frames import (
     StreamRecord,
     answer_key,
     jobs_digest,
+    oldest_first,
     pack_answer,
     pack_stream,
     unpack_answer,
@@ -222,7 +223,7 @@ class RedisSessionStore(SessionStore):
             pipe.hgetall(f"{self._p}a:{session_id}")
             pipe.lrange(f"{self._p}o:{session_id}", 0, -1)
             stored, answers, order = await pipe.execute()
-            return stored, {k: answers[k] for k in order if k in answers}
+            return stored, oldest_first(order, answers)
 
     async def _load(self, session_id: str) -> Session | None:
         forgotten = self._forgotten.get(session_id)
@@ -406,8 +407,7 @@ class RedisSessionStore(SessionStore):
         pairs: list[Any],
         record: StreamRecord | None = None,
     ) -> None:
-        """Write the session through: ``record`` (default: its state now, read under its
-        lock), and ``meta`` when not empty, and these answers."""
+        """Write ``record`` (default: the state now, under the lock), ``meta``, answers."""
         keys = self._keys(session.id, session.definition_key, session.owner)
         args = self._args(session, record or self._record(session), meta, pairs)
         try:

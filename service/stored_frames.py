@@ -55,6 +55,18 @@ def jobs_digest(jobs: Sequence[FrameJob]) -> bytes:
     return h.digest()
 
 
+def oldest_first(order: list[bytes], answers: dict[bytes, bytes]) -> dict[bytes, bytes]:
+    """A session's stored answers (Redis's hash) in its order list's order, oldest
+    first, as ``commit`` evicts them. An id the list holds twice (a list written before
+    the commit script moved a reused id to the end) is as old as its last place."""
+    ordered: dict[bytes, bytes] = {}
+    for key in order:
+        if key in answers:
+            ordered.pop(key, None)
+            ordered[key] = answers[key]
+    return ordered
+
+
 @dataclass(frozen=True, slots=True)
 class StoredAnswer:
     """A request's solved frames, as given to the client, and the digest of its jobs."""

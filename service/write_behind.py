@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .sessions import Session
-from .stored_frames import StreamRecord
+from .stored_frames import KEPT_ANSWERS, StreamRecord
 
 
 @dataclass(slots=True)
@@ -60,7 +60,7 @@ class WriteBehind:
             self._dirty[session.id] = Pending(session, record, list(pairs))
         else:
             pending.record = record
-            pending.pairs.extend(pairs)
+            pending.pairs = _newest_answers(pending.pairs + list(pairs))
         if self._task is None:
             self._task = asyncio.get_running_loop().create_task(self._run())
 
@@ -108,3 +108,15 @@ class WriteBehind:
             await task
         if self._dirty:
             await self.flush()
+
+
+def _newest_answers(pairs: list[Any]) -> list[Any]:
+    """The last ``KEPT_ANSWERS`` distinct frame ids of flat (id, answer) pairs, each
+    with its newest answer, oldest first: what Redis would keep of them anyway, so a
+    long interval (or no frame-rate limit) does not grow one flush's script."""
+    newest: dict[Any, Any] = {}
+    for key, answer in zip(pairs[::2], pairs[1::2], strict=True):
+        newest.pop(key, None)
+        newest[key] = answer
+    kept = list(newest.items())[-KEPT_ANSWERS:]
+    return [x for pair in kept for x in pair]

@@ -4,6 +4,7 @@ state continues the stream exactly where it was."""
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 from typing import Any
 
@@ -16,14 +17,17 @@ from service.config import Settings
 from service.convert import SolvedFrame
 from service.solving import make_solver
 from service.stored_frames import (
+    KEPT_ANSWERS,
     StoredAnswer,
     StreamRecord,
     jobs_digest,
+    oldest_first,
     pack_answer,
     pack_stream,
     unpack_answer,
     unpack_stream,
 )
+from service.write_behind import Pending, WriteBehind
 from solver.ik import StreamState, Target
 from solver.model.forward import link_poses
 
@@ -150,3 +154,39 @@ def test_a_stream_record_keeps_whether_a_frame_was_answered() -> None:
     assert fresh.answered is False and np.array_equal(fresh.q, q)
     old = msgpack.packb([q.tobytes(), None, None, 4, 4])
     assert unpack_stream(old, 3).answered is True
+
+
+def test_an_id_listed_twice_is_as_old_as_its_last_place() -> None:
+    """An order list written before the commit script moved a reused id to the end may
+    hold it twice: it is restored as the newest, not evicted first."""
+    answers = {b"1": b"new", b"2": b"b", b"3": b"c"}
+    restored = oldest_first([b"1", b"2", b"3", b"1", b"9"], answers)
+    assert list(restored.items()) == [(b"2", b"b"), (b"3", b"c"), (b"1", b"new")]
+
+
+def test_written_behind_a_flush_holds_at_most_the_kept_answers_each_id_once() -> None:
+    """A long interval (or no frame-rate limit) queues many frames: one flush writes
+    what Redis would keep of them, each id with its newest answer."""
+    session: Any = type("S", (), {"id": "s1"})()
+    record: Any = None
+    written: list[list[Pending]] = []
+
+    async def write(batch: list[Pending]) -> None:
+        written.append(batch)
+
+    async def run() -> Pending | None:
+        behind = WriteBehind(3600.0, write)
+        behind.queue(session, record, [1, b"old"])
+        for frame_id in range(2, KEPT_ANSWERS + 10):
+            behind.queue(session, record, [frame_id, b"a"])
+        behind.queue(session, record, [KEPT_ANSWERS + 5, b"again"])
+        pending = behind.take("s1")
+        await behind.close()
+        return pending
+
+    pending = asyncio.run(run())
+    assert pending is not None and written == []
+    ids, answers = pending.pairs[::2], pending.pairs[1::2]
+    assert len(ids) == len(set(ids)) == KEPT_ANSWERS
+    assert ids[-1] == KEPT_ANSWERS + 5 and answers[-1] == b"again"  # moved to the end
+    assert 1 not in ids  # the oldest left
