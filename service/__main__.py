@@ -22,6 +22,7 @@ from pydantic import ValidationError  # noqa: E402
 from .config import (  # noqa: E402
     get_settings,
     misspelt_variables,
+    service_link_hint,
     settings_errors,
     unknown_variables,
 )
@@ -108,12 +109,14 @@ class DrainingServer(uvicorn.Server):
 
 
 def main() -> None:
+    hint = service_link_hint(os.environ)
+    also = "" if hint is None else f"\n  ({hint})"
     try:
         settings = get_settings()
     except ValidationError as e:  # said in the environment's names, not a traceback
-        raise SystemExit(settings_errors(e)) from None
+        raise SystemExit(settings_errors(e) + also) from None
     if typos := misspelt_variables(os.environ):
-        raise SystemExit("invalid configuration:\n  " + "\n  ".join(typos.values()))
+        raise SystemExit("invalid configuration:\n  " + "\n  ".join(typos.values()) + also)
     logging.basicConfig(level=settings.log_level.upper(), format="%(levelname)s:     %(message)s")
     for name in ("uvicorn.access", "uvicorn.error"):
         logging.getLogger(name).addFilter(_RedactTokens())

@@ -48,9 +48,9 @@ class Settings(BaseSettings):
                 socket.inet_aton(value)  # 127.1 and 0 as getaddrinfo takes them
             elif ":" in value:
                 ipaddress.ip_address(value)  # IPv6, with a zone id or not
-            elif value != value.strip() or " " in value:
-                raise ValueError
-        except (OSError, ValueError):
+            else:  # a name: as the resolver will encode it (a..b, a label over 63)
+                value.encode("idna")
+        except (OSError, ValueError):  # UnicodeError is a ValueError
             raise ValueError("not an IP address (127.0.0.1, 0.0.0.0, ::) nor a host name") from None
         return value
 
@@ -295,14 +295,32 @@ def misspelt_variables(environ: Mapping[str, str]) -> dict[str, str]:
         if not key.startswith(ENV_PREFIX) or key in known:
             continue
         meant = _closest(key, known, TYPO_RATIO)
-        if meant is not None and meant not in environ:
+        if meant is not None and not environ.get(meant):  # empty: as good as unset
             out[key] = f"{key} is not a setting of this service: did you mean {meant}?"
-        elif key.startswith(ENV_PREFIX + "REDIS_") and redis_url not in environ:
+        elif key.startswith(ENV_PREFIX + "REDIS_") and not environ.get(redis_url):
             out[key] = (
                 f"{key} is not a setting of this service: sessions in Redis are set with "
                 f"{redis_url} alone (redis://[:password@]host:port/db)"
             )
     return out
+
+
+def service_link_hint(environ: Mapping[str, str]) -> str | None:
+    """Why a pod's environment holds ``IK_*=tcp://...``: Kubernetes' service links (a
+    Service named ``ik`` gives IK_PORT, ``ik-redis`` IK_REDIS_PORT, ...), said beside
+    the start's refusal, which names only the variable."""
+    if "KUBERNETES_SERVICE_HOST" not in environ:
+        return None
+    linked = sorted(
+        k for k, v in environ.items() if k.startswith(ENV_PREFIX) and v.startswith("tcp://")
+    )
+    if not linked:
+        return None
+    return (
+        f"{', '.join(linked)} come from Kubernetes' service links (a Service whose name "
+        "starts with ik): set enableServiceLinks: false in the pod spec, as "
+        "deploy/k8s/ik.yaml does"
+    )
 
 
 def unknown_variables(environ: Mapping[str, str]) -> list[str]:

@@ -11,7 +11,13 @@ from pathlib import Path
 import pytest
 from pydantic import ValidationError
 
-from service.config import Settings, misspelt_variables, settings_errors, unknown_variables
+from service.config import (
+    Settings,
+    misspelt_variables,
+    service_link_hint,
+    settings_errors,
+    unknown_variables,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -181,7 +187,30 @@ def test_restarts_default_to_the_solvers_own(monkeypatch: pytest.MonkeyPatch) ->
     assert convert.session_defaults(s).max_restarts == 7
 
 
-@pytest.mark.parametrize("host", ["256.1.1.1", "1.2.3.4.5", "ex ample", " worker", "::g"])
+def test_service_links_are_named_as_the_cause_of_a_refused_start() -> None:
+    """A pod started after a Service named ik gets IK_PORT=tcp://ip:80 (and ik-redis
+    IK_REDIS_PORT=...): the start stops naming the variable, and says where it came
+    from and what to set."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("IK_")}
+    env.update(
+        KUBERNETES_SERVICE_HOST="10.96.0.1",
+        IK_PORT="tcp://10.96.0.12:80",
+        IK_SERVICE_HOST="10.96.0.12",
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "service"], cwd=ROOT, env=env, capture_output=True, text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 1, done
+    assert "IK_PORT: " in done.stderr, done.stderr
+    assert "IK_PORT come from Kubernetes' service links" in done.stderr
+    assert "enableServiceLinks: false" in done.stderr
+    # Without Redis wanted by URL, the linked IK_REDIS_* stop it too, with the hint.
+    assert misspelt_variables({"IK_REDIS_PORT": "tcp://10.96.0.13:6379", "IK_REDIS_URL": ""})
+    assert service_link_hint({"IK_PORT": "8000"}) is None  # not on Kubernetes
+
+
+@pytest.mark.parametrize("host", ["256.1.1.1", "1.2.3.4.5", "a..b", "x" * 64, "::g"])
 def test_a_host_that_is_neither_an_address_nor_a_name_is_refused_at_start(
     monkeypatch: pytest.MonkeyPatch, host: str
 ) -> None:
