@@ -10,17 +10,17 @@ compile disjoint groups in separate processes) and reports after each one.
 
 from __future__ import annotations
 
-import os
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 from numba.core import config, event
 
 from .ik import Continuity, IKData, IKOptions, IKSolver, Target, pose_targets
+from .ik.continuity import largest_step
 from .model import EffectorMode
 from .model.examples import bolt, panda_arm
 from .path import plan_path
@@ -144,20 +144,21 @@ class _Compiles(event.Listener):
 
 
 def cache_location() -> str:
-    """Where the compiled solver is cached: ``NUMBA_CACHE_DIR`` if set and writable (numba
-    passes over a folder it cannot write to), else the ``__pycache__`` folders of solver/
-    and its subpackages (solver/_jit.py's locators, which this module does not import:
-    it is outside the cache stamp)."""
-    tree = f"{Path(__file__).resolve().parent}/**/__pycache__"
+    """Where the compiled solver is cached, as numba resolved it for one of the solver's
+    compiled functions: ``NUMBA_CACHE_DIR`` when numba uses it, else the ``__pycache__``
+    folders of solver/ and its subpackages, else the folder numba fell back to (its
+    user-wide cache: numba passes over a folder it cannot write to)."""
+    # numba resolves a function's cache folder once, when it is decorated (through
+    # solver/_jit.py's locators, which this module, outside the cache stamp, does not
+    # import); _cache._cache_path is where it will read and write.
+    used = Path(cast(Any, largest_step)._cache._cache_path)
     user_dir = getattr(config, "CACHE_DIR", "")  # numba reads it from the environment
-    if not user_dir:
-        return tree
-    try:  # what numba's locator checks before it uses the folder
-        os.makedirs(user_dir, exist_ok=True)
-        tempfile.TemporaryFile(dir=user_dir).close()
-    except OSError:
-        return f"{tree} (NUMBA_CACHE_DIR={user_dir} cannot be written to: numba passes over it)"
-    return str(user_dir)
+    if user_dir and used.is_relative_to(Path(user_dir)):
+        return str(user_dir)
+    solver_dir = Path(__file__).resolve().parent
+    if used.is_relative_to(solver_dir):
+        return f"{solver_dir}/**/__pycache__"
+    return str(used)
 
 
 def warmup(

@@ -71,6 +71,5 @@ def test_an_unwritable_numba_cache_dir_is_not_named_as_the_cache(tmp_path: Path)
     blocked = tmp_path / "not-a-dir"
     blocked.write_text("")
     out = _run({"NUMBA_CACHE_DIR": str(blocked / "cache")})
-    assert out[1].startswith(f"{ROOT / 'solver'}/**/__pycache__ (NUMBA_CACHE_DIR="), out
-    assert "cannot be written to" in out[1]
+    assert out[1] == f"{ROOT / 'solver'}/**/__pycache__", out
     assert out[2] == str(ROOT / "solver" / "ik" / "__pycache__"), out  # where numba went
