@@ -60,14 +60,17 @@ class WriteBehind:
             self._dirty[session.id] = Pending(session, record, list(pairs))
         else:
             pending.record = record
-            pending.pairs = _newest_answers(pending.pairs + list(pairs))
+            pending.pairs.extend(pairs)  # per frame: appended, compacted once per write
         if self._task is None:
             self._task = asyncio.get_running_loop().create_task(self._run())
 
     def take(self, session_id: str) -> Pending | None:
         """Remove and return what waits for the session (it is written another way now,
         or is void)."""
-        return self._dirty.pop(session_id, None)
+        pending = self._dirty.pop(session_id, None)
+        if pending is not None:
+            pending.pairs = _newest_answers(pending.pairs)
+        return pending
 
     async def settled(self, session_id: str) -> None:
         """Wait for the flush under way if it writes this session."""
@@ -91,6 +94,8 @@ class WriteBehind:
         batch = [p for p in dirty.values() if not p.session.closed]
         if not batch:
             return
+        for pending in batch:
+            pending.pairs = _newest_answers(pending.pairs)
         done = asyncio.Event()
         self._in_flight = ({p.session.id for p in batch}, done)
         try:
