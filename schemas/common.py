@@ -91,9 +91,10 @@ class ErrorBody(StrictModel):
     """Every HTTP error: FastAPI's ``detail`` plus a stable ``code``.
 
     For ``invalid_format`` (the body failed validation) ``detail`` is FastAPI's list of
-    ``{loc, msg, type}`` entries and ``field`` the first entry's ``loc``, dotted; for
+    ``{loc, msg, type}`` entries and ``field`` the first entry's ``loc`` as a path; for
     every other code ``detail`` is a message and ``field`` names the offending field
-    when there is one.
+    when there is one. Every ``field`` is written one way: keys dotted, list indices in
+    brackets (``frame.targets[0].orientation``, ``chain.joints[1].lower``).
     """
 
     model_config = ConfigDict(

@@ -42,8 +42,8 @@ from . import convert
 from .auth import authenticate
 from .errors import (
     ServiceError,
-    dotted_field,
     echoable_id,
+    field_path,
     invalid_problem,
     most_helpful,
     not_found,
@@ -112,10 +112,9 @@ def check_length(n_entries: int, limit: int) -> None:
 
 def invalid_entry(index: int, entry: S.InvalidEntry) -> ServiceError:
     """An entry that failed validation, as its ``invalid_format`` error (the field is
-    the entry's, ``frames.<index>.<loc>``, as a whole message's validation names it)."""
+    the entry's, ``frames[<index>].<loc>``, as a whole message's validation names it)."""
     first = most_helpful(entry.errors)
-    inner = dotted_field(first["loc"])
-    field = f"frames.{index}" + ("" if inner is None else f".{inner}")
+    field = field_path(["frames", index, *first["loc"]])
     return ServiceError(
         ErrorCode.INVALID_FORMAT,
         str(first["msg"]),

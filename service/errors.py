@@ -228,15 +228,24 @@ def most_helpful(errors: Any) -> dict[str, Any]:
     return validation_errors([chosen])[0]
 
 
-def dotted_field(loc: Sequence[Any]) -> str | None:
-    """The dotted path of a validation error's ``loc`` (``frame.targets.0.orientation``),
-    without FastAPI's leading ``body`` and without the chain's ``format`` that pydantic
-    puts after ``chain`` (``chain.unit_m``, not ``chain.bvh.unit_m``: ``chain.bvh`` is
-    the BVH text)."""
+def field_path(loc: Sequence[Any]) -> str | None:
+    """The path of a validation error's ``loc`` as every error names a field: object
+    keys dotted, list indices in brackets (``frame.targets[0].orientation``, as the
+    chain's and the solver's errors write ``frames[3].targets[0].effector``), without
+    FastAPI's leading ``body`` and without the chain's ``format`` that pydantic puts
+    after ``chain`` (``chain.unit_m``, not ``chain.bvh.unit_m``: ``chain.bvh`` is the
+    BVH text). A map key that looks like a number (a joint named "0") stays dotted:
+    pydantic gives it as a string, an index as an int."""
     parts = list(loc[1:] if loc and loc[0] == "body" else loc)
     if len(parts) > 1 and parts[0] == "chain" and parts[1] in CHAIN_FORMATS:
         del parts[1]  # only there: a bone may be named "chain", a key "urdf"
-    return ".".join(str(p) for p in parts) or None
+    path = ""
+    for part in parts:
+        if type(part) is int:
+            path += f"[{part}]"
+        else:
+            path += f".{part}" if path else str(part)
+    return path or None
 
 
 def _field_of(error: Mapping[str, Any]) -> str | None:
@@ -244,7 +253,7 @@ def _field_of(error: Mapping[str, Any]) -> str | None:
     all (its ``loc`` then ends in a character offset, not a field)."""
     if error.get("type") == JSON_INVALID:
         return "body"
-    return dotted_field(error["loc"])
+    return field_path(error["loc"])
 
 
 _HTTP_CODES = {

@@ -21,7 +21,7 @@ import schemas as S
 
 from .. import convert, hints
 from ..convert import ChainView, FastFrame
-from ..errors import dotted_field, echoable_id, most_helpful
+from ..errors import echoable_id, field_path, most_helpful
 from .ws_batch import RawBatch, raw_batch
 
 ClientMessage = S.FrameMessage | S.ClipMessage | S.BatchMessage | S.FkMessage | S.PingMessage
@@ -78,7 +78,7 @@ def decode(
         if raw is None:  # orjson refused it: NaN, Infinity, 1e400 (still an object)
             raw = _lenient(data, binary)
         error = most_helpful(e.errors())
-        message, field = str(error["msg"]), dotted_field(error["loc"])
+        message, field = str(error["msg"]), field_path(error["loc"])
         if field is None and error["type"] in _NO_MESSAGE_TYPE:
             message, field = hints.message_type_hint(raw), "type"
         raise Unreadable(raw_id(raw), message, field) from None

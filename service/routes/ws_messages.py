@@ -51,7 +51,7 @@ def pong_message(msg_id: int) -> dict[str, Any]:
 class ErrorDetails(TypedDict, total=False):
     """What an error message may add to its code and message."""
 
-    field: str | None  # dotted path of the offending field
+    field: str | None  # path of the offending field (frame.targets[0].position.x)
     retry_after_s: float | None  # when to send it again [s]
 
 

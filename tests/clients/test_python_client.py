@@ -373,7 +373,7 @@ def test_stream_error_answer_then_next_frame(
         with pytest.raises(InvalidRequest) as schema:
             stream.receive()
         assert schema.value.code is ErrorCode.INVALID_FORMAT and schema.value.id == 1
-        assert schema.value.field == "frame.targets.0"
+        assert schema.value.field == "frame.targets[0]"
         result = stream.frame([tool(0.1)])
         assert_solved(result)
         assert result.id == 2 and result.joints is None  # compact

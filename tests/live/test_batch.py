@@ -69,7 +69,7 @@ def test_entry_errors_and_rate_limits(start_server: Callable[..., Server]) -> No
             second = stream.batch([batch_frame(a, i, 0.1) for i in (3, 4, 5)])
     assert [e.success for e in first] == [True, False]
     assert first[1].error is not None and first[1].error.code is ErrorCode.INVALID_FORMAT
-    assert (first[1].error.field or "").startswith("frames.1.targets.0")
+    assert (first[1].error.field or "").startswith("frames[1].targets[0]")
     codes = [None if e.error is None else e.error.code for e in second]
     assert codes == [None, None, ErrorCode.RATE_LIMITED]
     retry_after_s = second[2].error.retry_after_s if second[2].error else None

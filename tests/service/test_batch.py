@@ -111,7 +111,7 @@ def test_one_bad_entry_gets_its_own_error(client: TestClient) -> None:
     ]
     errors = {i: r for i, r in enumerate(reply.results) if isinstance(r, S.BatchEntryError)}
     assert errors[2].error.field is not None and errors[2].error.field.startswith(
-        "frames.2.targets"
+        "frames[2].targets"
     )
     assert errors[3].error.field == "frames[3].targets[0].effector"
     assert [(errors[i].session, errors[i].id) for i in (1, 4, 5)] == [

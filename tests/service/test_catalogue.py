@@ -123,7 +123,7 @@ HTTP_ROWS = [
         {"targets": [{"effector": "hand", "position": {"x": "0.3", "y": 0, "z": 0}}]},
         422,
         "invalid_format",
-        "targets.0.position.x",
+        "targets[0].position.x",
     ),
     Row("id-as-float", F, {**GOOD, "id": 1.5}, 422, "invalid_format", "frame.id"),
     Row("id-as-bool", F, {**GOOD, "id": True}, 422, "invalid_format", "frame.id"),
@@ -283,7 +283,7 @@ HTTP_ROWS = [
         body(arm(a=joint(1, lower=[-1e308], upper=[1e308]))),
         422,
         "invalid_format",
-        "lower.0",
+        "lower[0]",
     ),
     Row(
         "limits-of-the-wrong-length",
@@ -422,10 +422,15 @@ def send(client: TestClient, row: Row, s: Created) -> Any:
 
 
 def named(err: dict[str, Any]) -> str:
-    """Everything an error says about where: field, or the locs of a schema error."""
+    """Everything an error says about where: field, or the locs of a schema error
+    (written as ``field`` writes a path: list indices in brackets)."""
     if isinstance(err.get("detail"), list):
-        return " ".join(".".join(str(p) for p in e["loc"]) for e in err["detail"])
+        return " ".join(_path(e["loc"]) for e in err["detail"])
     return str(err.get("field"))
+
+
+def _path(loc: list[Any]) -> str:
+    return "".join(f"[{p}]" if type(p) is int else f".{p}" for p in loc).lstrip(".")
 
 
 def assert_still_serving(client: TestClient, s: Created) -> None:
@@ -505,7 +510,7 @@ WS_ROWS: list[tuple[str, str | bytes, str, str | None]] = [
         '{"type": "frame", "id": 1, "targets": [{"effector": "hand", '
         '"position": {"x": NaN, "y": 0, "z": 0}}]}',
         "invalid_format",
-        "frame.targets.0.position.x",
+        "frame.targets[0].position.x",
     ),
     (
         "infinity-string",
@@ -517,7 +522,7 @@ WS_ROWS: list[tuple[str, str | bytes, str, str | None]] = [
             }
         ),
         "invalid_format",
-        "frame.targets.0.position.x",
+        "frame.targets[0].position.x",
     ),
     (
         "non-unit-quaternion",
@@ -529,7 +534,7 @@ WS_ROWS: list[tuple[str, str | bytes, str, str | None]] = [
             }
         ),
         "invalid_format",
-        "frame.targets.0.orientation",
+        "frame.targets[0].orientation",
     ),
     ("deep-nesting", "[" * 100_000 + "]" * 100_000, "invalid_format", None),
     (
@@ -569,7 +574,7 @@ WS_ROWS: list[tuple[str, str | bytes, str, str | None]] = [
             }
         ),
         "invalid_format",
-        "frame.targets.0.position.x",
+        "frame.targets[0].position.x",
     ),
 ]
 

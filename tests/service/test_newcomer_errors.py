@@ -84,7 +84,7 @@ def test_an_array_quaternion_in_a_chain_is_422_with_the_object_form(client: Test
     assert r.status_code == 422, r.text
     body = r.json()
     assert body["code"] == "invalid_format"
-    assert body["field"] == "chain.joints.1.origin.rotation"
+    assert body["field"] == "chain.joints[1].origin.rotation"
     (error,) = body["detail"]
     message = error["msg"]
     assert QUATERNION_FORM in message and "x, y, z, w" in message, message
@@ -102,7 +102,7 @@ def test_an_array_quaternion_in_a_frame_is_invalid_format_on_both_transports(
     target = {"effector": "hand", "orientation": [1, 0, 0, 0]}
     r = client.post(f"/v1/sessions/{s.id}/frames", json={"targets": [target]}, headers=s.headers)
     assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
-    assert r.json()["field"] == "frame.targets.0.orientation"
+    assert r.json()["field"] == "frame.targets[0].orientation"
     assert QUATERNION_FORM in r.json()["detail"][0]["msg"]
     for binary in (False, True):
         answer = ws_exchange(
@@ -110,7 +110,7 @@ def test_an_array_quaternion_in_a_frame_is_invalid_format_on_both_transports(
         )
         error = answer["error"]
         assert error["code"] == "invalid_format", answer
-        assert error["field"] == "frame.targets.0.orientation"
+        assert error["field"] == "frame.targets[0].orientation"
         assert QUATERNION_FORM in error["message"] and "x, y, z, w" in error["message"]
 
 
@@ -233,7 +233,7 @@ def test_a_misspelt_field_in_a_batch_entry_is_told_the_near_name(
     answer = ws_exchange(client, session, {"type": "batch", "id": 2, "frames": [entry]})
     error = answer["results"][0]["error"]
     assert error["message"] == "unknown field 'target'; did you mean 'targets'?", answer
-    assert error["field"] == "frames.0.target", answer
+    assert error["field"] == "frames[0].target", answer
 
 
 @pytest.mark.parametrize("bad", ["NaN", "Infinity", "1e400"])
@@ -248,7 +248,7 @@ def test_a_json_number_orjson_refuses_still_echoes_the_id(
     answer = ws_exchange(client, session, text)
     assert answer["id"] == 7, answer
     assert answer["error"]["code"] == "invalid_format", answer
-    assert answer["error"]["field"] == "frame.targets.0.position.x", answer
+    assert answer["error"]["field"] == "frame.targets[0].position.x", answer
 
 
 def test_an_id_beyond_the_schema_beside_a_nan_is_not_echoed_and_the_socket_stays(

@@ -15,7 +15,7 @@ import pytest
 from starlette.testclient import TestClient
 
 from schemas.chain import EXAMPLE_BVH_LEG, EXAMPLE_GLTF_LEG
-from service.errors import dotted_field
+from service.errors import field_path
 from tests.solver.skeleton_refs import (
     GLB_FILES,
     WALK_UNIT_M,
@@ -255,8 +255,19 @@ def test_unknown_bone_names_say_which_setting_and_suggest(client: TestClient) ->
 def test_only_the_chain_s_own_format_leaves_a_field() -> None:
     # A bone named "chain" whose settings hold a key named like a format keeps both.
     loc = ["body", "chain", "bvh", "bones", "chain", "urdf"]
-    assert dotted_field(loc) == "chain.bones.chain.urdf"
-    assert dotted_field(["body", "chain", "hierarchy", "joints", 0]) == "chain.joints.0"
+    assert field_path(loc) == "chain.bones.chain.urdf"
+    assert field_path(["body", "chain", "hierarchy", "joints", 0]) == "chain.joints[0]"
+
+
+def test_a_field_path_brackets_list_indices_only() -> None:
+    # As the chain's and the solver's errors write a field: an index (an int in loc)
+    # in brackets, a map key dotted even when it reads as a number (a joint named "0").
+    assert field_path(["body", "frame", "targets", 0, "position", "x"]) == (
+        "frame.targets[0].position.x"
+    )
+    assert field_path(["body", "joints", "0"]) == "joints.0"
+    assert field_path(["frames", 2, 1]) == "frames[2][1]"
+    assert field_path(["body"]) is None
 
 
 def test_a_schema_error_names_the_chain_s_field_not_its_format(client: TestClient) -> None:
@@ -265,7 +276,7 @@ def test_a_schema_error_names_the_chain_s_field_not_its_format(client: TestClien
     body = error(client, walk_chain(unit_m=0))
     assert (body["code"], body["field"]) == ("invalid_format", "chain.unit_m"), body
     body = error(client, walk_chain(effectors=[{"bone": "LeftHand", "mode": "poze"}]))
-    assert body["field"] == "chain.effectors.0.mode", body
+    assert body["field"] == "chain.effectors[0].mode", body
     body = error(client, {"format": "bvh", "effectors": [{"bone": "Head"}]})  # no text
     assert body["field"] == "chain.bvh", body
 

@@ -665,7 +665,7 @@ describe("stream", () => {
         const schema = await stream.frame([{ effector: "tool" }]).catch((e: unknown) => e);
         assert.ok(schema instanceof InvalidRequest);
         assert.equal(schema.code, ErrorCode.InvalidFormat);
-        assert.equal(schema.field, "frame.targets.0");
+        assert.equal(schema.field, "frame.targets[0]");
         const result = await stream.frame([tool(0.1)]);
         assertSolved(result);
         assert.equal(result.id, 2);
