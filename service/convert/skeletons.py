@@ -140,12 +140,39 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
             ) from None
         where = "chain.glb_base64"
     else:
-        data = json.dumps(spec.gltf, allow_nan=False)
         where = "chain.gltf"
+        try:
+            data = json.dumps(spec.gltf, allow_nan=False)
+        except ValueError:  # NaN or Infinity: the request's JSON parser accepts them
+            raise _non_finite(spec.gltf, where) from None
     try:
         return read_gltf(data, skin=spec.skin, max_bytes=cap)
     except InvalidModel as e:
         raise _file_problem(e, _gltf_field(where, e)) from None
+
+
+def _non_finite(document: object, where: str) -> ServiceError:
+    """``invalid_format`` naming the first NaN or infinite number of a .gltf document
+    (``chain.gltf.nodes[1].translation[0]``): the body's JSON parser reads the tokens
+    NaN and Infinity, which some exporters write, but a glTF number must be finite."""
+    stack: list[tuple[str, object]] = [(where, document)]
+    while stack:  # depth first, in document order
+        path, value = stack.pop()
+        if isinstance(value, float) and not np.isfinite(value):
+            return ServiceError(
+                ErrorCode.INVALID_FORMAT,
+                f"{path}: {value} is not a finite number (a glTF number must be finite; "
+                "JSON has no NaN or Infinity)",
+                status_code=422,
+                field=path,
+            )
+        if isinstance(value, dict):
+            stack += [(f"{path}.{k}", v) for k, v in reversed(value.items())]
+        elif isinstance(value, list):
+            stack += [(f"{path}[{i}]", v) for i, v in reversed(list(enumerate(value)))]
+    return ServiceError(
+        ErrorCode.INVALID_FORMAT, "not a JSON document", status_code=422, field=where
+    )
 
 
 def _file_problem(e: InvalidModel, field: str) -> ServiceError:

@@ -344,3 +344,57 @@ def test_translations_beyond_a_thousand_km_are_refused(client: TestClient) -> No
     assert body["field"] == "chain.gltf" and "knee" in body["detail"], body
     # glTF has no unit_m to set (metres by its specification): not advised.
     assert "unit_m" not in body["detail"] and "metres" in body["detail"], body
+
+
+def _nan_token_body(path: str, chain: dict[str, Any]) -> bytes:
+    """A request body as Python's json.dumps (and some exporters) write it: NaN as a
+    bare token, which the body's parser reads."""
+    import json
+
+    foot = [{"effector": "foot", "position": {"x": 0.1, "y": 0.3, "z": 0.2}}]
+    body = {"chain": chain} if path == "/v1/sessions" else {"chain": chain, "targets": foot}
+    return json.dumps(body).encode()
+
+
+@pytest.mark.parametrize("path", ["/v1/sessions", "/v1/solve"])
+@pytest.mark.parametrize(
+    ("edit", "field"),
+    [
+        (
+            lambda d: d.setdefault("extras", {}).update(weight=float("nan")),
+            "chain.gltf.extras.weight",
+        ),
+        (
+            lambda d: d["nodes"][1].update(translation=[0.0, float("-inf"), 0.0]),
+            "chain.gltf.nodes[1].translation[1]",
+        ),
+    ],
+    ids=["nan-in-extras", "infinity-in-a-translation"],
+)
+def test_a_non_finite_number_in_a_gltf_document_is_422_naming_it(
+    client: TestClient, path: str, edit: Any, field: str
+) -> None:
+    # Was a 500 (json.dumps(allow_nan=False) raised) and the connection dropped.
+    chain = copy.deepcopy(EXAMPLE_GLTF_LEG)
+    edit(chain["gltf"])
+    r = client.post(
+        path, content=_nan_token_body(path, chain), headers={"content-type": "application/json"}
+    )
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["code"] == "invalid_format" and body["field"] == field, body
+    assert "not a finite number" in body["detail"], body
+
+
+def test_a_non_finite_number_in_a_glb_s_json_chunk_is_422(client: TestClient) -> None:
+    def nan_scale(doc: dict[str, Any]) -> None:
+        doc["nodes"][3]["scale"] = [1.0, float("nan"), 1.0]
+
+    chain = {
+        "format": "gltf",
+        "glb_base64": _glb_with(nan_scale),
+        "effectors": [{"bone": "node_18"}],
+    }
+    body = error(client, chain)
+    # The GLB reader refuses the token itself (no path: it parses the chunk whole).
+    assert body["field"] == "chain.glb_base64" and "NaN" in body["detail"], body
