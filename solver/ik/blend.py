@@ -10,7 +10,8 @@ where it is to its target. Here "where it is" is the tip at the frame's start po
     direction  d = slerp(d0, dt, w)            (d0: the aim axis at the start)
 
 The part keeps w times the model's weight in the objective (``task``), so the pull
-fades to nothing as w goes to 0 (weight 0 is "free", not "hold still").
+fades to nothing as w goes to 0 (at weight 0 the part is free: it pulls nothing, and a
+target that pulls nothing leaves its limb where it was, ``task``).
 
 A frame with such parts is solved by ``solve_blended``: first as if every part were
 exact (the usual tolerances, no random restarts: the optimizer aims at the in-between

@@ -322,7 +322,7 @@ class IKSolver:
         task = self._task
         task.load(targets, options or self.options)
         check_targets(self._data)
-        if not (task.bounds_are_limits and task.every_effector_moves_all and task.active):
+        if not (task.bounds_are_limits and task.every_effector_moves_all and task.pulling):
             task.set_free_bounds(q0)
         return self._data
 
@@ -377,7 +377,7 @@ class IKSolver:
             opts.damping if task.redundant or not opts.damping_redundant_only else 0.0
         )
         if frozen is not None or not (
-            task.bounds_are_limits and task.every_effector_moves_all and task.active
+            task.bounds_are_limits and task.every_effector_moves_all and task.pulling
         ):
             task.set_free_bounds(q0, frozen)
         if box > 0.0:  # SMOOTH: the limits within box of q0 (reset by the next frame)

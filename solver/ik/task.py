@@ -8,7 +8,10 @@ of the frame before) costs one row copy.
 Blend weights (``Target.position_weight`` / ``rotation_weight``) enter here: a part's
 weight multiplies the model's weight in ED (so 0 takes its rows out of the objective
 and the metric), and a part at weight 0 gets an infinite tolerance, so the goal measure
-(max error / tolerance) never counts it. Parts strictly between 0 and 1 ("soft") keep
+(max error / tolerance) never counts it. An effector whose every part weighs 0 pulls
+nothing, so it frees nothing either: its limb is held at the frame's start pose unless
+another target moves it, as if the target were left out (``pulling``), and it is still
+listed, with no error, in the result. Parts strictly between 0 and 1 ("soft") keep
 their tolerance until ``relax_soft_parts`` (``blend.solve_blended``: first the optimizer
 aims at them, then only full-weight parts decide success); their targets are moved
 towards the frame's start pose by ``blend.blend_rows`` (it needs the seed). Poles are
@@ -85,6 +88,9 @@ class Task:
         self._static_position_weights = static[:, ED_WP].copy()
         self._static_rotation_weights = static[:, ED_WR].copy()
         self.active: list[int] = []
+        # The active effectors with a part that weighs more than 0: the joints of their
+        # chains are the frame's free variables (``set_free_bounds``).
+        self.pulling: list[int] = []
         # Effectors whose ED weights or tolerances this frame changed (restored next load).
         self._touched: list[int] = []
         self.blended: list[tuple[int, float, float, int]] = []
@@ -124,6 +130,7 @@ class Task:
             ed[i, ED_TOL_P] = opts.position_tolerance_m
             ed[i, ED_TOL_R] = opts.rotation_tolerance_rad
         self.active = active = []
+        self.pulling = pulling = []
         self._touched = []
         self.blended = []
         self.poles = []
@@ -146,6 +153,8 @@ class Task:
                 self.target_rows[i] = t.packed
                 ei[i, EI_ACTIVE] = 1
                 active.append(i)
+                if self._rows(i) > 0:
+                    pulling.append(i)
         finally:
             # Also when a target is rejected: the effectors loaded before it stay active,
             # and the next frame's fast path keeps this answer.
@@ -185,46 +194,52 @@ class Task:
 
     def free_mask(self) -> np.ndarray:
         """1.0 for each variable the loaded targets may move: unlocked, and in the
-        chain of a targeted effector; else 0.0."""
-        if self.every_effector_moves_all or not self.active:
+        chain of a targeted effector that pulls (``pulling``); else 0.0."""
+        if not self.active or (self.every_effector_moves_all and self.pulling):
             reach = self._movable
         else:
             reach = np.zeros(self._n, dtype=bool)
-            for i in self.active:
+            for i in self.pulling:
                 reach[self._chain_dofs[i]] = True
             reach &= self._movable
         return reach.astype(np.float64)
 
     def free_directions(self) -> int:
-        """Free (unlocked) joints of the targeted effectors minus their target rows: the
+        """Free (unlocked) joints of the pulling effectors minus their target rows: the
         dimension of the self-motion where the Jacobian has full rank (a 7-DOF arm
         under a 6-D pose: 1; <= 0: no self-motion)."""
         active = self.active
-        ed = self._ed
-        rows = sum(
-            (self._mode_rows[i] if ed[i, ED_WR] > 0.0 else 0) + (3 if ed[i, ED_WP] > 0.0 else 0)
-            for i in active
-        )
-        if self.every_effector_moves_all or not active:
+        rows = sum(self._rows(i) for i in active)
+        pulling = self.pulling
+        if not active or (self.every_effector_moves_all and pulling):
             free = int(self._movable.sum())
+        elif not pulling:
+            free = 0
         else:
-            dofs = np.unique(np.concatenate([self._chain_dofs[i] for i in active]))
+            dofs = np.unique(np.concatenate([self._chain_dofs[i] for i in pulling]))
             free = int(self._movable[dofs].sum())
         return free - rows
 
+    def _rows(self, i: int) -> int:
+        """The rows effector i's loaded target adds to the task (a part whose weight in
+        ED is zero, in the model or this frame, adds none; a position effector has no
+        orientation rows whatever its rotation weight)."""
+        ed = self._ed
+        return (self._mode_rows[i] if ed[i, ED_WR] > 0.0 else 0) + (3 if ed[i, ED_WP] > 0.0 else 0)
+
     def set_free_bounds(self, q0: Vector, frozen: np.ndarray | None = None) -> None:
-        """Limits for this frame (DD rows): variables outside every targeted chain, and
-        those ``frozen`` marks, are fixed at q0."""
+        """Limits for this frame (DD rows): variables outside every pulling target's
+        chain (``pulling``), and those ``frozen`` marks, are fixed at q0."""
         lo = self.chain.lower
         hi = self.chain.upper
-        if frozen is None and self.every_effector_moves_all and self.active:
+        if frozen is None and self.every_effector_moves_all and self.pulling:
             if not self.bounds_are_limits:
                 self._dd[DD_LO] = lo
                 self._dd[DD_HI] = hi
                 self.bounds_are_limits = True
             return
         free = np.zeros(self._n, dtype=bool)
-        for i in self.active:
+        for i in self.pulling:
             free[self._chain_dofs[i]] = True
         if frozen is not None:
             free &= ~frozen

@@ -234,6 +234,31 @@ def test_weight_zero_frees_an_effector(legs: Chain) -> None:
     assert not full.success
 
 
+def test_a_limb_at_weight_zero_holds_still_in_a_stream(legs: Chain) -> None:
+    # IK faded out (every part of the only target at weight 0) for a second of frames:
+    # the answer is the one without the target, the pose of the frame before. It used
+    # to creep towards the rest pose under the stream's null-space step (CesiumMan's
+    # leg: 0.3 rad of joint motion in 60 frames); now the limb is held.
+    target, _, _ = bent_leg(legs)
+    solver = IKSolver(legs, STREAM_DEFAULTS)
+    solver.set_pose(np.zeros(legs.n_dof))
+    assert solver.track([Target(effector="right_foot", position=target)]).success
+    held = solver.q.copy()
+    faded = [Target(effector="right_foot", position=target + [0.0, 0.2, 0.0], position_weight=0.0)]
+    for _ in range(60):
+        result = solver.track(faded)
+        assert result.success
+    assert np.array_equal(solver.q, held)
+    assert {e.name: e.position_error_m for e in result.effectors} == {"right_foot": None}
+    # Another limb's target still moves that limb, and the faded one stays put (1 cm:
+    # within the stream's default step limit of 0.1 rad per frame).
+    left = foot(legs, held, 1) + [0.0, 0.01, 0.0]
+    both = solver.track([*faded, Target(effector="left_foot", position=left)])
+    assert both.success
+    assert np.linalg.norm(foot(legs, both.q, 1) - left) <= 1e-4 + 1e-9
+    assert np.allclose(foot(legs, both.q, 0), foot(legs, held, 0), atol=1e-9)
+
+
 def test_rotation_weight_zero_frees_the_orientation(legs: Chain) -> None:
     rest = np.zeros(legs.n_dof)
     pose = effector_poses(legs, rest)[2]
