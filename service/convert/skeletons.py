@@ -139,6 +139,15 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
                 field="chain.glb_base64",
             ) from None
         where = "chain.glb_base64"
+        if not data.startswith(b"glTF") and not data.lstrip()[:1] == b"{":
+            # Not a GLB (nor a .gltf document, which the reader also takes): say so
+            # rather than report it as JSON that does not parse.
+            what = "is empty" if not data else f"starts with {data[:4]!r}, not the magic b'glTF'"
+            raise invalid_problem(
+                f"chain.glb_base64 is not a GLB file: the decoded data {what} (a .gltf JSON "
+                "document goes in chain.gltf)",
+                "chain.glb_base64",
+            )
     else:
         where = "chain.gltf"
         try:

@@ -160,6 +160,15 @@ def unknown_bone_message(name: str, names: Iterable[str]) -> str:
     """``unknown bone 'x'`` with the close names (or, when none is alike, the names
     there are): for a caller that names the field itself."""
     known = list(names)
+    # A name the file gives several joints: the importer called them name#<node index>
+    # (solver.model.gltf), which a name-based lookup in an engine would not guess.
+    renamed = [n for n in known if n.startswith(f"{name}#")]
+    if renamed:
+        listed = ", ".join(repr(n) for n in renamed)
+        return (
+            f"unknown bone {name!r}: {len(renamed)} joints of the file have that name, so "
+            f"each is called <name>#<node index>: {listed}"
+        )
     close = difflib.get_close_matches(name, known, n=5, cutoff=0.5)
     if close:
         hint = f"; did you mean {', '.join(repr(c) for c in close)}?"

@@ -324,3 +324,17 @@ def test_a_token_without_bearer_is_told_the_header_form(
     assert "'Bearer <token>'" in r.json()["detail"]
     assert session.token not in r.text  # the token is never echoed
     assert client.get(f"/v1/sessions/{session.id}", headers=session.headers).status_code == 200
+
+
+@pytest.mark.parametrize(
+    "body",
+    [b'{"chain": "\xff\xfe"}', b"[" * 100_000 + b"]" * 100_000],
+    ids=["not-utf8", "nested-100000-deep"],
+)
+def test_a_body_that_cannot_be_decoded_names_the_body(client: TestClient, body: bytes) -> None:
+    # FastAPI's own answer had no field and said only "There was an error parsing the body".
+    r = client.post("/v1/sessions", content=body, headers={"content-type": "application/json"})
+    assert r.status_code == 422, r.text
+    error = r.json()
+    assert error["code"] == "invalid_format" and error["field"] == "body", error
+    assert "not UTF-8" in error["detail"][0]["msg"], error

@@ -398,3 +398,33 @@ def test_a_non_finite_number_in_a_glb_s_json_chunk_is_422(client: TestClient) ->
     body = error(client, chain)
     # The GLB reader refuses the token itself (no path: it parses the chunk whole).
     assert body["field"] == "chain.glb_base64" and "NaN" in body["detail"], body
+
+
+def test_joints_sharing_a_name_are_told_apart_by_node_index(client: TestClient) -> None:
+    # Two joints named "leg" (nodes 1 and 2): the importer calls them leg#1 and leg#2,
+    # and asking for "leg" says so (difflib alone suggested other names first).
+    chain = copy.deepcopy(EXAMPLE_GLTF_LEG)
+    for node in chain["gltf"]["nodes"][1:]:
+        node["name"] = "leg"
+    chain["moving"] = ["hip", "leg#1"]
+    chain["bones"] = {}
+    chain["effectors"] = [{"bone": "leg", "name": "foot", "mode": "position"}]
+    body = error(client, chain)
+    assert body["field"] == "chain.effectors[0].bone", body
+    assert "'leg#1', 'leg#2'" in body["detail"] and "<node index>" in body["detail"], body
+    chain["effectors"] = [{"bone": "leg#2", "name": "foot", "mode": "position"}]
+    s = create(client, chain)
+    assert s.body["effectors"][0]["name"] == "foot"
+
+
+@pytest.mark.parametrize(
+    ("data", "words"),
+    [(b"", "is empty"), (bytes(range(7, 200)), r"starts with b'\x07\x08\t\n'")],
+    ids=["empty", "random-bytes"],
+)
+def test_glb_base64_that_is_not_a_glb_says_so(client: TestClient, data: bytes, words: str) -> None:
+    # It was read as a .gltf JSON document: "json: the JSON is not valid / not UTF-8".
+    glb = base64.b64encode(data).decode()
+    body = error(client, {"format": "gltf", "glb_base64": glb, "effectors": [{"bone": "a"}]})
+    assert body["field"] == "chain.glb_base64", body
+    assert "not a GLB file" in body["detail"] and words in body["detail"], body
