@@ -116,7 +116,9 @@ class ErrorBody(StrictModel):
         description="Stable error code (the ErrorCode schema lists and explains them)",
     )
     field: str | None = Field(
-        default=None, description="Dotted path of the offending field, when known"
+        default=None,
+        description="Path of the offending field, when known: keys dotted, list indices "
+        "in brackets (frame.targets[0].position.x)",
     )
 
 

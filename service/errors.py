@@ -104,7 +104,7 @@ class ServiceError(Exception):
         code: Stable error code.
         detail: Human-readable message.
         status_code: HTTP status.
-        field: Dotted path of the offending field, if any.
+        field: Path of the offending field, if any (``frame.targets[0].position.x``).
         retry_after_s: Adds ``Retry-After`` (seconds, rounded up).
     """
 
@@ -253,7 +253,9 @@ def _field_of(error: Mapping[str, Any]) -> str | None:
     all (its ``loc`` then ends in a character offset, not a field)."""
     if error.get("type") == JSON_INVALID:
         return "body"
-    return field_path(error["loc"])
+    loc = error["loc"]
+    # The body as a whole (an array where an object belongs): named as unreadable JSON is.
+    return field_path(loc) or ("body" if list(loc) == ["body"] else None)
 
 
 _HTTP_CODES = {

@@ -12,6 +12,8 @@ from __future__ import annotations
 import base64
 import binascii
 import json
+import math
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -139,9 +141,10 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
                 field="chain.glb_base64",
             ) from None
         where = "chain.glb_base64"
-        if not data.startswith(b"glTF") and not data.lstrip()[:1] == b"{":
-            # Not a GLB (nor a .gltf document, which the reader also takes): say so
-            # rather than report it as JSON that does not parse.
+        if not data.startswith(b"glTF") and data.removeprefix(_BOM).lstrip()[:1] != b"{":
+            # Not a GLB (nor a .gltf document, which the reader also takes, with or
+            # without a UTF-8 byte-order mark): say so rather than report it as JSON
+            # that does not parse.
             what = "is empty" if not data else f"starts with {data[:4]!r}, not the magic b'glTF'"
             raise invalid_problem(
                 f"chain.glb_base64 is not a GLB file: the decoded data {what} (a .gltf JSON "
@@ -164,24 +167,61 @@ def _non_finite(document: object, where: str) -> ServiceError:
     """``invalid_format`` naming the first NaN or infinite number of a .gltf document
     (``chain.gltf.nodes[1].translation[0]``): the body's JSON parser reads the tokens
     NaN and Infinity, which some exporters write, but a glTF number must be finite."""
-    stack: list[tuple[str, object]] = [(where, document)]
-    while stack:  # depth first, in document order
-        path, value = stack.pop()
-        if isinstance(value, float) and not np.isfinite(value):
-            return ServiceError(
-                ErrorCode.INVALID_FORMAT,
-                f"{path}: {value} is not a finite number (a glTF number must be finite; "
-                "JSON has no NaN or Infinity)",
-                status_code=422,
-                field=path,
-            )
-        if isinstance(value, dict):
-            stack += [(f"{path}.{k}", v) for k, v in reversed(value.items())]
-        elif isinstance(value, list):
-            stack += [(f"{path}[{i}]", v) for i, v in reversed(list(enumerate(value)))]
-    return ServiceError(
-        ErrorCode.INVALID_FORMAT, "not a JSON document", status_code=422, field=where
+    path = _first_non_finite(document)
+    field = (
+        where
+        if path is None
+        else where + "".join(f"[{p}]" if type(p) is int else f".{p}" for p in path)
     )
+    if len(field) > _MAX_FIELD_CHARS:  # a document nested thousands deep
+        field = where
+    return ServiceError(
+        ErrorCode.INVALID_FORMAT,
+        f"{field}: a number that is not finite (a glTF number must be finite; JSON has "
+        "no NaN or Infinity)",
+        status_code=422,
+        field=field,
+    )
+
+
+# The UTF-8 byte-order mark some Windows tools write before a .gltf document.
+_BOM = b"\xef\xbb\xbf"
+# A field longer than this (a path thousands of levels deep) is named by its document.
+_MAX_FIELD_CHARS = 512
+
+
+def _first_non_finite(document: object) -> list[str | int] | None:
+    """The keys and indices down to the first non-finite float, depth first in document
+    order. Only the path being walked is kept (a walk that built each child's path up
+    front took gigabytes for a 4 MB body with a NaN at its end)."""
+    if isinstance(document, float) and not math.isfinite(document):
+        return []
+    root = _children(document)
+    stack = [] if root is None else [root]
+    path: list[str | int] = []  # the key of each container below the root being walked
+    while stack:
+        step = next(stack[-1], None)
+        if step is None:
+            stack.pop()
+            if path:
+                path.pop()
+            continue
+        key, value = step
+        if isinstance(value, float) and not math.isfinite(value):
+            return [*path, key]
+        children = _children(value)
+        if children is not None:
+            stack.append(children)
+            path.append(key)
+    return None
+
+
+def _children(value: object) -> Iterator[tuple[str | int, object]] | None:
+    if isinstance(value, dict):
+        return iter(value.items())
+    if isinstance(value, list):
+        return enumerate(value)
+    return None
 
 
 def _file_problem(e: InvalidModel, field: str) -> ServiceError:

@@ -328,7 +328,7 @@ class IKSolver:
 
     def free_mask(self) -> np.ndarray:
         """For the targets loaded last: 1.0 for each variable they may move (unlocked,
-        in the chain of a targeted effector), else 0.0."""
+        in the chain of a targeted effector with a part above weight 0), else 0.0."""
         return self._task.free_mask()
 
     def free_directions(self) -> int:

@@ -82,6 +82,13 @@ LOOSE_PART_RESTARTS = 4
 TASK_ROWS = {EffectorMode.POSITION: 3, EffectorMode.POSE: 6, EffectorMode.AIM: 5}
 
 
+def _pulls(target: Target, rotation_rows: int) -> bool:
+    """Whether a target has a part with weight above 0 (a position effector's rotation
+    weight has no rows to weigh)."""
+    position = target.position is not None and target.position_weight > 0.0
+    return position or (rotation_rows > 0 and target.rotation_weight > 0.0)
+
+
 @dataclass(frozen=True, slots=True)
 class LimbGroup:
     """One group of effectors and the solver of its limb chain."""
@@ -110,8 +117,11 @@ class LimbSplit:
 
     def groups(self, targets: Sequence[Target]) -> list[tuple[int, ...]] | None:
         """The targeted effectors' indexes in groups that share no free variable (None
-        for fewer than two targets, and for targets the whole solve must refuse: an
-        unknown effector or two targets for one, whose errors it words)."""
+        for fewer than two targets, for targets the whole solve must refuse: an
+        unknown effector or two targets for one, whose errors it words, and for a
+        target that pulls nothing, every part at weight 0: the whole solve holds its
+        limb, as ``Task.pulling`` says, where a group here would place the trunk by
+        it)."""
         if len(targets) < 2:
             return None
         groups: list[tuple[int, list[int]]] = []  # (variables as bits, effectors)
@@ -119,6 +129,8 @@ class LimbSplit:
         for t in targets:
             i = self._slot.get(t.effector, -1)
             if i < 0 or i in seen:
+                return None
+            if not t.plain and not _pulls(t, self._rows[i] - 3):
                 return None
             seen.add(i)
             groups = _joined(groups, self._masks[i], i)

@@ -179,7 +179,7 @@ class Task:
         soft_r = wr if 0.0 < wr < 1.0 and t.given & (GIVEN_ROTATION | GIVEN_DIRECTION) else 1.0
         if soft_p < 1.0 or soft_r < 1.0:
             self.blended.append((i, soft_p, soft_r, t.given))
-        if t.pole is not None:
+        if t.pole is not None and self._rows(i) > 0:  # a held limb has nothing to bend
             self.poles.append((i, t.pole))
 
     def relax_soft_parts(self) -> None:

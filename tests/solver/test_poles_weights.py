@@ -239,12 +239,21 @@ def test_a_limb_at_weight_zero_holds_still_in_a_stream(legs: Chain) -> None:
     # the answer is the one without the target, the pose of the frame before. It used
     # to creep towards the rest pose under the stream's null-space step (CesiumMan's
     # leg: 0.3 rad of joint motion in 60 frames); now the limb is held.
-    target, _, _ = bent_leg(legs)
+    target, middle, across = bent_leg(legs)
     solver = IKSolver(legs, STREAM_DEFAULTS)
     solver.set_pose(np.zeros(legs.n_dof))
     assert solver.track([Target(effector="right_foot", position=target)]).success
     held = solver.q.copy()
-    faded = [Target(effector="right_foot", position=target + [0.0, 0.2, 0.0], position_weight=0.0)]
+    # A pole on the faded target changes nothing either: the held limb has no bend to pick.
+    pole = Pole(middle + 0.5 * across)
+    faded = [
+        Target(
+            effector="right_foot",
+            position=target + [0.0, 0.2, 0.0],
+            position_weight=0.0,
+            pole=pole,
+        )
+    ]
     for _ in range(60):
         result = solver.track(faded)
         assert result.success
@@ -257,6 +266,31 @@ def test_a_limb_at_weight_zero_holds_still_in_a_stream(legs: Chain) -> None:
     assert both.success
     assert np.linalg.norm(foot(legs, both.q, 1) - left) <= 1e-4 + 1e-9
     assert np.allclose(foot(legs, both.q, 0), foot(legs, held, 0), atol=1e-9)
+
+
+def test_a_weight_zero_target_is_as_if_left_out_of_a_one_shot_solve(legs: Chain) -> None:
+    # The left knee's pose target at weight 0 in both parts beside the left foot's:
+    # the answer is the foot's alone. The limb split used to take the knee's target,
+    # which has the rows to place the leg, as the one that fixes the trunk: 1.2-3.9
+    # rad apart and about 5x the time (review of 297ff97).
+    rng = np.random.default_rng(1)
+    solver = IKSolver(legs)
+    for k in range(20):
+        goal = np.clip(rng.normal(0.0, 0.4, legs.n_dof), legs.lower, legs.upper)
+        seed = np.clip(rng.normal(0.0, 0.4, legs.n_dof), legs.lower, legs.upper)
+        poses = effector_poses(legs, goal)
+        left = Target(effector="left_foot", position=poses[1][:3, 3])
+        knee = Target(
+            effector="left_knee",
+            position=poses[2][:3, 3] + 0.3,
+            rotation=poses[2][:3, :3].T,
+            position_weight=0.0,
+            rotation_weight=0.0,
+        )
+        alone = solver.solve([left], seed=seed, rng=np.random.default_rng(k))
+        both = solver.solve([left, knee], seed=seed, rng=np.random.default_rng(k))
+        assert both.success == alone.success
+        assert np.allclose(both.q, alone.q, atol=1e-9), k
 
 
 def test_rotation_weight_zero_frees_the_orientation(legs: Chain) -> None:

@@ -108,7 +108,8 @@ class ServiceError(IKClientError):
             client does not know).
         message: The server's explanation (HTTP ``detail``; for ``invalid_format`` over
             HTTP, the first validation error's ``msg``).
-        field: Dotted path of the offending field, when the server names one.
+        field: Path of the offending field, when the server names one: keys dotted,
+            list indices in brackets (``frame.targets[0].position.x``).
         retry_after_s: When to try again [s] (HTTP ``Retry-After``, WebSocket
             ``retry_after_s``), for the codes that have it.
         status_code: The HTTP status (None for a WebSocket answer).
