@@ -132,7 +132,7 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
             raise _file_problem(e, "chain.bvh") from None
     if spec.glb_base64 is not None:
         try:
-            data: bytes | str = base64.b64decode(spec.glb_base64, validate=True)
+            glb = base64.b64decode(spec.glb_base64, validate=True)
         except (binascii.Error, ValueError) as e:
             raise ServiceError(
                 ErrorCode.INVALID_FORMAT,
@@ -141,16 +141,17 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
                 field="chain.glb_base64",
             ) from None
         where = "chain.glb_base64"
-        if not data.startswith(b"glTF") and data.removeprefix(_BOM).lstrip()[:1] != b"{":
+        if not glb.startswith(b"glTF") and glb.removeprefix(_BOM).lstrip()[:1] != b"{":
             # Not a GLB (nor a .gltf document, which the reader also takes, with or
             # without a UTF-8 byte-order mark): say so rather than report it as JSON
             # that does not parse.
-            what = "is empty" if not data else f"starts with {data[:4]!r}, not the magic b'glTF'"
+            what = "is empty" if not glb else f"starts with {glb[:4]!r}, not the magic b'glTF'"
             raise invalid_problem(
                 f"chain.glb_base64 is not a GLB file: the decoded data {what} (a .gltf JSON "
                 "document goes in chain.gltf)",
                 "chain.glb_base64",
             )
+        data: bytes | str = glb
     else:
         where = "chain.gltf"
         try:
