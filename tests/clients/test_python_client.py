@@ -35,6 +35,7 @@ from ik_client import (
     FrameResult,
     IKClientError,
     InvalidRequest,
+    NoAnswer,
     NotFound,
     Pong,
     Quaternion,
@@ -391,6 +392,8 @@ def test_stream_close_codes(ik: Client, session: Session) -> None:
     with ik.stream(gone) as stream, pytest.raises(SessionGone) as missing:
         stream.ping()
     assert missing.value.close_code == 4404 and missing.value.reason == ErrorCode.NOT_FOUND
+    # The code a caller matches over HTTP (NotFound.code), on the stream's error too.
+    assert missing.value.code == ErrorCode.NOT_FOUND
 
 
 def test_too_many_websockets_after_bounded_retries(start_server: Callable[..., Server]) -> None:
@@ -915,14 +918,16 @@ def test_a_frame_with_an_id_is_sent_again_after_a_dropped_connection(
             (Client(relay.base, reconnect=Reconnect(attempts=0)), {"id": 9}),
         ):
             relay.drops = 1
-            with client, pytest.raises(httpx.TransportError):
+            with client, pytest.raises(NoAnswer):
                 client.frame(session, [tool(0.12)], **kwargs)
         assert relay.dropped == 5
         # More drops than attempts: the last error is raised.
         relay.drops = 4
-        with Client(relay.base, reconnect=quick) as through, pytest.raises(httpx.TransportError):
+        with Client(relay.base, reconnect=quick) as through, pytest.raises(NoAnswer) as lost:
             through.frame(session, [tool(0.12)], id=10)
         assert relay.dropped == 9
+        # One of the client's errors (it was httpx's own), the transport's as its cause.
+        assert not lost.value.timed_out and isinstance(lost.value.__cause__, httpx.TransportError)
         # A balancer's 503: sent again after its Retry-After, unless that is longer than
         # the client waits (the caller gets the error at once).
         relay.busy = 2
@@ -939,3 +944,16 @@ def test_a_frame_with_an_id_is_sent_again_after_a_dropped_connection(
         assert ik.get_session(session).counters.frames == 3
     finally:
         relay.close()
+
+
+def test_a_server_that_never_answers_is_a_timed_out_no_answer() -> None:
+    # A listener that accepts and never answers: the client's timeout, as its own error.
+    import socket
+
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        base = f"http://127.0.0.1:{silent.getsockname()[1]}"
+        with Client(base, timeout_s=0.3) as ik, pytest.raises(NoAnswer) as late:
+            ik.create_session(PANDA)
+    assert late.value.timed_out and isinstance(late.value.__cause__, httpx.TimeoutException)

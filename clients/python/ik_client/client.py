@@ -27,6 +27,7 @@ import httpx
 
 from . import calls
 from .calls import Call, SessionRef
+from .errors import NoAnswer
 from .stream import PING_INTERVAL_S, PING_TIMEOUT_S, AsyncStream, Reconnect, Stream
 from .types import Encoding
 
@@ -45,6 +46,16 @@ _NO_ANSWER_STATUSES = frozenset({502, 503})
 # store would solve it twice).
 # NetworkError: ConnectError, ReadError, WriteError, CloseError.
 _NO_ANSWER_ERRORS = (httpx.NetworkError, httpx.ConnectTimeout, httpx.RemoteProtocolError)
+
+
+def _no_answer(call: Call[Any], error: httpx.TransportError) -> NoAnswer:
+    """The ``NoAnswer`` a transport error comes to (a connect timeout is no answer
+    either: nothing was sent)."""
+    timed_out = isinstance(error, httpx.TimeoutException) and not isinstance(
+        error, httpx.ConnectTimeout
+    )
+    what = "timed out" if timed_out else f"the connection failed: {error}"
+    return NoAnswer(f"{call.method} {call.path}: no answer ({what})", timed_out=timed_out)
 
 
 class _Endpoint(Generic[P, T]):
@@ -160,7 +171,10 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
         ping_timeout_s: float | None = PING_TIMEOUT_S,
     ) -> S:
         """The session's WebSocket; open it with ``with`` (``Stream``) or ``async with``
-        (``AsyncStream``).
+        (``AsyncStream``). The server accepts the handshake and then closes a socket
+        whose token or session is wrong (4401, 4403, 4404): the first message raises it
+        (``StreamAuthError``, ``SessionGone``), not the opening; ``stream.ping()``
+        checks at once.
 
         Args:
             session: The session (or anything with ``id`` and ``token``).
@@ -216,10 +230,12 @@ class Client(_BaseClient[httpx.Client, Stream]):
         while True:
             try:
                 response = self._http.send(request)
-            except _NO_ANSWER_ERRORS:
+            except _NO_ANSWER_ERRORS as e:
                 wait = self._wait_before_resending(call, attempt, None)
                 if wait is None:
-                    raise
+                    raise _no_answer(call, e) from e
+            except httpx.TimeoutException as e:  # not sent again: it may be under way
+                raise _no_answer(call, e) from e
             else:
                 wait = self._wait_before_resending(call, attempt, response)
                 if wait is None:
@@ -251,10 +267,12 @@ class AsyncClient(_BaseClient[httpx.AsyncClient, AsyncStream]):
         while True:
             try:
                 response = await self._http.send(request)
-            except _NO_ANSWER_ERRORS:
+            except _NO_ANSWER_ERRORS as e:
                 wait = self._wait_before_resending(call, attempt, None)
                 if wait is None:
-                    raise
+                    raise _no_answer(call, e) from e
+            except httpx.TimeoutException as e:  # not sent again: it may be under way
+                raise _no_answer(call, e) from e
             else:
                 wait = self._wait_before_resending(call, attempt, response)
                 if wait is None:

@@ -15,6 +15,8 @@ from typing import Any, ClassVar
 
 from .codes import ErrorCode as ErrorCode  # re-exported: ik_client.errors.ErrorCode
 
+_ERROR_CODES = frozenset(ErrorCode)
+
 
 class CloseCode(enum.IntEnum):
     """The close codes of the service's WebSocket (docs/websocket.md, Close codes)."""
@@ -68,6 +70,21 @@ class EncodeError(IKClientError, ValueError, TypeError):
     def __init__(self, message: str, *, field: str | None = None) -> None:
         super().__init__(message)
         self.field = field
+
+
+class NoAnswer(IKClientError):
+    """An HTTP call that got no answer: the connection failed or dropped (after the
+    resends ``Reconnect`` allows, for a call that is safe to send again), or the client's
+    timeout passed (not sent again: the server may still be working on it). The
+    transport's error (httpx's) is the ``__cause__``.
+
+    Attributes:
+        timed_out: The timeout passed (the server may have acted on the call).
+    """
+
+    def __init__(self, message: str, *, timed_out: bool) -> None:
+        super().__init__(message)
+        self.timed_out = timed_out
 
 
 class UnexpectedAnswer(IKClientError):
@@ -216,6 +233,9 @@ class StreamClosed(IKClientError):
         reason: The server's close reason, its error code (e.g. ``not_found``); empty
             when none was sent.
         meaning: What the code means, from the server's table.
+        code: The reason as an ``ErrorCode`` when it is one (``SessionGone``:
+            ``not_found``, as ``NotFound.code`` over HTTP); None for a close without
+            one (1000, 1006, or the WebSocket library's own text).
     """
 
     close_codes: ClassVar[frozenset[CloseCode]] = frozenset()
@@ -223,6 +243,7 @@ class StreamClosed(IKClientError):
     def __init__(self, close_code: int, reason: str = "") -> None:
         self.close_code = close_code
         self.reason = reason
+        self.code = ErrorCode(reason) if reason in _ERROR_CODES else None
         self.meaning = CLOSE_CODE_MEANINGS.get(close_code, "unknown close code")
         super().__init__(
             f"WebSocket closed {close_code} ({self.meaning})" + (f": {reason}" if reason else "")

@@ -271,7 +271,7 @@ class _Pipeline:
             return ClipAnswer(message.id, ClipResult.from_json(envelope))
         if kind == "batch_result":
             results = [BatchEntryResult.from_json(e) for e in envelope["results"]]
-            return BatchAnswer(message.id, results)
+            return BatchAnswer(message.id, results, bool(envelope["success"]))
         if kind == "fk_result":
             return FkAnswer(message.id, FkResult.from_json(envelope))
         if kind == "pong":

@@ -490,10 +490,12 @@ class ClipAnswer:
 @dataclass(frozen=True, slots=True)
 class BatchAnswer:
     """A ``batch_result`` message: the answer to the stream's batch ``id``, one entry per
-    frame sent, in order, each a result or that entry's own error."""
+    frame sent, in order, each a result or that entry's own error; ``success``: every
+    entry's success."""
 
     id: int
     results: list[BatchEntryResult]
+    success: bool
     type: Literal["batch_result"] = "batch_result"
 
 

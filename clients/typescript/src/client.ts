@@ -1,7 +1,8 @@
 /**
  * `Client`: the IK service over HTTP (the platform's `fetch`), and `stream()` for a
  * session's WebSocket. Every call resolves to a typed answer or rejects with a
- * `ServiceError` subclass carrying the server's `code`, `field` and `retryAfterS`. A call
+ * `ServiceError` subclass carrying the server's `code`, `field` and `retryAfterS`, or
+ * with `NoAnswer` when no answer came (the connection failed, or `timeoutMs`). A call
  * that got no answer (fetch failed: the connection failed or dropped, not the timeout; or
  * a balancer's or the server's 502 or 503) is sent again when it is repeatable (reads, a
  * pose or options set, a stateless solve, a frame with an `id`: behind a balancer with a
@@ -12,7 +13,7 @@
  */
 
 import { encodeBody } from "./encode.js";
-import { serviceError } from "./errors.js";
+import { NoAnswer, serviceError } from "./errors.js";
 import { DEFAULT_RECONNECT, type FkOptions, type Reconnect, Stream, type StreamOptions } from "./stream.js";
 import type {
   BatchEntry,
@@ -229,7 +230,10 @@ export class Client {
     return this.request("POST", `/v1/sessions/${session.id}/fk`, { session, body, repeatable: true });
   }
 
-  /** The session's WebSocket, open (see `Stream`). */
+  /** The session's WebSocket, open (see `Stream`). The server accepts the handshake and
+   * then closes a socket whose token or session is wrong (4401, 4403, 4404): that
+   * rejects the first message (`StreamAuthError`, `SessionGone`), not this call; `await
+   * stream.ping()` checks at once. */
   stream<C extends boolean = false>(
     session: SessionRef,
     options: StreamOptions & { compact?: C } = {},
@@ -264,8 +268,12 @@ export class Client {
       } catch (error) {
         // fetch rejects with a TypeError when the network fails; the timeout is a
         // DOMException, not sent again (the server may still be solving the call).
-        const wait = error instanceof TypeError ? this.waitBeforeResending(init.repeatable ?? false, attempt, null) : null;
-        if (wait === null) throw error;
+        const failed = error instanceof TypeError;
+        const wait = failed ? this.waitBeforeResending(init.repeatable ?? false, attempt, null) : null;
+        if (wait === null) {
+          const what = failed ? `the connection failed: ${String(error.cause ?? error.message)}` : "timed out";
+          throw new NoAnswer(`${method} ${path}: no answer (${what})`, !failed, { cause: error });
+        }
         await sleep(wait);
         continue;
       }

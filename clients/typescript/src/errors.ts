@@ -37,6 +37,7 @@ export const ErrorCode = {
   InternalError: "internal_error",
 } as const;
 export type ErrorCode = (typeof ErrorCode)[keyof typeof ErrorCode];
+const ERROR_CODES: ReadonlySet<string> = new Set(Object.values(ErrorCode));
 
 /** The close codes of the service's WebSocket (docs/websocket.md, Close codes). */
 export const CloseCode = {
@@ -70,6 +71,23 @@ export const CLOSE_CODE_MEANINGS: Readonly<Record<number, string>> = {
 /** Base of every error this client raises. */
 export class IKClientError extends Error {
   override name = "IKClientError";
+}
+
+/** An HTTP call that got no answer (ik_client's `NoAnswer`): the connection failed or
+ * dropped (after the resends `reconnect` allows, for a call that is safe to send again),
+ * or `timeoutMs` passed (`timedOut`; not sent again: the server may still be working on
+ * it). The platform's error (fetch's `TypeError`, the timeout's `DOMException`) is the
+ * `cause`. */
+export class NoAnswer extends IKClientError {
+  override name = "NoAnswer";
+
+  constructor(
+    message: string,
+    readonly timedOut: boolean,
+    options?: { cause?: unknown },
+  ) {
+    super(message, options);
+  }
 }
 
 /** A request or stream message this client cannot write, thrown before anything is
@@ -215,6 +233,10 @@ export class StreamClosed extends IKClientError {
   override name = "StreamClosed";
   static readonly closeCodes: readonly CloseCode[] = [];
   readonly meaning: string;
+  /** The server's close reason when it is an error code (`not_found`, `forbidden`, ...),
+   * as `ServiceError.code` names it over HTTP; null when the close has none (1000, 1006,
+   * or the WebSocket library's text). */
+  readonly code: ErrorCode | null;
 
   constructor(
     readonly closeCode: number,
@@ -223,6 +245,7 @@ export class StreamClosed extends IKClientError {
     const meaning = CLOSE_CODE_MEANINGS[closeCode] ?? "unknown close code";
     super(`WebSocket closed ${closeCode} (${meaning})${reason ? `: ${reason}` : ""}`);
     this.meaning = meaning;
+    this.code = ERROR_CODES.has(reason) ? (reason as ErrorCode) : null;
   }
 }
 

@@ -118,6 +118,7 @@ function frameMessage(targets: Target[], options: FrameOptions): Envelope {
 }
 
 const OPEN = 1;
+const CLOSED = 3;
 const SUBPROTOCOL = "ik.v1";
 const TOKEN_SUBPROTOCOL_PREFIX = "ik.token.";
 
@@ -259,9 +260,14 @@ export class Stream<R = FrameResult> {
     return answer;
   }
 
+  /** Close the stream: messages still waiting reject with `StreamClosed` (1000), also
+   * while a reconnect is pending or under way (which is then abandoned). */
   close(): void {
+    if (this.closing) return;
     this.closing = true;
-    this.socketNow.close(1000);
+    const socket = this.socketNow;
+    if (socket.readyState === CLOSED) this.closed(1000, "");
+    else socket.close(1000); // its close event settles what waits
   }
 
   private answerOf(message: Message<R>): Promise<Answer<R>> {
@@ -346,12 +352,14 @@ export class Stream<R = FrameResult> {
         }),
       );
     } else if (envelope["type"] === "result") {
-      message.resolve({ type: "result", id, result: { ...(envelope["result"] as R), id } });
+      const success = envelope["success"] as boolean;
+      message.resolve({ type: "result", id, success, result: { ...(envelope["result"] as R), id } });
     } else if (envelope["type"] === "clip_result") {
       const clip = envelope as unknown as ClipAnswer<R>;
       message.resolve({ type: "clip_result", id, success: clip.success, results: clip.results, plan: clip.plan ?? null });
     } else if (envelope["type"] === "batch_result") {
-      message.resolve({ type: "batch_result", id, results: envelope["results"] as BatchEntry<R>[] });
+      const success = envelope["success"] as boolean;
+      message.resolve({ type: "batch_result", id, success, results: envelope["results"] as BatchEntry<R>[] });
     } else if (envelope["type"] === "fk_result") {
       const fk = envelope as unknown as FkResult;
       message.resolve({ type: "fk_result", id, result: { q: fk.q, bones: fk.bones } });
@@ -364,6 +372,10 @@ export class Stream<R = FrameResult> {
   }
 
   private closed(code: number, reason: string): void {
+    if (this.failure !== null) return; // settled already (a close between reconnects)
+    // Closed by the caller: a socket cut while connecting says 1006, but the stream ended
+    // as asked.
+    if (this.closing) [code, reason] = [1000, ""];
     if (!this.closing && RECONNECTABLE.has(code) && this.tries < this.reconnect.attempts) {
       const delay = Math.min(this.reconnect.initialDelayMs * 2 ** this.tries, this.reconnect.maxDelayMs);
       this.tries += 1;
@@ -376,6 +388,7 @@ export class Stream<R = FrameResult> {
   }
 
   private reopen(): void {
+    if (this.closing) return; // closed while the reconnect waited: nothing to reopen
     const socket = this.connect();
     this.socketNow = socket;
     this.watch(socket);

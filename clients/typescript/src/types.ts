@@ -448,6 +448,8 @@ export interface SessionRef {
 export interface FrameAnswer<R = FrameResult> {
   type: "result";
   id: number;
+  /** The frame's success (as `result.success`). */
+  success: boolean;
   result: R;
 }
 
@@ -471,6 +473,8 @@ export interface Pong {
 export interface BatchAnswer<R = FrameResult> {
   type: "batch_result";
   id: number;
+  /** Every entry's success. */
+  success: boolean;
   results: BatchEntry<R>[];
 }
 

@@ -25,8 +25,10 @@ import {
   InvalidRequest,
   NotFound,
   RetryLater,
+  NoAnswer,
   ServerFault,
   SessionGone,
+  StreamClosed,
   Status,
   type Stream,
   StreamAuthError,
@@ -382,7 +384,9 @@ describe("http", () => {
     for (const [drops, options, reconnect, sends] of cases) {
       const relay = await droppingRelay(ik.baseUrl, drops);
       try {
-        await assert.rejects(new Client(relay.url, { reconnect }).frame(session, [tool(0.12)], options));
+        // The client's own error (it was fetch's bare TypeError), fetch's as its cause.
+        const lost = await new Client(relay.url, { reconnect }).frame(session, [tool(0.12)], options).catch((e: unknown) => e);
+        assert.ok(lost instanceof NoAnswer && !lost.timedOut && lost.cause instanceof TypeError, String(lost));
         assert.equal(relay.dropped(), sends);
       } finally {
         relay.close();
@@ -410,6 +414,21 @@ describe("http", () => {
       patient.close();
     }
     assert.equal((await ik.getSession(session)).counters.frames, 2);
+  });
+
+  test("a server that never answers: NoAnswer, timed out, not sent again", async () => {
+    const held: NetSocket[] = [];
+    const silent = createServer((conn) => void held.push(conn)); // accepts, never answers
+    await new Promise<void>((resolve) => silent.listen(0, "127.0.0.1", resolve));
+    try {
+      const url = `http://127.0.0.1:${(silent.address() as AddressInfo).port}`;
+      const late = await new Client(url, { timeoutMs: 300 }).createSession(PANDA).catch((e: unknown) => e);
+      assert.ok(late instanceof NoAnswer && late.timedOut, String(late));
+      assert.equal(held.length, 1);
+    } finally {
+      for (const conn of held) conn.destroy();
+      silent.close();
+    }
   });
 
   test("session calls", async () => {
@@ -702,6 +721,29 @@ describe("stream", () => {
     assert.ok(missing instanceof SessionGone);
     assert.equal(missing.closeCode, 4404);
     assert.equal(missing.reason, ErrorCode.NotFound);
+    // The code a caller matches over HTTP (NotFound.code), on the stream's error too.
+    assert.equal(missing.code, ErrorCode.NotFound);
+    assert.equal(auth.code, ErrorCode.Forbidden);
+  });
+
+  test("close() while a reconnect waits ends the stream: nothing is sent again, no socket stays open", async () => {
+    const session = await ik.createSession(PANDA);
+    const stream = await ik.stream(session, { reconnect: { attempts: 3, initialDelayMs: 50 } });
+    stream.sendFrame([tool(0.1)]);
+    const answer = stream.receive();
+    const dropped = stream.socket;
+    (dropped as unknown as NodeWebSocket).terminate();
+    // The stream has seen the drop once the socket reads CLOSED (ws emits the close as
+    // it sets it): a reconnect is pending, 50 ms away.
+    while (dropped.readyState !== 3) await new Promise((resolve) => setImmediate(resolve));
+    stream.close();
+    const closed = await answer.catch((e: unknown) => e);
+    assert.ok(closed instanceof StreamClosed && closed.closeCode === 1000, String(closed));
+    await new Promise((resolve) => setTimeout(resolve, 150)); // past the reconnect's delay
+    assert.equal(stream.reconnects, 0);
+    assert.equal(stream.socket, dropped); // no new socket was opened
+    assert.throws(() => stream.sendPing(), StreamClosed);
+    assert.equal((await ik.getSession(session)).websockets, 0);
   });
 
   test("answers the client cannot read: UnexpectedAnswer, and the stream goes on", async () => {
