@@ -123,6 +123,7 @@ class ServiceProcess(StoppedOnExit):
         env: Variables added to this process's environment (``IK_*`` settings).
         log_path: File for the server's stdout and stderr; discarded when None.
         root: The checkout to run (another one compares two versions).
+        port: The port (a restart on the port of a stopped one); a free one when None.
     """
 
     def __init__(
@@ -131,8 +132,9 @@ class ServiceProcess(StoppedOnExit):
         env: Mapping[str, str] | None = None,
         log_path: Path | None = None,
         root: Path = ROOT,
+        port: int | None = None,
     ) -> None:
-        self.port = free_port()
+        self.port = free_port() if port is None else port
         self.base = f"http://127.0.0.1:{self.port}"
         self.log_path = log_path
         full_env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}

@@ -333,3 +333,47 @@ def test_with_api_keys_the_page_asks_for_one(
         demo.assert_clean(expected_errors=refused)
     finally:
         demo.close()
+
+
+def test_after_a_restart_that_lost_its_session_the_page_makes_a_new_one(
+    browser: Any, tmp_path: Any
+) -> None:
+    # Sessions in memory: a restarted server has none, and the page's socket reconnects
+    # to 4404. The page used to stop there ("not_found" for good, and a model switch
+    # failed on deleting the lost session); it now makes a new session for the same
+    # model, waiting while the new server answers not_ready.
+    first = Server(log_path=tmp_path / "first.log")
+    first.wait_ready()
+    page = DemoPage(browser, first)
+    second: Server | None = None
+    try:
+        page.open()
+        page.wait_for("the page ready", lambda s: s.get("ready") is True)
+        page.page.evaluate("() => window.ikDemo.startMotion()")
+        page.wait_for("answers", lambda s: s["frames"] >= 20)
+        first.stop()
+        second = Server(port=first.port, log_path=tmp_path / "second.log")
+        second.wait_ready()
+        state = page.wait_for(
+            "answers from a new session on the restarted server",
+            lambda s: s["socket"]["open"] and _frames_answered(second) >= 30,
+        )
+        assert any("4404" in e for e in state["errors"]), state["errors"]
+        assert state["model"] == "character"
+        # Its one error on screen is the lost session's; nothing else went wrong.
+        assert [e for e in state["errors"] if "4404" not in e] == [], state["errors"]
+        assert not page.visit.page_errors, page.visit.page_errors
+        _assert_stayed_local(page.visit, second)
+    finally:
+        page.close()
+        if second is not None:
+            second.stop()
+
+
+def _frames_answered(server: Server) -> float:
+    text = httpx.get(f"{server.base}/metrics", timeout=5.0).text
+    return sum(
+        float(line.rsplit(" ", 1)[1])
+        for line in text.splitlines()
+        if line.startswith("ik_frames_total{")
+    )

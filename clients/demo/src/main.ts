@@ -26,6 +26,8 @@ import {
   type Encoding,
   type Frame,
   type FrameResults,
+  NotFound,
+  RetryLater,
   type SessionCreated,
   type Target,
 } from "../../typescript/src/index.js";
@@ -344,6 +346,16 @@ worker.onmessage = (event: MessageEvent<FromWorker>) => {
       pendingClip?.reject(new Error(message.message));
       pendingClip = null;
       reportError(message.message);
+      // The session is gone (a server restarted with sessions in memory): a new one for
+      // the same model, once; if that fails too, the error stays on screen.
+      if (message.gone && !recovering) {
+        recovering = true;
+        void recoverSession()
+          .catch(reportError)
+          .finally(() => {
+            recovering = false;
+          });
+      }
       break;
   }
 };
@@ -596,6 +608,33 @@ function resetStats(): void {
 
 const HANDLE_PALETTE = [0xe6194b, 0x4363d8, 0xf58231, 0x3cb44b];
 
+function ignoreNotFound(error: unknown): void {
+  if (!(error instanceof NotFound)) throw error;
+}
+
+// A new session is being made after the old one was gone (one recovery at a time).
+let recovering = false;
+// How long a recovery waits for a restarted server to be ready (it answers not_ready,
+// with Retry-After, while it loads its compiled solver).
+const RECOVERY_ATTEMPTS = 30;
+
+/** The model again on a new session, after the server lost the old one; a server still
+ * warming up is waited for, as its Retry-After says. */
+async function recoverSession(): Promise<void> {
+  for (let attempt = 1; ; attempt++) {
+    readout.status("the session is gone: creating a new one");
+    try {
+      await switchModel(state.model);
+      return;
+    } catch (error) {
+      if (!(error instanceof RetryLater) || attempt >= RECOVERY_ATTEMPTS) throw error;
+      const waitS = Math.min(Math.max(error.retryAfterS ?? 1, 0.5), 5);
+      readout.status(`the server is not ready (${error.code}): trying again in ${waitS} s`);
+      await new Promise((resolve) => setTimeout(resolve, 1000 * waitS));
+    }
+  }
+}
+
 /** Show `name` (the character or an example chain) on a session of its own. */
 async function switchModel(name: string): Promise<void> {
   dropStream();
@@ -603,7 +642,8 @@ async function switchModel(name: string): Promise<void> {
   if (model !== undefined) scene.remove(model.root);
   for (const handle of handles.values()) scene.remove(handle);
   handles.clear();
-  if (session !== undefined) await client.deleteSession(session); // the page's previous one
+  // The page's previous session; one the server no longer has (restarted, expired) is fine.
+  if (session !== undefined) await client.deleteSession(session).catch(ignoreNotFound);
   previousQ = null;
   recording = null;
   recorded = null;

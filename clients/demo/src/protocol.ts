@@ -78,5 +78,6 @@ export type FromWorker =
     }
   | { kind: "opened"; generation: number }
   | { kind: "clip"; generation: number; clip: FrameResults<CompactFrameResult> }
-  /** `closed`: the stream is over (the client gave up reconnecting). */
-  | { kind: "error"; generation: number; message: string; closed: boolean };
+  /** `closed`: the stream is over (the client gave up reconnecting); `gone`: because the
+   * session is (the server restarted with sessions in memory, or it expired). */
+  | { kind: "error"; generation: number; message: string; closed: boolean; gone: boolean };

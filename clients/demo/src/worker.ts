@@ -11,7 +11,14 @@
  * for a draw.
  */
 
-import { Client, type CompactFrameResult, type Stream, StreamClosed, type Target } from "../../typescript/src/index.js";
+import {
+  Client,
+  type CompactFrameResult,
+  SessionGone,
+  type Stream,
+  StreamClosed,
+  type Target,
+} from "../../typescript/src/index.js";
 import { type FromWorker, type Motion, type ToWorker, absoluteNow, motionOffset } from "./protocol.js";
 import { FixedRate } from "./timing.js";
 
@@ -78,7 +85,8 @@ function failed(open: Open, error: unknown): void {
   // The client has already tried to reconnect: this socket is over (a switch or a reload
   // opens a new one).
   if (closed) current = null;
-  post({ kind: "error", generation: open.generation, message: errorText(error), closed });
+  const gone = error instanceof SessionGone;
+  post({ kind: "error", generation: open.generation, message: errorText(error), closed, gone });
 }
 
 function tick(): void {
@@ -148,7 +156,13 @@ onmessage = (event: MessageEvent<ToWorker>) => {
   switch (message.kind) {
     case "open":
       open(message).catch((error: unknown) =>
-        post({ kind: "error", generation: message.generation, message: errorText(error), closed: true }),
+        post({
+          kind: "error",
+          generation: message.generation,
+          message: errorText(error),
+          closed: true,
+          gone: error instanceof SessionGone,
+        }),
       );
       break;
     case "close":
