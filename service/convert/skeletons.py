@@ -168,7 +168,7 @@ def _non_finite(document: object, where: str) -> ServiceError:
     """``invalid_format`` naming the first NaN or infinite number of a .gltf document
     (``chain.gltf.nodes[1].translation[0]``): the body's JSON parser reads the tokens
     NaN and Infinity, which some exporters write, but a glTF number must be finite."""
-    path = _first_non_finite(document)
+    path = first_non_finite(document)
     field = (
         where
         if path is None
@@ -191,7 +191,7 @@ _BOM = b"\xef\xbb\xbf"
 _MAX_FIELD_CHARS = 512
 
 
-def _first_non_finite(document: object) -> list[str | int] | None:
+def first_non_finite(document: object) -> list[str | int] | None:
     """The keys and indices down to the first non-finite float, depth first in document
     order. Only the path being walked is kept (a walk that built each child's path up
     front took gigabytes for a 4 MB body with a NaN at its end)."""

@@ -446,14 +446,14 @@ def test_the_path_of_a_nan_deep_in_a_long_document_is_found_in_bounded_memory() 
     # it is on (it built every child's path string first: ~4 GB for this body).
     import tracemalloc
 
-    from service.convert.skeletons import _first_non_finite
+    from service.convert.skeletons import first_non_finite
 
     leaf: Any = [0.0] * 2_000_000 + [float("nan")]
     document: Any = leaf
     for _ in range(800):
         document = {"a": document}
     tracemalloc.start()
-    path = _first_non_finite(document)
+    path = first_non_finite(document)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     assert path == ["a"] * 800 + [2_000_000]
