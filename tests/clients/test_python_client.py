@@ -349,6 +349,8 @@ def test_stream_pipelines_in_order(ik: Client, session: Session, encoding: Encod
         answers = [stream.receive() for _ in ids]
         assert [a.id for a in answers] == ids
         assert all(isinstance(a, FrameAnswer) and a.result.id == a.id for a in answers)
+        # The envelope's success, kept: the frame's own.
+        assert all(isinstance(a, FrameAnswer) and a.success == a.result.success for a in answers)
         assert sum(a.result.success for a in answers if isinstance(a, FrameAnswer)) >= 19
 
         clip_id = stream.send_clip([{"id": 5, "targets": [tool(0.12)]}], plan=True)
@@ -429,6 +431,10 @@ def test_stream_batches_pipelined_in_order(ik: Client, encoding: Encoding) -> No
         assert [x.id for x in answers] == ids == list(range(5))
         for k, answer in enumerate(answers):
             assert isinstance(answer, BatchAnswer) and len(answer.results) == 2
+            # The envelope's success: every entry's.
+            assert answer.success == all(
+                e.result is not None and e.result.success for e in answer.results
+            )
             assert [(e.session, e.id) for e in answer.results] == [(a.id, k), (b.id, k)]
             assert all(e.result is not None and e.result.joints is None for e in answer.results)
         wrong = entries(5)

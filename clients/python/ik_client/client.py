@@ -4,7 +4,8 @@ Every call is written once, in calls.py (its signature, documentation, request a
 answer), and listed once, in ``_BaseClient``; each client only sends (``_send``: httpx's
 blocking or asyncio transport), so ``Client.frame`` returns what ``AsyncClient.frame``
 awaits. Every call returns a typed answer or raises a ``ServiceError`` subclass carrying
-the server's ``code``, ``field`` and ``retry_after_s``. A call that got no answer (the
+the server's ``code``, ``field`` and ``retry_after_s``, or ``NoAnswer`` when no answer
+came (the connection failed, or the timeout passed). A call that got no answer (the
 connection failed or dropped, not a timeout; or a balancer's or the server's 502 or 503)
 is sent again, as first encoded, when it is repeatable (``calls.Call``: reads, a pose
 or options set, a stateless solve, a frame with an id), as often and as patiently as
@@ -49,10 +50,11 @@ _NO_ANSWER_ERRORS = (httpx.NetworkError, httpx.ConnectTimeout, httpx.RemoteProto
 
 
 def _no_answer(call: Call[Any], error: httpx.TransportError) -> NoAnswer:
-    """The ``NoAnswer`` a transport error comes to (a connect timeout is no answer
-    either: nothing was sent)."""
+    """The ``NoAnswer`` a transport error comes to (``timed_out`` only where the call
+    may have reached the server)."""
+    # Connect and pool timeouts: nothing was sent; a read or write timeout: maybe acted on.
     timed_out = isinstance(error, httpx.TimeoutException) and not isinstance(
-        error, httpx.ConnectTimeout
+        error, (httpx.ConnectTimeout, httpx.PoolTimeout)
     )
     what = "timed out" if timed_out else f"the connection failed: {error}"
     return NoAnswer(f"{call.method} {call.path}: no answer ({what})", timed_out=timed_out)

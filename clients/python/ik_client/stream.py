@@ -266,7 +266,8 @@ class _Pipeline:
             )
         if kind == "result":
             result = envelope["result"]
-            return FrameAnswer(message.id, FrameResult.from_json({**result, "id": message.id}))
+            frame = FrameResult.from_json({**result, "id": message.id})
+            return FrameAnswer(message.id, frame, bool(envelope["success"]))
         if kind == "clip_result":
             return ClipAnswer(message.id, ClipResult.from_json(envelope))
         if kind == "batch_result":

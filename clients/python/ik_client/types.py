@@ -471,10 +471,12 @@ class SessionInfo(_SessionSummary):
 # --- stream answers -----------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class FrameAnswer:
-    """A ``result`` message: the answer to the stream's frame ``id``."""
+    """A ``result`` message: the answer to the stream's frame ``id``; ``success``: the
+    frame's (as ``result.success``)."""
 
     id: int
     result: FrameResult
+    success: bool
     type: Literal["result"] = "result"
 
 

@@ -87,9 +87,9 @@ function withoutUndefined(values: Json): Json {
 }
 
 /** Raise the `ServiceError` subclass of an error answer `{detail, code, field}`. */
-async function raiseForError(response: Response): Promise<void> {
+/** Throws the `ServiceError` of an answer that is not 2xx (`text`: its body, read). */
+function raiseForError(response: Response, text: string): void {
   if (response.ok) return;
-  const text = await response.text();
   let body: Json = { detail: text };
   try {
     const parsed: unknown = JSON.parse(text);
@@ -258,6 +258,8 @@ export class Client {
     const query = init.compact ? "?results=compact" : "";
     for (let attempt = 0; ; attempt++) {
       let response: Response;
+      let text: string;
+      let wait: number | null;
       try {
         response = await fetch(`${this.baseUrl}${path}${query}`, {
           method,
@@ -265,24 +267,27 @@ export class Client {
           body,
           signal: AbortSignal.timeout(this.timeoutMs),
         });
+        wait = this.waitBeforeResending(init.repeatable ?? false, attempt, response);
+        // The body is read here too: a connection that drops, or a timeout that passes,
+        // while it arrives is no answer either.
+        text = wait === null ? await response.text() : "";
+        if (wait !== null) await response.body?.cancel();
       } catch (error) {
         // fetch rejects with a TypeError when the network fails; the timeout is a
         // DOMException, not sent again (the server may still be solving the call).
         const failed = error instanceof TypeError;
-        const wait = failed ? this.waitBeforeResending(init.repeatable ?? false, attempt, null) : null;
-        if (wait === null) {
+        const again = failed ? this.waitBeforeResending(init.repeatable ?? false, attempt, null) : null;
+        if (again === null) {
           const what = failed ? `the connection failed: ${String(error.cause ?? error.message)}` : "timed out";
           throw new NoAnswer(`${method} ${path}: no answer (${what})`, !failed, { cause: error });
         }
-        await sleep(wait);
+        await sleep(again);
         continue;
       }
-      const wait = this.waitBeforeResending(init.repeatable ?? false, attempt, response);
       if (wait === null) {
-        await raiseForError(response);
-        return (response.status === 204 ? undefined : await response.json()) as T;
+        raiseForError(response, text);
+        return (response.status === 204 || text === "" ? undefined : JSON.parse(text)) as T;
       }
-      await response.body?.cancel();
       await sleep(wait);
     }
   }

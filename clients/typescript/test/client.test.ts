@@ -431,6 +431,34 @@ describe("http", () => {
     }
   });
 
+  test("an answer cut or stalled mid-body is NoAnswer too; a repeatable call is sent again", async () => {
+    let requests = 0;
+    const open: NetSocket[] = [];
+    const partial = createServer((conn) => {
+      requests += 1;
+      open.push(conn);
+      conn.once("data", () => {
+        conn.write("HTTP/1.1 200 OK\r\ncontent-type: application/json\r\ncontent-length: 100\r\n\r\n{\"id\": ");
+        if (mode === "drop") conn.destroy(); // else: stall
+      });
+    });
+    let mode: "drop" | "stall" = "drop";
+    await new Promise<void>((resolve) => partial.listen(0, "127.0.0.1", resolve));
+    try {
+      const url = `http://127.0.0.1:${(partial.address() as AddressInfo).port}`;
+      const client = new Client(url, { timeoutMs: 300, reconnect: { attempts: 2, initialDelayMs: 10 } });
+      const cut = await client.getSession({ id: "s", token: "t" }).catch((e: unknown) => e);
+      assert.ok(cut instanceof NoAnswer && !cut.timedOut, String(cut));
+      assert.equal(requests, 3); // a read: sent again as often as `reconnect` allows
+      mode = "stall";
+      const stalled = await client.getSession({ id: "s", token: "t" }).catch((e: unknown) => e);
+      assert.ok(stalled instanceof NoAnswer && stalled.timedOut, String(stalled));
+    } finally {
+      for (const conn of open) conn.destroy();
+      partial.close();
+    }
+  });
+
   test("session calls", async () => {
     const session = await ik.createSession(PANDA, { options: { time_budget_us: 5000 } });
     assert.equal(session.n_dof, 7);
@@ -583,6 +611,7 @@ describe("stream", () => {
           ids,
         );
         const solved = answers.filter((a) => a.type === "result" && a.result.id === a.id && a.result.success);
+        assert.ok(answers.every((a) => a.type === "result" && a.success === a.result.success));
         assert.ok(solved.length >= 19);
 
         const clipId = stream.sendClip([{ id: 5, targets: [tool(0.12)] }], { plan: true });
@@ -619,6 +648,9 @@ describe("stream", () => {
         assertSolved(first.result);
         assertSolved(third.result);
         assert.ok(wrong !== undefined && "error" in wrong && wrong.error.code === ErrorCode.Forbidden);
+        // The envelope's success: every entry's (one was refused; the other batch solved).
+        assert.equal(one.success, false);
+        assert.equal(two.success, true);
         const [again] = await stream.batch([{ session: a.id, token: a.token, id: 5, targets: [tool(0.1)] }]);
         assert.ok(again !== undefined && "result" in again);
         assertSolved(again.result);
