@@ -377,3 +377,33 @@ def _frames_answered(server: Server) -> float:
         for line in text.splitlines()
         if line.startswith("ik_frames_total{")
     )
+
+
+def test_a_server_that_keeps_losing_sessions_gets_one_new_one_per_five_seconds(
+    demo: DemoPage,
+) -> None:
+    # Every session the page makes is deleted as soon as it is made (a server that keeps
+    # losing them): the recovery must not turn into a storm (it made ~8 a second).
+    created: list[dict[str, Any]] = []
+
+    def on_response(response: Any) -> None:
+        if response.request.method == "POST" and response.url.endswith("/v1/sessions"):
+            if response.status == 201:
+                created.append(response.json())
+
+    demo.page.on("response", on_response)
+    demo.open()
+    demo.wait_for("the page ready", lambda s: s.get("ready") is True)
+    demo.page.evaluate("() => window.ikDemo.startMotion()")
+    demo.wait_for("answers", lambda s: s["frames"] >= 10)
+    before = len(created)
+    deleted = 0
+    deadline = time.monotonic() + 8.0
+    while time.monotonic() < deadline:
+        for session in created[deleted:]:
+            auth = {"Authorization": f"Bearer {session['token']}"}
+            httpx.delete(f"{demo.server.base}/v1/sessions/{session['id']}", headers=auth)
+            deleted += 1
+        demo.page.wait_for_timeout(20)
+    # At once, then 5 s later (one still waiting for an answer stops the next one).
+    assert 1 <= len(created) - before <= 2, len(created) - before

@@ -335,6 +335,7 @@ worker.onmessage = (event: MessageEvent<FromWorker>) => {
       readout.status(`solving (${state.encoding}${state.compact ? ", compact" : ""})`);
       break;
     case "answer":
+      answeredSinceRecovery = true;
       answered(message);
       break;
     case "clip":
@@ -347,9 +348,12 @@ worker.onmessage = (event: MessageEvent<FromWorker>) => {
       pendingClip = null;
       reportError(message.message);
       // The session is gone (a server restarted with sessions in memory): a new one for
-      // the same model, once; if that fails too, the error stays on screen.
-      if (message.gone && !recovering) {
+      // the model on show, once until an answer comes on it (a session lost again
+      // before that, by a balancer without a shared store, say, leaves the error on
+      // screen) and at most one per RECOVERY_SPACING_MS.
+      if (message.gone && !recovering && answeredSinceRecovery) {
         recovering = true;
+        answeredSinceRecovery = false;
         void recoverSession()
           .catch(reportError)
           .finally(() => {
@@ -552,7 +556,10 @@ function wireSwitches(): void {
   const select = document.getElementById("model") as HTMLSelectElement;
   select.add(new Option("stick figure (character.gltf)", "character"));
   for (const name of examples.keys()) select.add(new Option(`example chain: ${name}`, name));
-  select.addEventListener("change", () => void switchModel(select.value).catch(reportError));
+  select.addEventListener("change", () => {
+    userSwitches += 1;
+    void showModel(select.value, userSwitches).catch(reportError);
+  });
 }
 
 /** Screen position [CSS px] of a handle, for a test's mouse. */
@@ -612,19 +619,48 @@ function ignoreNotFound(error: unknown): void {
   if (!(error instanceof NotFound)) throw error;
 }
 
-// A new session is being made after the old one was gone (one recovery at a time).
+// A new session is being made after the old one was gone (one recovery at a time), and
+// whether an answer came since the last one (no second recovery before it does).
 let recovering = false;
-// How long a recovery waits for a restarted server to be ready (it answers not_ready,
+let answeredSinceRecovery = true;
+// Model switches, the user's and a recovery's, one after another (each awaits the server
+// several times and rebuilds the scene); `userSwitches` counts the user's.
+let switches: Promise<unknown> = Promise.resolve();
+let userSwitches = 0;
+
+function serially<T>(task: () => Promise<T>): Promise<T> {
+  const run = switches.then(task, task);
+  switches = run.catch(() => undefined);
+  return run;
+}
+// How long a switch waits for a restarted server to be ready (it answers not_ready,
 // with Retry-After, while it loads its compiled solver).
 const RECOVERY_ATTEMPTS = 30;
+// A server that keeps losing sessions gets at most one new one from this page this often.
+const RECOVERY_SPACING_MS = 5_000;
+let lastRecoveryMs = -Infinity;
 
-/** The model again on a new session, after the server lost the old one; a server still
- * warming up is waited for, as its Retry-After says. */
+/** The model again on a new session, after the server lost the old one. */
 async function recoverSession(): Promise<void> {
+  const asked = userSwitches;
+  const waitMs = lastRecoveryMs + RECOVERY_SPACING_MS - performance.now();
+  if (waitMs > 0) {
+    readout.status(`the session is gone: a new one in ${(waitMs / 1000).toFixed(1)} s`);
+    await new Promise((resolve) => setTimeout(resolve, waitMs));
+  }
+  lastRecoveryMs = performance.now();
+  readout.status("the session is gone: creating a new one");
+  await showModel(state.model, asked);
+}
+
+/** `switchModel(name)` in turn with the other switches; a server still warming up (a
+ * restart: not_ready with Retry-After) is waited for, unless the user picks another
+ * model meanwhile (`asked`: the user's switches so far). */
+async function showModel(name: string, asked: number): Promise<void> {
   for (let attempt = 1; ; attempt++) {
-    readout.status("the session is gone: creating a new one");
+    if (userSwitches !== asked) return; // a newer pick stands
     try {
-      await switchModel(state.model);
+      await serially(() => switchModel(name));
       return;
     } catch (error) {
       if (!(error instanceof RetryLater) || attempt >= RECOVERY_ATTEMPTS) throw error;
@@ -697,7 +733,7 @@ async function main(): Promise<void> {
   polesSupported = await serverHasPoles();
   state.poles = polesSupported;
   wireSwitches();
-  await switchModel("character");
+  await serially(() => switchModel("character"));
   state.ready = true;
   requestAnimationFrame(draw);
 }
