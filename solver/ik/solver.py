@@ -215,10 +215,13 @@ class IKSolver:
         # near: it is solved as REACH would.
         smooth = opts.continuity is Continuity.SMOOTH and self._answered
         box = float(opts.max_joint_step_rad) if smooth else 0.0
-        result = self._frame(targets, q0, opts, rng, h0, step, box, stream=True)
-        fallback = opts.global_fallback and math.isfinite(opts.restart_radius_rad)
-        if fallback and not smooth and not result.success:
-            budget = opts.time_budget_us
+        fallback = not smooth and opts.global_fallback and math.isfinite(opts.restart_radius_rad)
+        budget = opts.time_budget_us
+        # With a global search to follow, the local one (restarts near the last answer)
+        # gets half a finite budget: for a target far away it spent all of it.
+        local = budget * 0.5 if fallback and budget is not None else None
+        result = self._frame(targets, q0, opts, rng, h0, step, box, time_left_us=local, stream=True)
+        if fallback and not result.success:
             left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
             if left is None or left > 0.0:
                 wide = replace(opts, restart_radius_rad=_GLOBAL_RADIUS, time_budget_us=left)
@@ -297,18 +300,9 @@ class IKSolver:
         bad, measure = report_only(self._data, q, raw)
         raise_bad_target(self.chain, bad)
         ok = measure <= 1.0
-        return IKResult(
-            q,
-            IKStatus.SOLVED if ok else IKStatus.NOT_REACHED,
-            Termination.GOAL_REACHED if ok else Termination.GTOL,
-            0,
-            0,
-            0,
-            0,
-            solve_us,
-            raw,
-            packed.layout,
-        )
+        status = IKStatus.SOLVED if ok else IKStatus.NOT_REACHED
+        code = Termination.GOAL_REACHED if ok else Termination.GTOL
+        return IKResult(q, status, code, 0, 0, 0, 0, solve_us, raw, packed.layout)
 
     def load_frame(
         self, targets: Sequence[Target], q0: Vector, *, options: IKOptions | None = None

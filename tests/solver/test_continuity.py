@@ -168,3 +168,30 @@ def test_continuity_is_checked() -> None:
         IKOptions(continuity="jump")  # type: ignore[arg-type]
     with pytest.raises(InvalidProblem, match="max_joint_step_rad"):
         IKOptions(max_joint_step_rad=0.0)
+
+
+def test_reach_with_a_budget_keeps_half_of_it_for_the_global_search() -> None:
+    # Targets anywhere in the workspace, one after another (a tool sending goals, not a
+    # stream), under a session's 1 ms budget: the restarts near the last answer spent
+    # the whole budget on a far target, and the global search that finds it in tens of
+    # microseconds got nothing (48 of 60 solved; a one-shot solve, 60). The local search
+    # now stops at half the budget. (A budget test, not a timing one: the global search
+    # needs ~20-40 us of the 500 left.)
+    chain = panda_arm()
+    rng = np.random.default_rng(3)
+    options = replace(
+        STREAM_DEFAULTS,
+        continuity=Continuity.REACH,
+        time_budget_us=1000.0,
+        position_tolerance_m=1e-4,
+        rotation_tolerance_rad=1e-3,
+    )
+    solver = IKSolver(chain, options)
+    solver.set_pose((chain.lower + chain.upper) / 2)
+    (effector,) = chain.effector_names
+    solved = 0
+    for _ in range(30):
+        pose = effector_poses(chain, rng.uniform(chain.lower, chain.upper))[0]
+        target = Target(effector=effector, position=pose[:3, 3], rotation=pose[:3, :3])
+        solved += solver.track([target]).success
+    assert solved == 30
