@@ -179,8 +179,15 @@ def _urdf_chain(spec: S.UrdfChain, settings: Settings) -> Chain:
             max_bytes=settings.max_urdf_bytes,
         )
     except InvalidModel as e:
-        field = f"chain.{e.field}" if e.field in _URDF_REQUEST_FIELDS else "chain.urdf"
-        raise invalid_problem(str(e), field) from None
+        if e.field in _URDF_REQUEST_FIELDS:
+            # The request's own field: named once, as the field, with the link at fault
+            # (the reader's "tool_0.tip_links: " prefix read as a path of the file).
+            where = ".".join(p for p in (e.joint, e.field) if p)
+            rest = str(e).removeprefix(f"{where}: ")
+            named = e.joint is None or repr(e.joint) in rest
+            detail = rest if named else f"{e.joint!r}: {rest}"
+            raise invalid_problem(detail, f"chain.{e.field}") from None
+        raise invalid_problem(str(e), "chain.urdf") from None
     _check_urdf_offsets(chain)
     return chain
 

@@ -50,11 +50,13 @@ default (1, 0, 0) and unit-normalised; continuous joints have no limits.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import NoReturn
 
 import defusedxml
 import defusedxml.ElementTree as DET
@@ -135,7 +137,8 @@ def chain_from_urdf(
     links = _links(root)
     by_child = _joints_by_child(root, links)
     if base_link not in links:
-        raise InvalidModel(f"unknown base link {base_link!r}", joint=base_link, field="base_link")
+        message = _unknown_link("base", base_link, links)
+        raise InvalidModel(message, joint=base_link, field="base_link")
     on_path: set[str] = set()
     for tip in tips:
         on_path.update(_path_joint_names(tip, base_link, links, by_child))
@@ -183,7 +186,48 @@ def _parse_xml(text: str, max_bytes: int) -> ET.Element:
         raise InvalidModel(f"URDF is not well-formed XML: {e}", field="urdf") from None
     if _tag(root) != "robot":
         raise InvalidModel(f"root element must be <robot>, got <{_tag(root)}>", field="urdf")
+    _refuse_xacro(root)
     return root
+
+
+# xacro's namespace, and what its expressions and substitutions look like in a value.
+_XACRO_NS = "{http://www.ros.org/wiki/xacro}"
+_XACRO_VALUE = re.compile(r"\$[{(]")
+
+
+def _refuse_xacro(root: ET.Element) -> None:
+    """A file that is still xacro is refused as such: an element of xacro's namespace
+    anywhere (read as URDF, an ``<xacro:if>`` block's joints were silently left out and
+    an unexpanded macro's links reported as undeclared), or ``${...}`` / ``$(...)`` in
+    what the chain is read from (link and joint attributes and the joints' own
+    elements; a leftover in a mesh path changes nothing here)."""
+    for element in root.iter():
+        tag = element.tag if isinstance(element.tag, str) else ""
+        if tag.startswith(_XACRO_NS):
+            _xacro(f"<xacro:{tag[len(_XACRO_NS) :]}>")
+    for element in root:
+        if _tag(element) not in ("link", "joint"):
+            continue
+        parts = [element] if _tag(element) == "link" else [element, *element]
+        for part in parts:
+            for name, value in part.attrib.items():
+                if _XACRO_VALUE.search(value):
+                    _xacro(f"{name}={value!r} in <{_tag(part)}>")
+
+
+def _xacro(what: str) -> NoReturn:
+    raise InvalidModel(
+        f"the file is xacro, not URDF ({what}): expand it first, e.g. "
+        "`xacro robot.urdf.xacro > robot.urdf`",
+        field="urdf",
+    )
+
+
+def _unknown_link(role: str, name: str, links: set[str]) -> str:
+    """``unknown <role> link 'x'`` with the file's nearest link names."""
+    close = difflib.get_close_matches(name, sorted(links), n=3, cutoff=0.6)
+    hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+    return f"unknown {role} link {name!r}{hint}"
 
 
 def _tag(element: ET.Element) -> str:
@@ -265,7 +309,7 @@ def _path_joint_names(
 ) -> list[str]:
     """Joints from tip up to base; raises if the tip is unknown, the base, or not below it."""
     if tip not in links:
-        raise InvalidModel(f"unknown tip link {tip!r}", joint=tip, field="tip_links")
+        raise InvalidModel(_unknown_link("tip", tip, links), joint=tip, field="tip_links")
     if tip == base:
         raise InvalidModel("tip link is the base link", joint=tip, field="tip_links")
     names: list[str] = []

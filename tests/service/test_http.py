@@ -409,6 +409,30 @@ def test_bad_urdf_is_422(client: TestClient, urdf: str, field: str) -> None:
     assert r.status_code == 422 and r.json()["field"] == field
 
 
+_TWO_LINKS = (
+    '<robot name="r"><link name="base"/><link name="tip"/>'
+    '<joint name="j1" type="continuous"><parent link="base"/><child link="tip"/>'
+    '<axis xyz="0 0 1"/></joint></robot>'
+)
+
+
+@pytest.mark.parametrize(
+    ("base", "tip", "detail"),
+    [
+        ("bsae", "tip", "chain.base_link: unknown base link 'bsae'; did you mean 'base'?"),
+        ("base", "Tip", "chain.tip_links: unknown tip link 'Tip'; did you mean 'tip'?"),
+        ("base", "base", "chain.tip_links: 'base': tip link is the base link"),
+    ],
+)
+def test_a_link_name_of_the_request_is_named_once_with_the_nearest_names(
+    client: TestClient, base: str, tip: str, detail: str
+) -> None:
+    # It read "chain.base_link: bsae.base_link: unknown base link 'bsae'", no suggestion.
+    chain = {"format": "urdf", "urdf": _TWO_LINKS, "base_link": base, "tip_links": [tip]}
+    r = client.post("/v1/sessions", json={"chain": chain})
+    assert r.status_code == 422 and r.json()["detail"] == detail, r.text
+
+
 def test_chain_over_the_dof_limit(make_client: Callable[..., TestClient]) -> None:
     client = make_client(Settings(max_dof=10))
     r = client.post("/v1/sessions", json={"chain": {"format": "example", "name": "tail"}})

@@ -484,3 +484,55 @@ def test_committed_panda_matches_installed_panda(rng: np.random.Generator) -> No
         assert a.keys() == b.keys()
         for link in a:
             assert_allclose(a[link], b[link], rtol=0.0, atol=0.0)
+
+
+_XACRO = 'xmlns:xacro="http://www.ros.org/wiki/xacro"'
+_ROBOT = '<robot name="planar_2link">'
+
+
+def _in_xacro_if(text: str) -> str:
+    """The elbow joint inside an <xacro:if>: read as URDF, it was silently left out."""
+    start = text.index('<joint name="elbow"')
+    end = text.index("</joint>", start) + len("</joint>")
+    return f'{text[:start]}<xacro:if value="${{arm}}">{text[start:end]}</xacro:if>{text[end:]}'
+
+
+def _property(text: str) -> str:
+    return text.replace('xyz="0.5 0 0"', 'xyz="${length} 0 0"', 1)
+
+
+def _arg(text: str) -> str:
+    return text.replace('<joint name="shoulder"', '<joint name="$(arg prefix)shoulder"', 1)
+
+
+@pytest.mark.parametrize(
+    ("edit", "words"),
+    [
+        (_in_xacro_if, "<xacro:if>"),
+        (_property, "xyz='${length} 0 0' in <origin>"),
+        (_arg, "name='$(arg prefix)shoulder' in <joint>"),
+    ],
+    ids=["xacro-if", "property-in-an-origin", "arg-in-a-joint-name"],
+)
+def test_a_file_that_is_still_xacro_says_so(edit: Any, words: str) -> None:
+    text = edit(PLANAR.replace(_ROBOT, f"{_ROBOT[:-1]} {_XACRO}>"))
+    with pytest.raises(InvalidModel) as info:
+        chain_from_urdf(text, base_link="base", tip_links="tip")
+    assert info.value.field == "urdf"
+    assert "xacro, not URDF" in str(info.value) and words in str(info.value), str(info.value)
+
+
+def test_xacro_leftovers_where_the_chain_is_not_read_are_ignored() -> None:
+    # A mesh path with a substitution and a declared (unused) xacro namespace.
+    text = PLANAR.replace("package://nowhere/base.stl", "$(find nowhere)/base.stl")
+    text = text.replace(_ROBOT, f"{_ROBOT[:-1]} {_XACRO}>")
+    assert chain_from_urdf(text, base_link="base", tip_links="tip").n_dof == 2
+
+
+def test_an_unknown_link_is_told_the_nearest_names() -> None:
+    with pytest.raises(InvalidModel) as base:
+        chain_from_urdf(PLANAR, base_link="bsae", tip_links="tip")
+    assert base.value.field == "base_link" and "did you mean 'base'" in str(base.value)
+    with pytest.raises(InvalidModel) as tip:
+        chain_from_urdf(PLANAR, base_link="base", tip_links="Tip")
+    assert tip.value.field == "tip_links" and "did you mean 'tip'" in str(tip.value)
