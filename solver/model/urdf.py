@@ -56,7 +56,6 @@ import re
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import NoReturn
 
 import defusedxml
 import defusedxml.ElementTree as DET
@@ -196,31 +195,22 @@ _XACRO_VALUE = re.compile(r"\$[{(]")
 
 
 def _refuse_xacro(root: ET.Element) -> None:
-    """A file that is still xacro is refused as such: an element of xacro's namespace
-    anywhere (read as URDF, an ``<xacro:if>`` block's joints were silently left out and
-    an unexpanded macro's links reported as undeclared), or ``${...}`` / ``$(...)`` in
-    what the chain is read from (link and joint attributes and the joints' own
-    elements; a leftover in a mesh path changes nothing here)."""
-    for element in root.iter():
-        tag = element.tag if isinstance(element.tag, str) else ""
-        if tag.startswith(_XACRO_NS):
-            _xacro(f"<xacro:{tag[len(_XACRO_NS) :]}>")
-    for element in root:
-        if _tag(element) not in ("link", "joint"):
-            continue
+    """Refuse a file that is still xacro: an element of xacro's namespace (read as URDF,
+    an ``<xacro:if>`` block's joints were silently left out), or ``${...}`` / ``$(...)``
+    in a link or joint (a leftover in a mesh path, not read here, is let through)."""
+    tags = (e.tag for e in root.iter() if isinstance(e.tag, str) and e.tag.startswith(_XACRO_NS))
+    found = next((f"<xacro:{t[len(_XACRO_NS) :]}>" for t in tags), None)
+    for element in (e for e in root if _tag(e) in ("link", "joint")):
         parts = [element] if _tag(element) == "link" else [element, *element]
-        for part in parts:
-            for name, value in part.attrib.items():
-                if _XACRO_VALUE.search(value):
-                    _xacro(f"{name}={value!r} in <{_tag(part)}>")
-
-
-def _xacro(what: str) -> NoReturn:
-    raise InvalidModel(
-        f"the file is xacro, not URDF ({what}): expand it first, e.g. "
-        "`xacro robot.urdf.xacro > robot.urdf`",
-        field="urdf",
-    )
+        values = ((k, v, p) for p in parts for k, v in p.attrib.items())
+        bad = (f"{k}={v!r} in <{_tag(p)}>" for k, v, p in values if _XACRO_VALUE.search(v))
+        found = found or next(bad, None)
+    if found is not None:
+        raise InvalidModel(
+            f"the file is xacro, not URDF ({found}): expand it first, e.g. "
+            "`xacro robot.urdf.xacro > robot.urdf`",
+            field="urdf",
+        )
 
 
 def _unknown_link(role: str, name: str, links: set[str]) -> str:
