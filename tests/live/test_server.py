@@ -361,7 +361,7 @@ def test_keepalive_timeout_under_a_full_buffer_ends_the_handler(
 
 
 # continuity "reach": a smooth session keeps its restarts within one step of the last
-# answer and gives up far sooner; the tests of _SLOWER need frames that use their budget.
+# answer and gives up far sooner; the tests of _SLOWER need frames that take a while.
 _SLOWER: SolverOptionsPatch = {
     "time_budget_us": 50_000,
     "max_iter": 100_000,
@@ -369,7 +369,7 @@ _SLOWER: SolverOptionsPatch = {
     "continuity": "reach",
 }
 
-# Just out of the panda's reach: restarts spend each frame's whole 50 ms budget.
+# Just out of the panda's reach (6 cm): a frame restarts until its restarts stall, ~12 ms.
 _EDGE_OF_REACH = {
     "effector": "tool",
     "position": {"x": 0.9, "y": 0.0, "z": 0.3},
@@ -382,9 +382,12 @@ def test_sigterm_past_the_graceful_time_answers_http_with_json_503(
 ) -> None:
     """A clip longer than IK_GRACEFUL_SHUTDOWN_S: uvicorn cancels it; the client gets
     JSON it can act on, not uvicorn's plain-text 500."""
-    doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="0")  # no grace: cancelled at once
+    # No grace: cancelled at once. Each frame ends in ~12 ms (its restarts stop at a
+    # stall, not at the 50 ms budget): 300 frames are ~3.6 s, well past the SIGTERM at
+    # 0.3 s (38 frames were ~0.5 s, and a fast run finished before it).
+    doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="0", IK_MAX_REQUEST_WORK_S="20")
     far: Any = _EDGE_OF_REACH
-    frames: list[Any] = [{"id": i, "targets": [far]} for i in range(38)]  # about 1.9 s
+    frames: list[Any] = [{"id": i, "targets": [far]} for i in range(300)]
     result: dict[str, Any] = {}
     with Client(doomed.base, timeout_s=TIMEOUT_S) as ik:
         session = ik.create_session(PANDA, options=_SLOWER)
@@ -408,9 +411,10 @@ def test_sigterm_past_the_graceful_time_answers_http_with_json_503(
 def test_sigterm_past_the_graceful_time_answers_the_ws_message_before_1012(
     start_server: Callable[..., Server],
 ) -> None:
-    doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="1", IK_MAX_REQUEST_WORK_S="10")
+    doomed = start_server(IK_GRACEFUL_SHUTDOWN_S="1", IK_MAX_REQUEST_WORK_S="20")
     far: Any = _EDGE_OF_REACH
-    frames: list[Any] = [{"id": i, "targets": [far]} for i in range(150)]  # about 7 s
+    # ~12 ms a frame (restarts stop at a stall): ~3.6 s, past the SIGTERM and its 1 s grace.
+    frames: list[Any] = [{"id": i, "targets": [far]} for i in range(300)]
     with (
         Client(doomed.base, timeout_s=TIMEOUT_S) as ik,
         no_reconnect_stream(ik, _SLOWER) as stream,
