@@ -170,13 +170,17 @@ def test_continuity_is_checked() -> None:
         IKOptions(max_joint_step_rad=0.0)
 
 
-def test_reach_with_a_budget_keeps_half_of_it_for_the_global_search() -> None:
+def test_reach_with_a_budget_keeps_half_of_it_for_the_global_search(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     # Targets anywhere in the workspace, one after another (a tool sending goals, not a
     # stream), under a session's 1 ms budget: the restarts near the last answer spent
     # the whole budget on a far target, and the global search that finds it in tens of
-    # microseconds got nothing (48 of 60 solved; a one-shot solve, 60). The local search
-    # now stops at half the budget. (A budget test, not a timing one: the global search
-    # needs ~20-40 us of the 500 left.)
+    # microseconds got nothing (48 of 60 solved; a one-shot solve, 60;
+    # bench/history/2026-11-29-reach-budget-split.md). The local search now stops at
+    # half the budget and the global search gets what is left. Which frames that
+    # solves depends on the machine's speed (a count of solved frames under 1 ms failed
+    # under load), so this checks the split itself: the budget each search is handed.
     chain = panda_arm()
     rng = np.random.default_rng(3)
     options = replace(
@@ -186,12 +190,28 @@ def test_reach_with_a_budget_keeps_half_of_it_for_the_global_search() -> None:
         position_tolerance_m=1e-4,
         rotation_tolerance_rad=1e-3,
     )
+    # Per frame, per search: (time_left_us, the options' time_budget_us) handed to it.
+    frames: list[list[tuple[float | None, float | None]]] = []
+    frame = IKSolver._frame
+
+    def recording(self, targets, q0, opts, *args, time_left_us=None, **kwargs):  # type: ignore[no-untyped-def]
+        frames[-1].append((time_left_us, opts.time_budget_us))
+        return frame(self, targets, q0, opts, *args, time_left_us=time_left_us, **kwargs)
+
+    monkeypatch.setattr(IKSolver, "_frame", recording)
     solver = IKSolver(chain, options)
     solver.set_pose((chain.lower + chain.upper) / 2)
     (effector,) = chain.effector_names
-    solved = 0
     for _ in range(30):
         pose = effector_poses(chain, rng.uniform(chain.lower, chain.upper))[0]
         target = Target(effector=effector, position=pose[:3, 3], rotation=pose[:3, :3])
-        solved += solver.track([target]).success
-    assert solved == 30
+        frames.append([])
+        solver.track([target])
+    # Every frame's local search gets half the budget; a global search, when one
+    # runs, gets what the local one left (under the budget, and not nothing).
+    assert all(calls[0] == (500.0, 1000.0) for calls in frames)
+    retries = [calls[1] for calls in frames if len(calls) == 2]
+    assert retries, "no far target needed the global search"
+    assert all(
+        left is None and budget is not None and 0.0 < budget < 1000.0 for left, budget in retries
+    )
