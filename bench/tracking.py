@@ -57,12 +57,18 @@ TOLERANCES = {"position_tolerance_m": 1e-5, "rotation_tolerance_rad": 1e-4}
 FPS = 60.0
 
 
-def policies(budget_us: float | None = -1.0) -> dict[str, IKOptions]:
+def policies(
+    budget_us: float | None = -1.0, polish_steps: int | None = None
+) -> dict[str, IKOptions]:
     """The options each of our runs uses (session defaults at the benchmark's
     tolerances): the default (``smooth``, 0.1 rad per frame) and ``reach``, main's
     tracker (its global fallback then sampled an infinite radius, now a full turn).
-    ``budget_us``: the per-frame time budget (None: none; negative: the session's)."""
+    ``budget_us``: the per-frame time budget (None: none; negative: the session's);
+    ``polish_steps``: ``IKOptions.polish_steps`` (None: the default; 0: no polish,
+    the A/B's other side)."""
     base = replace(STREAM_DEFAULTS, **TOLERANCES)
+    if polish_steps is not None:
+        base = replace(base, polish_steps=polish_steps)
     if budget_us is None or budget_us >= 0.0:
         base = replace(base, time_budget_us=budget_us)
     assert base.continuity is Continuity.SMOOTH
@@ -221,11 +227,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         "depend on the machine's load; default: the session's, 5000)",
     )
     ap.add_argument("--misses", action="store_true", help="list our frames outside the tolerances")
+    ap.add_argument(
+        "--polish-steps",
+        type=int,
+        default=None,
+        help="IKOptions.polish_steps for ours (default: the options' default; 0: no polish)",
+    )
     args = ap.parse_args(argv)
 
     from bench.peers.rtb_peer import RtbIK
 
-    runs = policies(None if args.budget_us == 0.0 else args.budget_us)
+    runs = policies(None if args.budget_us == 0.0 else args.budget_us, args.polish_steps)
     solvers = [*runs, "ik_LM"] if not args.no_peer else list(runs)
     rows: dict[tuple[str, str, str], Row] = {}
     outliers: list[Outlier] = []
@@ -307,12 +319,13 @@ def report(
         f"at {FPS:g} Hz; generator seeds [{last}, chain, 0..{args.streams - 1}]; tolerances "
         f"{TOLERANCES['position_tolerance_m']:g} m / {TOLERANCES['rotation_tolerance_rad']:g} rad"
     )
-    opts = policies(None if args.budget_us == 0.0 else args.budget_us)
+    opts = policies(None if args.budget_us == 0.0 else args.budget_us, args.polish_steps)
     budget = opts["default"].time_budget_us
     print(
         f"default policy: {opts['default'].continuity.value}, max_joint_step_rad "
         f"{opts['default'].max_joint_step_rad:g}; our time budget per frame: "
-        f"{'none' if budget is None else f'{budget:g} us'}"
+        f"{'none' if budget is None else f'{budget:g} us'}; polish steps "
+        f"{opts['default'].polish_steps}"
     )
     print()
     print(

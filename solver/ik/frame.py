@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+from .._clock import now_s
 from .._jit import jit, jit_leaf
 from ..errors import InvalidProblem
 from ..model import Chain
@@ -37,11 +38,13 @@ from .kinematics import (
     DD_XLAST,
     MISC_GOAL,
     MISC_LIMIT,
+    MISC_POLISH_STEPS,
     MISC_POSTURE,
     effector_errors,
     is_last_point,
 )
 from .metric import null_space_step
+from .polish import POLISH_WITHIN, polish
 
 SEED_NOT_FINITE = -2  # ``solve_frame``'s "bad" code for a seed with NaN or inf
 TARGETS_OK = -1  # ``solve_frame``'s "bad" code when targets and seed are valid
@@ -113,6 +116,11 @@ def solve_frame(  # type: ignore[no-untyped-def]
     seed on the exact task, with the restarts and the budget left (see the comment at
     the call: the preferences must not cost the tolerances).
 
+    An answer that ends within ``polish.POLISH_WITHIN`` tolerances of the goal gets
+    up to MISC_POLISH_STEPS Levenberg-Marquardt steps after the optimizer (``polish``;
+    its steps count as iterations and evaluations, its time in the solve's; bounded by
+    the step count, not the time budget, which it may overrun by those few steps).
+
     One call and flat outputs because at ~20-40 us per solve, every Python-level
     step around it showed up in bench/ik/: a numba dispatch type-checks each
     array argument, and each returned array or nested tuple is boxed.
@@ -155,7 +163,8 @@ def solve_frame(  # type: ignore[no-untyped-def]
     moved = scratch[k + n : k + 2 * n]
     ns_g = scratch[k + 2 * n : k + 3 * n]
     k += 3 * n
-    moved_errors = scratch[k : k + 3 * m].reshape((m, 3))
+    moved_flat = scratch[k : k + 3 * m]  # also the polish's 2m saved weights
+    moved_errors = moved_flat.reshape((m, 3))
     ns_h = scratch[k + 3 * m : k + 3 * m + n * n].reshape((n, n))
     trace = scratch[:0].reshape((0, 5))  # records nothing
     # fg=None: the core binds the objective registered for this data type (cacheable).
@@ -179,6 +188,7 @@ def solve_frame(  # type: ignore[no-untyped-def]
     passes = res.passes
     elapsed = res.elapsed_s
     n_restarts = res.restarts
+    polished = False
     if regularised:
         iopt[C.I_MAX_RESTARTS] = restarts
         if res.goal_measure > 1.0:
@@ -218,6 +228,21 @@ def solve_frame(  # type: ignore[no-untyped-def]
                 passes += exact.passes
                 elapsed += exact.elapsed_s
                 n_restarts += exact.restarts
+    # An answer a few tolerances short of the goal: a bounded Levenberg-Marquardt
+    # polish after the optimizer (``polish``; not on a pole shaping pass, goal -inf).
+    max_polish = int(misc[MISC_POLISH_STEPS])
+    if max_polish > 0 and fopt[C.F_F_GOAL] > -math.inf:
+        near = misc[MISC_GOAL] if is_last_point(out_x, dd) else effector_errors(out_x, data)
+        if 1.0 < near <= POLISH_WITHIN:
+            started = now_s()
+            steps = polish(
+                data, out_x, max_polish, fopt[C.F_MAX_STEP], out_g, moved, ns_g, ns_h,
+                moved_flat, work[0], work[1],
+            )  # fmt: skip
+            nit += steps
+            nfev += steps
+            elapsed += now_s() - started
+            polished = True
     # The solve's answer is usually the point it evaluated last (ED holds its errors,
     # MISC its goal measure): reuse that instead of one more FK.
     if is_last_point(out_x, dd):
@@ -237,6 +262,8 @@ def solve_frame(  # type: ignore[no-untyped-def]
                         errors[e, c] = moved_errors[e, c]
     if measure <= 1.0:
         status = STATUS_SOLVED
+        if polished:
+            code = C.GOAL_REACHED  # the polish met the goal the optimizer stopped short of
     elif code == C.NONFINITE or not math.isfinite(measure):
         status = STATUS_NONFINITE
     elif code == C.MAX_ITER or code == C.MAX_FEV or code == C.DEADLINE:

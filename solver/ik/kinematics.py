@@ -10,10 +10,11 @@ written here and by the solver); DD and MISC are the IK's own:
     DD  float64[12 + n // 2, n]  reference pose, lower, upper, last q evaluated,
                               gradient scratch, 6 rows of Jacobian scratch, rest pose,
                               then n // 2 rows for several effectors' stacked Jacobian
-    MISC float64[7 (+ pole block)]  posture weight, limit weight, limit margin, goal
+    MISC float64[8 (+ pole block)]  posture weight, limit weight, limit margin, goal
                               measure of the last q evaluated, damping floor,
-                              f of the last q evaluated, damping scale; then, in an
-                              IKSolver's, the pole block (``pole_term``)
+                              f of the last q evaluated, damping scale, polish
+                              steps; then, in an IKSolver's, the pole block
+                              (``pole_term``)
 
 The gradient needs no Jacobian matrix: for each effector we walk its ancestors once
 and accumulate J^T r column by column (revolute column: a x (p - o) for position and
@@ -96,7 +97,8 @@ MISC_GOAL = 3
 MISC_DAMPING = 4  # floor of the Gauss-Newton damping mu
 MISC_LAST_F = 5  # f of the last q evaluated (DD_XLAST)
 MISC_DAMPING_SCALE = 6  # mu = scale x f (Levenberg-Marquardt damping relative to the error)
-MISC_SIZE = 7
+MISC_POLISH_STEPS = 7  # IKOptions.polish_steps (``polish``), as a float
+MISC_SIZE = 8
 
 
 @jit_inline

@@ -67,7 +67,7 @@ METRIC_MAX_DOF = 64
 
 
 @jit_inline
-def _held(qi, gi, lo_i, hi_i):  # type: ignore[no-untyped-def]
+def is_held(qi, gi, lo_i, hi_i):  # type: ignore[no-untyped-def]
     """A variable is frozen, or sits on a bound with the gradient pushing outward
     (scalars: see ``model.forward.world_axis`` on arrays handed to per-joint helpers)."""
     return lo_i == hi_i or (qi <= lo_i and gi > 0.0) or (qi >= hi_i and gi < 0.0)
@@ -80,17 +80,25 @@ def ik_metric(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
     (``METRIC_FACTOR``: the optimizer's step is then two triangular solves, and the
     inverse's other two thirds are done only if H itself is read), unless its
     blocks inverted one by one are less work."""
-    return _metric(q, g, lo, hi, data, h, -1.0, True)
+    return _metric(q, g, lo, hi, data, h, -1.0, True, None)
 
 
 @jit_leaf
 def metric_inverse(q, g, lo, hi, data, h):  # type: ignore[no-untyped-def]
     """``ik_metric`` as the inverse H itself; False where there is none."""
-    return _metric(q, g, lo, hi, data, h, -1.0, False) != METRIC_NONE
+    return _metric(q, g, lo, hi, data, h, -1.0, False, None) != METRIC_NONE
+
+
+@jit_leaf
+def damped_metric_inverse(q, free, lo, hi, data, h, mu):  # type: ignore[no-untyped-def]
+    """(2 J^T W J + mu I)^-1 on the variables that ``free`` (0/1) marks, as H itself,
+    for a given mu (the polish's Levenberg-Marquardt with its own active set,
+    ``polish``); False where there is none."""
+    return _metric(q, q, lo, hi, data, h, mu, False, free) != METRIC_NONE
 
 
 @jit_inline
-def _metric(q, g, lo, hi, data, h, mu_fixed, factor):  # type: ignore[no-untyped-def]
+def _metric(q, g, lo, hi, data, h, mu_fixed, factor, free_given):  # type: ignore[no-untyped-def]
     """Inverse Hessian for the free variables from the exact Jacobian: (2 J^T W J + mu I)^-1.
 
     BFGS from H = I takes dozens of iterations on a pose problem; seeding a pass (or
@@ -104,7 +112,8 @@ def _metric(q, g, lo, hi, data, h, mu_fixed, factor):  # type: ignore[no-untyped
     its limit. Returns what it wrote (``codes.MetricKind``): with ``factor``, the
     direct form's Cholesky factor (unless its blocks are less work); METRIC_NONE (the
     caller keeps H = I) when the direct O(n^3) form would be needed for more than
-    METRIC_MAX_DOF variables.
+    METRIC_MAX_DOF variables. ``free_given`` (0/1 per variable) overrides which are
+    free (None: those not held).
     """
     ni, nd, ei, ed, dd, misc = data
     n = q.shape[0]
@@ -124,8 +133,12 @@ def _metric(q, g, lo, hi, data, h, mu_fixed, factor):  # type: ignore[no-untyped
         # ND and ED's errors now describe q, not the point in DD_XLAST: mark it stale.
         dd[DD_XLAST, 0] = math.nan
     free = dd[DD_GSCRATCH]  # reused as a 0/1 mask of the free variables
-    for i in range(n):
-        free[i] = 0.0 if _held(q[i], g[i], lo[i], hi[i]) else 1.0
+    if free_given is None:  # the usual case: free unless held
+        for i in range(n):
+            free[i] = 0.0 if is_held(q[i], g[i], lo[i], hi[i]) else 1.0
+    else:
+        for i in range(n):
+            free[i] = free_given[i]
     if mu_fixed < 0.0:
         mu = max(misc[MISC_DAMPING_SCALE] * f + 1e-9, misc[MISC_DAMPING])
     else:
@@ -398,7 +411,7 @@ def null_space_step(q, data, rest, max_step, out, h, g):  # type: ignore[no-unty
     for i in range(n):
         g[i] = 0.0  # nothing is held by a gradient: only frozen variables stay out
     mu = 1e-6
-    if _metric(q, g, lo, hi, data, h, mu, False) == METRIC_NONE:
+    if _metric(q, g, lo, hi, data, h, mu, False, None) == METRIC_NONE:
         return False
     big = 0.0
     for i in range(n):

@@ -120,6 +120,12 @@ class IKOptions:
             poses of each arm, at the same solve rate (bench/ik/); 0.1 needed more
             restarts. Streams keep 1.0 (their step and jump figures were measured
             with it).
+        polish_steps: An answer that ends within a few tolerances of the goal
+            (``polish.POLISH_WITHIN``) gets at most this many Levenberg-Marquardt
+            steps on the goal's own residuals after the optimizer (0: off). Tail40
+            pose streams: 0.28% of frames ended 1.01-1.17 tolerances off after 5000
+            iterations, crawling at the edge of the workspace against a limit
+            (``polish``).
         metric_every: Re-seed H from the exact Gauss-Newton metric (2 J^T W J + mu I)^-1
             every this many iterations (1: damped Gauss-Newton steps under the same
             line search, multi-pass and analyzer; 0: the article's BFGS, with the
@@ -175,6 +181,7 @@ class IKOptions:
     damping: float = 0.0
     damping_redundant_only: bool = False
     damping_scale: float = 0.5
+    polish_steps: int = 20
     global_fallback: bool = False
     continuity: Continuity = Continuity.REACH
     max_joint_step_rad: float = 0.1
@@ -220,6 +227,8 @@ class IKOptions:
             raise InvalidProblem("metric_every and metric_until must be >= 0")
         if self.max_iter < 1 or self.max_restarts < 0 or self.stall_window < 0:
             raise InvalidProblem("max_iter must be >= 1, max_restarts and stall_window >= 0")
+        if self.polish_steps < 0:
+            raise InvalidProblem(f"polish_steps must be >= 0, got {self.polish_steps!r}")
         if self.full_restart_every < 0:
             raise InvalidProblem(
                 f"full_restart_every must be >= 0, got {self.full_restart_every!r}"

@@ -47,6 +47,7 @@ from .kinematics import (
     MISC_DAMPING_SCALE,
     MISC_LIMIT,
     MISC_MARGIN,
+    MISC_POLISH_STEPS,
     MISC_POSTURE,
     MISC_SIZE,
     dd_rows,
@@ -364,6 +365,7 @@ class IKSolver:
             self._misc[MISC_LIMIT] = opts.limit_weight
             self._misc[MISC_MARGIN] = opts.limit_margin
             self._misc[MISC_DAMPING_SCALE] = opts.damping_scale
+            self._misc[MISC_POLISH_STEPS] = opts.polish_steps
             self._misc_for = opts
         # Per frame: the target set (and with it the redundancy) can change under the
         # same options.

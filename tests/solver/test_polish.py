@@ -1,0 +1,140 @@
+"""The Levenberg-Marquardt polish after the optimizer (solver/ik/polish.py): a frame
+that ends a few tolerances short of its goal is finished; one far from it, or held by
+SMOOTH's step box, is not moved beyond what the frame allows (issue 22)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from solver.ik import STREAM_DEFAULTS, Continuity, IKOptions, IKSolver, IKStatus, Target
+from solver.ik.polish import POLISH_WITHIN
+from solver.model import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from solver.model.examples import humanoid_arm
+from solver.model.forward import effector_poses
+from solver.optim import Termination
+
+TOL_P = 1e-5
+TOL_R = 1e-4
+
+
+def planar_arm() -> Chain:
+    """Two 1 m links turning about z: a position target in the plane."""
+    z = np.array([0.0, 0.0, 1.0])
+    joints = [
+        Joint(name="shoulder", parent="world", child="upper", kind=JointKind.REVOLUTE, axis=z,
+              lower=(-3.0,), upper=(3.0,)),
+        Joint(name="elbow", parent="upper", child="fore", kind=JointKind.REVOLUTE, axis=z,
+              origin=Transform(np.array([1.0, 0.0, 0.0])), lower=(0.1,), upper=(2.5,)),
+        Joint(name="wrist", parent="fore", child="hand", kind=JointKind.FIXED,
+              origin=Transform(np.array([1.0, 0.0, 0.0]))),
+    ]  # fmt: skip
+    return build_chain(joints, [Effector(name="hand", link="hand", mode=EffectorMode.POSITION)])
+
+
+def pose_target(chain: Chain, q: np.ndarray) -> list[Target]:
+    p = effector_poses(chain, q)[0]
+    return [Target(effector=chain.effectors[0].name, position=p[:3, 3], rotation=p[:3, :3])]
+
+
+def short_solve(polish_steps: int) -> IKOptions:
+    """One heavily damped iteration: the optimizer stops a few tolerances short."""
+    return IKOptions(
+        position_tolerance_m=TOL_P,
+        rotation_tolerance_rad=TOL_R,
+        max_iter=1,
+        max_restarts=0,
+        damping=10.0,
+        polish_steps=polish_steps,
+    )
+
+
+def near_miss() -> tuple[Chain, list[Target], np.ndarray]:
+    """The humanoid arm, a pose target and a seed a few tolerances from it."""
+    chain = humanoid_arm()
+    rng = np.random.default_rng(7)
+    lo, hi = chain.lower, chain.upper
+    goal = lo + (hi - lo) * rng.uniform(0.3, 0.7, chain.n_dof)
+    seed = goal + rng.normal(0.0, 4e-5, chain.n_dof)
+    return chain, pose_target(chain, goal), seed
+
+
+def test_a_solve_stopped_a_few_tolerances_short_is_polished_to_its_goal() -> None:
+    chain, targets, seed = near_miss()
+    short = IKSolver(chain, short_solve(0)).solve(targets, seed)
+    # The case is what it claims to be: the optimizer alone ends short, within reach.
+    assert short.status is IKStatus.BUDGET_EXHAUSTED
+    measure = max(short.max_position_error_m / TOL_P, short.max_rotation_error_rad / TOL_R)
+    assert 1.0 < measure <= POLISH_WITHIN
+
+    done = IKSolver(chain, short_solve(20)).solve(targets, seed)
+    assert done.status is IKStatus.SOLVED
+    assert done.termination is Termination.GOAL_REACHED
+    assert done.max_position_error_m <= TOL_P
+    assert done.max_rotation_error_rad <= TOL_R
+    # Its steps are counted: one iteration of the optimizer, then the polish's.
+    assert done.iterations > short.iterations == 1
+    # The optimizer's own record is the same run's: the article's pass log untouched.
+    assert [p.start for p in done.pass_log] == [p.start for p in short.pass_log]
+    assert np.abs(done.q - short.q).max() < 1e-2
+
+
+def test_a_target_out_of_reach_costs_no_polish() -> None:
+    chain, targets, seed = near_miss()
+    far = [replace(targets[0], position=targets[0].position + np.array([5.0, 0.0, 0.0]))]
+    plain = IKSolver(chain, short_solve(0)).solve(far, seed)
+    polished = IKSolver(chain, short_solve(20)).solve(far, seed)
+    assert plain.max_position_error_m / TOL_P > POLISH_WITHIN
+    assert polished.iterations == plain.iterations
+    np.testing.assert_array_equal(polished.q, plain.q)
+
+
+def test_polish_steps_zero_turns_it_off_and_negative_is_refused() -> None:
+    chain, targets, seed = near_miss()
+    off = IKSolver(chain, short_solve(0)).solve(targets, seed)
+    assert off.termination is Termination.MAX_ITER
+    with pytest.raises(ValueError, match="polish_steps"):
+        IKOptions(polish_steps=-1)
+
+
+def test_the_polish_stays_inside_smooths_step_box() -> None:
+    # The target needs the shoulder 0.1 rad + 2e-5 rad away: 4e-5 m (4 tolerances)
+    # beyond what SMOOTH's 0.1 rad per frame allows. The polish must not cross the box.
+    chain = planar_arm()
+    options = replace(
+        STREAM_DEFAULTS,
+        position_tolerance_m=TOL_P,
+        rotation_tolerance_rad=TOL_R,
+        time_budget_us=None,
+        continuity=Continuity.SMOOTH,
+        max_joint_step_rad=0.1,
+    )
+    q0 = np.array([0.2, 1.0])
+    solver = IKSolver(chain, options)
+    solver.set_pose(q0)
+    solver.restore(solver.stream_state()._replace(answered=True))  # not a stream's first
+    goal = effector_poses(chain, q0 + np.array([0.1 + 2e-5, 0.0]))[0][:3, 3]
+    r = solver.track([Target(effector="hand", position=goal)])
+    assert np.abs(r.q - q0).max() <= 0.1 + 1e-9
+    assert not solver.last_step.jumped
+    assert r.status is not IKStatus.SOLVED
+    assert TOL_P < r.max_position_error_m < 2 * 2e-5 * 2.0  # the closest continuous pose
+
+
+def test_the_polish_never_ends_further_from_the_goal() -> None:
+    # Many near misses: with the polish, no answer's goal measure is above the
+    # optimizer's own (the polish puts q back if its steps end further).
+    chain = humanoid_arm()
+    rng = np.random.default_rng(3)
+    lo, hi = chain.lower, chain.upper
+    for _ in range(40):
+        goal = lo + (hi - lo) * rng.uniform(0.02, 0.98, chain.n_dof)
+        seed = np.clip(goal + rng.normal(0.0, 1e-4, chain.n_dof), lo, hi)
+        targets = pose_target(chain, goal)
+        a = IKSolver(chain, short_solve(0)).solve(targets, seed)
+        b = IKSolver(chain, short_solve(20)).solve(targets, seed)
+        measure_a = max(a.max_position_error_m / TOL_P, a.max_rotation_error_rad / TOL_R)
+        measure_b = max(b.max_position_error_m / TOL_P, b.max_rotation_error_rad / TOL_R)
+        assert measure_b <= measure_a * (1 + 1e-9)
