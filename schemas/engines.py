@@ -106,22 +106,46 @@ class BonesOut(_Answer):
     )
 
 
+class EffectorPoseOut(_Answer):
+    """An effector's world pose: the tip frame a target's ``position`` and
+    ``orientation`` (or ``direction``) are compared with, in the session's conventions."""
+
+    name: str = Field(description="The effector's name, as targets address it (``effector``)")
+    position: Vec3Out = Field(description="The tip point, in the session's frame and unit")
+    orientation: QuaternionOut = Field(
+        description="The tip frame's orientation {w,x,y,z}, in the session's frame (as a "
+        "pose target's ``orientation``)"
+    )
+    direction: Vec3Out | None = Field(
+        default=None,
+        description="Aim effectors: the unit direction the aim axis points along, in the "
+        "session's frame (as an aim target's ``direction``); null for the other modes",
+    )
+
+
 class FkRequest(StrictModel):
     """Forward kinematics: a pose (``q`` or ``joints``; neither: the session's current
-    pose) -> bone data. Does not change the session's pose."""
+    pose) -> the world pose of every effector and, on skeleton chains, bone data. Does
+    not change the session's pose."""
 
     q: list[float] | None = Field(default=None, max_length=4096, description="Every DOF")
     joints: dict[str, float] | None = Field(
         default=None, max_length=4096, description="Some DOFs by name (the others: current)"
     )
-    bones: BoneOutput = Field(
-        default_factory=lambda: BoneOutput(local_rotations=True),
-        description="What to return (default: local rotations)",
+    bones: BoneOutput | None = Field(
+        default=None,
+        description="Bone data to return (skeleton chains: gltf, bvh; left out: the local "
+        "rotations). A chain without bones answers none, and refuses bone data asked for",
     )
 
 
 class FkResult(StrictModel):
-    """The bone data of a pose."""
+    """The world poses of a pose's effectors, and its bone data on skeleton chains."""
 
     q: list[float] = Field(description="The pose used, in DOF order")
-    bones: BonesOut
+    effectors: list[EffectorPoseOut] = Field(
+        description="Every effector's world pose, in the chain's effector order"
+    )
+    bones: BonesOut | None = Field(
+        default=None, description="Skeleton chains (gltf, bvh) only: the bone data asked for"
+    )

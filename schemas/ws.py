@@ -13,7 +13,7 @@ from pydantic import Field
 
 from .batch import BatchEntry, BatchEntryError, BatchEntryResult
 from .common import ErrorPayload, StrictModel
-from .engines import BoneOutput, BonesOut, FkRequest
+from .engines import BoneOutput, FkRequest, FkResult
 from .results import CompactFrameResult, FrameResult, PlanSummary
 from .solve import (
     HARD_MAX_FRAMES,
@@ -137,13 +137,11 @@ class ErrorMessage(StrictModel):
     error: ErrorPayload
 
 
-class FkResultMessage(StrictModel):
-    """Server -> client: the answer to an ``fk`` message."""
+class FkResultMessage(FkResult):
+    """Server -> client: the answer to an ``fk`` message (an ``FkResult``)."""
 
     id: int
     type: Literal["fk_result"]
-    q: list[float]
-    bones: BonesOut
 
 
 class PongMessage(StrictModel):

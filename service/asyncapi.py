@@ -59,7 +59,11 @@ CLIENT_MESSAGES: Final = (
 SERVER_MESSAGES: Final = (
     WsMessage("result", ws.ResultMessage, "A frame's result"),
     WsMessage("clip_result", ws.ClipResultMessage, "A clip's results, one per frame"),
-    WsMessage("fk_result", ws.FkResultMessage, "An fk message's bone data"),
+    WsMessage(
+        "fk_result",
+        ws.FkResultMessage,
+        "An fk message's pose, its effectors' world poses and (skeletons) bone data",
+    ),
     WsMessage("pong", ws.PongMessage, "The answer to a ping"),
     WsMessage("batch_result", ws.BatchResultMessage, "A batch's results, one entry per frame"),
     WsMessage("error", ws.ErrorMessage, "A message that failed; the socket stays open"),

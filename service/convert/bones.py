@@ -1,5 +1,6 @@
-"""Joint vectors -> what a game engine applies: bone local rotations and world
-transforms, in the session's conventions (``conventions.py``)."""
+"""Joint vectors -> what a client places in its world: bone local rotations and world
+transforms (skeleton chains), effector world poses (every chain, ``fk_dict``), in the
+session's conventions (``conventions.py``)."""
 
 from __future__ import annotations
 
@@ -7,11 +8,13 @@ from collections.abc import Sequence
 from typing import Any
 
 import schemas as S
-from solver.arrays import Vector
-from solver.model import matrix_to_quaternion
+from solver.arrays import Matrix, Vector
+from solver.model import EffectorMode, matrix_to_quaternion
+from solver.model.forward import effector_poses
 
 from ..errors import ServiceError, invalid_problem
 from .chains import ChainView, check_bone_output
+from .conventions import Convention
 from .poses import pose_vector
 from .results import SolvedFrame
 
@@ -32,13 +35,41 @@ def bones_dict(view: ChainView, q: Vector, output: S.BoneOutput) -> dict[str, An
     if output.world:
         world = {}
         for name, m in skeleton.world_transforms(q, output.world).items():
-            px, py, pz = conv.position_out(m[:3, 3]).tolist()
-            w, x, y, z = matrix_to_quaternion(conv.rotation_out(m[:3, :3])).tolist()
-            world[name] = {
-                "position": {"x": px, "y": py, "z": pz},
-                "rotation": {"w": w, "x": x, "y": y, "z": z},
-            }
+            position, rotation = transform_out(conv, m)
+            world[name] = {"position": position, "rotation": rotation}
         out["world"] = world
+    return out
+
+
+def transform_out(conv: Convention, m: Matrix) -> tuple[dict[str, float], dict[str, float]]:
+    """A world transform (4x4, the chain's frame) as the client reads one: its position
+    ``{x, y, z}`` and rotation ``{w, x, y, z}`` in the session's conventions."""
+    px, py, pz = conv.position_out(m[:3, 3]).tolist()
+    w, x, y, z = matrix_to_quaternion(conv.rotation_out(m[:3, :3])).tolist()
+    return {"x": px, "y": py, "z": pz}, {"w": w, "x": x, "y": y, "z": z}
+
+
+def effectors_out(view: ChainView, q: Vector) -> list[dict[str, Any]]:
+    """``EffectorPoseOut``s: every effector's tip frame at ``q`` (the solver's own FK,
+    the frame its targets are measured against), in the chain's effector order and the
+    session's conventions; aim effectors add where their aim axis points."""
+    chain = view.chain
+    conv = view.convention
+    out: list[dict[str, Any]] = []
+    for eff, m in zip(chain.effectors, effector_poses(chain, q), strict=True):
+        position, orientation = transform_out(conv, m)
+        direction = None
+        if eff.mode is EffectorMode.AIM:
+            dx, dy, dz = conv.direction_out(m[:3, :3] @ eff.aim_axis).tolist()
+            direction = {"x": dx, "y": dy, "z": dz}
+        out.append(
+            {
+                "name": eff.name,
+                "position": position,
+                "orientation": orientation,
+                "direction": direction,
+            }
+        )
     return out
 
 
@@ -62,32 +93,41 @@ def add_bones(
     return results
 
 
+# What an FK answer of a skeleton chain carries when the request names no bone data.
+DEFAULT_FK_BONES = S.BoneOutput(local_rotations=True)
+
+
 def fk_dict(
     view: ChainView,
     current: Vector,
     q: list[float] | None,
     joints: dict[str, float] | None,
-    output: S.BoneOutput,
+    output: S.BoneOutput | None,
     field: str,
 ) -> dict[str, Any]:
     """An ``FkResult``: the pose (``q`` or ``joints`` over ``current``, clipped into the
-    limits; neither: ``current``) and its bone data. ``field`` prefixes the error
+    limits; neither: ``current``), its effectors' world poses and, on skeleton chains,
+    its bone data (``output``; None: ``DEFAULT_FK_BONES``). ``field`` prefixes the error
     fields (``body`` over HTTP; empty for a WebSocket message).
 
     Raises:
         ServiceError: ``invalid_problem``: both ``q`` and ``joints``, a wrong length or
-            DOF name, a chain without bones, an unknown bone.
+            DOF name, bone data asked of a chain without bones, an unknown bone.
     """
     if q is not None and joints is not None:
         raise invalid_problem("give at most one of 'q' and 'joints'", field or None)
-    if view.skeleton is None:
-        # Whatever the output asks (even nothing: found by schemathesis, a 500): FK
-        # answers bones, and only skeleton chains have them.
-        raise invalid_problem(
-            "FK needs a skeleton chain (format gltf or bvh); this chain has no bones",
-            field or None,
-        )
-    check_bone_output(output, view.skeleton, f"{field}.bones" if field else "bones")
+    bones_field = f"{field}.bones" if field else "bones"
+    skeleton = view.skeleton
+    if skeleton is None:
+        if output is not None and (output.local_rotations or output.world):
+            raise invalid_problem(
+                "bone data needs a skeleton chain (format gltf or bvh) and this chain has "
+                "no bones; leave 'bones' out: the answer's 'effectors' hold the tips' poses",
+                bones_field,
+            )
+    else:
+        output = DEFAULT_FK_BONES if output is None else output
+        check_bone_output(output, skeleton, bones_field)
     pose = current
     if q is not None or joints is not None:
         try:
@@ -97,4 +137,8 @@ def fk_dict(
                 e.field = e.field.removeprefix("_.")
                 e.detail = e.detail.removeprefix("_.")
             raise
-    return {"q": pose.tolist(), "bones": bones_dict(view, pose, output)}
+    out: dict[str, Any] = {"q": pose.tolist(), "effectors": effectors_out(view, pose)}
+    if skeleton is not None:
+        assert output is not None
+        out["bones"] = bones_dict(view, pose, output)
+    return out

@@ -114,6 +114,10 @@ class Convention:
     def position_out(self, p: Vector) -> Vector:
         return (self.matrix.T @ p) / self.scale
 
+    def direction_out(self, d: Vector) -> Vector:
+        """A native direction -> the client's (``target_in``'s ``M d`` undone: no scale)."""
+        return self.matrix.T @ d
+
     def rotation_out(self, r: Matrix) -> Matrix:
         return self.matrix.T @ r @ self.matrix
 

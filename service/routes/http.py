@@ -446,9 +446,10 @@ async def post_batch(
 async def post_fk(
     body: Annotated[S.FkRequest, Body()], session: SessionDep, svc: ServicesDep
 ) -> Response:
-    """Forward kinematics (skeleton chains): a pose in (``q`` or ``joints``; neither:
-    the current pose), bone local rotations and world transforms out, in the session's
-    conventions. The session's pose does not change."""
+    """Forward kinematics of any chain: a pose in (``q`` or ``joints``; neither: the
+    current pose), every effector's world pose out and, on skeleton chains (gltf, bvh),
+    bone local rotations and world transforms, in the session's conventions. The
+    session's pose does not change."""
     svc.store.touch(session)
     out = convert.fk_dict(session.view, session.solver.q, body.q, body.joints, body.bones, "body")
     return ORJSONResponse(out)

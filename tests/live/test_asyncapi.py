@@ -166,13 +166,16 @@ def test_every_message_the_server_sends_matches_the_document(server: Server, spe
         assert exchange(spec, socket, ping, binary=True) == "pong"
         frame = {"type": "frame", "id": 6, "targets": [TOOL]}
         assert exchange(spec, socket, frame, binary=True) == "result"
-        # Errors: unknown effector, an id not increasing, fk on a chain without bones,
-        # then messages the document refuses too (the server answers invalid_format).
+        # Errors: unknown effector, an id not increasing, bone data asked of a chain
+        # without bones (its fk answers the effectors' poses), then messages the
+        # document refuses too (the server answers invalid_format).
         claw = {"type": "frame", "id": 7, "targets": [{**TOOL, "effector": "claw"}]}
         assert exchange(spec, socket, claw) == "error"
         assert exchange(spec, socket, {"type": "ping", "id": 7}) == "error"
-        assert exchange(spec, socket, {"type": "fk", "id": 8}) == "error"
-        for bad in ({"type": "dance", "id": 9}, {"type": "frame", "id": 10, "targets": []}):
+        bones = {"type": "fk", "id": 8, "bones": {"local_rotations": True}}
+        assert exchange(spec, socket, bones) == "error"
+        assert exchange(spec, socket, {"type": "fk", "id": 9}, binary=True) == "fk_result"
+        for bad in ({"type": "dance", "id": 10}, {"type": "frame", "id": 11, "targets": []}):
             assert not spec.matches(bad, spec.sent_by_client), bad
             socket.send(json.dumps(bad))
             answer = json.loads(socket.recv(timeout=TIMEOUT_S))
