@@ -50,6 +50,7 @@ def test_curl_walkthrough(server: Server, tmp_path: Path) -> None:
     assert re.search(r'"field":"targets\[0\]\.effector"}\n\s*HTTP 422', text), text
     assert '"time_budget_us":500' in text
     assert '"joint4":-1.5' in text
+    assert '{"name":"tool","position":{"x":' in text  # 4b: the tool's pose from FK
     assert 'ik_frames_total{success="true",termination="goal_reached"}' in text
     assert text.rstrip().endswith("HTTP 204")
     # The walk-through kept the session's token in a file; it must not leave it behind.

@@ -59,10 +59,18 @@ def test_websocket_page_messages_get_the_documented_answers(client: TestClient) 
         if doc["error_code"] is not None:
             assert answer["error"]["code"] == doc["error_code"]
             assert answer["error"]["field"] == doc["field"]
-    frame, _pong, _error, clip = answers
+    frame, _pong, _error, clip, fk = answers
     assert frame["result"]["termination"] == "goal_reached"
     assert [r["id"] for r in clip["results"]] == [0, 1]
     assert clip["plan"]["largest_step_rad"] <= clip["plan"]["tracked_largest_step_rad"]
+    # fk of the current pose (the clip's last answer): the tool on the clip's last target.
+    assert fk["q"] == clip["results"][-1]["q"]
+    (tool,) = fk["effectors"]
+    target = messages[3]["frames"][-1]["targets"][0]
+    assert tool["name"] == "tool" and tool["direction"] is None
+    for key in ("x", "y", "z"):
+        assert abs(tool["position"][key] - target["position"][key]) < 1e-3
+    assert abs(abs(tool["orientation"]["x"]) - 1.0) < 1e-3
 
 
 def test_operations_page_lists_every_setting_with_its_default() -> None:
