@@ -116,6 +116,7 @@ MIRRORS: list[tuple[type, tuple[str, ...]]] = [
     (ik_client.Conventions, ("Conventions",)),
     (ik_client.BoneOutput, ("BoneOutput",)),
     (ik_client.FkResult, ("FkResult",)),
+    (ik_client.EffectorPose, ("EffectorPoseOut",)),
 ]
 
 
@@ -235,6 +236,38 @@ def test_bones_conventions_and_fk_over_http(ik: Client) -> None:
     assert one_shot.success and one_shot.bones is not None
     got = one_shot.bones["world"]["ankle"]["position"]
     assert [got[k] for k in "xyz"] == pytest.approx([ankle[k] for k in "xyz"], abs=0.02)
+
+
+@pytest.mark.parametrize("encoding", list(Encoding))
+def test_fk_of_an_arm_gives_its_tool_over_http_and_stream(ik: Client, encoding: Encoding) -> None:
+    """A robotics session (no bones): FK answers the tool's world pose, the same over
+    HTTP and the stream; a target set to it is where the tool already is; bone data is
+    refused, naming the field."""
+    session = ik.create_session(PANDA)
+    try:
+        over_http = ik.fk(session, joints={"joint4": -2.0})
+        with ik.stream(session, encoding=encoding) as stream:
+            streamed = stream.fk(joints={"joint4": -2.0})
+            (pose,) = over_http.effectors
+            target: Target = {
+                "effector": pose.name,
+                "position": pose.position,
+                "orientation": pose.orientation,
+            }
+            solved = stream.frame([target])
+            here = stream.fk()
+            with pytest.raises(InvalidRequest) as caught:
+                stream.fk(bones={"local_rotations": True})
+        with pytest.raises(InvalidRequest) as over_http_caught:
+            ik.fk(session, bones={"local_rotations": True})
+    finally:
+        ik.delete_session(session)
+    assert over_http.bones is None and streamed == over_http
+    assert [e.name for e in over_http.effectors] == ["tool"] and pose.direction is None
+    assert solved.success
+    reached = here.effectors[0].position
+    assert [reached[k] for k in "xyz"] == pytest.approx([pose.position[k] for k in "xyz"], abs=1e-3)
+    assert caught.value.field == "bones" and over_http_caught.value.field == "body.bones"
 
 
 def test_errors_carry_code_and_field(ik: Client, session: Session) -> None:

@@ -296,10 +296,11 @@ def fk(
     joints: dict[str, float] | None = None,
     bones: BoneOutput | None = None,
 ) -> Call[FkResult]:
-    """Forward kinematics: the bone data of a pose (``q``, or some DOFs by name in
-    ``joints``; neither: the session's current pose), in the session's conventions
-    (``bones``: what to return; the server's default is the local rotations). The
-    session's pose does not change."""
+    """Forward kinematics of any chain: every effector's world pose for a pose (``q``,
+    or some DOFs by name in ``joints``; neither: the session's current pose), in the
+    session's conventions, and on skeleton chains its bone data (``bones``: what to
+    return; the server's default is the local rotations; a chain without bones refuses
+    any). The session's pose does not change."""
     body = _without_none(q=q, joints=joints, bones=bones)
     return _on_session(
         session, "POST", "/fk", lambda r: FkResult.from_json(r.json()), json=body, repeatable=True

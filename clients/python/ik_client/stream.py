@@ -574,7 +574,8 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         bones: BoneOutput | None = None,
     ) -> FkResult:
         """Forward kinematics of a pose (``q``, ``joints`` by name, or neither: the
-        session's current pose) in the session's conventions; the pose does not change."""
+        session's current pose): its effectors' world poses (and, on skeleton chains,
+        bone data) in the session's conventions; the pose does not change."""
         await self.send_fk(q=q, joints=joints, bones=bones)
         return _expect_fk(await self.receive())
 
@@ -683,7 +684,8 @@ class Stream(_BaseStream[SyncConnection]):
         bones: BoneOutput | None = None,
     ) -> FkResult:
         """Forward kinematics of a pose (``q``, ``joints`` by name, or neither: the
-        session's current pose) in the session's conventions; the pose does not change."""
+        session's current pose): its effectors' world poses (and, on skeleton chains,
+        bone data) in the session's conventions; the pose does not change."""
         self.send_fk(q=q, joints=joints, bones=bones)
         return _expect_fk(self.receive())
 

@@ -222,16 +222,36 @@ class FrameResult:
 
 
 @dataclass(frozen=True, slots=True)
+class EffectorPose:
+    """Schema ``EffectorPoseOut``: an effector's world pose in the session's conventions
+    (the tip frame its targets are compared with); ``direction``: where an aim
+    effector's aim axis points (None for position and pose effectors)."""
+
+    name: str  # as targets address it
+    position: Vec3
+    orientation: Quaternion
+    direction: Vec3 | None
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> EffectorPose:
+        return cls(d["name"], d["position"], d["orientation"], d.get("direction"))
+
+
+@dataclass(frozen=True, slots=True)
 class FkResult:
-    """Schema ``FkResult``: the bone data of a pose (``POST .../fk``)."""
+    """Schema ``FkResult``: where a pose puts the chain (``POST .../fk``): every
+    effector's world pose and, on skeleton chains, the bone data asked for."""
 
     q: list[float]  # the pose used, in DOF order
-    # Schema ``BonesOut`` as sent: {"local": {bone: {w,x,y,z}}, "world": {bone: {...}}}.
-    bones: dict[str, Any]
+    effectors: list[EffectorPose]  # every effector, in the chain's order
+    # Schema ``BonesOut`` as sent: {"local": {bone: {w,x,y,z}}, "world": {bone: {...}}};
+    # None on chains without bones (URDF, hierarchy, examples).
+    bones: dict[str, Any] | None = None
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> FkResult:
-        return cls(d["q"], d["bones"])
+        effectors = [EffectorPose.from_json(e) for e in d.get("effectors", [])]
+        return cls(d["q"], effectors, d.get("bones"))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
