@@ -223,8 +223,9 @@ export class Client {
     return this.request("POST", "/v1/solve", { body, repeatable: true });
   }
 
-  /** Forward kinematics: the bone data of a pose in the session's conventions; the
-   * session's pose does not change. */
+  /** Forward kinematics of any chain: every effector's world pose for a pose (and, on
+   * skeleton chains, its bone data) in the session's conventions; the session's pose
+   * does not change. */
   fk(session: SessionRef, options: FkOptions = {}): Promise<FkResult> {
     const body = withoutUndefined({ q: options.q, joints: options.joints, bones: options.bones });
     return this.request("POST", `/v1/sessions/${session.id}/fk`, { session, body, repeatable: true });

@@ -96,8 +96,9 @@ export interface FrameOptions {
 }
 
 /** `fk`'s pose: `q` (every DOF), or `joints` (some, by name; the others: the session's
- * current pose), or neither (the current pose); `bones`: what to return (the server's
- * default: the local rotations). */
+ * current pose), or neither (the current pose); `bones`: the bone data to return
+ * (skeleton chains; the server's default: the local rotations; a chain without bones
+ * refuses any). */
 export interface FkOptions {
   q?: number[];
   joints?: Record<string, number>;
@@ -362,7 +363,7 @@ export class Stream<R = FrameResult> {
       message.resolve({ type: "batch_result", id, success, results: envelope["results"] as BatchEntry<R>[] });
     } else if (envelope["type"] === "fk_result") {
       const fk = envelope as unknown as FkResult;
-      message.resolve({ type: "fk_result", id, result: { q: fk.q, bones: fk.bones } });
+      message.resolve({ type: "fk_result", id, result: { q: fk.q, effectors: fk.effectors, bones: fk.bones ?? null } });
     } else if (envelope["type"] === "pong") {
       message.resolve({ type: "pong", id });
     } else {

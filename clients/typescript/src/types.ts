@@ -119,11 +119,26 @@ export interface BonesOut {
   world?: Record<string, { position: Vec3; rotation: Quaternion }> | null;
 }
 
-/** Schema `FkResult`: the bone data of a pose (`POST .../fk`). */
+/** Schema `EffectorPoseOut`: an effector's world pose in the session's conventions (the
+ * tip frame its targets are compared with); `direction`: where an aim effector's aim axis
+ * points (null for position and pose effectors). */
+export interface EffectorPoseOut {
+  /** As targets address it (`effector`). */
+  name: string;
+  position: Vec3;
+  orientation: Quaternion;
+  direction?: Vec3 | null;
+}
+
+/** Schema `FkResult`: where a pose puts the chain (`POST .../fk`): every effector's world
+ * pose and, on skeleton chains, the bone data asked for. */
 export interface FkResult {
   /** The pose used, in DOF order. */
   q: number[];
-  bones: BonesOut;
+  /** Every effector, in the chain's order. */
+  effectors: EffectorPoseOut[];
+  /** Skeleton chains (gltf, bvh) only; absent on chains without bones. */
+  bones?: BonesOut | null;
 }
 
 /** Schema `PoseIn`: exactly one of `q` (every DOF, in order) or `joints` (some, by name). */

@@ -39,6 +39,7 @@ import {
   type CompactFrameResult,
   type DofInfo,
   type EffectorErrorOut,
+  type EffectorPoseOut,
   type EffectorInfo,
   type EffectorSettings,
   type EffectorSpec,
@@ -267,7 +268,8 @@ const DECLARED: Record<string, string[]> = {
   BatchEntryResult: k<BatchEntryResult>({ session: true, id: true, success: true, result: true }),
   BatchEntryError: k<BatchEntryError>({ session: true, id: true, success: true, error: true }),
   ErrorPayload: k<ErrorPayload>({ code: true, message: true, field: true, retry_after_s: true }),
-  FkResult: k<FkResult>({ q: true, bones: true }),
+  FkResult: k<FkResult>({ q: true, effectors: true, bones: true }),
+  EffectorPoseOut: k<EffectorPoseOut>({ name: true, position: true, orientation: true, direction: true }),
 };
 
 describe("types", () => {
@@ -564,7 +566,7 @@ describe("http", () => {
       const here = await ik.fk(session);
       assert.ok(asked.success && plain.bones == null, JSON.stringify(plain));
       near(ankle(asked), ankle(moved));
-      assert.ok(asked.bones?.local?.["LeftLeg"] !== undefined && here.bones.world == null);
+      assert.ok(asked.bones?.local?.["LeftLeg"] !== undefined && here.bones?.world == null);
       assert.deepEqual(here.q, plain.q);
       const oneShot = await ik.solve(BVH_LEG, [foot], { conventions: unreal, bones: { world: ["LeftLeg_end"] } });
       assert.ok(oneShot.success);
@@ -674,13 +676,40 @@ describe("stream", () => {
         const overHttp = await ik.fk(session, { joints: { "LeftLeg.x": 0.5 }, bones: asked });
         const after = await stream.frame([foot]);
         assert.deepEqual(bent.q, overHttp.q);
-        assert.ok(bent.bones.world?.["LeftLeg_end"] !== undefined, JSON.stringify(bent));
-        assert.deepEqual(bent.bones.world["LeftLeg_end"], overHttp.bones.world?.["LeftLeg_end"]);
+        assert.ok(bent.bones?.world?.["LeftLeg_end"] !== undefined, JSON.stringify(bent));
+        assert.deepEqual(bent.bones.world["LeftLeg_end"], overHttp.bones?.world?.["LeftLeg_end"]);
+        assert.deepEqual(bent.effectors, overHttp.effectors);
         assert.deepEqual(here.q, before.q);
-        assert.ok(here.bones.local != null && here.bones.world == null);
+        assert.ok(here.bones?.local != null && here.bones.world == null);
         // fk did not move the stream: the next frame starts where the last answer was (a
         // move to the fk pose would step the 0.1 rad limit; the null-space step is 0.005).
         assert.ok(after.largest_step_rad !== null && after.largest_step_rad < 0.05, JSON.stringify(after));
+      } finally {
+        stream.close();
+        await ik.deleteSession(session);
+      }
+    });
+
+    test(`fk of an arm gives its tool's pose, over the stream as over HTTP (${encoding})`, async () => {
+      const session = await ik.createSession(PANDA);
+      const stream = await ik.stream(session, { encoding });
+      try {
+        const overHttp = await ik.fk(session, { joints: { joint4: -2.0 } });
+        const streamed = await stream.fk({ joints: { joint4: -2.0 } });
+        assert.deepEqual(streamed.effectors, overHttp.effectors);
+        assert.ok(overHttp.bones == null && streamed.bones == null, JSON.stringify(overHttp));
+        const [tool] = overHttp.effectors;
+        assert.ok(tool !== undefined && tool.name === "tool" && tool.direction == null, JSON.stringify(tool));
+        // A target set to the tool's FK pose is reached where FK put it.
+        const solved = await stream.frame([{ effector: "tool", position: tool.position, orientation: tool.orientation }]);
+        assert.ok(solved.success, JSON.stringify(solved));
+        const reached = (await stream.fk()).effectors[0]?.position;
+        assert.ok(reached !== undefined);
+        const far = Math.max(...(["x", "y", "z"] as const).map((a) => Math.abs(reached[a] - tool.position[a])));
+        assert.ok(far <= 1e-3, JSON.stringify([reached, tool.position]));
+        // Bone data of a chain without bones: refused, naming the field.
+        await assert.rejects(stream.fk({ bones: { local_rotations: true } }), (e: unknown) => e instanceof InvalidRequest && e.field === "bones");
+        await assert.rejects(ik.fk(session, { bones: { local_rotations: true } }), (e: unknown) => e instanceof InvalidRequest && e.field === "body.bones");
       } finally {
         stream.close();
         await ik.deleteSession(session);
