@@ -6,6 +6,7 @@ things are:
     solver.py       ``IKSolver`` (solve, track, and the surface the planner uses)
     task.py         loading targets into the compiled arrays; what they leave free
     frame.py        the compiled per-frame solve (validate, solve, report errors)
+    polish.py       Levenberg-Marquardt steps for an answer a few tolerances short
     kinematics.py   the IK objective, its exact gradient, the goal measure, errors
     metric.py       the Gauss-Newton metric handed to the optimizer; null-space step
     spd.py          its inverses: whole, block by block (compiled)

@@ -1,6 +1,7 @@
 """The per-frame solve, compiled: one call validates the targets and the seed, runs the
-optimizer's core (again on the exact task if the regularised one missed), reports the
-pose errors and takes the null-space step.
+optimizer's core (again on the exact task if the regularised one missed), polishes an
+answer a few tolerances short of its goal (``polish``), reports the pose errors and
+takes the null-space step.
 
 One module because these functions call each other inside numba and share the layout
 of the output block (errors, final H, pass log) that ``result.IKResult`` reads.
@@ -117,9 +118,9 @@ def solve_frame(  # type: ignore[no-untyped-def]
     the call: the preferences must not cost the tolerances).
 
     An answer that ends within ``polish.POLISH_WITHIN`` tolerances of the goal gets
-    up to MISC_POLISH_STEPS Levenberg-Marquardt steps after the optimizer (``polish``;
-    its steps count as iterations and evaluations, its time in the solve's; bounded by
-    the step count, not the time budget, which it may overrun by those few steps).
+    up to MISC_POLISH_STEPS Levenberg-Marquardt steps after the optimizer, within the
+    time budget it left (``polish``: kept only if they meet the goal; its steps count
+    as iterations, its objective calls as evaluations, its time in the solve's).
 
     One call and flat outputs because at ~20-40 us per solve, every Python-level
     step around it showed up in bench/ik/: a numba dispatch type-checks each
@@ -228,21 +229,6 @@ def solve_frame(  # type: ignore[no-untyped-def]
                 passes += exact.passes
                 elapsed += exact.elapsed_s
                 n_restarts += exact.restarts
-    # An answer a few tolerances short of the goal: a bounded Levenberg-Marquardt
-    # polish after the optimizer (``polish``; not on a pole shaping pass, goal -inf).
-    max_polish = int(misc[MISC_POLISH_STEPS])
-    if max_polish > 0 and fopt[C.F_F_GOAL] > -math.inf:
-        near = misc[MISC_GOAL] if is_last_point(out_x, dd) else effector_errors(out_x, data)
-        if 1.0 < near <= POLISH_WITHIN:
-            started = now_s()
-            steps = polish(
-                data, out_x, max_polish, fopt[C.F_MAX_STEP], out_g, moved, ns_g, ns_h,
-                moved_flat, work[0], work[1],
-            )  # fmt: skip
-            nit += steps
-            nfev += steps
-            elapsed += now_s() - started
-            polished = True
     # The solve's answer is usually the point it evaluated last (ED holds its errors,
     # MISC its goal measure): reuse that instead of one more FK.
     if is_last_point(out_x, dd):
@@ -250,6 +236,28 @@ def solve_frame(  # type: ignore[no-untyped-def]
         _copy_errors(data, errors)
     else:
         measure = _report(data, out_x, errors)
+    # An answer a few tolerances short of the goal: a bounded Levenberg-Marquardt
+    # polish after the optimizer (``polish``), within the time the solve left; not on
+    # a pole shaping pass (goal -inf), which has no goal to meet.
+    max_polish = int(misc[MISC_POLISH_STEPS])
+    time_left = fopt[C.F_BUDGET] - elapsed
+    if (
+        1.0 < measure <= POLISH_WITHIN
+        and max_polish > 0
+        and time_left > 0.0
+        and fopt[C.F_F_GOAL] > -math.inf
+    ):
+        started = now_s()
+        steps, evaluations = polish(
+            data, out_x, max_polish, fopt[C.F_MAX_STEP], started + time_left, out_g, moved,
+            ns_g, ns_h, moved_flat, work[0], work[1],
+        )  # fmt: skip
+        nit += steps
+        nfev += evaluations
+        elapsed += now_s() - started
+        if steps > 0:
+            measure = _report(data, out_x, errors)
+            polished = True
     if measure <= 1.0 and null_space_step_rad > 0.0:
         if null_space_step(out_x, data, dd[DD_REST], null_space_step_rad, moved, ns_h, ns_g):
             if _report(data, moved, moved_errors) <= 1.0:

@@ -13,34 +13,41 @@ Levenberg-Marquardt's adaptive mu, cross it in 1-15 steps
 (bench/history/2026-11-29-tail40-lm-polish-probe.md).
 
 It runs only after the optimizer (the article's method, untouched) has finished, only
-on an answer within ``POLISH_WITHIN`` tolerances of the goal, for at most
-``IKOptions.polish_steps`` steps, each moving no variable more than the solve's
-``max_step_rad`` and staying within the bounds (a SMOOTH frame's step box included),
-and it keeps a step only if it lowers the sum of squared scaled residuals: it can end
-a frame closer to the goal, never further from it.
+on an answer within ``POLISH_WITHIN`` tolerances of the goal and within the time the
+solve left, for at most ``IKOptions.polish_steps`` steps, each moving no variable more
+than the solve's ``max_step_rad`` and staying within the bounds (a SMOOTH frame's step
+box included); it keeps a step only if it lowers the sum of squared scaled residuals,
+and its answer only if it meets the goal: a frame it cannot finish is returned as the
+optimizer left it.
 """
 
 from __future__ import annotations
 
 import math
 
+from .._clock import now_s
 from .._jit import jit_leaf
 from ..model.layout import ED_TOL_P, ED_TOL_R, ED_WP, ED_WR, EI_MODE, MODE_POSITION
 from .kinematics import DD_HI, DD_LO, DD_XLAST, MISC_GOAL, MISC_LIMIT, MISC_POSTURE, ik_objective
 from .metric import damped_metric_inverse, is_held
 
 # The polish is tried on answers at most this many tolerances from the goal (the goal
-# measure): a target out of reach (a game character's hand past arm's length, every
-# frame) ends far beyond it and costs no polish.
+# measure): a target well out of reach (a game character's hand past arm's length,
+# every frame) ends far beyond it and costs no polish; one just out of reach costs the
+# steps until MAX_REFUSED or the time budget (~20-30 us on a 7-DOF arm).
 POLISH_WITHIN = 10.0
 # Times a step is solved again with the variables it would push past a bound held.
 PIN_ROUNDS = 4
+# Steps refused in a row after which the polish gives up. Finishing a tail40 frame
+# took up to 4-5 refusals in a row (mu x 1e4) before a step was accepted.
+MAX_REFUSED = 6
 
 
 @jit_leaf
-def polish(data, q, max_steps, max_step, g, trial, g_trial, h, saved, start, free):  # type: ignore[no-untyped-def]
-    """Up to ``max_steps`` Levenberg-Marquardt steps from q (updated in place) towards
-    the goal; returns the steps tried (accepted or not).
+def polish(data, q, max_steps, max_step, deadline, g, trial, g_trial, h, saved, start, free):  # type: ignore[no-untyped-def]
+    """Up to ``max_steps`` Levenberg-Marquardt steps from q towards the goal, none
+    begun after ``deadline`` (``_clock.now_s`` seconds); q is updated in place only if
+    they meet the goal. Returns (steps tried, accepted or not; objective evaluations).
 
     The residuals are the goal measure's (``kinematics.goal_measure``): each effector's
     position error over its position tolerance and rotation (or aim) error over its
@@ -53,8 +60,11 @@ def polish(data, q, max_steps, max_step, g, trial, g_trial, h, saved, start, fre
     starts at Sugihara's f (the sum itself), falls by 10 after a step that lowers the
     sum and rises by 10 after one that does not.
 
-    If the steps end further from the goal in the goal measure (the max over the
-    residuals, where the steps lower their sum of squares), q is put back.
+    Steps that do not meet the goal are undone (q is put back): on a frame left
+    unsolved, the optimizer's answer is the weighted compromise the client asked for
+    (effector weights, posture and limit preferences) that the polish's tolerance
+    weights would trade for another. The steps also end after ``MAX_REFUSED`` refused
+    in a row (mu a million times larger: the steps are too small to matter).
 
     ``g``, ``trial``, ``g_trial``, ``start``, ``free`` (n), ``h`` (n x n) and ``saved``
     (2m) are work space.
@@ -77,13 +87,20 @@ def polish(data, q, max_steps, max_step, g, trial, g_trial, h, saved, start, fre
     misc[MISC_POSTURE] = 0.0
     misc[MISC_LIMIT] = 0.0
     f = ik_objective(q, g, True, data)
+    evaluations = 1
     measure = misc[MISC_GOAL]
-    first = measure
     for i in range(n):
         start[i] = q[i]
     mu = f
     steps = 0
-    while measure > 1.0 and steps < max_steps and math.isfinite(f):
+    refused = 0
+    while (
+        measure > 1.0
+        and steps < max_steps
+        and refused < MAX_REFUSED
+        and math.isfinite(f)
+        and now_s() < deadline
+    ):
         steps += 1
         for i in range(n):
             free[i] = 0.0 if is_held(q[i], g[i], lo[i], hi[i]) else 1.0
@@ -120,6 +137,7 @@ def polish(data, q, max_steps, max_step, g, trial, g_trial, h, saved, start, fre
         for i in range(n):
             trial[i] = min(hi[i], max(lo[i], q[i] + scale * trial[i]))
         f_trial = ik_objective(trial, g_trial, True, data)
+        evaluations += 1
         if f_trial < f:
             for i in range(n):
                 q[i] = trial[i]
@@ -127,9 +145,11 @@ def polish(data, q, max_steps, max_step, g, trial, g_trial, h, saved, start, fre
             f = f_trial
             measure = misc[MISC_GOAL]
             mu = max(mu * 0.1, 1e-12)
+            refused = 0
         else:
             mu *= 10.0
-    if measure > first:
+            refused += 1
+    if measure > 1.0:
         for i in range(n):
             q[i] = start[i]
     for e in range(m):
@@ -139,4 +159,4 @@ def polish(data, q, max_steps, max_step, g, trial, g_trial, h, saved, start, fre
     misc[MISC_LIMIT] = w_limit
     if n > 0:
         dd[DD_XLAST, 0] = math.nan
-    return steps
+    return steps, evaluations

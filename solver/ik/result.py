@@ -89,8 +89,11 @@ class IKResult(NamedTuple):
     Attributes:
         q: Joint values, shape (n_dof,), in ``dof_names`` order, inside the limits.
         status: SOLVED / NOT_REACHED / BUDGET_EXHAUSTED / NONFINITE.
-        termination: How the optimizer's last pass ended.
-        iterations, function_evals, passes, restarts: Work done.
+        termination: How the optimizer's last pass ended; ``GOAL_REACHED`` also when
+            the polish after it met the goal (``polish``).
+        iterations, function_evals, passes, restarts: Work done (iterations and
+            evaluations include the polish's steps and objective calls, which the
+            pass log, the optimizer's record, does not).
         solve_us: Time inside the compiled solve [us].
         raw: The core's output block (layout in ``ResultLayout`` / ``frame.solve_frame``).
         layout: Names and tolerances shared by this solver's results.
