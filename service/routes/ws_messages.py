@@ -39,7 +39,8 @@ def batch_result_message(msg_id: int, results: list[dict[str, Any]]) -> dict[str
 
 
 def fk_result_message(msg_id: int, fk: dict[str, Any]) -> dict[str, Any]:
-    """The answer to an ``fk``: the pose used and its bone data."""
+    """The answer to an ``fk``: the pose used, its effectors' world poses and, on
+    skeleton chains, its bone data (an ``FkResult``)."""
     return {"id": msg_id, "type": "fk_result", **fk}
 
 

@@ -9,7 +9,7 @@ Answers ignore fields they do not know, so a newer server does not break an olde
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal, NotRequired, TypedDict
 
 from .codes import Termination as Termination  # re-exported: ik_client.types.Termination
@@ -243,15 +243,17 @@ class FkResult:
     effector's world pose and, on skeleton chains, the bone data asked for."""
 
     q: list[float]  # the pose used, in DOF order
-    effectors: list[EffectorPose]  # every effector, in the chain's order
     # Schema ``BonesOut`` as sent: {"local": {bone: {w,x,y,z}}, "world": {bone: {...}}};
-    # None on chains without bones (URDF, hierarchy, examples).
+    # None on chains without bones (URDF, hierarchy, examples). Before ``effectors``:
+    # FkResult(q, bones) kept its meaning when they came.
     bones: dict[str, Any] | None = None
+    # Every effector, in the chain's order (empty from a server older than them).
+    effectors: list[EffectorPose] = field(default_factory=list)
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> FkResult:
         effectors = [EffectorPose.from_json(e) for e in d.get("effectors", [])]
-        return cls(d["q"], effectors, d.get("bones"))
+        return cls(d["q"], d.get("bones"), effectors)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -35,6 +35,7 @@ import type {
   SessionRef,
   Target,
 } from "./types.js";
+import { fkResultFrom } from "./types.js";
 
 export interface ClientOptions {
   /** Sent as `X-API-Key` when the server has API keys (`IK_API_KEYS`). */
@@ -226,9 +227,10 @@ export class Client {
   /** Forward kinematics of any chain: every effector's world pose for a pose (and, on
    * skeleton chains, its bone data) in the session's conventions; the session's pose
    * does not change. */
-  fk(session: SessionRef, options: FkOptions = {}): Promise<FkResult> {
+  async fk(session: SessionRef, options: FkOptions = {}): Promise<FkResult> {
     const body = withoutUndefined({ q: options.q, joints: options.joints, bones: options.bones });
-    return this.request("POST", `/v1/sessions/${session.id}/fk`, { session, body, repeatable: true });
+    const json = await this.request<FkResult>("POST", `/v1/sessions/${session.id}/fk`, { session, body, repeatable: true });
+    return fkResultFrom(json);
   }
 
   /** The session's WebSocket, open (see `Stream`). The server accepts the handshake and

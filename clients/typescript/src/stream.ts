@@ -42,6 +42,7 @@ import type {
   Pong,
   Target,
 } from "./types.js";
+import { fkResultFrom } from "./types.js";
 
 /** How hard a stream tries to get its connection back: `attempts` connections, waiting
  * `initialDelayMs` before the first and doubling up to `maxDelayMs`; the count starts
@@ -362,8 +363,7 @@ export class Stream<R = FrameResult> {
       const success = envelope["success"] as boolean;
       message.resolve({ type: "batch_result", id, success, results: envelope["results"] as BatchEntry<R>[] });
     } else if (envelope["type"] === "fk_result") {
-      const fk = envelope as unknown as FkResult;
-      message.resolve({ type: "fk_result", id, result: { q: fk.q, effectors: fk.effectors, bones: fk.bones ?? null } });
+      message.resolve({ type: "fk_result", id, result: fkResultFrom(envelope as unknown as FkResult) });
     } else if (envelope["type"] === "pong") {
       message.resolve({ type: "pong", id });
     } else {

@@ -137,8 +137,14 @@ export interface FkResult {
   q: number[];
   /** Every effector, in the chain's order. */
   effectors: EffectorPoseOut[];
-  /** Skeleton chains (gltf, bvh) only; absent on chains without bones. */
-  bones?: BonesOut | null;
+  /** Skeleton chains (gltf, bvh) only; null on chains without bones. */
+  bones: BonesOut | null;
+}
+
+/** An `fk` answer as the client hands it on, over HTTP or the stream alike: `bones`
+ * null where the server sends none, `effectors` empty from a server older than them. */
+export function fkResultFrom(json: { q: number[]; effectors?: EffectorPoseOut[]; bones?: BonesOut | null }): FkResult {
+  return { q: json.q, effectors: json.effectors ?? [], bones: json.bones ?? null };
 }
 
 /** Schema `PoseIn`: exactly one of `q` (every DOF, in order) or `joints` (some, by name). */
