@@ -26,13 +26,14 @@ from prometheus_client.registry import Collector
 from prometheus_client.utils import floatToGoString
 
 from schemas import ErrorCode
-from solver.ik import IKResult
+from solver.ik import IKResult, IKStatus
 from solver.optim import Termination
 
 from .convert import SolvedFrame
 
 # 10 us .. ~0.33 s, x2 steps: solves take microseconds to the frame's budget.
 DURATION_BUCKETS_S = tuple(10e-6 * 2**k for k in range(16))
+SOLVED = IKStatus.SOLVED
 
 
 def _loop_tasks() -> float:
@@ -137,7 +138,9 @@ class Metrics:
     def frame(self, r: IKResult, server_s: float, transport: str) -> None:
         """Count one solved frame. Call on the event loop's thread only."""
         series = self.series
-        series.frames[series.slot[(r.termination.value, r.success)]] += 1
+        # The member itself as the key: a StrEnum hashes and compares as its string,
+        # and ``.value`` is a Python-level property (one per frame).
+        series.frames[series.slot[(r.termination, r.status is SOLVED)]] += 1
         if r.restarts:
             series.restarts += r.restarts
         series.solve.observe(r.solve_us * 1e-6)

@@ -28,7 +28,7 @@ import functools
 import logging
 import math
 import time
-from typing import Annotated, Any, Unpack
+from typing import Annotated, Any, Unpack, cast
 
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 from starlette import status
@@ -216,15 +216,19 @@ class _Connection:
             await self.send(reply, binary)
             return
         self.last_id = msg_id
-        if isinstance(msg, S.PingMessage):
+        # The fast path's (id, targets), a stream's usual message, is tested first and
+        # by exact type: isinstance against a pydantic model goes through ABCMeta's
+        # __instancecheck__ (two of them per frame before: ping, then batch).
+        fast = type(msg) is tuple
+        if not fast and isinstance(msg, S.PingMessage):
             await self.send(pong_message(msg_id), binary)
             return
         self._solving = (msg_id, binary)
         try:
-            if isinstance(msg, RawBatch | S.BatchMessage):
+            if fast:
+                reply = await self.frame(msg_id, cast(FastFrame, msg)[1], t0)
+            elif isinstance(msg, RawBatch | S.BatchMessage):
                 reply = await batch_reply(msg, binary, t0, self)
-            elif isinstance(msg, tuple):  # the fast path's (id, targets)
-                reply = await self.frame(msg_id, msg[1], t0)
             elif isinstance(msg, S.FrameMessage):
                 view = self.session.view
                 targets = convert.targets(msg.targets, view, "targets")
@@ -234,6 +238,7 @@ class _Connection:
             elif isinstance(msg, S.ClipMessage):
                 reply = await self.clip(msg, t0)
             else:  # an FkMessage (a ping was answered above)
+                assert isinstance(msg, S.FkMessage)
                 out = convert.fk_dict(
                     self.session.view, self.session.solver.q, msg.q, msg.joints, msg.bones, ""
                 )
