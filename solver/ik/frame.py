@@ -45,7 +45,7 @@ from .kinematics import (
     is_last_point,
 )
 from .metric import null_space_step
-from .polish import POLISH_WITHIN, polish
+from .polish import POLISH_RESERVE, POLISH_WITHIN, polish
 
 SEED_NOT_FINITE = -2  # ``solve_frame``'s "bad" code for a seed with NaN or inf
 TARGETS_OK = -1  # ``solve_frame``'s "bad" code when targets and seed are valid
@@ -119,8 +119,9 @@ def solve_frame(  # type: ignore[no-untyped-def]
 
     An answer that ends within ``polish.POLISH_WITHIN`` tolerances of the goal gets
     up to MISC_POLISH_STEPS Levenberg-Marquardt steps after the optimizer, within the
-    time budget it left (``polish``: kept only if they meet the goal; its steps count
-    as iterations, its objective calls as evaluations, its time in the solve's).
+    time budget (``polish``: kept only if they meet the goal; its steps count as
+    iterations, its objective calls as evaluations, its time in the solve's). The
+    optimizer's deadline then comes ``polish.POLISH_RESERVE`` of the budget earlier.
 
     One call and flat outputs because at ~20-40 us per solve, every Python-level
     step around it showed up in bench/ik/: a numba dispatch type-checks each
@@ -177,6 +178,13 @@ def solve_frame(  # type: ignore[no-untyped-def]
     # A goal of -inf (the pole shaping pass, ``poles``) is never met: nothing to retry.
     regularised = (w_posture > 0.0 or w_limit > 0.0) and fopt[C.F_F_GOAL] > -math.inf
     restarts = iopt[C.I_MAX_RESTARTS]
+    # A share of a finite time budget is kept for the polish: the optimizer's deadline
+    # comes that much earlier (restored below). Under a 5 ms budget, tail40's frames
+    # that stall a hair off the goal end on the deadline, with no time left to finish.
+    max_polish = int(misc[MISC_POLISH_STEPS])
+    budget = fopt[C.F_BUDGET]
+    if max_polish > 0 and math.isfinite(budget) and fopt[C.F_F_GOAL] > -math.inf:
+        fopt[C.F_BUDGET] = budget * (1.0 - POLISH_RESERVE)
     if regularised:
         iopt[C.I_MAX_RESTARTS] = 0  # restarts belong to the exact phase (see below)
     res = run_solver_leaf(
@@ -229,6 +237,7 @@ def solve_frame(  # type: ignore[no-untyped-def]
                 passes += exact.passes
                 elapsed += exact.elapsed_s
                 n_restarts += exact.restarts
+    fopt[C.F_BUDGET] = budget
     # The solve's answer is usually the point it evaluated last (ED holds its errors,
     # MISC its goal measure): reuse that instead of one more FK.
     if is_last_point(out_x, dd):
@@ -239,8 +248,7 @@ def solve_frame(  # type: ignore[no-untyped-def]
     # An answer a few tolerances short of the goal: a bounded Levenberg-Marquardt
     # polish after the optimizer (``polish``), within the time the solve left; not on
     # a pole shaping pass (goal -inf), which has no goal to meet.
-    max_polish = int(misc[MISC_POLISH_STEPS])
-    time_left = fopt[C.F_BUDGET] - elapsed
+    time_left = budget - elapsed
     if (
         1.0 < measure <= POLISH_WITHIN
         and max_polish > 0

@@ -13,12 +13,13 @@ Levenberg-Marquardt's adaptive mu, cross it in 1-15 steps
 (bench/history/2026-11-29-tail40-lm-polish-probe.md).
 
 It runs only after the optimizer (the article's method, untouched) has finished, only
-on an answer within ``POLISH_WITHIN`` tolerances of the goal and within the time the
-solve left, for at most ``IKOptions.polish_steps`` steps, each moving no variable more
-than the solve's ``max_step_rad`` and staying within the bounds (a SMOOTH frame's step
-box included); it keeps a step only if it lowers the sum of squared scaled residuals,
-and its answer only if it meets the goal: a frame it cannot finish is returned as the
-optimizer left it.
+on an answer within ``POLISH_WITHIN`` tolerances of the goal and within the time
+budget (of which the optimizer leaves it ``POLISH_RESERVE``), for at most
+``IKOptions.polish_steps`` steps, each moving no variable more than the solve's
+``max_step_rad`` and staying within the bounds (a SMOOTH frame's step box included);
+it keeps a step only if it lowers the sum of squared scaled residuals, and its answer
+only if it meets the goal: a frame it cannot finish is returned as the optimizer left
+it.
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ from .metric import damped_metric_inverse, is_held
 # every frame) ends far beyond it and costs no polish; one just out of reach costs the
 # steps until MAX_REFUSED or the time budget (~20-30 us on a 7-DOF arm).
 POLISH_WITHIN = 10.0
+# The share of a finite time budget the optimizer leaves for the polish (its deadline
+# comes that much earlier): 0.5 ms of a session's 5 ms, tens of tail40 steps.
+POLISH_RESERVE = 0.1
 # Times a step is solved again with the variables it would push past a bound held.
 PIN_ROUNDS = 4
 # Steps refused in a row after which the polish gives up. Finishing a tail40 frame

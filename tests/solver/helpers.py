@@ -151,3 +151,17 @@ def joint_stream(chain, seed: int, frames: int) -> np.ndarray:  # type: ignore[n
     t = np.arange(frames)[:, None] / 60.0
     q: np.ndarray = c + amp * np.sin(2 * math.pi * f * t + phi)
     return q
+
+
+def folding_arm():  # type: ignore[no-untyped-def]
+    """Two 1 m links in a plane, the elbow in [0, 2.5] rad: 0 is the straight arm."""
+    z = np.array([0.0, 0.0, 1.0])
+    joints = [
+        Joint(name="shoulder", parent="world", child="upper", kind=JointKind.REVOLUTE, axis=z,
+              lower=(-3.0,), upper=(3.0,)),
+        Joint(name="elbow", parent="upper", child="fore", kind=JointKind.REVOLUTE, axis=z,
+              origin=Transform(np.array([1.0, 0.0, 0.0])), lower=(0.0,), upper=(2.5,)),
+        Joint(name="wrist", parent="fore", child="hand", kind=JointKind.FIXED,
+              origin=Transform(np.array([1.0, 0.0, 0.0]))),
+    ]  # fmt: skip
+    return build_chain(joints, [Effector(name="hand", link="hand", mode=EffectorMode.POSITION)])

@@ -9,10 +9,12 @@ from dataclasses import replace
 import numpy as np
 
 from solver.ik import STREAM_DEFAULTS, Continuity, IKSolver, IKStatus, Target
-from solver.model import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from solver.model import EffectorMode
 from solver.model.examples import humanoid_arm
 from solver.model.forward import effector_poses
 from solver.optim import GoalStatus, PassStart
+
+from .helpers import folding_arm
 
 # bench/tracking.py's tolerances, no time budget (what a frame finds must not depend on
 # how busy the machine is).
@@ -20,20 +22,6 @@ TIGHT = replace(
     STREAM_DEFAULTS, position_tolerance_m=1e-5, rotation_tolerance_rad=1e-4, time_budget_us=None
 )
 REACH = replace(TIGHT, continuity=Continuity.REACH)
-
-
-def folding_arm() -> Chain:
-    """Two 1 m links in a plane, the elbow in [0, 2.5] rad: 0 is the straight arm."""
-    z = np.array([0.0, 0.0, 1.0])
-    joints = [
-        Joint(name="shoulder", parent="world", child="upper", kind=JointKind.REVOLUTE, axis=z,
-              lower=(-3.0,), upper=(3.0,)),
-        Joint(name="elbow", parent="upper", child="fore", kind=JointKind.REVOLUTE, axis=z,
-              origin=Transform(np.array([1.0, 0.0, 0.0])), lower=(0.0,), upper=(2.5,)),
-        Joint(name="wrist", parent="fore", child="hand", kind=JointKind.FIXED,
-              origin=Transform(np.array([1.0, 0.0, 0.0]))),
-    ]  # fmt: skip
-    return build_chain(joints, [Effector(name="hand", link="hand", mode=EffectorMode.POSITION)])
 
 
 def stretched(x: float = 2.0) -> list[Target]:

@@ -12,28 +12,16 @@ import pytest
 from solver.ik import STREAM_DEFAULTS, Continuity, IKOptions, IKSolver, IKStatus, Target
 from solver.ik.kinematics import MISC_LIMIT, MISC_POSTURE
 from solver.ik.polish import POLISH_WITHIN
-from solver.model import Chain, Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from solver.model import Chain
 from solver.model.examples import humanoid_arm, two_arm_torso
 from solver.model.forward import effector_poses
 from solver.model.layout import ED_WP, ED_WR
 from solver.optim import Termination
 
+from .helpers import folding_arm
+
 TOL_P = 1e-5
 TOL_R = 1e-4
-
-
-def planar_arm() -> Chain:
-    """Two 1 m links turning about z: a position target in the plane."""
-    z = np.array([0.0, 0.0, 1.0])
-    joints = [
-        Joint(name="shoulder", parent="world", child="upper", kind=JointKind.REVOLUTE, axis=z,
-              lower=(-3.0,), upper=(3.0,)),
-        Joint(name="elbow", parent="upper", child="fore", kind=JointKind.REVOLUTE, axis=z,
-              origin=Transform(np.array([1.0, 0.0, 0.0])), lower=(0.1,), upper=(2.5,)),
-        Joint(name="wrist", parent="fore", child="hand", kind=JointKind.FIXED,
-              origin=Transform(np.array([1.0, 0.0, 0.0]))),
-    ]  # fmt: skip
-    return build_chain(joints, [Effector(name="hand", link="hand", mode=EffectorMode.POSITION)])
 
 
 def pose_target(chain: Chain, q: np.ndarray) -> list[Target]:
@@ -104,7 +92,7 @@ def test_polish_steps_zero_turns_it_off_and_negative_is_refused() -> None:
 def test_the_polish_stays_inside_smooths_step_box() -> None:
     # The target needs the shoulder 0.1 rad + 2e-5 rad away: 4e-5 m (4 tolerances)
     # beyond what SMOOTH's 0.1 rad per frame allows. The polish must not cross the box.
-    chain = planar_arm()
+    chain = folding_arm()
     options = replace(
         STREAM_DEFAULTS,
         position_tolerance_m=TOL_P,
@@ -126,14 +114,13 @@ def test_the_polish_stays_inside_smooths_step_box() -> None:
 
 
 def test_a_frame_the_polish_cannot_finish_keeps_the_optimizers_answer() -> None:
-    # Just out of reach (5 tolerances past the arm stretched to its elbow stop, 0.1
-    # rad: 2 cos(0.05) m), from that pose: the polish's steps cannot meet the goal, so
-    # the answer is the optimizer's, bit for bit; and among near misses on the
-    # humanoid arm, each answer is either solved or the optimizer's.
-    chain = planar_arm()
-    reach = 2.0 * np.cos(0.05)
-    beyond = [Target(effector="hand", position=np.array([reach + 5 * TOL_P, 0.0, 0.0]))]
-    seed = np.array([-0.05, 0.1])
+    # Just out of reach (5 tolerances past the arm stretched straight, its elbow at the
+    # stop), from that pose: the polish's steps cannot meet the goal, so the answer is
+    # the optimizer's, bit for bit; and among near misses on the humanoid arm, each
+    # answer is either solved or the optimizer's.
+    chain = folding_arm()
+    beyond = [Target(effector="hand", position=np.array([2.0 + 5 * TOL_P, 0.0, 0.0]))]
+    seed = np.array([0.0, 0.0])
     a = IKSolver(chain, short_solve(0)).solve(beyond, seed)
     b = IKSolver(chain, short_solve(20)).solve(beyond, seed)
     assert 1.0 < a.max_position_error_m / TOL_P <= POLISH_WITHIN  # the polish ran
