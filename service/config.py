@@ -28,8 +28,15 @@ class Settings(BaseSettings):
 
     # hide_input_in_errors: a ValidationError's text never holds a value (IK_REDIS_URL and
     # IK_API_KEYS are secrets); settings_errors shows the others' from errors().
+    # env_ignore_empty: a variable set to nothing (compose's `IK_X=` or `IK_X: ""` for
+    # "unset") keeps the default, where it was refused as "not a valid integer"; every
+    # variable's empty value meant its default anyway (API keys, CORS, Redis: none).
     model_config = SettingsConfigDict(
-        env_prefix="IK_", frozen=True, extra="ignore", hide_input_in_errors=True
+        env_prefix="IK_",
+        frozen=True,
+        extra="ignore",
+        hide_input_in_errors=True,
+        env_ignore_empty=True,
     )
 
     # Network (used by ``python -m service``).

@@ -175,12 +175,14 @@ def too_many_plans(limit: int) -> ServiceError:
 
 def store_unavailable(retry_after_s: float = 1.0, *, detail: str | None = None) -> ServiceError:
     """Redis failed a call; ``detail`` replaces the clients' words (``/readyz`` says the
-    operator's cause there)."""
+    operator's cause there). Not "nothing was stored": a write that timed out may still
+    be applied by a Redis that was only slow (an operator trial: SIGSTOP for 1.2 s)."""
     return ServiceError(
         ErrorCode.STORE_UNAVAILABLE,
         detail
-        or "the session store (Redis) does not answer; nothing was solved: send it again "
-        "after Retry-After",
+        or "the session store (Redis) did not answer in time: send it again after "
+        "Retry-After (a frame sent again with its id is answered once: with its stored "
+        "answer if Redis stored it after all)",
         status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
         retry_after_s=retry_after_s,
     )

@@ -170,12 +170,16 @@ def default_store(settings: Settings, runner: Runner) -> SessionStore:
         return convert.apply_options(patch, convert.session_defaults(settings), settings)
 
     # Imported here: redis-py is the optional extra `redis`, needed only with a URL.
-    from .redis_commit import connect
+    from .redis_commit import connect, where
     from .redis_store import RedisSessionStore
 
-    log.info("sessions in Redis (IK_REDIS_URL)")
+    client = connect(url, settings.redis_timeout_s)
+    # Where, and which database (never the URL: it may hold a password): workers behind
+    # one balancer must all say the same.
+    db = client.connection_pool.connection_kwargs.get("db", 0)
+    log.info("sessions in Redis at %s, database %s (IK_REDIS_URL)", where(client), db)
     return RedisSessionStore(
-        connect(url, settings.redis_timeout_s),
+        client,
         max_sessions=settings.max_sessions,
         ttl_s=settings.session_ttl_s,
         max_per_owner=settings.max_sessions_per_key,

@@ -71,8 +71,7 @@ from .write_behind import Pending, WriteBehind
 
 log = logging.getLogger("service")
 
-# Builds a chain's model from its stored definition (in the build threads).
-ViewBuilder = Callable[[bytes], Awaitable[ChainView]]
+ViewBuilder = Callable[[bytes], Awaitable[ChainView]]  # a chain's model from its definition
 # Options <-> their stored JSON-ready dict; a solver for a model and options.
 OptionsLoader = Callable[[dict[str, Any]], IKOptions]
 OptionsDumper = Callable[[IKOptions], dict[str, Any]]
@@ -82,6 +81,7 @@ CACHED_VIEWS = 64  # models kept per process, by chain definition hash
 # Session.version of a session this worker must reload before its next frame: a write
 # failed (Redis gone) or was refused (another worker wrote first, written behind).
 RELOAD = -1
+_FAILURES = redis_commit.FailureLog()  # the requests' WARNING, throttled
 
 
 def definition_key(definition: bytes) -> str:
@@ -496,5 +496,5 @@ class RedisSessionStore(SessionStore):
 
 
 def _unavailable(e: RedisError) -> ServiceError:
-    log.warning("%s (%s)", redis_commit.redis_cause(e), e)
+    _FAILURES.failed(e)
     return store_unavailable()

@@ -24,7 +24,7 @@ import schemas as S
 from solver.ik import IKOptions, IKSolver
 
 from .convert import ChainView, FrameJob, SolvedFrame
-from .errors import store_unavailable
+from .errors import not_found, store_unavailable
 from .stored_frames import StoredAnswer
 
 # Times a change is made again when another worker committed the session first (a
@@ -214,6 +214,20 @@ class SessionStore(abc.ABC):
     async def refresh(self, session: Session) -> None:
         """Reload what other workers may have changed (before a pose or options change)."""
         return None
+
+    async def latest(self, session: Session) -> None:
+        """Reload what other workers changed before the session's state is read (GET
+        of the session, FK of its current pose): behind a balancer another worker may
+        have answered its latest frames. Under the session's lock, so that a frame of
+        this worker's is not half applied; nothing to do for sessions in memory.
+
+        Raises:
+            ServiceError: ``not_found`` (deleted), ``store_unavailable``.
+        """
+        async with session.lock:
+            if session.closed:
+                raise not_found()
+            await self.refresh(session)
 
     async def change(self, session: Session, apply: Callable[[], None]) -> None:
         """Reload ``session``, ``apply`` a pose or options change to it and write it

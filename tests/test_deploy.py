@@ -96,3 +96,13 @@ def test_k8s_service_links_cannot_set_an_ik_setting() -> None:
     injected = {f"{name.upper().replace('-', '_')}_PORT" for name in services}
     if injected & SETTINGS or any(n.upper().startswith("IK") for n in services):
         assert _k8s_worker_pod()["enableServiceLinks"] is False
+
+
+def test_the_k8s_redis_is_replaced_not_rolled() -> None:
+    # An operator trial: the default RollingUpdate starts a second, empty Redis beside
+    # the old one while the Service routes to both.
+    (redis,) = [
+        d for d in _k8s() if (d["kind"], d["metadata"]["name"]) == ("Deployment", "ik-redis")
+    ]
+    assert redis["spec"]["replicas"] == 1
+    assert redis["spec"]["strategy"] == {"type": "Recreate"}

@@ -283,6 +283,7 @@ async def _change(session: Session, store: SessionStore, apply: Callable[[], Non
 )
 async def get_session(session: SessionDep, svc: ServicesDep) -> dict[str, Any]:
     """The session's chain summary, options, current pose and counters."""
+    await svc.store.latest(session)
     svc.store.touch(session)
     return _session_info(session, svc.store)
 
@@ -450,6 +451,8 @@ async def post_fk(
     current pose), every effector's world pose out and, on skeleton chains (gltf, bvh),
     bone local rotations and world transforms, in the session's conventions. The
     session's pose does not change."""
+    if body.q is None:  # the current pose is read (all of it, or under ``joints``)
+        await svc.store.latest(session)
     svc.store.touch(session)
     out = convert.fk_dict(session.view, session.solver.q, body.q, body.joints, body.bones, "body")
     return ORJSONResponse(out)

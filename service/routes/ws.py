@@ -239,6 +239,8 @@ class _Connection:
                 reply = await self.clip(msg, t0)
             else:  # an FkMessage (a ping was answered above)
                 assert isinstance(msg, S.FkMessage)
+                if msg.q is None:  # the current pose: another worker may have moved it
+                    await self.svc.store.latest(self.session)
                 out = convert.fk_dict(
                     self.session.view, self.session.solver.q, msg.q, msg.joints, msg.bones, ""
                 )

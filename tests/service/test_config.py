@@ -46,6 +46,16 @@ def test_environment(monkeypatch: pytest.MonkeyPatch) -> None:
     assert s.default_time_budget_us == 250.5 and s.inline_budget_us == 0.0
 
 
+def test_a_variable_set_to_nothing_keeps_its_default(monkeypatch: pytest.MonkeyPatch) -> None:
+    # docker compose's "IK_X=" for unset (an operator trial: refused, exit 1).
+    monkeypatch.setenv("IK_DEFAULT_MAX_RESTARTS", "")
+    monkeypatch.setenv("IK_PORT", "")
+    monkeypatch.setenv("IK_HOST", "")
+    s = Settings()
+    default = Settings.model_fields["default_max_restarts"].default
+    assert (s.default_max_restarts, s.port, s.host) == (default, 8000, "127.0.0.1")
+
+
 def test_bad_values_are_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("IK_MAX_SESSIONS", "0")
     with pytest.raises(ValidationError):

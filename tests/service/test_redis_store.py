@@ -415,7 +415,7 @@ def test_readyz_says_redis_refuses_a_wrong_password_and_the_right_one_is_ready(
     assert "Redis refuses this worker (AuthenticationError" in ready["detail"], ready
     assert "IK_REDIS_URL" in ready["detail"]
     assert "not-the-pw" not in ready["detail"] and "s3cret" not in ready["detail"]
-    assert created["detail"].startswith("the session store (Redis) does not answer")
+    assert created["detail"].startswith("the session store (Redis) did not answer in time")
     none = guarded_redis.url.replace(":s3cret-pw@", "")
     ready, _ = _readyz_and_create(make_client(Settings(redis_url=SecretStr(none))))
     assert "Redis refuses this worker (AuthenticationError" in ready["detail"], ready
@@ -585,3 +585,36 @@ def test_an_id_sent_again_with_new_targets_keeps_its_answer_as_the_newest(
     assert post(a, again) == answer  # the worker that holds it
     assert post(b, again) == answer  # a worker that loads it from Redis
     assert _in_redis(workers, s)["counters"]["frames"] == frames  # neither solved it again
+
+
+def test_get_and_fk_of_the_current_pose_read_the_latest_on_every_worker(
+    workers: Workers,
+) -> None:
+    """Behind a balancer, GET and FK of a session are routed to any worker (an operator
+    trial: the creating worker answered the pose and counters it had before the other
+    worker's frames). They reload the session first, as a change does."""
+    a, b = workers()
+    s = create(a)
+    before = a.get(f"/v1/sessions/{s.id}", headers=s.headers).json()  # A holds its copy
+    assert before["counters"]["frames"] == 0
+    for k in range(3):
+        r = b.post(
+            f"/v1/sessions/{s.id}/frames", json=hand_frame(k, x=0.3 + 0.02 * k), headers=s.headers
+        )
+        assert r.status_code == 200, r.text
+    q_b = r.json()["results"][0]["q"]
+    info = a.get(f"/v1/sessions/{s.id}", headers=s.headers).json()
+    assert info["counters"]["frames"] == 3
+    assert info["pose"]["q"] == pytest.approx(q_b)
+    fk = a.post(f"/v1/sessions/{s.id}/fk", json={}, headers=s.headers)
+    assert fk.status_code == 200, fk.text
+    assert fk.json()["q"] == pytest.approx(q_b)
+    hand = fk.json()["effectors"][0]["position"]
+    assert [hand["x"], hand["y"], hand["z"]] == pytest.approx([0.34, 0.1, 0.6], abs=1e-3)
+    r = b.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(3, x=0.28), headers=s.headers)
+    q_b = r.json()["results"][0]["q"]
+    with a.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        ws.send_json({"type": "fk", "id": 1})
+        answer = ws.receive_json()
+    assert answer["type"] == "fk_result", answer
+    assert answer["q"] == pytest.approx(q_b)
