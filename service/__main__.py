@@ -12,6 +12,7 @@ import contextlib  # noqa: E402
 import logging  # noqa: E402
 import re  # noqa: E402
 import socket  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable  # noqa: E402
 from typing import Any  # noqa: E402
@@ -25,6 +26,7 @@ from .config import (  # noqa: E402
     service_link_hint,
     settings_errors,
     unknown_variables,
+    usage,
 )
 from .main import create_app  # noqa: E402
 from .peer_limits import PeerLimits, protocols  # noqa: E402
@@ -109,6 +111,15 @@ class DrainingServer(uvicorn.Server):
 
 
 def main() -> None:
+    if len(sys.argv) > 1:  # an operator trial: --port was ignored, --help started it
+        if sys.argv[1] in ("-h", "--help"):
+            print(usage())
+            raise SystemExit(0)
+        raise SystemExit(
+            f"python -m service takes no arguments (got {' '.join(sys.argv[1:])!r}): set "
+            "IK_* variables instead, e.g. IK_PORT=8001 python -m service; the list: "
+            "python -m service --help"
+        )
     hint = service_link_hint(os.environ)
     also = "" if hint is None else f"\n  ({hint})"
     try:

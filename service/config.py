@@ -265,6 +265,25 @@ class Settings(BaseSettings):
 
 
 @lru_cache
+def usage() -> str:
+    """``python -m service --help``: the service takes no arguments, only IK_*
+    variables; each with its default and description."""
+    lines = [
+        "usage: [IK_VARIABLE=value ...] python -m service",
+        "",
+        "The IK service (uvicorn) on IK_HOST:IK_PORT. It takes no arguments: it is",
+        "configured with these environment variables (docs/operations.md says more):",
+        "",
+    ]
+    for name, f in Settings.model_fields.items():
+        default = f.default
+        shown = "empty" if default in ("", None) or default == SecretStr("") else default
+        lines.append(f"  IK_{name.upper()} (default {shown})")
+        if f.description:
+            lines.append(f"      {f.description}")
+    return "\n".join(lines)
+
+
 def get_settings() -> Settings:
     """The process's settings, read from the environment once."""
     return Settings()

@@ -177,6 +177,27 @@ def test_a_misspelt_setting_stops_the_start_with_its_name() -> None:
     ), done.stderr
 
 
+def test_python_m_service_takes_no_arguments_and_help_lists_the_variables() -> None:
+    """An operator trial: ``--help`` started the server and ``--port 18012`` was
+    silently ignored (it bound IK_PORT)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("IK_")}
+    env["IK_PORT"] = "1"  # were the server to start, it could not bind
+    run = [sys.executable, "-m", "service"]
+    helped = subprocess.run(
+        [*run, "--help"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
+    )
+    assert helped.returncode == 0, helped
+    assert helped.stdout.startswith("usage: [IK_VARIABLE=value ...] python -m service")
+    for name in Settings.model_fields:
+        assert f"  IK_{name.upper()} (default " in helped.stdout
+    refused = subprocess.run(
+        [*run, "--port", "18012"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
+    )
+    assert refused.returncode == 1, refused
+    assert "takes no arguments (got '--port 18012')" in refused.stderr
+    assert "IK_PORT=8001 python -m service" in refused.stderr
+
+
 def test_frozen() -> None:
     with pytest.raises(ValidationError):
         Settings().port = 1  # type: ignore[misc]
