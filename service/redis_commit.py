@@ -17,7 +17,13 @@ import time
 from typing import Any
 
 import redis.asyncio as aioredis
-from redis.exceptions import AuthenticationError, NoScriptError, RedisError, ResponseError
+from redis.exceptions import (
+    AuthenticationError,
+    BusyLoadingError,
+    NoScriptError,
+    RedisError,
+    ResponseError,
+)
 from redis.exceptions import TimeoutError as RedisTimeout
 
 from .errors import store_unavailable
@@ -164,6 +170,8 @@ def redis_cause(e: RedisError) -> str:
         )
     if isinstance(e, RedisTimeout):
         return f"Redis did not answer within IK_REDIS_TIMEOUT_S ({name})"
+    if isinstance(e, BusyLoadingError):  # a ConnectionError to redis-py, but it answered
+        return f"Redis is loading its data set into memory ({name}): it serves when done"
     return f"Redis cannot be reached ({name}; the worker's log says where it tried)"
 
 

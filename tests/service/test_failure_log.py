@@ -6,10 +6,11 @@ from __future__ import annotations
 import logging
 
 import pytest
+from redis.exceptions import BusyLoadingError
 from redis.exceptions import ConnectionError as RedisConnectionError
 from redis.exceptions import TimeoutError as RedisTimeout
 
-from service.redis_commit import FailureLog
+from service.redis_commit import FailureLog, redis_cause
 
 
 def test_a_failed_request_is_logged_once_per_interval_with_the_count_left_out(
@@ -30,3 +31,9 @@ def test_a_failed_request_is_logged_once_per_interval_with_the_count_left_out(
     assert "127.0.0.1:16379" in lines[0] and "more since" not in lines[0]
     assert lines[1].startswith("a request failed: Redis did not answer within")
     assert lines[2].endswith("; 599 more since the last such line")
+
+
+def test_redis_loading_its_data_is_said_so_not_unreachable() -> None:
+    # An operator trial: Redis loading its append-only file read "cannot be reached".
+    cause = redis_cause(BusyLoadingError("Redis is loading the dataset in memory"))
+    assert cause.startswith("Redis is loading its data set into memory (BusyLoadingError)")
