@@ -219,11 +219,14 @@ class SessionStore(abc.ABC):
         """Reload what other workers changed before the session's state is read (GET
         of the session, FK of its current pose): behind a balancer another worker may
         have answered its latest frames. Under the session's lock, so that a frame of
-        this worker's is not half applied; nothing to do for sessions in memory.
+        this worker's is not half applied; nothing to do (and no wait for the lock) for
+        sessions in this process's memory.
 
         Raises:
             ServiceError: ``not_found`` (deleted), ``store_unavailable``.
         """
+        if not self.commits_frames:
+            return
         async with session.lock:
             if session.closed:
                 raise not_found()
