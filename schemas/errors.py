@@ -96,8 +96,9 @@ ERROR_CODE_DESCRIPTIONS: dict[ErrorCode, str] = {
     "jobs of this kind (chain builds, one-shot solves or pooled frames) are already queued "
     "or running",
     ErrorCode.STORE_UNAVAILABLE: "503 + Retry-After / WebSocket error message: the shared "
-    "session store (Redis, IK_REDIS_URL) did not answer in time; send it again (a write that "
-    "timed out may have been stored: a frame sent again with its id gets its stored answer)",
+    "session store (Redis, IK_REDIS_URL) failed the request; send it again (a write that timed "
+    "out may have been stored: over HTTP a frame sent again with its id gets its stored answer; "
+    "a stream sends its next frame)",
     ErrorCode.TOO_MUCH_WORK: "429 + Retry-After / WebSocket error message: this client "
     "(API key, else address) already has IK_MAX_CLIENT_WORK_S of pooled solving in flight",
     ErrorCode.TOO_MANY_WEBSOCKETS: "close 1013: IK_MAX_WEBSOCKETS are open; retry later",

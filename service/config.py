@@ -29,8 +29,9 @@ class Settings(BaseSettings):
     # hide_input_in_errors: a ValidationError's text never holds a value (IK_REDIS_URL and
     # IK_API_KEYS are secrets); settings_errors shows the others' from errors().
     # env_ignore_empty: a variable set to nothing (compose's `IK_X=` or `IK_X: ""` for
-    # "unset") keeps the default, where it was refused as "not a valid integer"; every
-    # variable's empty value meant its default anyway (API keys, CORS, Redis: none).
+    # "unset") keeps the default, where a number was refused as "not a valid integer"
+    # (API keys, CORS and Redis: empty was their default anyway). IK_HOST excepted: an
+    # empty one is refused at start (``misspelt_variables``).
     model_config = SettingsConfigDict(
         env_prefix="IK_",
         frozen=True,
@@ -328,6 +329,15 @@ def misspelt_variables(environ: Mapping[str, str]) -> dict[str, str]:
                 f"{key} is not a setting of this service: sessions in Redis are set with "
                 f"{redis_url} alone (redis://[:password@]host:port/db)"
             )
+    host = ENV_PREFIX + "HOST"
+    if environ.get(host) == "":
+        # Every other empty variable keeps its default (env_ignore_empty); an empty host
+        # bound every interface before that, and the default (127.0.0.1) would now
+        # hide a container from its network: say which, do not guess.
+        out[host] = (
+            f"{host} is empty: give the address to bind (0.0.0.0: every interface, as the "
+            "image's default; 127.0.0.1: this machine only)"
+        )
     return out
 
 

@@ -180,9 +180,10 @@ def store_unavailable(retry_after_s: float = 1.0, *, detail: str | None = None) 
     return ServiceError(
         ErrorCode.STORE_UNAVAILABLE,
         detail
-        or "the session store (Redis) did not answer in time: send it again after "
-        "Retry-After (a frame sent again with its id is answered once: with its stored "
-        "answer if Redis stored it after all)",
+        or "the session store (Redis) failed the request (no answer in time, or a "
+        "refusal): send it again after Retry-After; over HTTP a frame sent again with its "
+        "id gets its stored answer if Redis stored it after all (a stream sends its next "
+        "frame instead)",
         status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
         retry_after_s=retry_after_s,
     )

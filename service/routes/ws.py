@@ -394,8 +394,9 @@ async def _serve(
                 # (measured: a second client's round trip went from 1 ms to 1.2 s).
                 # With it, a client waits at most one message per busy connection. Only
                 # a message taken with no pause needs it: one taken 1 ms or more after
-                # the answer was taken after the receive had suspended (or after the
-                # worker was descheduled), when the others had their turn. A yield
+                # the answer was taken after the receive had suspended, when the others
+                # had their turn (or after the process was descheduled or paused for
+                # garbage collection, when they did not: one message more). A yield
                 # after every answer was one more turn of the loop per frame (one
                 # paired loadtest.cost run, 30 clients x 60 Hz, without any yield:
                 # 174, 177 -> 161, 164 us of the worker's CPU per frame).

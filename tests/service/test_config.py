@@ -50,10 +50,18 @@ def test_a_variable_set_to_nothing_keeps_its_default(monkeypatch: pytest.MonkeyP
     # docker compose's "IK_X=" for unset (an operator trial: refused, exit 1).
     monkeypatch.setenv("IK_DEFAULT_MAX_RESTARTS", "")
     monkeypatch.setenv("IK_PORT", "")
-    monkeypatch.setenv("IK_HOST", "")
     s = Settings()
     default = Settings.model_fields["default_max_restarts"].default
-    assert (s.default_max_restarts, s.port, s.host) == (default, 8000, "127.0.0.1")
+    assert (s.default_max_restarts, s.port) == (default, 8000)
+    assert misspelt_variables({"IK_PORT": "", "IK_DEFAULT_MAX_RESTARTS": ""}) == {}
+
+
+def test_an_empty_host_is_refused_not_taken_as_loopback() -> None:
+    # A review: an empty IK_HOST bound every interface before empty variables kept their
+    # defaults; 127.0.0.1 would hide a container (the image sets 0.0.0.0) from its
+    # network. The start says so instead.
+    problems = misspelt_variables({"IK_HOST": ""})
+    assert problems["IK_HOST"].startswith("IK_HOST is empty: give the address to bind")
 
 
 def test_bad_values_are_rejected(monkeypatch: pytest.MonkeyPatch) -> None:

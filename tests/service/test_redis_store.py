@@ -415,7 +415,7 @@ def test_readyz_says_redis_refuses_a_wrong_password_and_the_right_one_is_ready(
     assert "Redis refuses this worker (AuthenticationError" in ready["detail"], ready
     assert "IK_REDIS_URL" in ready["detail"]
     assert "not-the-pw" not in ready["detail"] and "s3cret" not in ready["detail"]
-    assert created["detail"].startswith("the session store (Redis) did not answer in time")
+    assert created["detail"].startswith("the session store (Redis) failed the request")
     none = guarded_redis.url.replace(":s3cret-pw@", "")
     ready, _ = _readyz_and_create(make_client(Settings(redis_url=SecretStr(none))))
     assert "Redis refuses this worker (AuthenticationError" in ready["detail"], ready

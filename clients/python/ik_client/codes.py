@@ -58,8 +58,8 @@ class ErrorCode(enum.StrEnum):
     builds, one-shot solves or pooled frames) are already queued or running"""
     STORE_UNAVAILABLE = "store_unavailable"
     """503 + Retry-After / WebSocket error message: the shared session store (Redis, IK_REDIS_URL)
-    did not answer in time; send it again (a write that timed out may have been stored: a frame
-    sent again with its id gets its stored answer)"""
+    failed the request; send it again (a write that timed out may have been stored: over HTTP a
+    frame sent again with its id gets its stored answer; a stream sends its next frame)"""
     TOO_MUCH_WORK = "too_much_work"
     """429 + Retry-After / WebSocket error message: this client (API key, else address) already
     has IK_MAX_CLIENT_WORK_S of pooled solving in flight"""
