@@ -386,13 +386,6 @@ async def _serve(
             backlog = t0 - done_at < BACKLOG_GAP_S
             if message["type"] == "websocket.disconnect":
                 return
-            if svc.draining:
-                # Shutting down, and this message was not in flight when the stop began:
-                # the socket closes 1012 as an idle one does (clients send it again after
-                # reconnecting) instead of starting a solve that the end of the drain
-                # would cut short with a shutting_down error (the demo's page showed one).
-                await ws.close(code=status.WS_1012_SERVICE_RESTART, reason=ErrorCode.SHUTTING_DOWN)
-                return
             if backlog:
                 # Let every other ready connection take its turn before this message.
                 # uvicorn queues all the messages of one read, and taking one from a
@@ -420,6 +413,14 @@ async def _serve(
                 return
             if session.closed:
                 await ws.close(code=WS_NOT_FOUND, reason=ErrorCode.NOT_FOUND)
+                return
+            if svc.draining:
+                # Shutting down, and this message was not in flight when the stop began (checked
+                # with no await before it is counted in flight, which the drain waits for):
+                # the socket closes 1012 as an idle one does (clients send it again after
+                # reconnecting) instead of starting a solve that the end of the drain
+                # would cut short with a shutting_down error (the demo's page showed one).
+                await ws.close(code=status.WS_1012_SERVICE_RESTART, reason=ErrorCode.SHUTTING_DOWN)
                 return
             svc.ws_in_flight += 1
             try:
