@@ -109,9 +109,10 @@ def polish(data, q, max_steps, max_step, deadline, g, trial, g_trial, h, saved, 
         for i in range(n):
             free[i] = 0.0 if is_held(q[i], g[i], lo[i], hi[i]) else 1.0
         # The active set: a free variable whose step would cross its bound is held
-        # where it is and the step solved again without it (clipping it instead bent
-        # the step, and the bent steps kept being refused: 6-200 steps at the tail's
-        # limits where this takes a few).
+        # where it is and the step solved again without it. Clipping it instead bends
+        # the step, and bent steps get refused: on one stalled tail40 frame (stream 31
+        # frame 322) 5 steps finished it this way, 16 with clipping; on the hardest
+        # frames neither does within 60 (bench/RESULTS.md, tracking bars).
         solved = False
         for _ in range(PIN_ROUNDS):
             if not damped_metric_inverse(q, free, lo, hi, data, h, mu):
