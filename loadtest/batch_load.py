@@ -9,10 +9,10 @@ point of the chain's path; it waits for the answer before the next tick's send i
 socket closed under the client (``closed_<code>``, which ends that client).
 
 The batches go through ik_client's ``AsyncStream`` (``send_batch``; reconnecting off,
-no permessage-deflate). The sessions are created with plain httpx: the floor's bare
-echo, measured by the same clients, answers session creation with an id and a token
-only, and echoes each batch back as it came (an ``UnexpectedAnswer`` whose entries are
-the frames echoed).
+permessage-deflate only with ``--deflate``). The sessions are created with plain httpx:
+the floor's bare echo, measured by the same clients, answers session creation with an
+id and a token only, and echoes each batch back as it came (an ``UnexpectedAnswer``
+whose entries are the frames echoed).
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ class BatchRun:
 
 async def _client(
     url: str, index: int, characters: int, chain: str, rate_hz: float, duration_s: float,
-    warmup_s: float, results: str, run: BatchRun, ready: asyncio.Barrier,
+    warmup_s: float, results: str, deflate: bool, run: BatchRun, ready: asyncio.Barrier,
 ) -> None:  # fmt: skip
     path = make_path(chain, rate_hz)
     sessions = []
@@ -87,7 +87,7 @@ async def _client(
             compact=results == "compact",
             reconnect=NO_RECONNECT,
             timeout_s=None,
-            deflate=False,
+            deflate=deflate,
             ping_interval_s=None,  # no keepalive frames in the measured traffic
         ) as stream,
     ):
@@ -133,11 +133,12 @@ async def _client(
 
 def run_batches(
     url: str, *, clients: int, characters: int, chain: str, rate_hz: float, duration_s: float,
-    warmup_s: float, results: str, cpu_s: Callable[[], float],
+    warmup_s: float, results: str, cpu_s: Callable[[], float], deflate: bool = False,
 ) -> BatchRun:  # fmt: skip
     """Run ``clients`` batch clients against ``url`` (in this process) until done;
     ``cpu_s`` reads the server's CPU time, counted once every session is created;
-    ``results``: ``full`` or ``compact`` (``?results=``)."""
+    ``results``: ``full`` or ``compact`` (``?results=``); ``deflate``: the clients offer
+    permessage-deflate."""
     run = BatchRun()
     ready = asyncio.Barrier(clients + 1)
 
@@ -145,7 +146,17 @@ def run_batches(
         tasks = [
             asyncio.create_task(
                 _client(
-                    url, i, characters, chain, rate_hz, duration_s, warmup_s, results, run, ready
+                    url,
+                    i,
+                    characters,
+                    chain,
+                    rate_hz,
+                    duration_s,
+                    warmup_s,
+                    results,
+                    deflate,
+                    run,
+                    ready,
                 )
             )
             for i in range(clients)

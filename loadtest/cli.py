@@ -47,6 +47,12 @@ def add_load_options(
         default="full",
         help="ask for full frame results (default) or compact ones (?results=compact)",
     )
+    ap.add_argument(
+        "--deflate",
+        action="store_true",
+        help="WebSocket clients offer permessage-deflate, as browsers do (the server accepts "
+        "it unless IK_WS_COMPRESSION=false); default: they do not",
+    )
 
 
 def run_config(args: argparse.Namespace, **fields: Any) -> RunConfig:
@@ -56,6 +62,7 @@ def run_config(args: argparse.Namespace, **fields: Any) -> RunConfig:
         "duration_s": args.duration,
         "warmup_s": args.warmup,
         "results": args.results,
+        "deflate": args.deflate,
     }
     if "clients" in args:
         load |= {"transport": args.transport, "clients": args.clients}

@@ -79,6 +79,7 @@ class ClientSpec:
     phase_s: float  # first frame this long after the common start (spreads the ticks)
     options: dict[str, Any]
     results: str = "full"  # ?results= of the service: "full" or "compact"
+    deflate: bool = False  # offer permessage-deflate (browsers do; the floors accept it too)
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,10 +167,11 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
     """One WebSocket client: sticky session, paced sends, in-order answers checked.
 
     Frames go through ik_client's ``AsyncStream`` on the connection that created the
-    session, with reconnecting off (a drop is counted as ``closed_<code>``, not mended)
-    no permessage-deflate (300-byte frames gain nothing from it; it costs CPU) and no
-    keepalive pings (as the raw clients before ik_client: they add traffic to a short
-    run, and a reconnect-less client learns of a drop from its reads)."""
+    session, with reconnecting off (a drop is counted as ``closed_<code>``, not mended),
+    permessage-deflate only when ``spec.deflate`` (browsers offer it; the figures without
+    it are the service's own cost, not zlib's) and no keepalive pings (as the raw
+    clients before ik_client: they add traffic to a short run, and a reconnect-less
+    client learns of a drop from its reads)."""
     res = ClientResult(spec.index, spec.path.chain, "ws")
     parts = urlsplit(spec.url)
     host, port = parts.hostname or "127.0.0.1", parts.port or 80
@@ -186,7 +188,7 @@ async def ws_client(spec: ClientSpec, start: float, progress: Progress) -> Clien
             encoding=Encoding.JSON,
             reconnect=NO_RECONNECT,
             timeout_s=None,  # the drain below bounds the wait for the last answers
-            deflate=False,
+            deflate=spec.deflate,
             sock=sock,
             ping_interval_s=None,  # the run is short; pings would only add traffic
         )

@@ -106,7 +106,7 @@ def batch_trial(dep: Deployment, app: str, args: argparse.Namespace) -> dict[str
     run = run_batches(
         dep.url, clients=args.clients, characters=args.characters, chain=args.chain,
         rate_hz=args.rate, duration_s=args.duration, warmup_s=0.0, results=args.results,
-        cpu_s=dep.cpu_s,
+        cpu_s=dep.cpu_s, deflate=args.deflate,
     )  # fmt: skip
     s = summary(run)
     s["server_cpu_s"] = run.server_cpu_s  # sessions created before it starts

@@ -44,6 +44,7 @@ class RunConfig:
     processes: int = 1
     options: dict[str, Any] = field(default_factory=dict)  # session options (PATCH fields)
     results: str = "full"  # the service's ?results= view: "full" or "compact"
+    deflate: bool = False  # WebSocket clients offer permessage-deflate (as browsers do)
     allow_remote: bool = False
 
     def check(self) -> None:
@@ -108,6 +109,7 @@ def _specs(cfg: RunConfig, indices: list[int], paths: dict[str, Path]) -> list[C
             phase_s=period * i / cfg.clients,
             options=cfg.options,
             results=cfg.results,
+            deflate=cfg.deflate,
         )
         for i in indices
     ]

@@ -89,6 +89,7 @@ def _uvicorn_kwargs() -> dict[str, Any]:
     return {
         "ws": "websockets-sansio",
         "ws_max_size": s.ws_max_message_bytes,
+        "ws_per_message_deflate": s.ws_compression,
         "timeout_graceful_shutdown": s.graceful_shutdown_s,
         "log_level": s.log_level,
         "log_config": None,

@@ -161,6 +161,7 @@ def main() -> None:
         http=http_protocol,  # httptools, with limits on headers and slow peers
         ws=ws_protocol,  # websockets-sansio, with a bound on unread pongs
         ws_max_size=settings.ws_max_message_bytes,
+        ws_per_message_deflate=settings.ws_compression,
         ws_ping_interval=settings.ws_ping_interval_s,
         ws_ping_timeout=settings.ws_ping_timeout_s,
         timeout_keep_alive=settings.keep_alive_s,

@@ -109,6 +109,21 @@ def test_ws_recoverable_error_then_next_frame_solves(server: Server) -> None:
         assert json.loads(ws.recv(timeout=TIMEOUT_S))["result"]["id"] == 1
 
 
+def test_ws_compression_is_accepted_unless_switched_off(
+    server: Server, start_server: Callable[..., Server]
+) -> None:
+    """websockets offers permessage-deflate, as browsers do: accepted by default, not
+    with IK_WS_COMPRESSION=false; frames are answered either way."""
+    plain = start_server(IK_WS_COMPRESSION="false")
+    for srv, extensions in ((server, ["permessage-deflate"]), (plain, [])):
+        sid, headers = session(srv)
+        with ws_connect(srv, sid, headers) as ws:
+            assert [e.name for e in ws.protocol.extensions] == extensions
+            ws.send(json.dumps({"type": "frame", "id": 7, "targets": [tool_target(0.1)]}))
+            reply = json.loads(ws.recv(timeout=TIMEOUT_S))
+            assert reply["id"] == 7 and reply["result"]["q"]
+
+
 def test_ws_bad_token_closes_4403(server: Server) -> None:
     sid, _ = session(server)
     with ws_connect(server, sid, {"Authorization": "Bearer wrong"}) as ws:

@@ -89,6 +89,8 @@ def test_operations_page_lists_every_setting_with_its_default() -> None:
             assert documented == "empty", name
         elif default is None:  # the variable is not set: the solver's own default applies
             assert documented == "unset", name
+        elif isinstance(default, bool):  # before int: a bool is one; documented as set
+            assert documented == str(default).lower(), name
         elif isinstance(default, int | float):
             assert float(documented) == float(default), name
         else:
