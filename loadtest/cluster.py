@@ -143,7 +143,12 @@ class Cluster(StoppedOnExit):
         redis_dir = log_dir / "redis"
         redis_dir.mkdir(exist_ok=True)
         self.redis = RedisServer(data_dir=redis_dir)
-        self.env = {"IK_REDIS_URL": self.redis.url, **(env or {})}
+        # HAProxy connects from 127.0.0.1 and names the client (option forwardfor).
+        self.env = {
+            "IK_REDIS_URL": self.redis.url,
+            "IK_FORWARDED_ALLOW_IPS": "127.0.0.1",
+            **(env or {}),
+        }
         self.log_dir = log_dir
         self.workers: list[ServiceProcess] = []
         self.balancer: Balancer | None = None

@@ -143,6 +143,7 @@ def main() -> None:
         settings.port,
     )
     app = create_app(settings)
+    proxies = settings.trusted_proxies()
     http_protocol, ws_protocol = protocols(
         PeerLimits(
             max_header_bytes=settings.max_header_bytes,
@@ -152,6 +153,7 @@ def main() -> None:
             max_connections_per_address=settings.max_connections_per_address or 2**62,
             ws_max_write_buffer_bytes=settings.ws_max_write_buffer_bytes,
             ws_max_pings_per_s=settings.ws_max_pings_per_s,
+            trusted_proxies=proxies,
         )
     )
     config = uvicorn.Config(
@@ -160,6 +162,10 @@ def main() -> None:
         port=settings.port,
         http=http_protocol,  # httptools, with limits on headers and slow peers
         ws=ws_protocol,  # websockets-sansio, with a bound on unread pongs
+        # X-Forwarded-For believed from IK_FORWARDED_ALLOW_IPS only (service/forwarded.py):
+        # uvicorn's default believes any local program's.
+        proxy_headers=bool(proxies),
+        forwarded_allow_ips=proxies.as_list(),
         ws_max_size=settings.ws_max_message_bytes,
         ws_per_message_deflate=settings.ws_compression,
         ws_ping_interval=settings.ws_ping_interval_s,

@@ -17,6 +17,7 @@ from typing import Literal
 from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from .forwarded import TrustedProxies, trusted_networks
 from .redis_url import redis_url_problem
 
 # Digits and dots only: an IPv4 address, in the forms the resolver takes (127.1, 0).
@@ -92,8 +93,9 @@ class Settings(BaseSettings):
     max_connections_per_address: int = Field(
         default=256,
         ge=0,
-        description="Open connections (HTTP and WebSocket) per client address; more are "
-        "closed at once; 0 = no limit (behind a reverse proxy every client has its address)",
+        description="Open connections (HTTP and WebSocket) per client address (the TCP "
+        "peer: a proxy in IK_FORWARDED_ALLOW_IPS is not limited); more are closed at once; "
+        "0 = no limit",
     )
     sessions_per_address_per_min: float = Field(
         default=60.0,
@@ -101,6 +103,19 @@ class Settings(BaseSettings):
         description="Sessions one client address may create per minute when the server has "
         "no API keys (429 rate_limited); 0 = no limit",
     )
+    forwarded_allow_ips: str = Field(
+        default="",
+        description="Comma-separated addresses or networks of reverse proxies whose "
+        "X-Forwarded-For names the client (sessions per address, work shares, logs); "
+        "empty = no proxy header is believed",
+    )
+
+    @field_validator("forwarded_allow_ips")
+    @classmethod
+    def _forwarded_form(cls, value: str) -> str:
+        trusted_networks(value)  # said at start, naming the entry
+        return value
+
     ws_ping_interval_s: float = Field(
         default=20.0, gt=0, description="WebSocket keep-alive ping period [s]"
     )
@@ -266,6 +281,9 @@ class Settings(BaseSettings):
         """The configured API keys (UTF-8), empty when keys are off."""
         raw = self.api_keys.get_secret_value()
         return tuple(k.strip().encode() for k in raw.split(",") if k.strip())
+
+    def trusted_proxies(self) -> TrustedProxies:
+        return TrustedProxies(trusted_networks(self.forwarded_allow_ips))
 
     def cors_origin_list(self) -> list[str]:
         return [o.strip() for o in self.cors_origins.split(",") if o.strip()]

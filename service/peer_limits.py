@@ -11,7 +11,9 @@ its websockets-sansio protocol writes every pong whatever its write buffer holds
 subclasses, passed to ``uvicorn.Config(http=..., ws=...)`` by ``python -m service``.
 
 Sessions created per address per minute (no API keys) are the app's
-(``service/session_starts.py``).
+(``service/session_starts.py``); they see the client a trusted proxy names
+(``service/forwarded.py``). The connection count is taken before any header, on the
+TCP peer: a trusted proxy is not capped.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIO
 
 from schemas import ErrorCode
 
+from .forwarded import IgnoredForwards, TrustedProxies
 from .responses import dumps
 
 if TYPE_CHECKING:
@@ -47,6 +50,9 @@ class PeerLimits:
     max_connections_per_address: int
     ws_max_write_buffer_bytes: int
     ws_max_pings_per_s: int
+    # Proxies in IK_FORWARDED_ALLOW_IPS: each carries many clients' connections, so
+    # the per-address cap does not apply to them (the proxy limits its clients).
+    trusted_proxies: TrustedProxies = field(default_factory=TrustedProxies)
 
 
 @dataclass(slots=True)
@@ -113,11 +119,13 @@ def protocols(limits: PeerLimits) -> tuple[type[asyncio.Protocol], type[asyncio.
     of connections per address."""
     counts = ConnectionCounts()
     refusals = RefusalLog()
+    ignored_forwards = IgnoredForwards()
 
     class LimitedHttp(HttpToolsProtocol):
         """httptools with a header budget (bytes, count, time) and a body time limit."""
 
         _address = ""
+        _untrusted_forwards = False  # whether an X-Forwarded-For of this peer is ignored
         _refused = False
         _header_bytes = 0
         _header_count = 0
@@ -127,7 +135,9 @@ def protocols(limits: PeerLimits) -> tuple[type[asyncio.Protocol], type[asyncio.
 
         def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
             self._address = _address(transport)
-            if counts.add(self._address) > limits.max_connections_per_address:
+            trusted = self._address in limits.trusted_proxies
+            self._untrusted_forwards = bool(limits.trusted_proxies) and not trusted
+            if counts.add(self._address) > limits.max_connections_per_address and not trusted:
                 # Refused before uvicorn sets the connection up, and logged once a
                 # second: an abuser over the cap reconnecting in a loop made thousands
                 # of accepts a second, each a log line and a protocol set-up on the loop.
@@ -212,6 +222,8 @@ def protocols(limits: PeerLimits) -> tuple[type[asyncio.Protocol], type[asyncio.
             self._header_count += 1
             if self._header_count > limits.max_headers:
                 raise _HeadersTooLarge  # httptools re-raises it as a parser error
+            if self._untrusted_forwards and name.lower() == b"x-forwarded-for":
+                ignored_forwards.note(self._address)
             super().on_header(name, value)
 
         def on_headers_complete(self) -> None:

@@ -69,6 +69,20 @@ def test_k8s_workers_use_redis_and_the_health_routes() -> None:
     assert "upstream-hash-by" in " ".join(ingress)
 
 
+def test_the_workers_believe_the_balancer_s_forwarded_for() -> None:
+    """HAProxy names the client (``option forwardfor``); the workers behind it believe
+    that header from a list they can start with, so that per-address limits and logs see
+    each client rather than one balancer (and need not be switched off)."""
+    cfg = (ROOT / "deploy/haproxy.cfg").read_text()
+    assert "\n    option forwardfor\n" in cfg
+    (container,) = _k8s_worker_pod()["containers"]
+    k8s = {e["name"]: e["value"] for e in container["env"]}
+    for env in (_compose()["services"]["service"]["environment"], k8s):
+        assert Settings(forwarded_allow_ips=env["IK_FORWARDED_ALLOW_IPS"]).trusted_proxies()
+        assert "IK_SESSIONS_PER_ADDRESS_PER_MIN" not in env
+        assert "IK_MAX_CONNECTIONS_PER_ADDRESS" not in env
+
+
 def test_k8s_memory_limit_lets_a_cold_start_compile() -> None:
     """A pod that must compile the solver (an image without its cache) is not killed
     for memory on every start: a crash loop no log line explains."""

@@ -277,3 +277,34 @@ def test_a_host_that_is_neither_an_address_nor_a_name_is_refused_at_start(
 def test_addresses_and_host_names_are_taken(monkeypatch: pytest.MonkeyPatch, host: str) -> None:
     monkeypatch.setenv("IK_HOST", host)
     assert Settings().host == host
+
+
+@pytest.mark.parametrize(
+    ("value", "said"),
+    [
+        ("*", "'*' would believe the address a client writes itself"),
+        ("10.0.0.1/8", "'10.0.0.1/8' is not an IP address or network"),
+        ("10.0.0.5, proxy.local", "'proxy.local' is not an IP address or network"),
+    ],
+)
+def test_forwarded_allow_ips_that_uvicorn_would_misread_stop_the_start(
+    monkeypatch: pytest.MonkeyPatch, value: str, said: str
+) -> None:
+    """uvicorn takes an entry it cannot read as a literal that never matches, and ``*``
+    as the header's first entry, which the client writes."""
+    monkeypatch.setenv("IK_FORWARDED_ALLOW_IPS", value)
+    with pytest.raises(ValidationError) as err:
+        Settings()
+    text = settings_errors(err.value)
+    assert text.startswith("invalid configuration:\n  IK_FORWARDED_ALLOW_IPS: ") and said in text
+
+
+def test_forwarded_allow_ips_lists_addresses_and_networks(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert not Settings().trusted_proxies()  # default: no proxy header believed
+    monkeypatch.setenv("IK_FORWARDED_ALLOW_IPS", "10.0.0.5, 10.244.0.0/16,::1")
+    proxies = Settings().trusted_proxies()
+    assert proxies.as_list() == ["10.0.0.5/32", "10.244.0.0/16", "::1/128"]
+    inside = ("10.0.0.5", "10.244.3.7", "::1")
+    outside = ("10.0.0.6", "10.245.0.1", "127.0.0.1", "not-an-address", "")
+    assert all(a in proxies for a in inside)
+    assert not any(a in proxies for a in outside)
