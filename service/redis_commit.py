@@ -88,9 +88,12 @@ class GroupCommit:
     216 us of CPU per lone commit with it). The script is loaded once, and again when
     Redis answers NOSCRIPT (it restarted and lost it)."""
 
-    def __init__(self, client: aioredis.Redis, script: str) -> None:
+    def __init__(
+        self, client: aioredis.Redis, script: str, failures: FailureLog | None = None
+    ) -> None:
         self._client = client
         self._script = script
+        self._failures = failures or FailureLog()  # told when Redis answers
         self._sha: str | None = None
         self._pending: list[tuple[list[str], list[Any], asyncio.Future[Any]]] = []
         self._flushing = False
@@ -110,6 +113,7 @@ class GroupCommit:
         if any(isinstance(r, NoScriptError) for r in results):
             self._sha = None  # Redis restarted: load it, run the batch again
             results = await self._execute(batch)
+        self._failures.answered()
         return results
 
     async def _execute(self, batch: list[tuple[list[str], list[Any], Any]]) -> list[Any]:
@@ -178,17 +182,23 @@ def redis_cause(e: RedisError) -> str:
 class FailureLog:
     """The WARNING for requests Redis failed, at most once per ``every_s`` per cause,
     with how many were left out since: one line per failed frame flooded the log
-    (8,516 lines in a 7 s outage, an operator trial; 60 a second per 60 Hz client)."""
+    (8,516 lines in a 7 s outage, an operator trial; 60 a second per 60 Hz client).
+    When Redis answers again (``answered``), one line says so, with the failures left
+    out since the last warning: without it the log ended at the last warning, and the
+    outage's end and size were nowhere."""
 
     def __init__(self, every_s: float = 10.0, clock: Any = time.monotonic) -> None:
         self.every_s = every_s
         self.clock = clock
         self.last: dict[str, float] = {}
         self.left_out: dict[str, int] = {}
+        self.failing_since: float | None = None  # the first failure since Redis answered
 
     def failed(self, e: RedisError) -> None:
         cause = redis_cause(e)
         now = self.clock()
+        if self.failing_since is None:
+            self.failing_since = now
         if now - self.last.get(cause, -math.inf) < self.every_s:
             self.left_out[cause] = self.left_out.get(cause, 0) + 1
             return
@@ -197,6 +207,25 @@ class FailureLog:
         log.warning("a request failed: %s (%s)%s", cause, e, since)
         self.last[cause] = now
 
+    def answered(self) -> None:
+        """Redis answered a call. After failures, one line: Redis is back, for how long
+        requests failed, and how many were not logged since the last warning. The next
+        outage's first failure is logged at once. Called at every answer: one test when
+        nothing failed."""
+        if self.failing_since is None:
+            return
+        failed_s = self.clock() - self.failing_since
+        left_out = sum(self.left_out.values())
+        self.failing_since = None
+        self.last.clear()
+        self.left_out.clear()
+        log.info(
+            "Redis answers again (requests failed for %.1f s); %d failed request(s) not "
+            "logged since the last warning",
+            failed_s,
+            left_out,
+        )
+
 
 class ReadinessProbe:
     """``/readyz``'s check of Redis: a PING; when it fails, ``store_unavailable`` whose
@@ -204,9 +233,10 @@ class ReadinessProbe:
     (a refusal at ERROR: it needs a fix), not at every probe, with where the worker
     tried; and once when Redis answers again."""
 
-    def __init__(self, client: aioredis.Redis) -> None:
+    def __init__(self, client: aioredis.Redis, failures: FailureLog | None = None) -> None:
         self.client = client
         self.last_cause: str | None = None
+        self._failures = failures or FailureLog()  # told when Redis answers
 
     async def check(self) -> None:
         try:
@@ -220,6 +250,7 @@ class ReadinessProbe:
                 log.log(level, "not ready: %s (at %s%s)", cause, where(self.client), detail)
             self.last_cause = cause
             raise store_unavailable(detail=cause) from None
+        self._failures.answered()
         if self.last_cause is not None:
             log.info("ready: Redis at %s answers again", where(self.client))
         self.last_cause = None

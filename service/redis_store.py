@@ -81,7 +81,6 @@ CACHED_VIEWS = 64  # models kept per process, by chain definition hash
 # Session.version of a session this worker must reload before its next frame: a write
 # failed (Redis gone) or was refused (another worker wrote first, written behind).
 RELOAD = -1
-_FAILURES = redis_commit.FailureLog()  # the requests' WARNING, throttled
 
 
 def definition_key(definition: bytes) -> str:
@@ -124,11 +123,12 @@ class RedisSessionStore(SessionStore):
         # the sessions its batches opened): a load takes the same object back.
         self._forgotten = weakref.WeakValueDictionary[str, Session]()
         self._views: OrderedDict[str, ChainView] = OrderedDict()
-        self._commit = GroupCommit(client, COMMIT_SCRIPT)
+        self._failures = redis_commit.FailureLog()  # the requests' WARNING, throttled
+        self._commit = GroupCommit(client, COMMIT_SCRIPT, self._failures)
         # Written behind (IK_REDIS_WRITE_BEHIND_MS > 0): None when written through.
         self.behind = WriteBehind(write_behind_s, self._write_behind) if write_behind_s else None
         self._count = 0
-        self._probe = redis_commit.ReadinessProbe(client)
+        self._probe = redis_commit.ReadinessProbe(client, self._failures)
 
     def __len__(self) -> int:
         """Sessions in Redis (every worker's) at this worker's last sweep, give or take
@@ -186,7 +186,7 @@ class RedisSessionStore(SessionStore):
             await self.client.set(keys[3], definition, px=self._ttl_ms())
             v = await self._commit.run(keys, args)
         except RedisError as e:
-            raise _unavailable(e) from None
+            raise self._unavailable(e) from None
         if v == SESSIONS_FULL:
             raise StoreFull(retry_after_s=self.ttl_s)
         if v == OWNER_FULL:
@@ -242,7 +242,7 @@ class RedisSessionStore(SessionStore):
                 if definition is None:
                     return None
         except RedisError as e:
-            raise _unavailable(e) from None
+            raise self._unavailable(e) from None
         if view is None:
             assert definition is not None
             view = await self._build_view(definition)
@@ -311,7 +311,7 @@ class RedisSessionStore(SessionStore):
                     pipe.zrem(f"{p}owner:{owner}", session_id)
                 await pipe.execute()
         except RedisError as e:
-            raise _unavailable(e) from None
+            raise self._unavailable(e) from None
         if session is not None:
             session.closed = True
             self._count = max(0, self._count - 1)
@@ -416,7 +416,7 @@ class RedisSessionStore(SessionStore):
             # What this worker solved is not stored: whatever it holds now may be ahead
             # of Redis, so it reloads before its next frame.
             session.version = RELOAD
-            raise _unavailable(e) from None
+            raise self._unavailable(e) from None
         self._written(session, v)
         if v == GONE:
             raise not_found()
@@ -444,7 +444,7 @@ class RedisSessionStore(SessionStore):
         try:
             results = await self._commit.execute(calls)
         except RedisError as e:
-            _unavailable(e)
+            self._unavailable(e)
             assert self.behind is not None
             self.behind.failed = True
             for _, _, s in calls:
@@ -478,7 +478,7 @@ class RedisSessionStore(SessionStore):
         try:
             stored, answers = await self._read_hashes(session.id)
         except RedisError as e:
-            raise _unavailable(e) from None
+            raise self._unavailable(e) from None
         if not stored:
             self._forget(session)
             raise not_found()
@@ -494,7 +494,6 @@ class RedisSessionStore(SessionStore):
             await self.behind.close()
         await self.client.aclose()
 
-
-def _unavailable(e: RedisError) -> ServiceError:
-    _FAILURES.failed(e)
-    return store_unavailable()
+    def _unavailable(self, e: RedisError) -> ServiceError:
+        self._failures.failed(e)
+        return store_unavailable()

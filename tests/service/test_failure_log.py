@@ -37,3 +37,36 @@ def test_redis_loading_its_data_is_said_so_not_unreachable() -> None:
     # An operator trial: Redis loading its append-only file read "cannot be reached".
     cause = redis_cause(BusyLoadingError("Redis is loading the dataset in memory"))
     assert cause.startswith("Redis is loading its data set into memory (BusyLoadingError)")
+
+
+def test_the_end_of_an_outage_is_one_line_with_the_failures_left_out(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    now = [0.0]
+    failures = FailureLog(every_s=10.0, clock=lambda: now[0])
+    caplog.set_level(logging.INFO, logger="service")
+    failures.answered()  # nothing failed: nothing to say
+    refused = RedisConnectionError("Error 111 connecting to 127.0.0.1:16379.")
+    for k in range(12 * 60):  # 12 s at 60 Hz: a warning at 0 s and at 10 s
+        now[0] = 2.0 + k / 60
+        failures.failed(refused)
+    now[0] = 14.5
+    failures.answered()
+    failures.answered()  # Redis answering on: said once
+    now[0] = 16.0  # a new outage within 10 s of the last warning: said at once
+    failures.failed(RedisTimeout("Timeout reading from socket"))
+    failures.failed(refused)
+    lines = [(r.levelno, r.getMessage()) for r in caplog.records]
+    assert [level for level, _ in lines] == [logging.WARNING] * 2 + [logging.INFO] + [
+        logging.WARNING
+    ] * 2, lines
+    # 720 failures: the first (2 s) logged, the 601st (12 s, 10 s on) logged with the
+    # 599 between; the 119 after it are the ones the end's line counts.
+    assert lines[1][1].endswith("; 599 more since the last such line")
+    assert lines[2][1] == (
+        "Redis answers again (requests failed for 12.5 s); 119 failed request(s) not "
+        "logged since the last warning"
+    )
+    assert lines[3][1].startswith("a request failed: Redis did not answer within")
+    assert lines[4][1].startswith("a request failed: Redis cannot be reached")
+    assert "more since" not in lines[4][1]

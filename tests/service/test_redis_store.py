@@ -473,6 +473,39 @@ def test_an_outage_is_logged_with_where_and_the_recovery_once(
     assert lines.count(f"ready: Redis at 127.0.0.1:{server.port} answers again") == 1, lines
 
 
+def test_frames_failed_in_an_outage_are_summed_up_when_redis_answers_again(
+    make_client: Callable[..., TestClient], caplog: pytest.LogCaptureFixture
+) -> None:
+    """Frames against a paused Redis: one WARNING, then, at the first frame stored
+    after it answers again, one line saying so with the failures not logged."""
+    server = RedisServer()
+    try:
+        client = make_client(Settings(redis_url=SecretStr(server.url), redis_timeout_s=0.2))
+        s = create(client)
+        url = f"/v1/sessions/{s.id}/frames"
+        with caplog.at_level(logging.INFO, logger="service"):
+            server.pause()
+            try:
+                for i in range(4):
+                    r = client.post(url, json=hand_frame(i), headers=s.headers)
+                    assert r.status_code == 503, r.text
+            finally:
+                server.resume()
+            for i in range(4, 6):
+                r = client.post(url, json=hand_frame(i), headers=s.headers)
+                assert r.status_code == 200, r.text
+    finally:
+        server.stop()
+    lines = [r.getMessage() for r in caplog.records if r.name == "service"]
+    failed = [m for m in lines if m.startswith("a request failed: Redis did not answer")]
+    back = [m for m in lines if m.startswith("Redis answers again")]
+    assert len(failed) == 1 and len(back) == 1, lines
+    # The first failure was logged; the other frames' (their reloads' too) were not.
+    left_out = int(back[0].split("); ")[1].split()[0])
+    assert left_out >= 3, back
+    assert lines.index(back[0]) > lines.index(failed[0])
+
+
 def test_readyz_says_a_database_number_redis_lacks_and_a_port_nobody_serves(
     make_client: Callable[..., TestClient], redis_url: str
 ) -> None:
