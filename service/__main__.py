@@ -80,6 +80,27 @@ class QuietProbes(logging.Filter):
         return True
 
 
+class UtcTimestamps(logging.Formatter):
+    """Each line's time in ISO-8601 UTC to the millisecond (2025-06-01T10:00:00.123Z):
+    the lines had none, and an operator reads several workers' logs side by side, across
+    machines and time zones."""
+
+    def formatTime(self, record: logging.LogRecord, datefmt: str | None = None) -> str:
+        when = time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(record.created))
+        return f"{when}.{int(record.msecs):03d}Z"
+
+
+# The time, the worker's pid (which of several on a machine), then uvicorn's level style;
+# uvicorn's own lines, its access log included, go through the same handler (log_config=None).
+LOG_FORMAT = "%(asctime)s [%(process)d] %(levelname)s:     %(message)s"
+
+
+def log_handler() -> logging.Handler:
+    handler = logging.StreamHandler()  # stderr, as before
+    handler.setFormatter(UtcTimestamps(LOG_FORMAT))
+    return handler
+
+
 class DrainingServer(uvicorn.Server):
     """uvicorn's server, with one step before its shutdown: stop accepting, then let the
     WebSocket messages in flight be answered (each such socket then closes 1012),
@@ -128,7 +149,7 @@ def main() -> None:
         raise SystemExit(settings_errors(e) + also) from None
     if typos := misspelt_variables(os.environ):
         raise SystemExit("invalid configuration:\n  " + "\n  ".join(typos.values()) + also)
-    logging.basicConfig(level=settings.log_level.upper(), format="%(levelname)s:     %(message)s")
+    logging.basicConfig(level=settings.log_level.upper(), handlers=[log_handler()])
     for name in ("uvicorn.access", "uvicorn.error"):
         logging.getLogger(name).addFilter(_RedactTokens())
     logging.getLogger("uvicorn.access").addFilter(QuietProbes())

@@ -12,11 +12,13 @@ import base64
 import errno
 import json
 import os
+import re
 import signal
 import socket
 import threading
 import time
 from collections.abc import Callable
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import httpx
@@ -71,6 +73,28 @@ def test_logs_where_the_docs_are(server: Server) -> None:
     assert f"http://127.0.0.1:{server.port}/docs" in server.log()
     assert httpx.get(f"{server.base}/docs", timeout=TIMEOUT_S).status_code == 200
     assert httpx.get(f"{server.base}/healthz", timeout=TIMEOUT_S).json() == {"status": "ok"}
+
+
+def test_log_lines_carry_the_utc_time_and_the_worker_s_pid(server: Server) -> None:
+    """Operators read several workers' logs side by side: each line, uvicorn's access
+    log included, starts with its ISO-8601 UTC time and the process id."""
+    before = datetime.now(UTC) - timedelta(seconds=1)
+    assert httpx.get(f"{server.base}/no-such-page", timeout=TIMEOUT_S).status_code == 404
+    stamp = re.compile(r"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3})Z \[(\d+)\] (\w+): ")
+    deadline = time.monotonic() + 5
+    while (access := [ln for ln in server.log().splitlines() if "/no-such-page" in ln]) == []:
+        assert time.monotonic() < deadline, "the request was not logged"
+        time.sleep(0.05)
+    lines = [ln for ln in server.log().splitlines() if ln.strip()]
+    (started,) = [ln for ln in lines if "IK service on http://" in ln]  # the service's own
+    first = stamp.match(started)
+    assert first is not None and first.group(3) == "INFO", started
+    logged = stamp.match(access[0])
+    assert logged is not None and logged.group(3) == "INFO", access[0]
+    assert int(logged.group(2)) == int(first.group(2)) == server.proc.pid
+    when = datetime.fromisoformat(logged.group(1)).replace(tzinfo=UTC)
+    assert before <= when <= datetime.now(UTC) + timedelta(seconds=1)  # UTC, not local
+    assert all(stamp.match(ln) for ln in lines if ' - "' in ln), "an access line without one"
 
 
 def test_logs_how_the_solver_got_warm(server: Server) -> None:
