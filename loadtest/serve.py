@@ -155,7 +155,9 @@ def main(argv: list[str] | None = None) -> int:
     port = a.port if a.port is not None else int(os.environ.get("IK_PORT", "8000"))
     os.environ["IK_HOST"], os.environ["IK_PORT"] = host, str(port)
     level = os.environ.get("IK_LOG_LEVEL", "info").upper()
-    logging.basicConfig(level=level, format="%(levelname)s:     %(message)s")
+    from service.__main__ import log_handler  # the service's line format (time, pid)
+
+    logging.basicConfig(level=level, handlers=[log_handler()])
     if a.child:
         run_child(a.app, host, port)
         return 0
