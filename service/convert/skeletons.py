@@ -185,6 +185,10 @@ def _non_finite(document: object, where: str) -> ServiceError:
     )
 
 
+# An effector's settings as the request names them (the solver's errors name the same).
+_EFFECTOR_FIELDS = frozenset(
+    {"mode", "tip_offset", "tip_rotation", "aim_axis", "position_weight", "rotation_weight"}
+)
 # The UTF-8 byte-order mark some Windows tools write before a .gltf document.
 _BOM = b"\xef\xbb\xbf"
 # A field longer than this (a path thousands of levels deep) is named by its document.
@@ -261,6 +265,12 @@ def _settings_field(spec: SkeletonSpec, e: InvalidModel) -> str:
         return f"chain.bones.{bone}"
     if field in ("moving", "bones", "free_root", "effectors"):
         return f"chain.{field}"
-    if bone is not None and any((e.name or e.bone) == bone for e in spec.effectors):
-        return "chain.effectors"
+    for i, eff in enumerate(spec.effectors):
+        if bone is not None and (eff.name or eff.bone) == bone:
+            # The effector's own setting (aim_axis, tip_offset, a weight), as sent.
+            return (
+                f"chain.effectors[{i}].{field}"
+                if field in _EFFECTOR_FIELDS
+                else f"chain.effectors[{i}]"
+            )
     return "chain"

@@ -252,6 +252,25 @@ def test_unknown_bone_names_say_which_setting_and_suggest(client: TestClient) ->
     assert body["detail"].startswith("bones.world[0]: unknown bone 'Hed'; did you mean 'Head'")
 
 
+def test_a_bad_effector_setting_names_the_effector_and_the_setting(client: TestClient) -> None:
+    # A game client's zero aim axis, or weights that leave nothing to solve, on its
+    # second effector: the field says which effector and which setting, as a JSON
+    # chain's error does, not just "chain.effectors".
+    hand = {"bone": "LeftHand"}
+    body = error(
+        client,
+        walk_chain(
+            effectors=[hand, {"bone": "Head", "mode": "aim", "aim_axis": {"x": 0, "y": 0, "z": 0}}]
+        ),
+    )
+    assert (body["code"], body["field"]) == ("invalid_problem", "chain.effectors[1].aim_axis")
+    assert "axis must not be zero" in body["detail"], body
+    body = error(
+        client, walk_chain(effectors=[hand, {"bone": "Head", "name": "look", "position_weight": 0}])
+    )
+    assert body["field"] == "chain.effectors[1].position_weight", body
+
+
 def test_only_the_chain_s_own_format_leaves_a_field() -> None:
     # A bone named "chain" whose settings hold a key named like a format keeps both.
     loc = ["body", "chain", "bvh", "bones", "chain", "urdf"]
