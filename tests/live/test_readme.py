@@ -75,3 +75,30 @@ def test_python_websocket_client(server: Server, tmp_path: Path) -> None:
     assert [line.split()[0] for line in lines] == ["0", "1", "2", "3", "4"]
     assert all("error" not in line for line in lines)
     assert sum("goal_reached" in line for line in lines) >= 4
+
+
+def test_typescript_client_as_the_readme_installs_it(server: Server, tmp_path: Path) -> None:
+    """The README's TypeScript steps, from a copy of the repository's client folder (so
+    the test neither builds in nor leaves a project in the checkout)."""
+    npm = shutil.which("npm")
+    if npm is None or shutil.which("node") is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail("node and npm are needed for the TypeScript client's README steps")
+        pytest.skip("node and npm are not installed")
+    source = ROOT / "clients" / "typescript"
+    shutil.copytree(
+        source,
+        tmp_path / "clients" / "typescript",
+        ignore=shutil.ignore_patterns("node_modules", "dist"),
+    )
+    out = subprocess.run(
+        ["bash", "-c", "set -euo pipefail\n" + block("ts-client")],
+        env={**os.environ, "IK": server.base},
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr + out.stdout
+    line = out.stdout.strip().splitlines()[-1].split()
+    assert line[:2] == ["0", "goal_reached"] and len(line) == 2 + 7, out.stdout
