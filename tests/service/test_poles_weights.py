@@ -267,3 +267,35 @@ def test_engines_page_pole_example(client: TestClient) -> None:
     axis = (ankle - hip) / np.linalg.norm(ankle - hip)
     towards = (pole - hip) - ((pole - hip) @ axis) * axis
     assert (knee - (knee @ axis) * axis) @ towards > 0.0
+
+
+def test_a_lone_hand_s_default_pole_misses_an_arm_only_session(client: TestClient) -> None:
+    """docs/engines.md, "Poles": the default pulled bone counts effectors, not `moving`:
+    a lone hand's is the spine, which an arm-only session never moves, so the pole does
+    nothing; naming the elbow picks the side. (A game-dev trial's first pole.)"""
+    chain = {
+        "format": "gltf",
+        "glb_base64": base64.b64encode(asset_bytes("CesiumMan.glb")).decode(),
+        "moving": ["node_16", "node_17", "node_18"],
+        "effectors": [{"bone": "node_18", "name": "hand"}],
+    }
+    target = np.array([0.25, 1.0, -0.2])  # glTF frame: ahead of the left shoulder
+
+    def elbow_side(sign: float, bone: str | None) -> float:
+        s = create(client, chain, bones={"world": ["node_16", "node_17", "node_18"]})
+        pole = {"position": vec(target + [0.0, sign * 0.5, 0.0])}
+        if bone is not None:
+            pole["bone"] = bone
+        frame = {"targets": [{"effector": "hand", "position": vec(target), "pole": pole}]}
+        r = client.post(f"/v1/sessions/{s.id}/frames", headers=s.headers, json=frame)
+        result = r.json()["results"][0]
+        assert result["success"], result
+        world = {b: arr(w["position"]) for b, w in result["bones"]["world"].items()}
+        shoulder, elbow, hand = world["node_16"], world["node_17"], world["node_18"]
+        axis = (hand - shoulder) / np.linalg.norm(hand - shoulder)
+        off = (elbow - shoulder) - np.dot(elbow - shoulder, axis) * axis
+        return float(off[1])  # up (+) or down (-) of the shoulder-hand line
+
+    assert np.sign(elbow_side(+1, "node_17")) == 1 and np.sign(elbow_side(-1, "node_17")) == -1
+    # The default: the elbow bends the same way whichever side the pole is on.
+    assert np.sign(elbow_side(+1, None)) == np.sign(elbow_side(-1, None))
