@@ -18,6 +18,7 @@ from schemas.chain import MAX_NAME_LENGTH
 from schemas.common import MAX_COORDINATE
 from solver.arrays import Vector
 from solver.errors import InvalidModel
+from solver.ik import default_pole_link
 from solver.model import (
     Chain,
     EffectorMode,
@@ -60,6 +61,9 @@ class ChainView:
     convention: Convention = NATIVE
     # What every result carries unless a frame asks otherwise (skeleton chains).
     bone_output: S.BoneOutput | None = None
+    # Effectors whose limb has no bone a pole could pull by default (solver.ik.poles):
+    # a pole without ``bone`` on them is refused naming the field, before any solve.
+    no_default_pole: frozenset[str] = frozenset()
 
     @classmethod
     def of(cls, chain: Chain) -> ChainView:
@@ -91,7 +95,10 @@ class ChainView:
         index = {n: i for i, n in enumerate(chain.dof_names)}
         mid = chain.mid_limits()
         fast = {n: m for n, m in modes.items() if 1 <= len(n) <= MAX_NAME_LENGTH}
-        return cls(chain, modes, index, summary, mid, fast)
+        no_pole = frozenset(
+            e.name for i, e in enumerate(chain.effectors) if default_pole_link(chain, i) is None
+        )
+        return cls(chain, modes, index, summary, mid, fast, no_default_pole=no_pole)
 
 
 def _finite_or_none(v: float) -> float | None:

@@ -120,13 +120,21 @@ def targets(ts: Sequence[S.Target], view: ChainView, field: str) -> list[SolverT
 def _pole(p: S.Pole, view: ChainView, effector: str, where: str) -> SolverPole:
     """The solver's pole (in the client's frame: ``targets_in`` converts it), a named
     bone checked against the effector's path to the root (``pole_node``; the default
-    bone is the solver's choice, cached per session)."""
+    bone is the solver's choice, cached per session), a pole without a bone refused
+    where the limb has no default (``ChainView.no_default_pole``)."""
     if p.bone is not None:
         chain = view.chain
         try:
             pole_node(chain, chain.effector_index(effector), p.bone)
         except InvalidProblem as e:
             raise invalid_problem(str(e), f"{where}.pole.bone") from None
+    elif effector in view.no_default_pole:
+        raise invalid_problem(
+            f"pole for {effector!r}: its limb has no bone that the moving joints carry "
+            "between its top and its tip, so there is no default to pull; name one in "
+            "pole.bone",
+            f"{where}.pole",
+        )
     return SolverPole(vec3(p.position), p.bone)
 
 

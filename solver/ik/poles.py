@@ -24,10 +24,16 @@ limb continuously with the pole). The null-space step is skipped after a shaped 
 
 The pulled link, when the client names none (``default_pole_link``): the middle of
 the effector's limb. The limb is the effector's path towards the root up to the first
-link another effector's path shares (the hips for a foot, the chest for a hand), or up
-to the root; the middle is the link origin on that path whose distance along the bones
-from the limb's top is nearest half the limb's length (the knee of hip-knee-ankle-toe,
-the elbow of clavicle-shoulder-elbow-wrist).
+link that is one of these (its top): a link where the chain branches into two or more
+parts that move (the hips for a foot, the chest for a hand, a hand for a finger), a
+link another effector's path shares (an effector's link above this one's), or a link
+nothing moves (above the topmost moving joint: a session whose ``moving`` is the arm);
+else the root. The middle is the link origin on that path whose distance along the
+bones from the limb's top is nearest half the limb's length (the knee of
+hip-knee-ankle-toe, the elbow of clavicle-shoulder-elbow-wrist). The branch and the
+still link make the default the elbow or knee whatever the other effectors: a limb
+that ran to the root put a lone hand's middle in the spine (and a pole on a bone an
+arm-only session never moves does nothing).
 """
 
 from __future__ import annotations
@@ -39,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidProblem
-from ..model import Chain
+from ..model import Chain, Joint, JointKind
 from ..model.forward import effector_poses, link_poses
 from ..optim import codes as C
 from .blend import FrameCall, SolveResult, combined
@@ -76,15 +82,25 @@ def limb_path(chain: Chain, effector: int) -> list[str]:
 
 def default_pole_link(chain: Chain, effector: int) -> str | None:
     """The middle of the effector's limb (see the module docstring); None when the
-    limb has no link between its top and the tip."""
+    limb has no link between its top and the tip that the solve can move."""
     path = limb_path(chain, effector)
     shared: set[str] = set()
     for other in range(len(chain.effectors)):
         if other != effector:
             shared.update(limb_path(chain, other))
-    top = next((k for k, link in enumerate(path) if k > 0 and link in shared), len(path) - 1)
     if path[0] in shared:  # another effector below this one (a hand and its finger)
-        top = len(path) - 1
+        shared = set()
+    joint_into = {j.child: j for j in chain.joints}
+    branches = _moving_branches(chain)
+    still = _still_links(path, joint_into)
+    top = next(
+        (
+            k
+            for k, link in enumerate(path)
+            if k > 0 and (link in shared or branches.get(link, 0) > 1 or link in still)
+        ),
+        len(path) - 1,
+    )
     q = chain.mid_limits()
     poses = link_poses(chain, q)
     tip = effector_poses(chain, q)[effector][:3, 3]
@@ -96,7 +112,9 @@ def default_pole_link(chain: Chain, effector: int) -> str | None:
     best: str | None = None
     best_gap = math.inf
     for k in range(1, len(links)):
-        if float(np.linalg.norm(points[k] - tip)) < 1e-9 or chain.compiled.link_node[links[k]] < 0:
+        if not _origin_moves(joint_into[links[k]], still):
+            continue
+        if float(np.linalg.norm(points[k] - tip)) < 1e-9:
             continue
         gap = abs(lengths[k] - 0.5 * total)
         if gap < best_gap - 1e-12:
@@ -104,18 +122,60 @@ def default_pole_link(chain: Chain, effector: int) -> str | None:
     return best
 
 
+def _moving_branches(chain: Chain) -> dict[str, int]:
+    """For each link, how many of its child joints lead to motion (a joint that moves
+    there or below): a fixed sensor frame hung on a forearm is not a branch of the arm,
+    a finger is one of the hand's."""
+    children: dict[str, list[Joint]] = {}
+    for j in chain.joints:
+        children.setdefault(j.parent, []).append(j)
+    moves: dict[str, bool] = {}
+
+    def leads_to_motion(j: Joint) -> bool:
+        if j.kind is not JointKind.FIXED:
+            return True
+        if j.child not in moves:
+            moves[j.child] = any(leads_to_motion(c) for c in children.get(j.child, ()))
+        return moves[j.child]
+
+    return {link: sum(map(leads_to_motion, kids)) for link, kids in children.items()}
+
+
+def _still_links(path: list[str], joint_into: dict[str, Joint]) -> set[str]:
+    """The links of ``path`` (effector to root) that no joint moves: the root and the
+    links below it hung by fixed joints only (the spine and chest of a session whose
+    ``moving`` is an arm)."""
+    still: set[str] = set()
+    for link in reversed(path):
+        joint = joint_into.get(link)
+        if joint is not None and (joint.kind is not JointKind.FIXED or joint.parent not in still):
+            break
+        still.add(link)
+    return still
+
+
+def _origin_moves(joint: Joint, still: set[str]) -> bool:
+    """Whether a solve can move the origin of ``joint``'s child: not when the joint
+    turns it about that origin from a still link (the shoulder of an arm-only session)."""
+    return joint.parent not in still or joint.kind is JointKind.PRISMATIC
+
+
 def pole_node(chain: Chain, effector: int, link: str | None) -> int:
     """The node whose origin the pole pulls: ``link``'s, or the default link's.
 
     Raises:
         InvalidProblem: a link not on the effector's path to the root, the root
-            (it cannot move), or no default for this effector.
+            (it cannot move), a link whose origin no moving joint moves (a pole on it
+            would do nothing), or no default for this effector.
     """
     name = chain.effectors[effector].name
     if link is None:
         link = default_pole_link(chain, effector)
         if link is None:
-            raise InvalidProblem(f"pole for {name!r}: the limb has no middle link; name one")
+            raise InvalidProblem(
+                f"pole for {name!r}: the limb has no middle link that its moving joints "
+                "carry; name one"
+            )
     path = limb_path(chain, effector)
     if link not in path:
         near = ", ".join(repr(p) for p in path[:-1][:8])
@@ -133,6 +193,15 @@ def pole_node(chain: Chain, effector: int, link: str | None) -> int:
     node = chain.compiled.link_node[link]
     if node < 0:
         raise InvalidProblem(f"pole for {name!r}: the root link {link!r} cannot bend")
+    joint_into = {j.child: j for j in chain.joints}
+    still = _still_links(path, joint_into)
+    if not _origin_moves(joint_into[link], still):
+        carried = ", ".join(repr(p) for p in path[:-1] if _origin_moves(joint_into[p], still))
+        hint = f" (links whose origin moves: {carried})" if carried else ""
+        raise InvalidProblem(
+            f"pole for {name!r}: no moving joint carries link {link!r}, so a pole on it "
+            f"cannot bend the limb{hint}"
+        )
     return node
 
 

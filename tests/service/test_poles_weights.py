@@ -269,10 +269,14 @@ def test_engines_page_pole_example(client: TestClient) -> None:
     assert (knee - (knee @ axis) * axis) @ towards > 0.0
 
 
-def test_a_lone_hand_s_default_pole_misses_an_arm_only_session(client: TestClient) -> None:
-    """docs/engines.md, "Poles": the default pulled bone counts effectors, not `moving`:
-    a lone hand's is the spine, which an arm-only session never moves, so the pole does
-    nothing; naming the elbow picks the side. (A game-dev trial's first pole.)"""
+def test_a_lone_hand_s_default_pole_is_its_elbow_in_an_arm_only_session(
+    client: TestClient,
+) -> None:
+    """docs/engines.md, "Poles": a lone hand's default pulled bone is its elbow, the
+    middle of the arm below the chest (the skeleton's branch, and here the last bone
+    nothing moves): the pole picks the bend side as naming the elbow does. It was the
+    spine, which an arm-only session never moves, so the pole did nothing (a game-dev
+    trial's first pole). A bone no moving joint carries is refused, naming the field."""
     chain = {
         "format": "gltf",
         "glb_base64": base64.b64encode(asset_bytes("CesiumMan.glb")).decode(),
@@ -297,5 +301,36 @@ def test_a_lone_hand_s_default_pole_misses_an_arm_only_session(client: TestClien
         return float(off[1])  # up (+) or down (-) of the shoulder-hand line
 
     assert np.sign(elbow_side(+1, "node_17")) == 1 and np.sign(elbow_side(-1, "node_17")) == -1
-    # The default: the elbow bends the same way whichever side the pole is on.
-    assert np.sign(elbow_side(+1, None)) == np.sign(elbow_side(-1, None))
+    assert np.sign(elbow_side(+1, None)) == 1 and np.sign(elbow_side(-1, None)) == -1
+    s = create(client, chain)
+    for still in ("node_11", "node_16"):  # the spine; the shoulder (turned about itself)
+        pole = {"position": vec(target), "bone": still}
+        frame = {"targets": [{"effector": "hand", "position": vec(target), "pole": pole}]}
+        r = client.post(f"/v1/sessions/{s.id}/frames", headers=s.headers, json=frame)
+        assert r.status_code == 422, r.text
+        error = r.json()
+        assert error["code"] == "invalid_problem"
+        assert error["field"] == "targets[0].pole.bone"
+        assert "no moving joint carries" in error["detail"] and "'node_17'" in error["detail"]
+
+
+def test_a_pole_with_no_default_bone_names_its_field(client: TestClient) -> None:
+    """A foot in an arm-only session: nothing on its limb moves, so a pole without
+    ``bone`` has nothing to pull; it is refused naming ``targets[0].pole`` over HTTP and
+    the WebSocket alike (the solver's error said no field)."""
+    chain = {
+        "format": "gltf",
+        "glb_base64": base64.b64encode(asset_bytes("CesiumMan.glb")).decode(),
+        "moving": ["node_16", "node_17", "node_18"],
+        "effectors": [{"bone": "node_18", "name": "hand"}, {"bone": "node_5", "name": "foot"}],
+    }
+    s = create(client, chain)
+    pole = {"position": vec(np.array([0.0, 0.5, 0.3]))}
+    target = {"effector": "foot", "position": vec(np.array([0.1, 0.1, 0.0])), "pole": pole}
+    r = client.post(f"/v1/sessions/{s.id}/frames", headers=s.headers, json={"targets": [target]})
+    assert r.status_code == 422, r.text
+    assert r.json()["field"] == "targets[0].pole" and "name one in pole.bone" in r.json()["detail"]
+    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        ws.send_json({"type": "frame", "id": 1, "targets": [target]})
+        answer = ws.receive_json()
+    assert answer["error"]["field"] == "targets[0].pole", answer

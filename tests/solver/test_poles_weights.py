@@ -24,7 +24,7 @@ from solver.ik import (
     pole_node,
 )
 from solver.ik.poles import PoleShaper
-from solver.model import Chain, Effector, EffectorMode
+from solver.model import Chain, Effector, EffectorMode, Joint, JointKind, build_chain, examples
 from solver.model.forward import effector_poses, link_poses
 from solver.model.gltf import read_gltf
 from solver.model.skeleton import SkeletonSettings, chain_from_skeleton
@@ -77,6 +77,56 @@ def knee_side(chain: Chain, q: np.ndarray, across: np.ndarray) -> float:
 def test_default_pole_bone_is_the_knee(legs: Chain) -> None:
     assert default_pole_link(legs, 0) == KNEE
     assert pole_node(legs, 0, None) == legs.compiled.link_node[KNEE]
+
+
+# CesiumMan's left arm: chest 12, shoulder 16, elbow 17, hand 18; spine 11, hips 2; the
+# left leg's hip 7, knee 8, ankle 9.
+ARM = ("node_16", "node_17", "node_18")
+
+
+@pytest.mark.parametrize(
+    ("effector_bones", "moving"),
+    [
+        (("node_18",), None),  # a lone hand: its limb stops at the chest's branch
+        (("node_18", "node_9"), None),  # a hand and a foot share only the hips
+        (("node_18", "node_14"), None),  # both hands: the chest is shared
+        (("node_18",), ARM),  # an arm-only session: nothing above the shoulder moves
+    ],
+)
+def test_a_hand_s_default_pole_bone_is_its_elbow(
+    effector_bones: tuple[str, ...], moving: tuple[str, ...] | None
+) -> None:
+    """Whatever the other effectors and ``moving``: it was the lower spine for a lone
+    hand, the shoulder for a hand beside a foot, the spine in an arm-only session."""
+    skeleton = read_gltf(asset_bytes("CesiumMan.glb"))
+    effectors = [Effector(name=f"e{i}", link=b) for i, b in enumerate(effector_bones)]
+    settings = SkeletonSettings(effectors=effectors, moving=moving)
+    chain = chain_from_skeleton(skeleton, settings).chain
+    assert default_pole_link(chain, 0) == "node_17"
+    if "node_9" in effector_bones:
+        assert default_pole_link(chain, 1) == "node_8"  # and the foot's is its knee
+
+
+def test_a_pole_on_a_bone_nothing_moves_is_refused_with_the_bones_that_move() -> None:
+    skeleton = read_gltf(asset_bytes("CesiumMan.glb"))
+    settings = SkeletonSettings(effectors=[Effector(name="hand", link="node_18")], moving=ARM)
+    chain = chain_from_skeleton(skeleton, settings).chain
+    for still in ("node_11", "node_12", "node_16"):  # spine, chest; shoulder turned in place
+        with pytest.raises(InvalidProblem, match="no moving joint carries") as info:
+            pole_node(chain, 0, still)
+        assert "(links whose origin moves: 'node_18', 'node_17')" in str(info.value)
+    assert pole_node(chain, 0, "node_17") == chain.compiled.link_node["node_17"]
+
+
+def test_a_fixed_frame_on_the_forearm_is_not_a_branch_of_the_arm() -> None:
+    """A sensor or attachment frame hung by a fixed joint (a URDF's camera link) does not
+    end the limb: the default stays the arm's middle, not a bone below the attachment."""
+    arm = examples.EXAMPLES["humanoid_arm"]()
+    forearm = next(j for j in arm.joints if j.child == "forearm")
+    camera = Joint(name="camera_mount", parent="forearm", child="camera", kind=JointKind.FIXED,
+                   origin=forearm.origin)  # fmt: skip
+    with_camera = build_chain([*arm.joints, camera], list(arm.effectors))
+    assert default_pole_link(arm, 0) == default_pole_link(with_camera, 0) == "forearm"
 
 
 def test_a_pole_flips_the_knee_to_its_side(legs: Chain) -> None:
