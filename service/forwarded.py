@@ -11,8 +11,9 @@ could pick its address per request.
 
 The list is checked at start, stricter than uvicorn (which takes an entry it cannot
 read as a literal that never matches, without a word), and ``*`` is refused: uvicorn
-then takes the header's first entry, which the client writes (HAProxy and nginx append
-the address they saw after whatever the client sent).
+then takes the header's first entry, which the client writes (HAProxy's ``option
+forwardfor`` and nginx's ``$proxy_add_x_forwarded_for`` append the address they saw
+after whatever the client sent; deploy/haproxy.cfg drops the client's header first).
 """
 
 from __future__ import annotations

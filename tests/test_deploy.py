@@ -70,11 +70,14 @@ def test_k8s_workers_use_redis_and_the_health_routes() -> None:
 
 
 def test_the_workers_believe_the_balancer_s_forwarded_for() -> None:
-    """HAProxy names the client (``option forwardfor``); the workers behind it believe
+    """HAProxy names the client (``option forwardfor``), in place of any header the
+    client sent (tests/live/test_forwarded.py shows why); the workers behind it believe
     that header from a list they can start with, so that per-address limits and logs see
     each client rather than one balancer (and need not be switched off)."""
     cfg = (ROOT / "deploy/haproxy.cfg").read_text()
     assert "\n    option forwardfor\n" in cfg
+    frontend = cfg.split("\nfrontend ik\n")[1].split("\n\n")[0]
+    assert "\n    http-request del-header X-Forwarded-For\n" in frontend
     (container,) = _k8s_worker_pod()["containers"]
     k8s = {e["name"]: e["value"] for e in container["env"]}
     for env in (_compose()["services"]["service"]["environment"], k8s):

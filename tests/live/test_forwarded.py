@@ -120,25 +120,33 @@ def test_a_trusted_proxy_is_not_held_to_the_connection_cap(proxied: Server) -> N
 
 @pytest.fixture(scope="module")
 def balancer(proxied: Server) -> Iterator[Balancer]:
-    missing = missing_programs()
-    if "haproxy" in missing:
-        if os.environ.get("CI") == "true":
-            pytest.fail("haproxy not installed; CI=true, so this is a failure", pytrace=False)
-        pytest.skip("haproxy not installed (.ci/run installs it)")
-    lb = Balancer([proxied.port])
+    lb = _ready_balancer(proxied)
     try:
-        deadline = time.monotonic() + 10  # its first health check marks the worker up
-        while httpx.get(f"{lb.base}/readyz", timeout=TIMEOUT_S).status_code != 200:
-            assert time.monotonic() < deadline, "the balancer never saw the worker ready"
-            time.sleep(0.1)
         yield lb
     finally:
         lb.stop()
 
 
+def _ready_balancer(worker: Server) -> Balancer:
+    """HAProxy with deploy/haproxy.cfg in front of ``worker``, once it sees it ready."""
+    missing = missing_programs()
+    if "haproxy" in missing:
+        if os.environ.get("CI") == "true":
+            pytest.fail("haproxy not installed; CI=true, so this is a failure", pytrace=False)
+        pytest.skip("haproxy not installed (.ci/run installs it)")
+    lb = Balancer([worker.port])
+    deadline = time.monotonic() + 10  # its first health check marks the worker up
+    while httpx.get(f"{lb.base}/readyz", timeout=TIMEOUT_S).status_code != 200:
+        if time.monotonic() > deadline:
+            lb.stop()
+            raise AssertionError("the balancer never saw the worker ready")
+        time.sleep(0.1)
+    return lb
+
+
 def test_through_haproxy_each_client_has_its_own_limit(proxied: Server, balancer: Balancer) -> None:
-    # Both clients write the same address in a header of their own: HAProxy appends
-    # the address it saw, and the worker takes that one.
+    # Both clients write the same address in a header of their own: HAProxy drops it
+    # and writes the address it saw, and the worker takes that one.
     for address in ("127.0.0.3", "127.0.0.4"):
         with _from(address) as client:
             assert _creates(client, balancer.base, "192.0.2.1", LIMIT + 1) == [201] * LIMIT + [429]
@@ -159,3 +167,34 @@ def test_through_haproxy_a_websocket_sees_its_client(proxied: Server, balancer: 
     with connect(url, sock=sock, additional_headers={"Authorization": f"Bearer {token}"}):
         pass
     assert _logged(proxied, f'127.0.0.5:0 - "WebSocket /v1/sessions/{sid}/ws" [accepted]')
+
+
+@pytest.fixture(scope="module")
+def wide_list_balancer(start_server: Callable[..., Server]) -> Iterator[tuple[Server, Balancer]]:
+    """A list wider than the proxy, as docker-compose.yml's private networks are: the
+    clients (127.0.0.7, 127.0.0.8) are inside it too, as a LAN client or Docker's
+    gateway is inside 10/8, 172.16/12, 192.168/16."""
+    wide = start_server(
+        IK_FORWARDED_ALLOW_IPS="127.0.0.0/8", IK_SESSIONS_PER_ADDRESS_PER_MIN=str(LIMIT)
+    )
+    lb = _ready_balancer(wide)
+    try:
+        yield wide, lb
+    finally:
+        lb.stop()
+        wide.stop()
+
+
+def test_through_haproxy_a_client_in_the_list_cannot_pick_its_address(
+    wide_list_balancer: tuple[Server, Balancer],
+) -> None:
+    """uvicorn takes the rightmost entry not in the list: had HAProxy appended its
+    entry after the client's, a client inside the list would be passed over and the
+    address it wrote believed, a new one per request."""
+    wide, lb = wide_list_balancer
+    for address in ("127.0.0.7", "127.0.0.8"):
+        with _from(address) as client:
+            codes = [_creates(client, lb.base, f"198.51.100.{i}", 1)[0] for i in range(LIMIT + 1)]
+        assert codes == [201] * LIMIT + [429]
+        assert _logged(wide, f'{address}:0 - "POST /v1/sessions HTTP/1.1" 201')
+    assert "198.51.100." not in wide.log()
