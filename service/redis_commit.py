@@ -93,7 +93,7 @@ class GroupCommit:
     ) -> None:
         self._client = client
         self._script = script
-        self._failures = failures or FailureLog()  # told when Redis answers
+        self._failures = failures or FailureLog()  # told when a commit succeeds
         self._sha: str | None = None
         self._pending: list[tuple[list[str], list[Any], asyncio.Future[Any]]] = []
         self._flushing = False
@@ -113,7 +113,11 @@ class GroupCommit:
         if any(isinstance(r, NoScriptError) for r in results):
             self._sha = None  # Redis restarted: load it, run the batch again
             results = await self._execute(batch)
-        self._failures.answered()
+        # Only a batch stored whole is Redis answering again: with raise_on_error=False
+        # a refusal (OOM at maxmemory, READONLY, MISCONF) is a result, not a raise, and
+        # each refused frame would end the outage in the log and restart its throttle.
+        if not any(isinstance(r, Exception) for r in results):
+            self._failures.answered()
         return results
 
     async def _execute(self, batch: list[tuple[list[str], list[Any], Any]]) -> list[Any]:
@@ -208,10 +212,11 @@ class FailureLog:
         self.last[cause] = now
 
     def answered(self) -> None:
-        """Redis answered a call. After failures, one line: Redis is back, for how long
-        requests failed, and how many were not logged since the last warning. The next
-        outage's first failure is logged at once. Called at every answer: one test when
-        nothing failed."""
+        """Redis stored a commit (not merely answered: a refusal is an answer, and
+        PING answers while writes are refused). After failures, one line: Redis is
+        back, for how long requests failed, and how many were not logged since the last
+        warning. The next outage's first failure is logged at once. Called after every
+        batch stored whole: one test when nothing failed."""
         if self.failing_since is None:
             return
         failed_s = self.clock() - self.failing_since
@@ -231,12 +236,13 @@ class ReadinessProbe:
     """``/readyz``'s check of Redis: a PING; when it fails, ``store_unavailable`` whose
     detail is the operator's cause (``redis_cause``), logged when the cause changes
     (a refusal at ERROR: it needs a fix), not at every probe, with where the worker
-    tried; and once when Redis answers again."""
+    tried; and once when Redis answers again. A PING that answers does not end the
+    requests' failures (``FailureLog``): Redis answers it while it refuses writes (out
+    of memory at maxmemory, a read-only replica)."""
 
-    def __init__(self, client: aioredis.Redis, failures: FailureLog | None = None) -> None:
+    def __init__(self, client: aioredis.Redis) -> None:
         self.client = client
         self.last_cause: str | None = None
-        self._failures = failures or FailureLog()  # told when Redis answers
 
     async def check(self) -> None:
         try:
@@ -250,7 +256,6 @@ class ReadinessProbe:
                 log.log(level, "not ready: %s (at %s%s)", cause, where(self.client), detail)
             self.last_cause = cause
             raise store_unavailable(detail=cause) from None
-        self._failures.answered()
         if self.last_cause is not None:
             log.info("ready: Redis at %s answers again", where(self.client))
         self.last_cause = None

@@ -128,7 +128,7 @@ class RedisSessionStore(SessionStore):
         # Written behind (IK_REDIS_WRITE_BEHIND_MS > 0): None when written through.
         self.behind = WriteBehind(write_behind_s, self._write_behind) if write_behind_s else None
         self._count = 0
-        self._probe = redis_commit.ReadinessProbe(client, self._failures)
+        self._probe = redis_commit.ReadinessProbe(client)
 
     def __len__(self) -> int:
         """Sessions in Redis (every worker's) at this worker's last sweep, give or take

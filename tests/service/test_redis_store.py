@@ -506,6 +506,44 @@ def test_frames_failed_in_an_outage_are_summed_up_when_redis_answers_again(
     assert lines.index(back[0]) > lines.index(failed[0])
 
 
+def test_commits_redis_refuses_are_failures_not_its_recovery(
+    make_client: Callable[..., TestClient], caplog: pytest.LogCaptureFixture
+) -> None:
+    """Redis out of memory (maxmemory, noeviction) refuses every write with an error
+    reply in the pipeline's results (READONLY, MISCONF the same) while it still answers
+    PING and reads: each refused frame is a failure, one WARNING for them all, and
+    neither a frame's reply nor /readyz's PING is Redis answering again. The line comes
+    with the first frame stored."""
+    server = RedisServer()
+    try:
+        client = make_client(Settings(redis_url=SecretStr(server.url), redis_timeout_s=0.5))
+        s = create(client)
+        url = f"/v1/sessions/{s.id}/frames"
+        control = redis.Redis.from_url(server.url)
+        with caplog.at_level(logging.INFO, logger="service"):
+            control.config_set("maxmemory", "1")
+            try:
+                for i in range(6):
+                    r = client.post(url, json=hand_frame(i), headers=s.headers)
+                    assert r.status_code == 503, r.text
+                    assert client.get("/readyz").status_code == 200
+                during = [r.getMessage() for r in caplog.records if r.name == "service"]
+            finally:
+                control.config_set("maxmemory", "0")
+            r = client.post(url, json=hand_frame(6), headers=s.headers)
+            assert r.status_code == 200, r.text
+        control.close()
+    finally:
+        server.stop()
+    assert [m for m in during if not m.startswith("a request failed")] == [], during
+    (failed,) = during  # one WARNING for the six frames
+    assert "OutOfMemoryError" in failed, failed
+    lines = [r.getMessage() for r in caplog.records if r.name == "service"]
+    (back,) = lines[1:]
+    assert back.startswith("Redis answers again (requests failed for "), lines
+    assert back.endswith("); 5 failed request(s) not logged since the last warning"), lines
+
+
 def test_readyz_says_a_database_number_redis_lacks_and_a_port_nobody_serves(
     make_client: Callable[..., TestClient], redis_url: str
 ) -> None:
