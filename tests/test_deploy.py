@@ -86,6 +86,34 @@ def test_the_workers_believe_the_balancer_s_forwarded_for() -> None:
         assert "IK_MAX_CONNECTIONS_PER_ADDRESS" not in env
 
 
+def test_k8s_admits_only_the_ingress_controller_to_the_workers_port() -> None:
+    """The workers believe X-Forwarded-For from the private networks, which hold every
+    pod, and spare those peers the per-address connection cap: a NetworkPolicy on the
+    workers' own labels admits only the ingress controller's namespace, and only to the
+    port the Service sends to (a policy whose selector missed the pods would isolate
+    nothing; one on another port would shut the ingress out)."""
+    by_kind = {(d["kind"], d["metadata"]["name"]): d for d in _k8s()}
+    deployment = by_kind[("Deployment", "ik")]
+    labels = deployment["spec"]["selector"]["matchLabels"]
+    assert labels.items() <= deployment["spec"]["template"]["metadata"]["labels"].items()
+    policies = [d for d in _k8s() if d["kind"] == "NetworkPolicy"]
+    (policy,) = [p for p in policies if p["spec"]["podSelector"]["matchLabels"] == labels]
+    assert policy["spec"]["policyTypes"] == ["Ingress"]
+    (rule,) = policy["spec"]["ingress"]
+    assert rule["from"] == [
+        {"namespaceSelector": {"matchLabels": {"kubernetes.io/metadata.name": "ingress-nginx"}}}
+    ]
+    (container,) = _k8s_worker_pod()["containers"]
+    (served,) = by_kind[("Service", "ik")]["spec"]["ports"]
+    (port,) = container["ports"]
+    assert served["targetPort"] in (port["name"], port["containerPort"])
+    assert [(p["protocol"], p["port"]) for p in rule["ports"]] in (
+        [("TCP", port["name"])],
+        [("TCP", port["containerPort"])],
+    )
+    assert policy["metadata"].get("namespace") == deployment["metadata"].get("namespace")
+
+
 def test_k8s_memory_limit_lets_a_cold_start_compile() -> None:
     """A pod that must compile the solver (an image without its cache) is not killed
     for memory on every start: a crash loop no log line explains."""
