@@ -86,8 +86,13 @@ def _uvicorn_kwargs() -> dict[str, Any]:
     from service.config import get_settings
 
     s = get_settings()
+    proxies = s.trusted_proxies()
     return {
         "ws": "websockets-sansio",
+        # X-Forwarded-For believed from IK_FORWARDED_ALLOW_IPS only (service/forwarded.py):
+        # uvicorn's default believes 127.0.0.1's, which every load client here is.
+        "proxy_headers": bool(proxies),
+        "forwarded_allow_ips": proxies.as_list(),
         "ws_max_size": s.ws_max_message_bytes,
         "ws_per_message_deflate": s.ws_compression,
         "timeout_graceful_shutdown": s.graceful_shutdown_s,
