@@ -23,7 +23,6 @@ Settings come from the same ``IK_*`` variables as ``python -m service`` (``IK_PO
 from __future__ import annotations
 
 import argparse
-import logging
 import os
 import signal
 import socket
@@ -82,8 +81,11 @@ APPS = {"service": service_app, "floors": floors_app}
 
 
 def _uvicorn_kwargs() -> dict[str, Any]:
-    """The uvicorn settings ``python -m service`` uses, from the same IK_* variables."""
+    """The uvicorn settings ``python -m service`` uses, from the same IK_* variables;
+    its logging too, which uvicorn applies in each process it runs (``--balance
+    shared``'s workers never run ``main``)."""
     from service.config import get_settings
+    from service.log_format import log_config
 
     s = get_settings()
     proxies = s.trusted_proxies()
@@ -97,7 +99,7 @@ def _uvicorn_kwargs() -> dict[str, Any]:
         "ws_per_message_deflate": s.ws_compression,
         "timeout_graceful_shutdown": s.graceful_shutdown_s,
         "log_level": s.log_level,
-        "log_config": None,
+        "log_config": log_config(s.log_level),
     }
 
 
@@ -112,7 +114,8 @@ def _reuseport_socket(host: str, port: int) -> socket.socket:
 def run_child(app: str, host: str, port: int) -> None:
     """One worker: its own SO_REUSEPORT socket, one uvicorn server."""
     sock = _reuseport_socket(host, port)
-    config = uvicorn.Config(APPS[app](), **_uvicorn_kwargs())
+    # The app is built by uvicorn (factory), after it has set up the logging.
+    config = uvicorn.Config(APPS[app], factory=True, **_uvicorn_kwargs())
     uvicorn.Server(config).run(sockets=[sock])
 
 
@@ -159,10 +162,6 @@ def main(argv: list[str] | None = None) -> int:
     host = a.host or os.environ.get("IK_HOST", "127.0.0.1")
     port = a.port if a.port is not None else int(os.environ.get("IK_PORT", "8000"))
     os.environ["IK_HOST"], os.environ["IK_PORT"] = host, str(port)
-    level = os.environ.get("IK_LOG_LEVEL", "info").upper()
-    from service.__main__ import log_handler  # the service's line format (time, pid)
-
-    logging.basicConfig(level=level, handlers=[log_handler()])
     if a.child:
         run_child(a.app, host, port)
         return 0

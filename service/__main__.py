@@ -10,11 +10,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import asyncio  # noqa: E402
 import contextlib  # noqa: E402
 import logging  # noqa: E402
-import re  # noqa: E402
+import logging.config  # noqa: E402
 import socket  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from collections.abc import Callable  # noqa: E402
 from typing import Any  # noqa: E402
 
 import uvicorn  # noqa: E402
@@ -28,77 +27,9 @@ from .config import (  # noqa: E402
     unknown_variables,
     usage,
 )
+from .log_format import log_config  # noqa: E402
 from .main import create_app  # noqa: E402
 from .peer_limits import PeerLimits, protocols  # noqa: E402
-
-_TOKEN = re.compile(r"(token=)[^&\s\"]+")
-
-
-class _RedactTokens(logging.Filter):
-    """uvicorn's access log prints query strings; WebSocket clients may put ?token= there."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        if isinstance(record.args, tuple):
-            record.args = tuple(
-                _TOKEN.sub(r"\1<redacted>", a) if isinstance(a, str) else a for a in record.args
-            )
-        record.msg = _TOKEN.sub(r"\1<redacted>", str(record.msg))
-        return True
-
-
-# Health checks a balancer or a kubelet sends every 0.5-10 s per worker.
-_PROBES = frozenset(("/healthz", "/readyz"))
-
-
-class QuietProbes(logging.Filter):
-    """Drops uvicorn's access-log line of a health check that passed: a balancer's
-    probes were most of an idle worker's log (925 /readyz lines in a few minutes). A
-    probe that fails (503 while compiling or without Redis) is logged when its status
-    changes, and then once per ``repeat_s`` at most: a first start's compile of several
-    minutes, probed every 0.5 s by two backends, once logged ~750 identical lines."""
-
-    def __init__(self, repeat_s: float = 30.0, clock: Callable[[], float] = time.monotonic):
-        super().__init__()
-        self.repeat_s = repeat_s
-        self.clock = clock
-        self._failed: dict[str, tuple[int, float]] = {}  # path -> (status, when logged)
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        args = record.args
-        # uvicorn.access: (client address, method, path, HTTP version, status code)
-        if isinstance(args, tuple) and len(args) == 5:
-            path, status_code = args[2], args[4]
-            if path in _PROBES and isinstance(status_code, int):
-                if status_code < 400:
-                    self._failed.pop(path, None)
-                    return False
-                now = self.clock()
-                last = self._failed.get(path)
-                if last is not None and last[0] == status_code and now - last[1] < self.repeat_s:
-                    return False
-                self._failed[path] = (status_code, now)
-        return True
-
-
-class UtcTimestamps(logging.Formatter):
-    """Each line's time in ISO-8601 UTC to the millisecond (2025-06-01T10:00:00.123Z):
-    the lines had none, and an operator reads several workers' logs side by side, across
-    machines and time zones."""
-
-    def formatTime(self, record: logging.LogRecord, datefmt: str | None = None) -> str:
-        when = time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(record.created))
-        return f"{when}.{int(record.msecs):03d}Z"
-
-
-# The time, the worker's pid (which of several on a machine), then uvicorn's level style;
-# uvicorn's own lines, its access log included, go through the same handler (log_config=None).
-LOG_FORMAT = "%(asctime)s [%(process)d] %(levelname)s:     %(message)s"
-
-
-def log_handler() -> logging.Handler:
-    handler = logging.StreamHandler()  # stderr, as before
-    handler.setFormatter(UtcTimestamps(LOG_FORMAT))
-    return handler
 
 
 class DrainingServer(uvicorn.Server):
@@ -149,10 +80,7 @@ def main() -> None:
         raise SystemExit(settings_errors(e) + also) from None
     if typos := misspelt_variables(os.environ):
         raise SystemExit("invalid configuration:\n  " + "\n  ".join(typos.values()) + also)
-    logging.basicConfig(level=settings.log_level.upper(), handlers=[log_handler()])
-    for name in ("uvicorn.access", "uvicorn.error"):
-        logging.getLogger(name).addFilter(_RedactTokens())
-    logging.getLogger("uvicorn.access").addFilter(QuietProbes())
+    logging.config.dictConfig(log_config(settings.log_level))
     for warning in unknown_variables(os.environ):
         logging.getLogger("service").warning(warning)
     host = f"[{settings.host}]" if ":" in settings.host else settings.host
@@ -194,7 +122,7 @@ def main() -> None:
         timeout_keep_alive=settings.keep_alive_s,
         timeout_graceful_shutdown=settings.graceful_shutdown_s,
         log_level=settings.log_level,
-        log_config=None,
+        log_config=None,  # applied above, before the first line (once: see log_config)
     )
     DrainingServer(config, app).run()
 

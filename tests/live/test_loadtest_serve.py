@@ -108,3 +108,24 @@ def test_forwarded_for_is_believed_from_the_listed_proxies_only(
     assert r.status_code == 404
     (line,) = _access_lines(s, "/no-such-page", 1)
     assert f"{client}:" in line, line
+
+
+def test_shared_workers_log_their_lines_with_time_and_pid(serve: Callable[..., Serve]) -> None:
+    """``--balance shared``: uvicorn starts the workers, which never run main(); each
+    still logs, in the service's format: its access lines under its own pid (the one
+    its ``x-worker`` header names) and the service's own lines."""
+    s = serve("--workers", "2", "--balance", "shared")
+    s.wait_ready(2)
+    pids = set()
+    for _ in range(12):  # fresh connections: a shared socket hands them to either
+        r = httpx.get(f"{s.base}/no-such-page", timeout=TIMEOUT_S)
+        assert r.status_code == 404
+        pids.add(int(r.headers["x-worker"]))
+    lines = _access_lines(s, "/no-such-page", 12)
+    stamped = [STAMP.match(ln) for ln in lines]
+    assert all(stamped), lines
+    assert {int(m.group(1)) for m in stamped if m} == pids
+    assert len(_access_lines(s, "/no-such-page", 12)) == 12  # each once
+    for pid in pids:  # the service's own lines (the solver's warm-up), each worker's
+        own = [ln for ln in s.log().splitlines() if f"[{pid}] INFO: " in ln and "solver" in ln]
+        assert own, s.log()

@@ -171,7 +171,7 @@ def test_openapi_documents_every_route(client: TestClient) -> None:
 def test_passed_health_checks_are_left_out_of_the_access_log() -> None:
     """uvicorn's access-log record (its args as uvicorn passes them): a balancer's
     passed probes are dropped, failed ones and every other request kept."""
-    from service.__main__ import QuietProbes
+    from service.log_format import QuietProbes
 
     def record(path: str, status: int) -> logging.LogRecord:
         args = ("127.0.0.1:5000", "GET", path, "1.1", status)
@@ -188,7 +188,7 @@ def test_passed_health_checks_are_left_out_of_the_access_log() -> None:
 
 def test_a_failing_probe_is_logged_when_it_changes_and_then_every_30_s() -> None:
     """A compile of minutes probed twice a second: not a line per probe."""
-    from service.__main__ import QuietProbes
+    from service.log_format import QuietProbes
 
     def record(path: str, status: int) -> logging.LogRecord:
         args = ("127.0.0.1:5000", "GET", path, "1.1", status)
