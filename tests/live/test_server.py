@@ -75,9 +75,13 @@ def test_logs_where_the_docs_are(server: Server) -> None:
     assert httpx.get(f"{server.base}/healthz", timeout=TIMEOUT_S).json() == {"status": "ok"}
 
 
-def test_log_lines_carry_the_utc_time_and_the_worker_s_pid(server: Server) -> None:
+def test_log_lines_carry_the_utc_time_and_the_worker_s_pid(
+    start_server: Callable[..., Server],
+) -> None:
     """Operators read several workers' logs side by side: each line, uvicorn's access
-    log included, starts with its ISO-8601 UTC time and the process id."""
+    log included, starts with its ISO-8601 UTC time and the process id. The server runs
+    in a zone 5:30 off UTC: where TZ is unset (UTC, as in CI) local time would pass."""
+    server = start_server(TZ="Asia/Kolkata")
     before = datetime.now(UTC) - timedelta(seconds=1)
     assert httpx.get(f"{server.base}/no-such-page", timeout=TIMEOUT_S).status_code == 404
     stamp = re.compile(r"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3})Z \[(\d+)\] (\w+): ")
@@ -95,6 +99,7 @@ def test_log_lines_carry_the_utc_time_and_the_worker_s_pid(server: Server) -> No
     when = datetime.fromisoformat(logged.group(1)).replace(tzinfo=UTC)
     assert before <= when <= datetime.now(UTC) + timedelta(seconds=1)  # UTC, not local
     assert all(stamp.match(ln) for ln in lines if ' - "' in ln), "an access line without one"
+    server.stop()
 
 
 def test_logs_how_the_solver_got_warm(server: Server) -> None:
