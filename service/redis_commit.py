@@ -21,6 +21,8 @@ from redis.exceptions import (
     AuthenticationError,
     BusyLoadingError,
     NoScriptError,
+    OutOfMemoryError,
+    ReadOnlyError,
     RedisError,
     ResponseError,
 )
@@ -166,11 +168,20 @@ def refuses(e: RedisError) -> bool:
     return isinstance(e, AuthenticationError | ResponseError)
 
 
+def refuses_writes(e: RedisError) -> bool:
+    """Redis refused a write for its own state, not this worker's credentials: out of
+    memory at maxmemory (OOM), a read-only replica (READONLY), a failed snapshot
+    (MISCONF, which redis-py leaves a plain ResponseError)."""
+    return isinstance(e, OutOfMemoryError | ReadOnlyError) or str(e).startswith("MISCONF")
+
+
 def redis_cause(e: RedisError) -> str:
     """Why Redis failed a call, in an operator's words, for ``/readyz`` (which the
     balancer may serve to anyone): a refusal with Redis's own reason; an outage by its
     kind only, since redis-py's message names the host and port (the log has it)."""
     name = type(e).__name__
+    if refuses_writes(e):  # a ResponseError too, but IK_REDIS_URL is not what to check
+        return f"Redis refuses writes ({name}: {e}): see Redis's own log and settings"
     if refuses(e):
         return (
             f"Redis refuses this worker ({name}: {e}): check the user, password and "

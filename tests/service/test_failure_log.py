@@ -6,7 +6,13 @@ from __future__ import annotations
 import logging
 
 import pytest
-from redis.exceptions import BusyLoadingError
+from redis.exceptions import (
+    AuthenticationError,
+    BusyLoadingError,
+    OutOfMemoryError,
+    ReadOnlyError,
+    ResponseError,
+)
 from redis.exceptions import ConnectionError as RedisConnectionError
 from redis.exceptions import TimeoutError as RedisTimeout
 
@@ -37,6 +43,26 @@ def test_redis_loading_its_data_is_said_so_not_unreachable() -> None:
     # An operator trial: Redis loading its append-only file read "cannot be reached".
     cause = redis_cause(BusyLoadingError("Redis is loading the dataset in memory"))
     assert cause.startswith("Redis is loading its data set into memory (BusyLoadingError)")
+
+
+@pytest.mark.parametrize(
+    "error",
+    [
+        OutOfMemoryError("command not allowed when used memory > 'maxmemory'."),
+        ReadOnlyError("You can't write against a read only replica."),
+        ResponseError("MISCONF Redis is configured to save RDB snapshots, but it is ..."),
+    ],
+)
+def test_redis_refusing_writes_is_not_said_to_be_the_worker_s_credentials(
+    error: ResponseError,
+) -> None:
+    # The refusals Redis answers a commit with for its own state: the hint of a wrong
+    # password or database number (an AuthenticationError's) sent operators astray.
+    cause = redis_cause(error)
+    assert cause.startswith(f"Redis refuses writes ({type(error).__name__}: {error})"), cause
+    assert "IK_REDIS_URL" not in cause
+    wrong = redis_cause(AuthenticationError("invalid username-password pair"))
+    assert "IK_REDIS_URL" in wrong
 
 
 def test_the_end_of_an_outage_is_one_line_with_the_failures_left_out(
