@@ -114,6 +114,26 @@ def test_k8s_admits_only_the_ingress_controller_to_the_workers_port() -> None:
     assert policy["metadata"].get("namespace") == deployment["metadata"].get("namespace")
 
 
+def test_k8s_admits_only_the_workers_to_redis() -> None:
+    """Redis holds every session and asks no password: a NetworkPolicy on its pods'
+    labels admits the workers' pods only, on the port it listens on."""
+    by_kind = {(d["kind"], d["metadata"]["name"]): d for d in _k8s()}
+    redis = by_kind[("Deployment", "ik-redis")]
+    labels = redis["spec"]["selector"]["matchLabels"]
+    assert labels.items() <= redis["spec"]["template"]["metadata"]["labels"].items()
+    policies = [d for d in _k8s() if d["kind"] == "NetworkPolicy"]
+    (policy,) = [p for p in policies if p["spec"]["podSelector"]["matchLabels"] == labels]
+    assert policy["spec"]["policyTypes"] == ["Ingress"]
+    (rule,) = policy["spec"]["ingress"]
+    workers = by_kind[("Deployment", "ik")]["spec"]["template"]["metadata"]["labels"]
+    (source,) = rule["from"]
+    assert source["podSelector"]["matchLabels"].items() <= workers.items()
+    assert set(source) == {"podSelector"}  # the workers' own namespace, no other
+    (container,) = redis["spec"]["template"]["spec"]["containers"]
+    (port,) = container["ports"]
+    assert rule["ports"] == [{"protocol": "TCP", "port": port["containerPort"]}]
+
+
 def test_k8s_memory_limit_lets_a_cold_start_compile() -> None:
     """A pod that must compile the solver (an image without its cache) is not killed
     for memory on every start: a crash loop no log line explains."""
