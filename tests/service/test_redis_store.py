@@ -544,6 +544,40 @@ def test_commits_redis_refuses_are_failures_not_its_recovery(
     assert back.endswith("); 5 failed request(s) not logged since the last warning"), lines
 
 
+def test_a_flush_redis_refuses_is_a_failure_written_behind(
+    make_client: Callable[..., TestClient], caplog: pytest.LogCaptureFixture
+) -> None:
+    """Written behind, a flush Redis refuses (out of memory) is a failure as a flush
+    Redis does not answer, and logged (once): it only marked its sessions for a reload,
+    and nothing said that the frames answered were not stored (a review of the
+    operator fixes). Redis still answers reads, so each next frame reloads the stored
+    state and is answered from it (docs/operations.md, "Written behind instead")."""
+    server = RedisServer()
+    try:
+        settings = Settings(redis_url=SecretStr(server.url), redis_write_behind_ms=10)
+        client = make_client(settings)
+        s = create(client)
+        url = f"/v1/sessions/{s.id}/frames"
+        control = redis.Redis.from_url(server.url)
+        statuses = []
+        with caplog.at_level(logging.WARNING, logger="service"):
+            control.config_set("maxmemory", "1")
+            try:
+                for i in range(8):
+                    r = client.post(url, json=hand_frame(i), headers=s.headers)
+                    statuses.append(r.status_code)
+                    time.sleep(0.05)  # the flush (every 10 ms) goes in between
+            finally:
+                control.config_set("maxmemory", "0")
+        control.close()
+    finally:
+        server.stop()
+    assert statuses == [200] * 8, statuses
+    warned = [r.getMessage() for r in caplog.records if r.name == "service"]
+    (line,) = warned  # once for the eight flushes refused
+    assert line.startswith("a request failed: Redis refuses writes (OutOfMemoryError"), line
+
+
 def test_readyz_says_a_database_number_redis_lacks_and_a_port_nobody_serves(
     make_client: Callable[..., TestClient], redis_url: str
 ) -> None:
