@@ -68,6 +68,15 @@ class SkeletonSettings:
 
 
 def default_limits(axes: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """The default ball joint's limits [rad] for these axes (see ``skeleton``'s decisions)."""
-    half = tuple(math.pi / 2 if len(axes) == 3 and i == 1 else math.pi for i in range(len(axes)))
-    return tuple(-h for h in half), half
+    """The default ball joint's limits [rad] for these axes (see ``skeleton``'s decisions):
+    every axis +-pi.
+
+    Not the Tait-Bryan box (the middle angle of three within +-pi/2): its bound on the
+    middle angle lies on the gimbal lock, where the two other axes line up, and is no
+    limit of the joint's rotations (just past it, the same rotations continue with the
+    other two angles turned by pi). A stream that drove a middle angle to that bound
+    stalled there under ``smooth``, up to 8 cm off for up to 1.6 s, on circles a hand of
+    walk.bvh or CesiumMan reaches without any large step once the bound is +-pi
+    (bench/history/2026-11-29-bvh-euler-wall.md).
+    """
+    return tuple(-math.pi for _ in axes), tuple(math.pi for _ in axes)
