@@ -299,8 +299,9 @@ async def _commit(
 ) -> None:
     """Commit one session's solved entries (``store.commit``, as for frames sent alone).
     When another worker committed the session first, it has been reloaded: its entries
-    are solved again from there (on the loop: a rare case), up to ``STALE_RETRIES``
-    times; a store error becomes each solved entry's own error."""
+    get the answers stored for them if that worker answered the same entries (a batch
+    sent again), else are solved again from there (on the loop: a rare case), up to
+    ``STALE_RETRIES`` times; a store error becomes each solved entry's own error."""
     session = group[0][1].session
     for _ in range(STALE_RETRIES):
         solved = [(k, e) for k, e in group if isinstance(outcomes[k], convert.SolvedFrame)]
@@ -313,6 +314,15 @@ async def _commit(
         except StaleSession:
             if session.closed:
                 break
+            # Reloaded: the entries may be a batch sent again whose answers another
+            # worker stored after this worker's copy was taken (a client resending
+            # through a balancer); they get those answers, as frames sent alone do
+            # (solving._solve_and_commit), not a second solve that moves the pose again.
+            stored = store.stored_answer(session, _jobs(group))
+            if stored is not None and len(stored) == len(group):
+                for (k, _), frame in zip(group, stored, strict=True):
+                    outcomes[k] = frame
+                return
             again = _solve_entries([e for _, e in group], t0, record, transport)
             for (k, _), outcome in zip(group, again, strict=True):
                 outcomes[k] = outcome

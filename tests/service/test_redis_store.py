@@ -175,6 +175,31 @@ def test_a_batch_is_stored_and_a_resent_batch_gets_its_stored_answers(workers: W
     assert _in_redis(workers, s1)["counters"]["frames"] == 2
 
 
+def test_a_batch_resent_to_a_worker_holding_an_older_copy_gets_its_stored_answers(
+    workers: Workers,
+) -> None:
+    """A batch answered by worker A whose answer was lost, sent again through a balancer
+    to worker B, which holds the session from an earlier frame: B's commit is refused, it
+    reloads the session and finds the stored answers, as a frame sent alone does; solving
+    again from the reloaded pose would have moved the pose twice and counted the frames
+    twice."""
+    a, b = workers()
+    s1, s2 = create(a), create(a)
+    _batch(b, [_entry(s1, 1, 0.1), _entry(s2, 1, 0.1)])  # worker B holds both at frame 1
+    sent = [_entry(s1, 2, 0.13), _entry(s2, 2, 0.13), _entry(s1, 3, 0.16)]
+    first = _batch(a, sent)  # answered by A, the answer lost on the way
+    again = _batch(b, sent)
+    assert [r["result"] for r in again] == [r["result"] for r in first]
+    stored = _in_redis(workers, s1)
+    assert stored["counters"]["frames"] == 3
+    assert stored["pose"]["q"] == pytest.approx(first[2]["result"]["q"])
+    # The frame path does the same (what the batch path is held to).
+    frame = hand_frame(4, y=0.19)
+    r = a.post(f"/v1/sessions/{s2.id}/frames", json=frame, headers=s2.headers)
+    r_again = b.post(f"/v1/sessions/{s2.id}/frames", json=frame, headers=s2.headers)
+    assert r_again.json()["results"] == r.json()["results"]
+
+
 def test_a_batch_racing_another_worker_is_solved_again_from_its_frame(workers: Workers) -> None:
     a, b = workers()
     s = create(a)
