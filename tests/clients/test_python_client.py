@@ -415,6 +415,63 @@ def test_stream_error_answer_then_next_frame(
         assert result.id == 2 and result.joints is None  # compact
 
 
+@pytest.fixture
+def nobody_listens() -> str:
+    """The URL of a port on 127.0.0.1 nothing listens on (bound, then closed)."""
+    with socket.create_server(("127.0.0.1", 0)) as probe:
+        port = probe.getsockname()[1]
+    return f"http://127.0.0.1:{port}"
+
+
+def _answer_upgrades_with_502() -> tuple[str, socket.socket]:
+    """A server that answers every request, the WebSocket upgrade too, with a 502 (a
+    balancer without a live worker)."""
+    listener = socket.create_server(("127.0.0.1", 0))
+
+    def serve() -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = listener.accept()
+                with conn:
+                    conn.recv(65536)
+                    conn.sendall(b"HTTP/1.1 502 Bad Gateway\r\nContent-Length: 0\r\n\r\n")
+
+    threading.Thread(target=serve, daemon=True).start()
+    return f"http://127.0.0.1:{listener.getsockname()[1]}", listener
+
+
+def test_a_stream_that_cannot_open_raises_connection_lost(nobody_listens: str) -> None:
+    """Opening a stream to a server that is down (restarting) or behind a balancer that
+    refuses the upgrade raises a ``StreamClosed`` (``ConnectionLost``, an
+    ``IKClientError``) with the transport's error as its cause, as every other stream
+    failure is, not websockets' or the OS's own exception (which a game server catching
+    ``IKClientError`` to recreate its stream did not catch)."""
+    fake = dataclasses.make_dataclass("Ref", ["id", "token"])("some-session", "t")
+    with Client(nobody_listens) as ik, pytest.raises(ConnectionLost) as refused:
+        with ik.stream(fake):
+            pass
+    assert refused.value.close_code == 1006
+    assert isinstance(refused.value.__cause__, OSError)
+    assert "could not open" in str(refused.value)
+
+    base, listener = _answer_upgrades_with_502()
+    try:
+        with Client(base) as ik, pytest.raises(ConnectionLost) as bad_gateway:
+            with ik.stream(fake):
+                pass
+        assert "502" in str(bad_gateway.value.__cause__)
+
+        async def open_async(url: str) -> None:
+            async with AsyncClient(url) as aik, aik.stream(fake):
+                pass
+
+        for url in (nobody_listens, base):
+            with pytest.raises(ConnectionLost):
+                asyncio.run(open_async(url))
+    finally:
+        listener.close()
+
+
 def test_stream_close_codes(ik: Client, session: Session) -> None:
     stranger = dataclasses.replace(session, token="not-the-token")
     with ik.stream(stranger) as stream, pytest.raises(StreamAuthError) as auth:

@@ -176,7 +176,9 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
         (``AsyncStream``). The server accepts the handshake and then closes a socket
         whose token or session is wrong (4401, 4403, 4404): the first message raises it
         (``StreamAuthError``, ``SessionGone``), not the opening; ``stream.ping()``
-        checks at once.
+        checks at once. An opening that cannot connect at all (the server down or
+        restarting, a balancer refusing the upgrade) raises ``ConnectionLost`` at once,
+        not retried.
 
         Args:
             session: The session (or anything with ``id`` and ``token``).

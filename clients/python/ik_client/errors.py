@@ -288,7 +288,8 @@ class TooManyWebSockets(StreamClosed):
 
 class ConnectionLost(StreamClosed):
     """The connection dropped, or the server failed; raised only when reconnecting did
-    not succeed."""
+    not succeed. Also what opening a stream raises when no connection can be made (a
+    server down or restarting, a refused handshake), the transport's error its cause."""
 
     close_codes = frozenset({CloseCode.ABNORMAL, CloseCode.INTERNAL_ERROR})
 

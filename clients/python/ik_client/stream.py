@@ -40,6 +40,8 @@ from websockets.sync.client import connect as sync_connect
 
 from .errors import (
     RECONNECTABLE,
+    CloseCode,
+    ConnectionLost,
     EncodeError,
     IKClientError,
     UnexpectedAnswer,
@@ -345,6 +347,17 @@ def _fk(
     return body
 
 
+def _open_failed(url: str, exc: Exception) -> ConnectionLost:
+    """The first connection could not be opened (nothing listens, the handshake was
+    refused, e.g. a balancer's 502, or no answer in ``OPEN_TIMEOUT_S``): a
+    ``ConnectionLost`` (1006), so that a caller catches every stream failure as an
+    ``IKClientError``; the transport's error is its cause. Not retried: a reconnect
+    resends what a connection that was open left unanswered, and nothing was sent yet."""
+    lost = ConnectionLost(CloseCode.ABNORMAL)
+    lost.args = (f"could not open the WebSocket {url} ({type(exc).__name__}: {exc})",)
+    return lost
+
+
 def _close_of(exc: ConnectionClosed) -> tuple[int, str]:
     """The close code and reason the server sent; 1006 when none came."""
     if exc.rcvd is not None:
@@ -508,7 +521,10 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         return asyncio.Lock()
 
     async def __aenter__(self) -> AsyncStream:
-        self._connection = await self._open()
+        try:
+            self._connection = await self._open()
+        except _ATTEMPT_FAILURES as exc:
+            raise _open_failed(self.url, exc) from exc
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:
@@ -620,7 +636,10 @@ class Stream(_BaseStream[SyncConnection]):
     ``receive`` waits at most ``timeout_s`` (``TimeoutError``)."""
 
     def __enter__(self) -> Stream:
-        self._connection = self._open()
+        try:
+            self._connection = self._open()
+        except _ATTEMPT_FAILURES as exc:
+            raise _open_failed(self.url, exc) from exc
         return self
 
     def __exit__(self, *exc_info: object) -> None:
