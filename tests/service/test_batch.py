@@ -13,6 +13,7 @@ import pytest
 from numpy.testing import assert_allclose
 from pydantic import TypeAdapter
 from starlette.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
 
 import schemas as S
 from service.config import Settings
@@ -158,6 +159,52 @@ def test_too_many_entries_fail_the_whole_message(make_client: Callable[..., Test
     assert reply.error.code == S.ErrorCode.INVALID_PROBLEM and reply.error.field == "frames"
     r = client.post("/v1/batch", json={"frames": [entry(a, i) for i in range(3)]})
     assert r.status_code == 422 and r.json()["code"] == "invalid_problem"
+
+
+def test_a_pooled_batch_over_the_work_cap_fails_whole_naming_frames(
+    make_client: Callable[..., TestClient],
+) -> None:
+    """docs/api.md and websocket.md: a batch that goes to the frame threads (an entry's
+    time_budget_us over IK_INLINE_BUDGET_US) fails whole when the sum of its entries'
+    budgets is over IK_MAX_REQUEST_WORK_S, as a clip does, and nothing is solved."""
+    client = make_client(Settings(max_request_work_s=0.01))
+    a, b = create(client), create(client)
+    patched = client.patch(f"/v1/sessions/{a.id}", json={"time_budget_us": 4000}, headers=a.headers)
+    assert patched.status_code == 200, patched.text
+    entries = [entry(a, 1), entry(a, 2), entry(a, 3), entry(b, 1)]  # 3 x 4 ms + b's budget
+    (reply,) = send_batch(client, b, [batch_msg(1, entries)])
+    assert isinstance(reply, S.ErrorMessage) and reply.id == 1, reply
+    assert reply.error.code == S.ErrorCode.INVALID_PROBLEM and reply.error.field == "frames"
+    assert "IK_MAX_REQUEST_WORK_S" in reply.error.message
+    r = client.post("/v1/batch", json={"frames": entries})
+    assert r.status_code == 422, r.text
+    assert r.json()["code"] == "invalid_problem" and r.json()["field"] == "frames"
+    for s in (a, b):
+        info = client.get(f"/v1/sessions/{s.id}", headers=s.headers).json()
+        assert info["counters"]["frames"] == 0, info
+
+
+def test_deleting_the_socket_s_own_session_ends_its_batches(client: TestClient) -> None:
+    """websocket.md: a batch socket belongs to the session it was opened on. Another
+    entry's session deleted fails that entry alone; the socket's own session deleted
+    closes the socket 4404 at its next batch, whatever sessions the batch names."""
+    own, other, gone = create(client), create(client), create(client)
+    with client.websocket_connect(ws_url(own), headers=own.headers) as ws:
+        ws.send_text(json.dumps(batch_msg(1, [entry(other, 1), entry(gone, 1)])))
+        assert ws.receive_json()["success"] is True
+        assert client.delete(f"/v1/sessions/{gone.id}", headers=gone.headers).status_code == 204
+        ws.send_text(json.dumps(batch_msg(2, [entry(other, 2), entry(gone, 2)])))
+        reply = SERVER_MESSAGE.validate_python(ws.receive_json())
+        assert isinstance(reply, S.BatchResultMessage)
+        assert reply.results[0].success
+        gone_entry = reply.results[1]
+        assert isinstance(gone_entry, S.BatchEntryError)
+        assert gone_entry.error.code == S.ErrorCode.NOT_FOUND
+        assert client.delete(f"/v1/sessions/{own.id}", headers=own.headers).status_code == 204
+        ws.send_text(json.dumps(batch_msg(3, [entry(other, 3)])))
+        with pytest.raises(WebSocketDisconnect) as closed:
+            ws.receive_json()
+    assert closed.value.code == 4404 and closed.value.reason == "not_found"
 
 
 def test_batch_message_needs_increasing_ids(client: TestClient) -> None:
