@@ -443,13 +443,13 @@ class RedisSessionStore(SessionStore):
             calls.append((keys, self._args(s, p.record, "", p.pairs), s))
         try:
             results = await self._commit.execute(calls)
-            error = next((v for v in results if isinstance(v, RedisError)), None)
-        except RedisError as e:
-            results, error = [e] * len(calls), e
-        if error is not None:  # gone, or refusing writes (out of memory): as an outage
-            self._unavailable(error)
+        except RedisError as e:  # no answer: frames are refused until a reload works
+            results = [e] * len(calls)
             assert self.behind is not None
             self.behind.failed = True
+        # Refused (out of memory, read-only) or gone: logged; the sessions reload.
+        if (error := next((v for v in results if isinstance(v, RedisError)), None)) is not None:
+            self._unavailable(error)
         for (_, _, s), v in zip(calls, results, strict=True):
             if isinstance(v, Exception):
                 s.version = RELOAD
