@@ -184,7 +184,8 @@ BoneAxes = Annotated[str, Field(pattern=r"^[xyz]{1,3}$")]
 class BoneSettingsSpec(StrictModel):
     """How one bone's joint is built (a bone named in ``moving``, or by default every
     bone the file lets rotate). Defaults: the BVH channels' rotation order, else
-    ``default_axes``; limits of a ball joint (every axis +-pi)."""
+    ``default_axes``; limits of a ball joint (every axis +-2 pi: a full turn either
+    way)."""
 
     model_config = ConfigDict(
         json_schema_extra={"examples": [{"axes": "x", "lower": [0.0], "upper": [2.6]}]}

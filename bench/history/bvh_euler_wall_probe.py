@@ -41,18 +41,27 @@ SMOOTH = session_defaults(Settings())
 REACH = replace(SMOOTH, continuity=Continuity.REACH)
 # A limit band a client could ask for instead (limit_margin, limit_weight).
 BAND = replace(SMOOTH, limit_margin=0.1, limit_weight=1e-2)
-LIMITS = {"middle +-pi/2": PI / 2, "every axis +-pi": PI}
+# (outer axes, middle axis) bounds [rad]
+LIMITS = {
+    "middle +-pi/2": (PI, PI / 2),
+    "every axis +-pi": (PI, PI),
+    "every axis +-2pi": (2 * PI, 2 * PI),
+}
 RADIUS_M = 0.08
 FRAMES = 300
 
 
-def limb(source: str, moving: tuple[str, ...], pivot: str, tip: str, middle: float):  # type: ignore[no-untyped-def]
+def limb(source: str, moving: tuple[str, ...], pivot: str, tip: str, bounds: tuple[float, float]):  # type: ignore[no-untyped-def]
     """The chain, its pivot's world position and its two segment lengths."""
     if source == "walk.bvh":
         skeleton = read_bvh((ASSETS / source).read_text(), unit_m=0.056).skeleton
     else:
         skeleton = read_gltf((ASSETS / source).read_bytes())
-    bones = {b: BoneSettings(lower=(-PI, -middle, -PI), upper=(PI, middle, PI)) for b in moving}
+    outer, middle = bounds
+    bones = {
+        b: BoneSettings(lower=(-outer, -middle, -outer), upper=(outer, middle, outer))
+        for b in moving
+    }
     built = chain_from_skeleton(
         skeleton,
         SkeletonSettings(effectors=[Effector(name=tip, link=tip)], moving=moving, bones=bones),
@@ -129,6 +138,8 @@ CONFIGS = (
     ("middle +-pi/2", "reach", REACH),
     ("every axis +-pi", "smooth", SMOOTH),
     ("every axis +-pi", "reach", REACH),
+    ("every axis +-2pi", "smooth", SMOOTH),
+    ("every axis +-2pi", "reach", REACH),
 )
 
 
@@ -145,9 +156,9 @@ def line(label: str, rows: list[dict[str, float]]) -> str:
 def main() -> None:
     per_limb = int(sys.argv[1]) if len(sys.argv) > 1 else 8
     chains = {
-        (name, lim): limb(*spec, middle)
+        (name, lim): limb(*spec, bounds)
         for name, spec in LIMBS.items()
-        for lim, middle in LIMITS.items()
+        for lim, bounds in LIMITS.items()
     }
     for stream, (name, offset, normal) in FIXED.items():
         tip = LIMBS[name][3]

@@ -45,8 +45,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidProblem
-from ..model import Chain, Joint, JointKind
+from ..model import Chain, JointKind
 from ..model.forward import effector_poses, link_poses
+from ..model.layout import NI_DOF, NI_PARENT
 from ..optim import codes as C
 from .blend import FrameCall, SolveResult, combined
 from .frame import STATUS_SOLVED, TARGETS_OK
@@ -82,7 +83,7 @@ def limb_path(chain: Chain, effector: int) -> list[str]:
 
 def default_pole_link(chain: Chain, effector: int) -> str | None:
     """The middle of the effector's limb (see the module docstring); None when the
-    limb has no link between its top and the tip that the solve can move."""
+    limb has no link between its top and the tip that the effector's variables move."""
     path = limb_path(chain, effector)
     shared: set[str] = set()
     for other in range(len(chain.effectors)):
@@ -90,14 +91,12 @@ def default_pole_link(chain: Chain, effector: int) -> str | None:
             shared.update(limb_path(chain, other))
     if path[0] in shared:  # another effector below this one (a hand and its finger)
         shared = set()
-    joint_into = {j.child: j for j in chain.joints}
-    branches = _moving_branches(chain)
-    still = _still_links(path, joint_into)
+    limb = LimbMotion(chain, effector, path)
     top = next(
         (
             k
-            for k, link in enumerate(path)
-            if k > 0 and (link in shared or branches.get(link, 0) > 1 or link in still)
+            for k in range(1, len(path))
+            if path[k] in shared or limb.branches_off(k) or not limb.frame_moves[k]
         ),
         len(path) - 1,
     )
@@ -105,59 +104,101 @@ def default_pole_link(chain: Chain, effector: int) -> str | None:
     poses = link_poses(chain, q)
     tip = effector_poses(chain, q)[effector][:3, 3]
     points = [poses[path[k]][:3, 3] for k in range(top, -1, -1)] + [tip]
-    links = [path[k] for k in range(top, -1, -1)]
     steps = [float(np.linalg.norm(b - a)) for a, b in zip(points, points[1:], strict=False)]
     lengths = np.cumsum([0.0, *steps])
     total = lengths[-1]
     best: str | None = None
     best_gap = math.inf
-    for k in range(1, len(links)):
-        if not _origin_moves(joint_into[links[k]], still):
+    for i, k in enumerate(range(top, -1, -1)):
+        if i == 0 or not limb.origin_moves(k):
             continue
-        if float(np.linalg.norm(points[k] - tip)) < 1e-9:
+        if float(np.linalg.norm(points[i] - tip)) < 1e-9:
             continue
-        gap = abs(lengths[k] - 0.5 * total)
+        gap = abs(lengths[i] - 0.5 * total)
         if gap < best_gap - 1e-12:
-            best, best_gap = links[k], gap
+            best, best_gap = path[k], gap
     return best
 
 
-def _moving_branches(chain: Chain) -> dict[str, int]:
-    """For each link, how many of its child joints lead to motion (a joint that moves
-    there or below): a fixed sensor frame hung on a forearm is not a branch of the arm,
-    a finger is one of the hand's."""
-    children: dict[str, list[Joint]] = {}
-    for j in chain.joints:
-        children.setdefault(j.parent, []).append(j)
-    moves: dict[str, bool] = {}
+class LimbMotion:
+    """What the effector's own variables move along its path to the root (effector
+    link first): ``CompiledChain.eff_dofs``, so a skeleton's ``moving``, a terminator,
+    a mimic joint's leader and a free root all count as the solve counts them. Read
+    from the compiled node tree, without recursion (a chain may be a thousand fixed
+    joints deep)."""
 
-    def leads_to_motion(j: Joint) -> bool:
-        if j.kind is not JointKind.FIXED:
+    def __init__(self, chain: Chain, effector: int, path: list[str]) -> None:
+        compiled = chain.compiled
+        self.path = path
+        self.variables = frozenset(compiled.eff_dofs[effector].tolist())
+        self._chain = chain
+        self._joint_into = {j.child: j for j in chain.joints}
+        # The effector's variables in each path link's own joint (its run of nodes).
+        self.own = [
+            self._segment_variables(link, above) & self.variables
+            for link, above in zip(path, path[1:], strict=False)
+        ] + [frozenset()]  # the root: no joint
+        # frame_moves[k]: a variable of the effector turns or moves path[k]'s frame.
+        self.frame_moves = [False] * len(path)
+        moves = False
+        for k in range(len(path) - 1, -1, -1):
+            moves = moves or bool(self.own[k])
+            self.frame_moves[k] = moves
+        self._foreign: set[int] | None = None
+
+    def origin_moves(self, k: int) -> bool:
+        """Whether the effector's variables move path[k]'s origin: a joint above it, or
+        its own when it slides or turns about a pivot off the origin (not a joint that
+        turns the link about its origin from a still parent: an arm-only session's
+        shoulder)."""
+        if k + 1 < len(self.path) and self.frame_moves[k + 1]:
             return True
-        if j.child not in moves:
-            moves[j.child] = any(leads_to_motion(c) for c in children.get(j.child, ()))
-        return moves[j.child]
+        joint = self._joint_into.get(self.path[k])
+        if joint is None or not self.own[k]:
+            return False
+        return joint.kind is JointKind.PRISMATIC or bool(np.any(joint.pivot != 0.0))
 
-    return {link: sum(map(leads_to_motion, kids)) for link, kids in children.items()}
+    def branches_off(self, k: int) -> bool:
+        """Whether the chain branches at path[k] into another part that moves on
+        variables this effector does not read (a chest's neck and other arm; not a
+        gripper's other finger that mimics this one's, nor a fixed sensor frame)."""
+        link, below = self.path[k], self.path[k - 1]
+        foreign = self._foreign_nodes()
+        for j in self._chain.joints:
+            if j.parent != link or j.child == below:
+                continue
+            if any(n in foreign for n in self._segment(j.child, link)):
+                return True
+        return False
 
+    def _segment(self, link: str, parent: str) -> list[int]:
+        """The nodes of the joint from ``parent`` to ``link`` (child first)."""
+        compiled = self._chain.compiled
+        n, stop = compiled.link_node[link], compiled.link_node[parent]
+        out = []
+        while n != stop and n >= 0:
+            out.append(n)
+            n = int(compiled.ni[n, NI_PARENT])
+        return out
 
-def _still_links(path: list[str], joint_into: dict[str, Joint]) -> set[str]:
-    """The links of ``path`` (effector to root) that no joint moves: the root and the
-    links below it hung by fixed joints only (the spine and chest of a session whose
-    ``moving`` is an arm)."""
-    still: set[str] = set()
-    for link in reversed(path):
-        joint = joint_into.get(link)
-        if joint is not None and (joint.kind is not JointKind.FIXED or joint.parent not in still):
-            break
-        still.add(link)
-    return still
+    def _segment_variables(self, link: str, parent: str) -> frozenset[int]:
+        ni = self._chain.compiled.ni
+        return frozenset(int(ni[n, NI_DOF]) for n in self._segment(link, parent)) - {-1}
 
-
-def _origin_moves(joint: Joint, still: set[str]) -> bool:
-    """Whether a solve can move the origin of ``joint``'s child: not when the joint
-    turns it about that origin from a still link (the shoulder of an arm-only session)."""
-    return joint.parent not in still or joint.kind is JointKind.PRISMATIC
+    def _foreign_nodes(self) -> set[int]:
+        """Nodes with a variable the effector does not read at or below them."""
+        if self._foreign is None:
+            ni = self._chain.compiled.ni
+            marked: set[int] = set()
+            for n in range(len(ni)):
+                d = int(ni[n, NI_DOF])
+                if d < 0 or d in self.variables:
+                    continue
+                while n >= 0 and n not in marked:
+                    marked.add(n)
+                    n = int(ni[n, NI_PARENT])
+            self._foreign = marked
+        return self._foreign
 
 
 def pole_node(chain: Chain, effector: int, link: str | None) -> int:
@@ -193,10 +234,9 @@ def pole_node(chain: Chain, effector: int, link: str | None) -> int:
     node = chain.compiled.link_node[link]
     if node < 0:
         raise InvalidProblem(f"pole for {name!r}: the root link {link!r} cannot bend")
-    joint_into = {j.child: j for j in chain.joints}
-    still = _still_links(path, joint_into)
-    if not _origin_moves(joint_into[link], still):
-        carried = ", ".join(repr(p) for p in path[:-1] if _origin_moves(joint_into[p], still))
+    limb = LimbMotion(chain, effector, path)
+    if not limb.origin_moves(path.index(link)):
+        carried = ", ".join(repr(p) for k, p in enumerate(path[:-1]) if limb.origin_moves(k))
         hint = f" (links whose origin moves: {carried})" if carried else ""
         raise InvalidProblem(
             f"pole for {name!r}: no moving joint carries link {link!r}, so a pole on it "

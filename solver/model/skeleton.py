@@ -26,11 +26,13 @@ Decisions (what a game developer gets when they give no settings):
   axes           a BVH bone's rotation channels in their file order (so a clip replays
                  exactly); otherwise ``SkeletonSettings.default_axes`` ("xyz").
                  Motion is intrinsic: axes "zyx" give Rz(q0) Ry(q1) Rx(q2).
-  limits         a ball joint: every axis in [-180 deg, 180 deg]. Every orientation is
-                 reachable (most by two angle triples), the rest pose (q = 0) is the
-                 middle of the box, where solves start, and no bound sits on the gimbal
-                 lock (the Tait-Bryan box's +-90 deg on the middle angle did: a stream
-                 stalled against it, ``skeleton_settings.default_limits``).
+  limits         a ball joint: every axis in [-360 deg, 360 deg], a full turn either
+                 way. Every orientation is reachable (by several angle triples), the
+                 rest pose (q = 0) is the middle of the box, where solves start, and no
+                 bound sits on the gimbal lock (the Tait-Bryan box's +-90 deg on the
+                 middle angle did: a stream stalled against it) nor half a turn from
+                 rest (+-180 deg did: angles do not wrap;
+                 ``skeleton_settings.default_limits``).
   free root      off. With ``FreeRoot``, prismatic joints along the x, y, z axes of the
                  root bone's parent frame come before its rotation (for BVH, only the
                  axes the root has position channels for, if it has any), limited to the

@@ -69,7 +69,7 @@ class SkeletonSettings:
 
 def default_limits(axes: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """The default ball joint's limits [rad] for these axes (see ``skeleton``'s decisions):
-    every axis +-pi.
+    every axis +-2 pi, a full turn either way from the rest pose.
 
     Not the Tait-Bryan box (the middle angle of three within +-pi/2): its bound on the
     middle angle lies on the gimbal lock, where the two other axes line up, and is no
@@ -77,6 +77,10 @@ def default_limits(axes: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
     other two angles turned by pi). A stream that drove a middle angle to that bound
     stalled there under ``smooth``, up to 8 cm off for up to 1.6 s, on circles a hand of
     walk.bvh or CesiumMan reaches without any large step once the bound is +-pi
-    (bench/history/2026-11-29-bvh-euler-wall.md).
+    (bench/history/2026-11-29-bvh-euler-wall.md). Nor +-pi on the outer two: an angle
+    does not wrap, so a bound at +-pi is a wall too (a knee's pole swung front, back and
+    front from the rest pose held the hip's first angle at -pi on the third swing);
+    +-2 pi keeps the walls a full turn away, with the same frames, steps and times on
+    those circles.
     """
-    return tuple(-math.pi for _ in axes), tuple(math.pi for _ in axes)
+    return tuple(-2 * math.pi for _ in axes), tuple(2 * math.pi for _ in axes)

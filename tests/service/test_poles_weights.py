@@ -124,12 +124,15 @@ def test_a_pole_flips_the_knee_over_http_and_websocket(legs: Legs) -> None:
         assert result["success"] is True, result["status"]
         sides[sign] = legs.knee_side(result)
     assert sides[1.0] > 0.02 * legs.leg_cm and sides[-1.0] < -0.02 * legs.leg_cm
-    # Over the WebSocket, msgpack: the knee follows the pole from front to back and
-    # round again. A stream's later frame shapes for a bounded number of iterations and
-    # a half-turn swing may go on in the next (docs/engines.md), so each side gets up to
-    # 3 frames; the knee must then be well on the pole's side (a fifth of the leg; the
-    # Tait-Bryan default box held the hip at its +-90 deg middle bound with the knee
-    # 0.04 of the leg off the hip-foot line, bench/history/2026-11-29-bvh-euler-wall.md).
+    # Over the WebSocket, msgpack, from the rest pose: the knee follows the pole from
+    # front to back and round again. A stream's later frame shapes for a bounded number
+    # of iterations and a half-turn swing may go on in the next (docs/engines.md), so
+    # each side gets 3 frames: the knee never on the wrong side, and at the third well
+    # on the pole's (a fifth of the leg). The Tait-Bryan default box held the hip at its
+    # +-90 deg middle bound with the knee 0.04 of the leg off the hip-foot line; +-pi on
+    # the outer angles held it at -pi on the third swing (0.025-0.045 of the leg): a
+    # review, bench/history/2026-11-29-bvh-euler-wall.md.
+    legs.reset()
     url = f"/v1/sessions/{legs.s.id}/ws"
     fid = 0
     with legs.client.websocket_connect(url, headers=legs.s.headers) as ws:
@@ -143,7 +146,7 @@ def test_a_pole_flips_the_knee_over_http_and_websocket(legs: Legs) -> None:
                 answer = msgpack.unpackb(ws.receive_bytes())
                 assert answer["success"] is True, answer
                 sides.append(sign * legs.knee_side(answer["result"]))
-            assert sides[-1] > 0.2 * legs.leg_cm, sides
+            assert min(sides) > 0.0 and sides[-1] > 0.2 * legs.leg_cm, sides
 
 
 def test_weight_zero_frees_an_effector_in_one_shot_and_stream(

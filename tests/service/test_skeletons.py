@@ -144,7 +144,7 @@ def test_moving_axes_limits_and_tip_offset_shape_the_chain(client: TestClient) -
     dof = {d["name"]: (d["lower"], d["upper"]) for d in s.body["dof"]}
     assert list(dof) == ["LeftUpLeg.z", "LeftUpLeg.x", "LeftLeg.x"]
     assert dof["LeftLeg.x"] == (-2.5, 0.0)
-    assert dof["LeftUpLeg.z"] == (-np.pi, np.pi)  # the default ball range
+    assert dof["LeftUpLeg.z"] == (-2 * np.pi, 2 * np.pi)  # the default ball range
     fk = client.post(
         f"/v1/sessions/{s.id}/fk",
         json={"q": [0.0, 0.0, 0.0], "bones": {"world": ["LeftLeg"]}},

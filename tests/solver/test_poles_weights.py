@@ -24,7 +24,17 @@ from solver.ik import (
     pole_node,
 )
 from solver.ik.poles import PoleShaper
-from solver.model import Chain, Effector, EffectorMode, Joint, JointKind, build_chain, examples
+from solver.model import (
+    Chain,
+    Effector,
+    EffectorMode,
+    Joint,
+    JointKind,
+    Mimic,
+    Transform,
+    build_chain,
+    examples,
+)
 from solver.model.forward import effector_poses, link_poses
 from solver.model.gltf import read_gltf
 from solver.model.skeleton import SkeletonSettings, chain_from_skeleton
@@ -118,13 +128,84 @@ def test_a_pole_on_a_bone_nothing_moves_is_refused_with_the_bones_that_move() ->
     assert pole_node(chain, 0, "node_17") == chain.compiled.link_node["node_17"]
 
 
+def _arm_with_gripper(side: str) -> Chain:
+    """A 3-joint arm (shoulder, elbow, wrist) with a two-finger gripper whose right
+    finger mimics the left (a URDF's usual parallel gripper), one effector on the
+    ``side`` finger."""
+    up = Transform(translation=np.array([0.0, 0.0, 0.3]))
+    y_axis = np.array([0.0, 1.0, 0.0])
+
+    def hinge(name: str, parent: str, child: str) -> Joint:
+        kind = JointKind.REVOLUTE
+        return Joint(
+            name=name, parent=parent, child=child, kind=kind, origin=up, axis=y_axis,
+            lower=(-2.0,), upper=(2.0,),
+        )  # fmt: skip
+
+    def finger(side: str, mimic: Mimic | None) -> Joint:
+        name, child, kind = f"{side}_finger_joint", f"{side}_finger", JointKind.PRISMATIC
+        return Joint(
+            name=name, parent="hand", child=child, kind=kind, axis=y_axis, mimic=mimic,
+            lower=(0.0,), upper=(0.04,),
+        )  # fmt: skip
+
+    joints = [
+        hinge("shoulder", "base", "upper"),
+        hinge("elbow", "upper", "fore"),
+        hinge("wrist", "fore", "hand"),
+        finger("left", None),
+        finger("right", Mimic(joint="left_finger_joint")),
+    ]
+    return build_chain(joints, [Effector(name="tip", link=f"{side}_finger")])
+
+
+def test_a_finger_that_mimics_the_other_is_no_branch_of_its_arm() -> None:
+    """The other finger moves on the leader's variable, which the follower reads too:
+    the hand is no branch for either (a review: Panda's right finger, PR2's and Talos's
+    grippers lost their default, the hand counted as a branch)."""
+    left, right = _arm_with_gripper("left"), _arm_with_gripper("right")
+    assert default_pole_link(left, 0) == default_pole_link(right, 0) == "fore"
+
+
+def test_a_terminator_ends_the_limb_as_moving_does() -> None:
+    """two_arm_torso's shoulders are terminators: the spine does not move for a hand,
+    so the shoulder's origin stays put, the default is the elbow and a pole on the
+    shoulder or the chest is refused (a review: the rule looked at fixed joints only)."""
+    chain = examples.EXAMPLES["two_arm_torso"]()
+    assert default_pole_link(chain, 0) == "left_fore"
+    for still in ("left_upper", "chest"):
+        with pytest.raises(InvalidProblem, match="no moving joint carries"):
+            pole_node(chain, 0, still)
+
+
+def test_a_thousand_fixed_joints_deep_is_no_recursion() -> None:
+    """Session creation computes every effector's default (service ChainView): a
+    recursive walk raised RecursionError, a 500, past ~400 fixed joints."""
+    step = Transform(translation=np.array([0.01, 0.0, 0.0]))
+    fixed = JointKind.FIXED
+    joints = [
+        Joint(name=f"j{i}", parent=f"l{i}", child=f"l{i + 1}", kind=fixed, origin=step)
+        for i in range(1000)
+    ]
+    hinge = JointKind.REVOLUTE
+    limits = {"lower": (-1.0,), "upper": (1.0,)}
+    joints.append(Joint(name="r", parent="l1000", child="tip", kind=hinge, **limits))
+    chain = build_chain(joints, [Effector(name="e", link="tip")])
+    assert default_pole_link(chain, 0) is None  # nothing on it can bend
+
+
 def test_a_fixed_frame_on_the_forearm_is_not_a_branch_of_the_arm() -> None:
     """A sensor or attachment frame hung by a fixed joint (a URDF's camera link) does not
     end the limb: the default stays the arm's middle, not a bone below the attachment."""
     arm = examples.EXAMPLES["humanoid_arm"]()
     forearm = next(j for j in arm.joints if j.child == "forearm")
-    camera = Joint(name="camera_mount", parent="forearm", child="camera", kind=JointKind.FIXED,
-                   origin=forearm.origin)  # fmt: skip
+    camera = Joint(
+        name="camera_mount",
+        parent="forearm",
+        child="camera",
+        kind=JointKind.FIXED,
+        origin=forearm.origin,
+    )
     with_camera = build_chain([*arm.joints, camera], list(arm.effectors))
     assert default_pole_link(arm, 0) == default_pole_link(with_camera, 0) == "forearm"
 

@@ -71,9 +71,11 @@ def test_defaults_every_joint_moves_as_a_ball_joint() -> None:
         assert joint.kind is JointKind.ROTATIONAL
         assert joint.axes == "xyz"
         assert (joint.lower, joint.upper) == default_limits("xyz")
-    # Every axis +-pi: no bound on the middle angle's gimbal lock (skeleton_settings).
-    assert_allclose(default_limits("xyz")[1], [math.pi, math.pi, math.pi])
-    assert_allclose(default_limits("yz")[1], [math.pi, math.pi])
+    # Every axis +-2 pi: no bound on the middle angle's gimbal lock, none half a turn
+    # from rest (skeleton_settings).
+    assert_allclose(default_limits("xyz")[1], [2 * math.pi] * 3)
+    assert_allclose(default_limits("xyz")[0], [-2 * math.pi] * 3)
+    assert_allclose(default_limits("yz")[1], [2 * math.pi] * 2)
     # Rest pose (q = 0) is the middle of the limits: where a solve starts.
     assert_allclose(built.chain.mid_limits(), 0.0)
 
