@@ -24,16 +24,19 @@ limb continuously with the pole). The null-space step is skipped after a shaped 
 
 The pulled link, when the client names none (``default_pole_link``): the middle of
 the effector's limb. The limb is the effector's path towards the root up to the first
-link that is one of these (its top): a link where the chain branches into two or more
-parts that move (the hips for a foot, the chest for a hand, a hand for a finger), a
-link another effector's path shares (an effector's link above this one's), or a link
-nothing moves (above the topmost moving joint: a session whose ``moving`` is the arm);
-else the root. The middle is the link origin on that path whose distance along the
-bones from the limb's top is nearest half the limb's length (the knee of
-hip-knee-ankle-toe, the elbow of clavicle-shoulder-elbow-wrist). The branch and the
-still link make the default the elbow or knee whatever the other effectors: a limb
-that ran to the root put a lone hand's middle in the spine (and a pole on a bone an
-arm-only session never moves does nothing).
+link that is one of these (its top): a link where the chain branches into another
+part that moves on variables this effector does not read (the hips for a foot, the
+chest for a hand, a hand for a finger; not a fixed sensor frame, nor the other finger
+of a gripper that mimics this one), a link another effector's path shares (an
+effector's link above this one's), or a link none of the effector's variables moves
+(``CompiledChain.eff_dofs``: above the topmost moving joint of a session whose
+``moving`` is the arm, above a terminator); else the root. The middle is the link
+origin on that path, moved by the effector's variables, whose distance along the bones
+from the limb's top is nearest half the limb's length (the knee of hip-knee-ankle-toe,
+the elbow of clavicle-shoulder-elbow-wrist; the shoulder where the clavicle is long).
+The branch and the still link make the default the elbow or knee whatever the other
+effectors: a limb that ran to the root put a lone hand's middle in the spine (and a
+pole on a bone an arm-only session never moves does nothing).
 """
 
 from __future__ import annotations
