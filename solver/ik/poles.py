@@ -42,7 +42,9 @@ pole on a bone an arm-only session never moves does nothing).
 from __future__ import annotations
 
 import difflib
+import itertools
 import math
+import operator
 from typing import Any
 
 import numpy as np
@@ -95,11 +97,15 @@ def default_pole_link(chain: Chain, effector: int) -> str | None:
     if path[0] in shared:  # another effector below this one (a hand and its finger)
         shared = set()
     limb = LimbMotion(chain, effector, path)
+    # A branch or a shared link ends the limb only above one of the effector's own
+    # variables: a rigid finger on a gripper whose motor hangs beside it is no limb.
+    bends_below = list(itertools.accumulate((bool(v) for v in limb.own), operator.or_))
     top = next(
         (
             k
             for k in range(1, len(path))
-            if path[k] in shared or limb.branches_off(k) or not limb.frame_moves[k]
+            if not limb.frame_moves[k]
+            or (bends_below[k - 1] and (path[k] in shared or limb.branches_off(k)))
         ),
         len(path) - 1,
     )

@@ -167,6 +167,28 @@ def test_a_finger_that_mimics_the_other_is_no_branch_of_its_arm() -> None:
     assert default_pole_link(left, 0) == default_pole_link(right, 0) == "fore"
 
 
+def test_a_rigid_finger_beside_its_gripper_s_motor_is_no_limb() -> None:
+    """Talos's reduced models: the finger hangs by fixed joints from the gripper base,
+    and the gripper's one variable turns a motor link beside it. The base branches on
+    a variable the fingertip does not read, but nothing of the fingertip's own bends
+    below it: the limb goes on to the arm (a review: the default was a rigid finger
+    link, or none)."""
+    arm = _arm_with_gripper("left")
+    fixed, hinge = JointKind.FIXED, JointKind.REVOLUTE
+    step = Transform(translation=np.array([0.0, 0.0, 0.05]))
+    extra = [
+        Joint(name="base_mount", parent="hand", child="gripper_base", kind=fixed, origin=step),
+        Joint(name="finger_mount", parent="gripper_base", child="finger", kind=fixed, origin=step),
+        Joint(name="tip_mount", parent="finger", child="fingertip", kind=fixed, origin=step),
+        Joint(
+            name="gripper_motor", parent="gripper_base", child="motor", kind=hinge,
+            origin=step, lower=(0.0,), upper=(1.0,),
+        ),
+    ]  # fmt: skip
+    chain = build_chain([*arm.joints, *extra], [Effector(name="tip", link="fingertip")])
+    assert default_pole_link(chain, 0) == "fore"
+
+
 def test_a_terminator_ends_the_limb_as_moving_does() -> None:
     """two_arm_torso's shoulders are terminators: the spine does not move for a hand,
     so the shoulder's origin stays put, the default is the elbow and a pole on the
