@@ -50,9 +50,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidProblem
-from ..model import Chain, JointKind
-from ..model.forward import effector_poses, link_poses
-from ..model.layout import NI_DOF, NI_PARENT
+from ..model import Chain
+from ..model.forward import effector_poses, link_poses, node_frames
+from ..model.layout import ND_JAXIS, ND_R, ND_T, NI_DOF, NI_KIND, NI_PARENT, NODE_ROTATION
 from ..optim import codes as C
 from .blend import FrameCall, SolveResult, combined
 from .frame import STATUS_SOLVED, TARGETS_OK
@@ -60,6 +60,9 @@ from .kinematics import DD_XLAST
 from .pole_term import POLE_NODE, POLE_POINT, POLE_WEIGHT, POLE_WIDTH
 from .targets import Pole
 
+# A point whose speed per unit of every variable above it is below this [m/rad] does not
+# move: on the axis or at the centre of each turn (roundoff is ~1e-16 m).
+_STILL_RATE = 1e-9
 # Weight of the pole term in the shaping pass [1/m^2 against the targets' m^2]: strong
 # enough to swing a limb in a few dozen iterations, weak enough that the targets stay
 # nearly met (the second call then has little to do).
@@ -141,7 +144,6 @@ class LimbMotion:
         self.path = path
         self.variables = frozenset(compiled.eff_dofs[effector].tolist())
         self._chain = chain
-        self._joint_into = {j.child: j for j in chain.joints}
         # The effector's variables in each path link's own joint (its run of nodes).
         self.own = [
             self._segment_variables(link, above) & self.variables
@@ -154,18 +156,33 @@ class LimbMotion:
             moves = moves or bool(self.own[k])
             self.frame_moves[k] = moves
         self._foreign: set[int] | None = None
+        self._nodes: np.ndarray | None = None  # node frames at the middle of the limits
 
     def origin_moves(self, k: int) -> bool:
-        """Whether the effector's variables move path[k]'s origin: a joint above it, or
-        its own when it slides or turns about a pivot off the origin (not a joint that
-        turns the link about its origin from a still parent: an arm-only session's
-        shoulder)."""
-        if k + 1 < len(self.path) and self.frame_moves[k + 1]:
-            return True
-        joint = self._joint_into.get(self.path[k])
-        if joint is None or not self.own[k]:
+        """Whether the effector's variables move path[k]'s origin, by the velocity each
+        gives it at the middle of the limits: not a joint that turns the link about its
+        own origin (an arm-only session's shoulder), nor one whose axis runs through it
+        (a BVH bone with no offset, Panda's link2 on joint 1's axis): a pole there would
+        pull a point nothing can move. A turn's axis through the origin, or a slide, is
+        a property of the chain's structure, not of the pose, for every joint at once."""
+        compiled = self._chain.compiled
+        node = compiled.link_node[self.path[k]]
+        if node < 0:
             return False
-        return joint.kind is JointKind.PRISMATIC or bool(np.any(joint.pivot != 0.0))
+        if self._nodes is None:
+            self._nodes = node_frames(self._chain, self._chain.mid_limits())
+        nd, ni = self._nodes, compiled.ni
+        point = nd[node, ND_T : ND_T + 3]
+        while node >= 0:
+            if int(ni[node, NI_DOF]) in self.variables:
+                axis = nd[node, ND_R : ND_R + 9].reshape(3, 3) @ nd[node, ND_JAXIS : ND_JAXIS + 3]
+                if ni[node, NI_KIND] != NODE_ROTATION:
+                    return True  # a slide moves every point it carries
+                rate = np.cross(axis, point - nd[node, ND_T : ND_T + 3])
+                if float(np.linalg.norm(rate)) > _STILL_RATE:
+                    return True
+            node = int(ni[node, NI_PARENT])
+        return False
 
     def branches_off(self, k: int) -> bool:
         """Whether the chain branches at path[k] into another part that moves on
@@ -248,8 +265,8 @@ def pole_node(chain: Chain, effector: int, link: str | None) -> int:
         carried = ", ".join(repr(p) for k, p in enumerate(path[:-1]) if limb.origin_moves(k))
         hint = f" (links whose origin moves: {carried})" if carried else ""
         raise InvalidProblem(
-            f"pole for {name!r}: no moving joint carries link {link!r}, so a pole on it "
-            f"cannot bend the limb{hint}"
+            f"pole for {name!r}: no moving joint moves the origin of link {link!r}, so a "
+            f"pole on it cannot bend the limb{hint}"
         )
     return node
 

@@ -199,7 +199,10 @@ def effector_frame_py(e, ei, ed, nd):  # type: ignore[no-untyped-def]
     return effector_frame(e, ei, ed, nd)
 
 
-def _node_frames(chain: Chain, q: Vector) -> np.ndarray:
+def node_frames(chain: Chain, q: Vector) -> np.ndarray:
+    """The compiled chain's node array (``layout.ND_*``) with every node's world frame
+    for joint values q: what ``link_poses`` reads, for callers that need the nodes'
+    axes (``ik.poles``)."""
     cc = chain.compiled
     nd = cc.nd.copy()
     qa = np.ascontiguousarray(q, dtype=np.float64).reshape(-1)
@@ -211,7 +214,7 @@ def _node_frames(chain: Chain, q: Vector) -> np.ndarray:
 
 def link_poses(chain: Chain, q: Vector) -> dict[str, Matrix]:
     """World pose (4x4, base = root link frame) of every link for joint values q."""
-    nd = _node_frames(chain, q)
+    nd = node_frames(chain, q)
     out: dict[str, Matrix] = {}
     for link, node in chain.compiled.link_node.items():
         m = np.eye(4)
@@ -224,7 +227,7 @@ def link_poses(chain: Chain, q: Vector) -> dict[str, Matrix]:
 
 def effector_poses(chain: Chain, q: Vector) -> list[Matrix]:
     """World pose (4x4) of each effector's tip frame, in ``chain.effectors`` order."""
-    nd = _node_frames(chain, q)
+    nd = node_frames(chain, q)
     cc = chain.compiled
     out = []
     for e in range(len(chain.effectors)):

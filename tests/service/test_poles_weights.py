@@ -324,7 +324,9 @@ def test_a_lone_hand_s_default_pole_is_its_elbow_in_an_arm_only_session(
         error = r.json()
         assert error["code"] == "invalid_problem"
         assert error["field"] == "targets[0].pole.bone"
-        assert "no moving joint carries" in error["detail"] and "'node_17'" in error["detail"]
+        assert (
+            "no moving joint moves the origin" in error["detail"] and "'node_17'" in error["detail"]
+        )
 
 
 def test_a_pole_with_no_default_bone_names_its_field(client: TestClient) -> None:

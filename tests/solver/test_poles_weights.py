@@ -122,7 +122,7 @@ def test_a_pole_on_a_bone_nothing_moves_is_refused_with_the_bones_that_move() ->
     settings = SkeletonSettings(effectors=[Effector(name="hand", link="node_18")], moving=ARM)
     chain = chain_from_skeleton(skeleton, settings).chain
     for still in ("node_11", "node_12", "node_16"):  # spine, chest; shoulder turned in place
-        with pytest.raises(InvalidProblem, match="no moving joint carries") as info:
+        with pytest.raises(InvalidProblem, match="no moving joint moves the origin") as info:
             pole_node(chain, 0, still)
         assert "(links whose origin moves: 'node_18', 'node_17')" in str(info.value)
     assert pole_node(chain, 0, "node_17") == chain.compiled.link_node["node_17"]
@@ -189,6 +189,35 @@ def test_a_rigid_finger_beside_its_gripper_s_motor_is_no_limb() -> None:
     assert default_pole_link(chain, 0) == "fore"
 
 
+def test_a_bone_on_its_parent_joint_s_axis_is_no_pole_bone() -> None:
+    """A turn about the vertical carries a link whose origin is on that very axis (as
+    Panda's link2 on joint 1's, or a BVH bone with no offset at its parent's joint): no
+    variable moves that origin, so it is neither the default nor accepted by name (a
+    review: a pole there did nothing, silently)."""
+    z_axis, y_axis = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    up = Transform(translation=np.array([0.0, 0.0, 0.3]))
+    hinge = JointKind.REVOLUTE
+
+    def joint(name: str, parent: str, child: str, axis: np.ndarray) -> Joint:
+        return Joint(
+            name=name, parent=parent, child=child, kind=hinge, origin=up, axis=axis,
+            lower=(-2.0,), upper=(2.0,),
+        )  # fmt: skip
+
+    chain = build_chain(
+        [
+            joint("yaw", "base", "turret", z_axis),  # turns about the vertical
+            joint("lift", "turret", "boom", y_axis),  # its origin on the yaw axis
+            joint("bend", "boom", "arm", y_axis),
+            joint("wrist", "arm", "hand", y_axis),
+        ],
+        [Effector(name="tip", link="hand", tip_offset=np.array([0.0, 0.0, 0.1]))],
+    )
+    with pytest.raises(InvalidProblem, match="no moving joint moves the origin of link 'boom'"):
+        pole_node(chain, 0, "boom")
+    assert default_pole_link(chain, 0) == "arm"  # the middle joint that moves: the bend
+
+
 def test_a_terminator_ends_the_limb_as_moving_does() -> None:
     """two_arm_torso's shoulders are terminators: the spine does not move for a hand,
     so the shoulder's origin stays put, the default is the elbow and a pole on the
@@ -196,7 +225,7 @@ def test_a_terminator_ends_the_limb_as_moving_does() -> None:
     chain = examples.EXAMPLES["two_arm_torso"]()
     assert default_pole_link(chain, 0) == "left_fore"
     for still in ("left_upper", "chest"):
-        with pytest.raises(InvalidProblem, match="no moving joint carries"):
+        with pytest.raises(InvalidProblem, match="no moving joint moves the origin"):
             pole_node(chain, 0, still)
 
 
