@@ -122,12 +122,13 @@ def _pole(p: S.Pole, view: ChainView, effector: str, where: str) -> SolverPole:
     bone checked against the effector's path to the root (``pole_node``; the default
     bone is the solver's choice, cached per session), a pole without a bone refused
     where the limb has no default (``ChainView.no_default_pole``)."""
-    if p.bone is not None:
+    if p.bone is not None and (effector, p.bone) not in view.accepted_poles:
         chain = view.chain
         try:
             pole_node(chain, chain.effector_index(effector), p.bone)
         except InvalidProblem as e:
             raise invalid_problem(str(e), f"{where}.pole.bone") from None
+        view.accepted_poles.add((effector, p.bone))
     elif effector in view.no_default_pole:
         raise invalid_problem(
             f"pole for {effector!r}: its limb has no bone that the moving joints carry "

@@ -316,7 +316,13 @@ def test_a_lone_hand_s_default_pole_is_its_elbow_in_an_arm_only_session(
     assert np.sign(elbow_side(+1, "node_17")) == 1 and np.sign(elbow_side(-1, "node_17")) == -1
     assert np.sign(elbow_side(+1, None)) == 1 and np.sign(elbow_side(-1, None)) == -1
     s = create(client, chain)
-    for still in ("node_11", "node_16"):  # the spine; the shoulder (turned about itself)
+    url = f"/v1/sessions/{s.id}/frames"
+    for bone in ("node_17", "node_17"):  # accepted, then remembered as accepted
+        pole = {"position": vec(target), "bone": bone}
+        frame = {"targets": [{"effector": "hand", "position": vec(target), "pole": pole}]}
+        assert client.post(url, headers=s.headers, json=frame).status_code == 200
+    # Twice each, after an accepted bone: the service remembers accepted pairs only.
+    for still in ("node_11", "node_16", "node_11", "node_16"):
         pole = {"position": vec(target), "bone": still}
         frame = {"targets": [{"effector": "hand", "position": vec(target), "pole": pole}]}
         r = client.post(f"/v1/sessions/{s.id}/frames", headers=s.headers, json=frame)
