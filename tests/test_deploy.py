@@ -2,9 +2,8 @@
 shipped HAProxy file, IK_REDIS_URL, /readyz for readiness, /healthz for liveness, and
 only settings the service has (a misspelt IK_ variable stops the service, or is ignored
 with a warning: either way a deployment that names one is broken). No container engine
-runs here: these files are read, not run (tests/test_deploy_lint.py puts the manifests
-and the Dockerfile through kubernetes-validate and hadolint; dclint checked the compose
-file by hand, docs/operations.md)."""
+runs here: these files are read, not run (tests/test_deploy_lint.py puts them through
+kubernetes-validate, hadolint and dclint)."""
 
 from __future__ import annotations
 

@@ -1,13 +1,15 @@
-"""The deployment files checked by the tools made for them, as docs/operations.md says
-was done (no container engine or cluster runs here, so this is as far as they go):
-deploy/k8s/ik.yaml against Kubernetes' own API schemas (kubernetes-validate, strict: a
-misspelt field is an error, as ``kubectl apply --validate=strict`` makes it), and the
-Dockerfile through hadolint. Each tool is first shown to catch a broken file, so that
-a pass means something."""
+"""The deployment files checked by the tools made for them (no container engine or
+cluster runs here, so this is as far as they go): deploy/k8s/ik.yaml against
+Kubernetes' own API schemas (kubernetes-validate, strict: a misspelt field is an
+error, as ``kubectl apply --validate=strict`` makes it), the Dockerfile through
+hadolint, and docker-compose.yml through dclint (the compose-spec schema and its
+rules; npm, deploy/lint/package.json). Each tool is also shown to refuse a broken
+file, so that a pass means something."""
 
 from __future__ import annotations
 
 import copy
+import os
 import shutil
 import subprocess
 import sys
@@ -19,6 +21,7 @@ import pytest
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
+LINT_PACKAGE = ROOT / "deploy" / "lint"
 # The oldest Kubernetes the manifests promise (docs/operations.md, "Kubernetes").
 K8S_VERSION = "1.30"
 
@@ -66,3 +69,43 @@ def test_hadolint_catches_a_broken_dockerfile() -> None:
     )
     assert run.returncode != 0
     assert "DL3007" in run.stdout  # the latest tag
+
+
+@pytest.fixture(scope="module")
+def dclint() -> str:
+    """deploy/lint's pinned dclint, installed with ``npm ci`` (node and npm: .ci/run)."""
+    npm = shutil.which("npm")
+    if npm is None or shutil.which("node") is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail("node and npm are needed for dclint; CI=true, so this is a failure")
+        pytest.skip("node and npm are not installed")
+    done = subprocess.run(
+        [npm, "ci", "--no-audit", "--no-fund"],
+        cwd=LINT_PACKAGE,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    return str(LINT_PACKAGE / "node_modules" / ".bin" / "dclint")
+
+
+def _dclint(program: str, path: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [program, "--max-warnings", "0", str(path)], capture_output=True, text=True, timeout=120
+    )
+
+
+@pytest.mark.slow  # npm ci: the registry
+def test_the_compose_file_passes_dclint(dclint: str) -> None:
+    run = _dclint(dclint, ROOT / "docker-compose.yml")
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+@pytest.mark.slow
+def test_dclint_catches_a_broken_compose_file(dclint: str, tmp_path: Path) -> None:
+    broken = tmp_path / "docker-compose.yml"
+    broken.write_text("services:\n  worker:\n    image: ik\n    replica: 4\n")
+    run = _dclint(dclint, broken)
+    assert run.returncode != 0
+    assert "invalid-schema" in run.stdout
