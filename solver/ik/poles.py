@@ -22,18 +22,19 @@ moves smoothly (each frame starts from the last answer, and the shaping pass mov
 limb continuously with the pole). The null-space step is skipped after a shaped frame
 (it would drift the self-motion the pole chose back towards the rest pose).
 
-The pulled link, when the client names none (``default_pole_link``): the middle of
-the effector's limb. The limb is the effector's path towards the root up to the first
-link that is one of these (its top): a link where the chain branches into another
-part that moves on variables this effector does not read (the hips for a foot, the
-chest for a hand, a hand for a finger; not a fixed sensor frame, nor the other finger
-of a gripper that mimics this one), a link another effector's path shares (an
-effector's link above this one's), or a link none of the effector's variables moves
+The pulled link, when the client names none (``default_pole_link``): the middle of the
+effector's limb. The limb is the effector's path towards the root up to the first link
+that is one of these (its top): a link where the chain branches into another part that
+moves on variables this effector does not read (the hips for a foot, the chest for a
+hand, a hand for a finger; not a fixed sensor frame, nor the other finger of a gripper
+that mimics this one), a link another effector's path shares (an effector's link above
+this one's), or a link none of the effector's variables moves
 (``CompiledChain.eff_dofs``: above the topmost moving joint of a session whose
-``moving`` is the arm, above a terminator); else the root. The middle is the link
-origin on that path, moved by the effector's variables, whose distance along the bones
-from the limb's top is nearest half the limb's length (the knee of hip-knee-ankle-toe,
-the elbow of clavicle-shoulder-elbow-wrist; the shoulder where the clavicle is long).
+``moving`` is the arm, above a terminator; a joint locked by lower = upper moves
+nothing); else the root. The middle is the link origin on that path, moved by the
+effector's variables, whose distance along the bones from the limb's top is nearest
+half the limb's length (the knee of hip-knee-ankle-toe, the elbow of
+clavicle-shoulder-elbow-wrist; the shoulder where the clavicle is long).
 The branch and the still link make the default the elbow or knee whatever the other
 effectors: a limb that ran to the root put a lone hand's middle in the spine (and a
 pole on a bone an arm-only session never moves does nothing).
@@ -135,14 +136,19 @@ def default_pole_link(chain: Chain, effector: int) -> str | None:
 class LimbMotion:
     """What the effector's own variables move along its path to the root (effector
     link first): ``CompiledChain.eff_dofs``, so a skeleton's ``moving``, a terminator,
-    a mimic joint's leader and a free root all count as the solve counts them. Read
+    a mimic joint's leader and a free root all count as the solve counts them, less
+    the variables locked by their limits (lower = upper). Read
     from the compiled node tree, without recursion (a chain may be a thousand fixed
     joints deep)."""
 
     def __init__(self, chain: Chain, effector: int, path: list[str]) -> None:
         compiled = chain.compiled
         self.path = path
-        self.variables = frozenset(compiled.eff_dofs[effector].tolist())
+        # A locked variable (lower = upper: a URDF's way of freezing a joint) moves
+        # nothing: counted, it would stretch the limb above it and make a pole on a
+        # link only it carries look useful.
+        self._free = chain.upper > chain.lower
+        self.variables = frozenset(d for d in compiled.eff_dofs[effector].tolist() if self._free[d])
         self._chain = chain
         # The effector's variables in each path link's own joint (its run of nodes).
         self.own = [
@@ -212,13 +218,14 @@ class LimbMotion:
         return frozenset(int(ni[n, NI_DOF]) for n in self._segment(link, parent)) - {-1}
 
     def _foreign_nodes(self) -> set[int]:
-        """Nodes with a variable the effector does not read at or below them."""
+        """Nodes with a variable the effector does not read, and that is not locked,
+        at or below them."""
         if self._foreign is None:
             ni = self._chain.compiled.ni
             marked: set[int] = set()
             for n in range(len(ni)):
                 d = int(ni[n, NI_DOF])
-                if d < 0 or d in self.variables:
+                if d < 0 or d in self.variables or not self._free[d]:
                     continue
                 while n >= 0 and n not in marked:
                     marked.add(n)

@@ -229,6 +229,42 @@ def test_a_terminator_ends_the_limb_as_moving_does() -> None:
             pole_node(chain, 0, still)
 
 
+def test_a_joint_locked_by_its_limits_moves_no_limb() -> None:
+    """A URDF freezes a joint with lower = upper: it moves nothing, so it neither
+    stretches the limb above the arm (the default stays the elbow, not the shoulder)
+    nor makes a pole on a link only it carries look useful (a review: locked joints
+    counted as moving). A locked finger beside the hand is no branch either."""
+    y_axis = np.array([0.0, 1.0, 0.0])
+    hinge, fixed = JointKind.REVOLUTE, JointKind.FIXED
+
+    def up(z: float) -> Transform:
+        return Transform(translation=np.array([0.0, 0.0, z]))
+
+    def joint(name: str, parent: str, child: str, z: float, lo: float, hi: float) -> Joint:
+        return Joint(
+            name=name, parent=parent, child=child, kind=hinge, origin=up(z), axis=y_axis,
+            lower=(lo,), upper=(hi,),
+        )  # fmt: skip
+
+    chain = build_chain(
+        [
+            Joint(name="post", parent="base", child="mast", kind=fixed, origin=up(0.5)),
+            joint("lift", "mast", "boom", 0.5, 0.4, 0.4),  # locked
+            joint("shoulder", "boom", "upper", 0.3, -2.0, 2.0),
+            joint("elbow", "upper", "fore", 0.3, -2.0, 2.0),
+            joint("wrist", "fore", "hand", 0.3, -2.0, 2.0),
+            joint("thumb", "hand", "thumb_tip", 0.05, 0.0, 0.0),  # locked
+        ],
+        [Effector(name="tip", link="hand", tip_offset=np.array([0.0, 0.0, 0.1]))],
+    )
+    # From the boom (the top: nothing free moves it) the arm is 1.0 m to the tip: the
+    # elbow is at 0.6 m, nearest half; counted from the mast, the shoulder was.
+    assert default_pole_link(chain, 0) == "fore"
+    with pytest.raises(InvalidProblem, match="no moving joint moves the origin of link 'upper'"):
+        pole_node(chain, 0, "upper")
+    assert pole_node(chain, 0, "fore") >= 0
+
+
 def test_a_thousand_fixed_joints_deep_is_no_recursion() -> None:
     """Session creation computes every effector's default (service ChainView): a
     recursive walk raised RecursionError, a 500, past ~400 fixed joints."""
