@@ -253,12 +253,14 @@ def test_a_joint_locked_by_its_limits_moves_no_limb() -> None:
             joint("shoulder", "boom", "upper", 0.3, -2.0, 2.0),
             joint("elbow", "upper", "fore", 0.3, -2.0, 2.0),
             joint("wrist", "fore", "hand", 0.3, -2.0, 2.0),
+            joint("finger", "hand", "finger_tip", 0.1, -1.0, 1.0),
             joint("thumb", "hand", "thumb_tip", 0.05, 0.0, 0.0),  # locked
         ],
-        [Effector(name="tip", link="hand", tip_offset=np.array([0.0, 0.0, 0.1]))],
+        [Effector(name="tip", link="finger_tip", tip_offset=np.array([0.0, 0.0, 0.1]))],
     )
-    # From the boom (the top: nothing free moves it) the arm is 1.0 m to the tip: the
-    # elbow is at 0.6 m, nearest half; counted from the mast, the shoulder was.
+    # From the boom (the top: nothing free moves it) the arm is 1.1 m to the tip: the
+    # elbow is at 0.6 m, nearest half; counted from the mast, the shoulder was; had the
+    # locked thumb been a branch, the hand would have been the top and no link the middle.
     assert default_pole_link(chain, 0) == "fore"
     with pytest.raises(InvalidProblem, match="no moving joint moves the origin of link 'upper'"):
         pole_node(chain, 0, "upper")
