@@ -54,6 +54,7 @@ from . import redis_commit
 from .convert import ChainView, FrameJob, SolvedFrame
 from .errors import ServiceError, not_found, store_unavailable
 from .redis_commit import COMMIT_SCRIPT, GONE, MOVED, OWNER_FULL, SESSIONS_FULL, GroupCommit
+from .redis_reads import ChangedReader, read_session
 from .sessions import OwnerFull, Session, SessionStore, StaleSession, StoreFull
 from .stored_frames import (
     KEPT_ANSWERS,
@@ -61,7 +62,6 @@ from .stored_frames import (
     StreamRecord,
     answer_key,
     jobs_digest,
-    oldest_first,
     pack_answer,
     pack_stream,
     unpack_answer,
@@ -129,6 +129,7 @@ class RedisSessionStore(SessionStore):
         self.behind = WriteBehind(write_behind_s, self._write_behind) if write_behind_s else None
         self._count = 0
         self._probe = redis_commit.ReadinessProbe(client)
+        self._changed = ChangedReader(client, prefix)
 
     def __len__(self) -> int:
         """Sessions in Redis (every worker's) at this worker's last sweep, give or take
@@ -216,21 +217,12 @@ class RedisSessionStore(SessionStore):
         if not task.cancelled():
             task.exception()  # retrieved: the waiters get it; with none left, nobody need
 
-    async def _read_hashes(self, session_id: str) -> tuple[dict[bytes, bytes], dict[bytes, bytes]]:
-        """A session's hash and its answers oldest first, in one round trip (or empty)."""
-        async with self.client.pipeline(transaction=False) as pipe:
-            pipe.hgetall(f"{self._p}s:{session_id}")
-            pipe.hgetall(f"{self._p}a:{session_id}")
-            pipe.lrange(f"{self._p}o:{session_id}", 0, -1)
-            stored, answers, order = await pipe.execute()
-            return stored, oldest_first(order, answers)
-
     async def _load(self, session_id: str) -> Session | None:
         forgotten = self._forgotten.get(session_id)
         if forgotten is not None and not forgotten.closed:
             return await self._take_back(forgotten)
         try:
-            stored, answers = await self._read_hashes(session_id)
+            stored, answers = await read_session(self.client, self._p, session_id)
             if not stored:
                 return None
             token, owner, chain, options, created_at = msgpack.unpackb(stored[b"meta"])
@@ -476,9 +468,12 @@ class RedisSessionStore(SessionStore):
             except StaleSession:  # another worker wrote first: reloaded from Redis
                 return
         try:
-            stored, answers = await self._read_hashes(session.id)
+            fresh = await self._changed.read(session.id, session.version)
         except RedisError as e:
             raise self._unavailable(e) from None
+        if fresh is None:
+            return  # the version this worker holds (or just wrote) is the stored one
+        stored, answers = fresh
         if not stored:
             self._forget(session)
             raise not_found()

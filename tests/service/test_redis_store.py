@@ -750,3 +750,33 @@ def test_get_and_fk_of_the_current_pose_read_the_latest_on_every_worker(
         answer = ws.receive_json()
     assert answer["type"] == "fk_result", answer
     assert answer["q"] == pytest.approx(q_b)
+
+
+def _hgetalls(redis_url: str) -> int:
+    """HGETALL calls Redis has run (scripts' calls included): whole-session reads."""
+    stats = redis.Redis.from_url(redis_url).info("commandstats")
+    return int(stats.get("cmdstat_hgetall", {}).get("calls", 0))
+
+
+def test_get_and_fk_read_the_session_whole_only_when_another_worker_changed_it(
+    workers: Workers, redis_url: str
+) -> None:
+    """GET and FK compare the version in Redis first: the worker that answered the last
+    frames reads no state back (it held the latest), one behind another worker's frames
+    reads it whole, in the same one round trip."""
+    a, b = workers()
+    s = create(a)
+    r = a.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(0, x=0.3), headers=s.headers)
+    assert r.status_code == 200, r.text
+    before = _hgetalls(redis_url)
+    assert a.get(f"/v1/sessions/{s.id}", headers=s.headers).json()["counters"]["frames"] == 1
+    assert a.post(f"/v1/sessions/{s.id}/fk", json={}, headers=s.headers).status_code == 200
+    assert _hgetalls(redis_url) == before  # A holds the latest: nothing read back
+    r = b.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(1, x=0.32), headers=s.headers)
+    assert r.status_code == 200, r.text
+    q_b = r.json()["results"][0]["q"]
+    before = _hgetalls(redis_url)
+    info = a.get(f"/v1/sessions/{s.id}", headers=s.headers).json()
+    assert info["counters"]["frames"] == 2
+    assert info["pose"]["q"] == pytest.approx(q_b)
+    assert _hgetalls(redis_url) == before + 2  # the session's hash and its answers
