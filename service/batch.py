@@ -11,8 +11,8 @@ each from the previous answer, under the session's lock.
 
 With a shared store (IK_REDIS_URL) each session's entries are committed as one request
 of frames is (service/redis_store.py): stored before they are answered, solved again when
-another worker committed the session first, and answered from the stored answers when
-the same entries (ids and targets) are sent again.
+another worker committed the session first; an entry sent again (id and targets) gets its
+stored answer, also when another entry of its session failed then or fails now.
 
 Codes, per entry: invalid_format, unauthorized, forbidden, not_found, invalid_problem,
 rate_limited, store_unavailable. For the whole batch: invalid_problem (``frames``: too
@@ -38,7 +38,7 @@ from schemas import ErrorCode
 from solver.errors import IKError
 from solver.ik import Target as SolverTarget
 
-from . import convert
+from . import convert, stored_frames
 from .auth import authenticate
 from .errors import (
     ServiceError,
@@ -198,9 +198,8 @@ async def solve(
         # targets) get the answers stored for them, as frames sent alone do.
         shared = store.commits_frames
         if shared:
-            live, replayed = _replay(store, live)
-            for k, frame in replayed:
-                outcomes[k] = frame
+            prepared = _prepared_groups(entries, live)
+            live = _replay(prepared, live, outcomes)
         work = [e for _, e in live]
         inline_us = runner.inline_budget_us
         if not work:
@@ -210,6 +209,8 @@ async def solve(
         else:
             budget_us = sum(_budget_us(e.session) for e in work)
             cost_s = budget_us * 1e-6
+            pool = runner.pools[WorkClass.FRAMES]
+            shares = runner.frame_shares
             if cost_s > runner.max_request_work_s:
                 raise invalid_problem(
                     f"the batch is {cost_s:.3g} s of solving at worst (the sum of its "
@@ -217,9 +218,7 @@ async def solve(
                     f"({runner.max_request_work_s:g} s): send fewer entries",
                     "frames",
                 )
-            pool = runner.pools[WorkClass.FRAMES]
             pool.admit()
-            shares = runner.frame_shares
             shares.take(client, cost_s)
             loop = asyncio.get_running_loop()
             metrics = runner.metrics
@@ -243,9 +242,12 @@ async def solve(
         # Stored before answered, each session's entries in one commit, under its lock
         # (with sessions in this process's memory there is nothing to commit).
         if shared:
-            groups = _by_session(live)
+            record = runner.metrics.frames
             await asyncio.gather(
-                *(_commit(store, g, outcomes, t0, runner.metrics.frames, transport) for g in groups)
+                *(
+                    _commit(store, g, prepared[g[0][1].session.id], outcomes, t0, record, transport)
+                    for g in _by_session(live)
+                )
             )
     finally:
         if not handed_over:
@@ -272,39 +274,61 @@ def _jobs(group: Sequence[tuple[int, Entry]]) -> list[convert.FrameJob]:
     return [(entry.frame_id, entry.targets) for _, entry in group]
 
 
+def _prepared_groups(
+    entries: Sequence[Entry | ServiceError], live: Sequence[tuple[int, Entry]]
+) -> dict[str, list[tuple[int, Entry]]]:
+    """Each live session's entries that are ready, rate limited ones included, in the
+    order given: what was sent for it, against which its stored answers are matched (an
+    entry rate limited now may be in the same stored answer as one answered now)."""
+    sessions = {e.session.id for _, e in live}
+    groups: dict[str, list[tuple[int, Entry]]] = {sid: [] for sid in sessions}
+    for k, entry in enumerate(entries):
+        if isinstance(entry, Entry) and entry.session.id in sessions:
+            groups[entry.session.id].append((k, entry))
+    return groups
+
+
+def _answered(group: Sequence[tuple[int, Entry]]) -> dict[int, convert.SolvedFrame]:
+    """A session's entries answered before (the same ids and targets, in any of its
+    stored answers), by their place in the batch."""
+    stored = stored_frames.answered_among(group[0][1].session.answers, _jobs(group))
+    return {group[i][0]: frame for i, frame in stored.items()}
+
+
 def _replay(
-    store: SessionStore, live: Sequence[tuple[int, Entry]]
-) -> tuple[list[tuple[int, Entry]], list[tuple[int, convert.SolvedFrame]]]:
-    """Split the entries into those to solve and those answered before (a session's
-    entries of this batch, the same ids and targets: the store's stored answers)."""
-    to_solve: list[tuple[int, Entry]] = []
-    replayed: list[tuple[int, convert.SolvedFrame]] = []
-    for group in _by_session(live):
-        stored = store.stored_answer(group[0][1].session, _jobs(group))
-        if stored is not None and len(stored) == len(group):
-            replayed += [(k, frame) for (k, _), frame in zip(group, stored, strict=True)]
-        else:
-            to_solve += group
-    to_solve.sort(key=lambda item: item[0])  # the order given
-    return to_solve, replayed
+    prepared: dict[str, list[tuple[int, Entry]]],
+    live: Sequence[tuple[int, Entry]],
+    outcomes: list[Outcome | None],
+) -> list[tuple[int, Entry]]:
+    """The live entries still to solve; each one answered before gets its stored answer
+    in ``outcomes`` (per entry: also when another entry of its session was refused or
+    failed, then or now)."""
+    answered = {k: frame for group in prepared.values() for k, frame in _answered(group).items()}
+    for k, frame in answered.items():
+        if outcomes[k] is None:  # a live entry (not one refused now)
+            outcomes[k] = frame
+    return [(k, e) for k, e in live if k not in answered]
 
 
 async def _commit(
     store: SessionStore,
     group: Sequence[tuple[int, Entry]],
+    prepared: Sequence[tuple[int, Entry]],
     outcomes: list[Outcome | None],
     t0: float,
     record: Callable[[list[convert.SolvedFrame], str], None],
     transport: str,
 ) -> None:
     """Commit one session's solved entries (``store.commit``, as for frames sent alone).
-    When another worker committed the session first, it has been reloaded: its entries
-    get the answers stored for them if that worker answered the same entries (a batch
-    sent again), else are solved again from there (on the loop: a rare case), up to
-    ``STALE_RETRIES`` times; a store error becomes each solved entry's own error."""
+    When another worker committed the session first, it has been reloaded: the entries
+    that worker answered (a batch sent again: ``prepared``, the session's entries of the
+    batch, are matched against its stored answers) get those answers, the others are
+    solved again from there (on the loop: a rare case), up to ``STALE_RETRIES`` times; a
+    store error becomes each solved entry's own error."""
     session = group[0][1].session
+    pending = list(group)  # solved here, not yet stored
     for _ in range(STALE_RETRIES):
-        solved = [(k, e) for k, e in group if isinstance(outcomes[k], convert.SolvedFrame)]
+        solved = [(k, e) for k, e in pending if isinstance(outcomes[k], convert.SolvedFrame)]
         frames = [o for k, _ in solved if isinstance(o := outcomes[k], convert.SolvedFrame)]
         if not solved:
             return
@@ -318,20 +342,22 @@ async def _commit(
             # worker stored after this worker's copy was taken (a client resending
             # through a balancer); they get those answers, as frames sent alone do
             # (solving._solve_and_commit), not a second solve that moves the pose again.
-            stored = store.stored_answer(session, _jobs(group))
-            if stored is not None and len(stored) == len(group):
-                for (k, _), frame in zip(group, stored, strict=True):
-                    outcomes[k] = frame
+            answered = _answered(prepared)
+            for k, _ in pending:
+                if k in answered:
+                    outcomes[k] = answered[k]
+            pending = [(k, e) for k, e in pending if k not in answered]
+            if not pending:
                 return
-            again = _solve_entries([e for _, e in group], t0, record, transport)
-            for (k, _), outcome in zip(group, again, strict=True):
+            again = _solve_entries([e for _, e in pending], t0, record, transport)
+            for (k, _), outcome in zip(pending, again, strict=True):
                 outcomes[k] = outcome
         except ServiceError as e:
             for k, _ in solved:
                 outcomes[k] = e
             return
     error = not_found() if session.closed else store_unavailable()
-    for k, _ in group:
+    for k, _ in pending:
         if isinstance(outcomes[k], convert.SolvedFrame):
             outcomes[k] = error
 

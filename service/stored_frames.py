@@ -14,7 +14,7 @@ per connection) sends different targets and is solved as before.
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -194,3 +194,40 @@ def answer_key(jobs: Sequence[FrameJob]) -> int | None:
     """A request's answers are kept under its last frame's id (None: not kept: a frame
     without an id cannot be sent again as the same frame)."""
     return jobs[-1][0] if jobs else None
+
+
+def answered_among(
+    answers: Mapping[int, StoredAnswer], jobs: Sequence[FrameJob]
+) -> dict[int, SolvedFrame]:
+    """Which of ``jobs`` (one session's entries of a batch, in order) were answered
+    before, by their place in ``jobs``: each stored answer whose frames are among them,
+    in order, with the same ids and targets (its digest).
+
+    A batch sent again need not be stored as one answer: an entry rate limited the first
+    time, or answered with an error, was not stored with the others, and one rate
+    limited now is not solved with them. Each stored answer is looked for on its own,
+    from the job under its key (its last frame's id) back.
+    """
+    found: dict[int, SolvedFrame] = {}
+    for end, (frame_id, _) in enumerate(jobs):
+        answer = None if frame_id is None else answers.get(frame_id)
+        if answer is None:
+            continue
+        places = _places(jobs, end, [f.frame_id for f in answer.frames])
+        if places is not None and jobs_digest([jobs[i] for i in places]) == answer.digest:
+            found.update(zip(places, answer.frames, strict=True))
+    return found
+
+
+def _places(jobs: Sequence[FrameJob], end: int, ids: list[int | None]) -> list[int] | None:
+    """The places of ``ids``, in order, among ``jobs[: end + 1]``, the last at ``end``
+    (the nearest before it for each), or None when some are not there."""
+    places: list[int] = []
+    want = len(ids) - 1
+    for i in range(end, -1, -1):
+        if want < 0:
+            break
+        if jobs[i][0] == ids[want]:
+            places.append(i)
+            want -= 1
+    return places[::-1] if want < 0 else None

@@ -213,6 +213,90 @@ def test_a_batch_racing_another_worker_is_solved_again_from_its_frame(workers: W
     assert stored["pose"]["q"] == pytest.approx(answer["result"]["q"])
 
 
+def _frozen_clock(client: TestClient) -> list[float]:
+    """``client``'s store clock (its sessions' rate limits), moved on by hand: now[0]."""
+    now = [0.0]
+    _store(client).clock = lambda: now[0]
+    return now
+
+
+def _codes(results: list[dict[str, Any]]) -> list[str | None]:
+    return [r["error"]["code"] if "error" in r else None for r in results]
+
+
+def test_a_resent_batch_whose_entry_was_refused_gets_the_others_stored_answers(
+    workers: Workers,
+) -> None:
+    """A batch in which a session's last entry was rate limited (and other entries
+    refused: a wrong token, a bad target), sent again once the bucket refilled (its
+    answer lost): the entries answered the first time get their stored answers (the
+    same server_us: not solved again), the one refused is solved now."""
+    (a,) = workers(1, max_frames_per_s=1.0, max_frames_per_request=5)
+    now = _frozen_clock(a)
+    s, t = create(a), create(a)
+    _batch(a, [_entry(s, k, 0.1) for k in (1, 2, 3, 4)])  # s's bucket: 1 frame left
+    bad = {**_entry(s, 7, 0.1), "targets": [{"effector": "hand"}]}
+    sent = [
+        _entry(s, 5, 0.12),
+        {**_entry(s, 6, 0.13), "token": "not-the-token"},
+        _entry(t, 1, 0.1),
+        bad,
+        _entry(s, 8, 0.14),
+    ]
+    first = _batch(a, sent)
+    assert _codes(first) == [None, "forbidden", None, "invalid_format", "rate_limited"]
+    now[0] += 10.0  # the bucket full again
+    again = _batch(a, sent)
+    assert _codes(again) == [None, "forbidden", None, "invalid_format", None]
+    assert again[:4] == first[:4]
+    stored = _in_redis(workers, s)
+    assert stored["counters"]["frames"] == 6  # 1 to 5, and 8: none solved twice
+    assert stored["pose"]["q"] == pytest.approx(again[4]["result"]["q"])
+
+
+def test_a_batch_resent_when_its_session_s_bucket_is_short_gets_its_stored_answers(
+    workers: Workers,
+) -> None:
+    """A batch answered whole, sent again when its session has frames for only part of
+    it: those entries get their stored answers (each costs a frame, as a frame sent
+    again alone), the rest are rate limited; sent once more, all are answered as first."""
+    (a,) = workers(1, max_frames_per_s=1.0, max_frames_per_request=3)
+    now = _frozen_clock(a)
+    s = create(a)
+    sent = [_entry(s, 1, 0.1), _entry(s, 2, 0.11), _entry(s, 3, 0.12)]
+    first = _batch(a, sent)  # the bucket spent
+    now[0] += 1.0  # one frame's worth
+    again = _batch(a, sent)
+    assert _codes(again) == [None, "rate_limited", "rate_limited"]
+    assert again[0] == first[0]
+    now[0] += 10.0
+    assert _batch(a, sent) == first
+    assert _in_redis(workers, s)["counters"]["frames"] == 3
+
+
+def test_a_partly_answered_batch_resent_to_a_worker_holding_an_older_copy(
+    workers: Workers,
+) -> None:
+    """Worker A answered a batch whose last entry it rate limited; the answer lost, the
+    batch goes to worker B, which holds the session from before: B's commit is refused,
+    it reloads the session, the entry A answered gets A's stored answer and only the
+    other is solved again from there."""
+    a, b = workers(max_frames_per_s=1.0, max_frames_per_request=3)
+    _frozen_clock(a)
+    s = create(a)
+    _batch(a, [_entry(s, 1, 0.1), _entry(s, 2, 0.11)])  # A's bucket for s: 1 frame left
+    assert b.get(f"/v1/sessions/{s.id}", headers=s.headers).status_code == 200  # B holds s
+    sent = [_entry(s, 3, 0.12), _entry(s, 4, 0.13)]
+    first = _batch(a, sent)
+    assert _codes(first) == [None, "rate_limited"]
+    again = _batch(b, sent)
+    assert _codes(again) == [None, None]
+    assert again[0] == first[0]
+    stored = _in_redis(workers, s)
+    assert stored["counters"]["frames"] == 4
+    assert stored["pose"]["q"] == pytest.approx(again[1]["result"]["q"])
+
+
 def test_written_behind_a_pose_change_keeps_the_frames_answered(workers: Workers) -> None:
     """Frames answered but not yet flushed (a flush every 60 s) are written before a
     PATCH reloads the session: the pose is the last answer's, not the one in Redis."""

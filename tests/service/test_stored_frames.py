@@ -20,6 +20,7 @@ from service.stored_frames import (
     KEPT_ANSWERS,
     StoredAnswer,
     StreamRecord,
+    answered_among,
     jobs_digest,
     oldest_first,
     pack_answer,
@@ -128,6 +129,34 @@ def test_the_digest_tells_other_weights_or_poles_apart() -> None:
         digest(pole={"position": {"x": 0.3, "y": 0.0, "z": 0.8}, "bone": "link3"}),
     ]
     assert len({plain, *variants}) == 1 + len(variants)
+
+
+def test_a_batch_sent_again_finds_each_stored_answer_among_its_entries() -> None:
+    """``answered_among``: each stored answer (frames under their last id) is found among
+    a session's entries of a batch sent again, in order, also with entries between or
+    after them that were not stored (refused then); an answer whose frames are not all
+    there, or whose targets differ, is not used."""
+    view = _panda()
+    solver = make_solver(view, convert.session_defaults(Settings()))
+    jobs = [(k, _targets(view, 0.40 + 0.01 * k)) for k in range(1, 7)]
+    frames = {k: SolvedFrame(k, solver.track(t), float(k), solver.last_step) for k, t in jobs}
+
+    def stored(*ids: int) -> StoredAnswer:
+        picked = [jobs[k - 1] for k in ids]
+        return StoredAnswer(jobs_digest(picked), tuple(frames[k] for k in ids))
+
+    # Answered before: 1 and 3 in one request (2 failed then), 4 alone; 5 and 6 not.
+    answers = {3: stored(1, 3), 4: stored(4)}
+    found = answered_among(answers, jobs)
+    assert {i: f.frame_id for i, f in found.items()} == {0: 1, 2: 3, 3: 4}
+    assert all(found[i] is frames[i + 1] for i in found)
+    # Sent again without 1 (1 and 3 were one answer): only 4 is found.
+    assert {f.frame_id for f in answered_among(answers, jobs[1:]).values()} == {4}
+    # 3 with other targets: its answer is not used.
+    moved = [*jobs[:2], (3, _targets(view, 0.5)), *jobs[3:]]
+    assert {f.frame_id for f in answered_among(answers, moved).values()} == {4}
+    assert answered_among({}, jobs) == {}
+    assert answered_among(answers, [(None, jobs[0][1])]) == {}
 
 
 def test_a_stored_stream_state_continues_the_stream_exactly() -> None:
