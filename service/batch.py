@@ -4,7 +4,8 @@ each result (``POST /v1/batch`` and the WebSocket's ``batch`` message, schemas/b
 An entry is answered on its own: an entry that fails validation, whose token does not
 open its session, whose targets do not fit its chain, or whose session is over its rate
 limit gets its own error, and the other entries are solved. The limits are those of a
-frame sent alone: each session's rate limit, and for the whole batch, as for a clip,
+frame sent alone: each session's rate limit (an entry refused before it is solved costs
+no frame of it), and for the whole batch, as for a clip,
 IK_MAX_FRAMES_PER_REQUEST entries and, when it goes to the frame threads, the client's
 share of them (service/work.py). Each session's entries are solved in the order given,
 each from the previous answer, under the session's lock.
@@ -211,15 +212,22 @@ async def solve(
             cost_s = budget_us * 1e-6
             pool = runner.pools[WorkClass.FRAMES]
             shares = runner.frame_shares
-            if cost_s > runner.max_request_work_s:
-                raise invalid_problem(
-                    f"the batch is {cost_s:.3g} s of solving at worst (the sum of its "
-                    f"frames' time_budget_us), over IK_MAX_REQUEST_WORK_S "
-                    f"({runner.max_request_work_s:g} s): send fewer entries",
-                    "frames",
-                )
-            pool.admit()
-            shares.take(client, cost_s)
+            try:
+                if cost_s > runner.max_request_work_s:
+                    raise invalid_problem(
+                        f"the batch is {cost_s:.3g} s of solving at worst (the sum of its "
+                        f"frames' time_budget_us), over IK_MAX_REQUEST_WORK_S "
+                        f"({runner.max_request_work_s:g} s): send fewer entries",
+                        "frames",
+                    )
+                pool.admit()
+                shares.take(client, cost_s)
+            except ServiceError:
+                # Refused whole, nothing solved or answered: the entries cost no frames
+                # of their sessions' rate limits (as a frame refused alone).
+                for _, entry in admitted:
+                    entry.session.give_back_frames(1)
+                raise
             loop = asyncio.get_running_loop()
             metrics = runner.metrics
 

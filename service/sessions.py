@@ -108,6 +108,11 @@ class Session:
         self.bucket = level
         return (n - level) / rate_per_s
 
+    def give_back_frames(self, n: int) -> None:
+        """Return ``n`` frames taken by ``take_frames`` for frames then refused before
+        being solved (a refused request costs nothing of the rate limit)."""
+        self.bucket += n  # capped at the burst by the next ``take_frames``
+
     def token_ok(self, token: str) -> bool:
         return secrets.compare_digest(token_digest(token), self.token_digest)
 

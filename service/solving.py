@@ -343,12 +343,17 @@ class Runner:
                 with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
                     loop.call_soon_threadsafe(metrics.frames, batch, transport)
 
-            # Admitted before any state changes: a refusal leaves the lock free.
-            cost_s = self.request_work_s(len(jobs), options)
+            # Admitted before any state changes: a refusal leaves the lock free, and the
+            # frames' place in the session's rate limit (nothing was solved).
             pool = self.pools[WorkClass.FRAMES]
-            pool.admit()
             shares = self.frame_shares
-            shares.take(client, cost_s)
+            try:
+                cost_s = self.request_work_s(len(jobs), options)
+                pool.admit()
+                shares.take(client, cost_s)
+            except ServiceError:
+                session.give_back_frames(len(jobs))
+                raise
             fut = pool.submit(_track_all, session, jobs, options, t0, record, transport)
             fut.add_done_callback(lambda _: shares.give_back(client, cost_s))
         try:

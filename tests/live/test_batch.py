@@ -91,3 +91,46 @@ def test_size_caps(start_server: Callable[..., Server]) -> None:
     assert closed.value.rcvd is not None and closed.value.rcvd.code == 1009
     r = httpx.post(f"{server.base}/v1/batch", json={"frames": entries}, timeout=TIMEOUT_S)
     assert r.status_code == 413 and r.json()["code"] == "payload_too_large"
+
+
+def test_refused_batches_at_a_high_rate_leave_the_valid_frames_their_rate(
+    start_server: Callable[..., Server],
+) -> None:
+    """A client sending batches refused whole (over IK_MAX_REQUEST_WORK_S, too many
+    entries) and entries refused on their own (a wrong token, a bad target) as fast as
+    it can spends nothing of its session's IK_MAX_FRAMES_PER_S: its next valid frames
+    are solved up to the burst, and the one after is still rate limited. A refill of
+    0.1 frame/s keeps that true on a slow machine."""
+    server = start_server(
+        IK_MAX_FRAMES_PER_S="0.1", IK_MAX_FRAMES_PER_REQUEST="2", IK_MAX_REQUEST_WORK_S="0.01"
+    )
+    a, ha = session(server)
+    # 6 ms per frame: to the frame threads, and two in a request are over the work cap.
+    r = httpx.patch(
+        f"{server.base}/v1/sessions/{a}",
+        json={"time_budget_us": 6000},
+        headers=ha,
+        timeout=TIMEOUT_S,
+    )
+    assert r.status_code == 200, r.text
+    wrong = {**entry(a, ha, 3, 0.1), "token": "not-the-token"}
+    bad = {**entry(a, ha, 4, 0.1), "targets": [{"effector": "tool"}]}
+    refused = [
+        [entry(a, ha, 1, 0.1), entry(a, ha, 2, 0.1)],
+        [entry(a, ha, i, 0.1) for i in range(3)],
+        [wrong, bad],
+    ]
+    with ws_connect(server, a, ha) as ws:
+        for msg_id in range(1, 61):
+            frames = refused[msg_id % len(refused)]
+            ws.send(json.dumps({"type": "batch", "id": msg_id, "frames": frames}))
+        replies = [json.loads(ws.recv(timeout=TIMEOUT_S)) for _ in range(60)]
+        assert all(x["success"] is False for x in replies)
+        codes = {x["error"]["code"] if "error" in x else x["type"] for x in replies}
+        assert codes == {"invalid_problem", "batch_result"}, codes
+        valid = [entry(a, ha, 10 + k, 0.1 + 0.01 * k) for k in range(3)]
+        for k, one in enumerate(valid):
+            ws.send(json.dumps({"type": "batch", "id": 100 + k, "frames": [one]}))
+        answers = [json.loads(ws.recv(timeout=TIMEOUT_S))["results"][0] for _ in valid]
+    got = [x["error"]["code"] if "error" in x else "ok" for x in answers]
+    assert got == ["ok", "ok", "rate_limited"], answers

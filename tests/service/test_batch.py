@@ -17,6 +17,7 @@ from starlette.websockets import WebSocketDisconnect
 
 import schemas as S
 from service.config import Settings
+from service.sessions import InMemorySessionStore
 
 from .helpers import Created, create, hand_frame
 
@@ -262,3 +263,60 @@ def test_where_a_batch_is_solved_does_not_change_its_answers(
     for s in sessions:
         info = client.get(f"/v1/sessions/{s.id}", headers=s.headers).json()
         assert info["counters"]["frames"] == 5
+
+
+def test_refused_batches_and_frames_cost_nothing_of_the_rate_limit(
+    make_client: Callable[..., TestClient],
+) -> None:
+    """docs/websocket.md: a frame solved, or answered from storage, costs one of its
+    session's IK_MAX_FRAMES_PER_S; one refused, alone or as a batch's entry, costs
+    nothing. A client sending refused batches and frames at a high rate can still send
+    its valid frames; valid frames over the limit are still limited."""
+    now = [0.0]  # the rate limit's clock, frozen: no frame comes back with time
+    store = InMemorySessionStore(max_sessions=10, ttl_s=1e9, clock=lambda: now[0])
+    settings = Settings(max_frames_per_s=1.0, max_frames_per_request=2, max_request_work_s=0.01)
+    client = make_client(settings, store=store)
+    a, b, gone = create(client), create(client), create(client)
+    # a's frames go to the frame threads (6 ms each): two in a request are over the cap.
+    patched = client.patch(f"/v1/sessions/{a.id}", json={"time_budget_us": 6000}, headers=a.headers)
+    assert patched.status_code == 200, patched.text
+    assert client.delete(f"/v1/sessions/{gone.id}", headers=gone.headers).status_code == 204
+    bad_target = {**entry(a, 3), "targets": [{"effector": "foot", "position": {"x": 0}}]}
+    over_cap = [entry(a, 1), entry(a, 2)]
+    refused = [
+        (over_cap, "invalid_problem"),  # IK_MAX_REQUEST_WORK_S, for the whole batch
+        ([entry(a, i) for i in range(3)], "invalid_problem"),  # IK_MAX_FRAMES_PER_REQUEST
+        ([], "invalid_format"),  # no entries
+        ([{**entry(a, 4), "token": "wrong"}, bad_target], "batch_result"),  # entries refused
+        ([entry(gone, 5), {**entry(a, 6), "targets": []}], "batch_result"),
+    ]
+    with client.websocket_connect(ws_url(b), headers=b.headers) as ws:
+        msg_id = 0
+        for _ in range(10):
+            for frames, expected in refused:
+                msg_id += 1
+                ws.send_text(json.dumps(batch_msg(msg_id, frames)))
+                reply = ws.receive_json()
+                got = reply["error"]["code"] if "error" in reply else reply["type"]
+                assert got == expected, reply
+                assert reply["success"] is False, reply
+            ws.send_text(json.dumps(batch_msg(msg_id, [entry(a, 7)])))  # id_reuse
+            assert ws.receive_json()["error"]["code"] == "id_reuse"
+            r = client.post("/v1/batch", json={"frames": over_cap})
+            assert r.status_code == 422 and r.json()["field"] == "frames", r.text
+            clip = {"frames": [hand_frame(1), hand_frame(2)]}
+            r = client.post(f"/v1/sessions/{a.id}/frames", json=clip, headers=a.headers)
+            assert r.status_code == 422 and r.json()["field"] == "frames", r.text
+        info = client.get(f"/v1/sessions/{a.id}", headers=a.headers).json()
+        assert info["counters"]["frames"] == 0, info
+        # a's bucket is whole: two frames (its burst), one in a batch, one alone...
+        ws.send_text(json.dumps(batch_msg(msg_id + 1, [entry(a, 10)])))
+        assert ws.receive_json()["success"] is True
+        r = client.post(f"/v1/sessions/{a.id}/frames", json=hand_frame(11), headers=a.headers)
+        assert r.status_code == 200, r.text
+        # ...and the third is over the limit, in a batch and alone.
+        ws.send_text(json.dumps(batch_msg(msg_id + 2, [entry(a, 12)])))
+        (limited,) = ws.receive_json()["results"]
+        assert limited["error"]["code"] == "rate_limited", limited
+    r = client.post(f"/v1/sessions/{a.id}/frames", json=hand_frame(12), headers=a.headers)
+    assert r.status_code == 429 and r.json()["code"] == "rate_limited", r.text
