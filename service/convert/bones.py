@@ -111,11 +111,14 @@ def fk_dict(
     fields (``body`` over HTTP; empty for a WebSocket message).
 
     Raises:
-        ServiceError: ``invalid_problem``: both ``q`` and ``joints``, a wrong length or
+        ServiceError: ``invalid_problem``: both ``q`` and ``joints`` (``field``, or
+            ``joints`` on a WebSocket), a wrong length or
             DOF name, bone data asked of a chain without bones, an unknown bone.
     """
     if q is not None and joints is not None:
-        raise invalid_problem("give at most one of 'q' and 'joints'", field or None)
+        # Over HTTP the body is at fault; a WebSocket error names a field of the
+        # message, and an error with no field at all tells the client nothing to fix.
+        raise invalid_problem("give at most one of 'q' and 'joints'", field or "joints")
     bones_field = f"{field}.bones" if field else "bones"
     skeleton = view.skeleton
     if skeleton is None:

@@ -222,6 +222,26 @@ def test_fk_errors_name_the_field_over_http_and_websocket(
         assert words in message.error.message
 
 
+def test_fk_with_both_q_and_joints_names_a_field_over_http_and_websocket(
+    client: TestClient,
+) -> None:
+    # Over the WebSocket this error had no field (null) where HTTP names the body.
+    s = create(client, PANDA)
+    both = {"q": Q, "joints": {"panda_joint1": 0.1}}
+    r = client.post(f"/v1/sessions/{s.id}/fk", json=both, headers=s.headers)
+    assert r.status_code == 422, r.text
+    assert (r.json()["code"], r.json()["field"]) == ("invalid_problem", "body")
+    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        ws.send_json({"type": "fk", "id": 1, **both})
+        text = S.ErrorMessage.model_validate(ws.receive_json())
+        ws.send_bytes(msgpack.packb({"type": "fk", "id": 2, **both}))
+        binary = S.ErrorMessage.model_validate(msgpack.unpackb(ws.receive_bytes()))
+    for message, msg_id in ((text, 1), (binary, 2)):
+        assert message.id == msg_id
+        assert (message.error.code, message.error.field) == ("invalid_problem", "joints")
+        assert "at most one of 'q' and 'joints'" in message.error.message
+
+
 def test_fk_over_the_websocket_is_the_http_answer(client: TestClient) -> None:
     s = create(client, PANDA)
     over_http = _fk(client, s, {"q": Q})
