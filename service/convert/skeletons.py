@@ -122,6 +122,17 @@ def _root_link(skeleton: Skeleton) -> str:
     return name
 
 
+def _base64_hint(text: str) -> str:
+    """What is likely wrong with base64 that does not decode, for the two mistakes a
+    client makes most: a browser's data URL (FileReader.readAsDataURL) sent whole, and
+    the URL-safe alphabet (some engines' and languages' default encoders)."""
+    if text.startswith("data:"):
+        return "; this is a data URL: send only what follows 'base64,'"
+    if "-" in text or "_" in text:
+        return "; it holds '-' or '_', the URL-safe alphabet: use '+' and '/'"
+    return ""
+
+
 def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
     # A decoded file cannot be larger than the body that carried it.
     cap = settings.max_body_bytes
@@ -136,7 +147,8 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
         except (binascii.Error, ValueError) as e:
             raise ServiceError(
                 ErrorCode.INVALID_FORMAT,
-                f"glb_base64 is not valid base64 (standard alphabet, padded): {e}",
+                f"glb_base64 is not valid base64 (standard alphabet, padded): {e}"
+                + _base64_hint(spec.glb_base64),
                 status_code=422,
                 field="chain.glb_base64",
             ) from None

@@ -238,6 +238,24 @@ def test_bad_base64_is_invalid_format(client: TestClient) -> None:
     assert (body["code"], body["field"]) == ("invalid_format", "chain.glb_base64")
 
 
+@pytest.mark.parametrize(
+    ("encode", "words"),
+    [
+        # a browser's FileReader.readAsDataURL, sent whole
+        (lambda b64: "data:model/gltf-binary;base64," + b64, "data URL"),
+        # the URL-safe alphabet (base64url)
+        (lambda b64: b64.replace("+", "-").replace("/", "_"), "URL-safe"),
+    ],
+)
+def test_base64_a_client_got_wrong_says_how(client: TestClient, encode: Any, words: str) -> None:
+    b64 = glb_chain("CesiumMan.glb")["glb_base64"]
+    assert "+" in b64 and "/" in b64  # else the URL-safe case would decode
+    chain = glb_chain("CesiumMan.glb", glb_base64=encode(b64))
+    body = error(client, chain)
+    assert (body["code"], body["field"]) == ("invalid_format", "chain.glb_base64"), body
+    assert words in body["detail"], body
+
+
 def test_unknown_bone_names_say_which_setting_and_suggest(client: TestClient) -> None:
     body = error(client, walk_chain(effectors=[{"bone": "LeftHnd"}]))
     assert body["field"] == "chain.effectors[0].bone"
