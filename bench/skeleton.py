@@ -10,7 +10,10 @@ times (median and 99th percentile, microseconds), for every bone moving (the def
 and for the limbs only; then the same stream with blend weights (0.5 on the feet's
 positions and the hands' rotations: the blend towards the start pose) and with a pole
 on each limb (knees and elbows, the default bone; each pole 0.3 m in front of that
-bone in the path's pose, so the poles move with the path).
+bone in the path's pose, so the poles move with the path), and the poles' first frame
+held for every frame (a character standing still). Each line ends with the largest
+joint step from one answer to the next (median, largest, median over the last half:
+0 for a stream that settles).
 
     OPENBLAS_NUM_THREADS=1 python -m bench.skeleton --frames 300 [--budget-us 0]
 """
@@ -141,17 +144,23 @@ def main(argv: list[str] | None = None) -> int:
             ("", plain),
             (" + weights 0.5", [weighted(t) for t in plain]),
             (f" + poles on {', '.join(b or '-' for b in bent)}", poled),
+            # A character standing still: the first frame, poles and all, every frame.
+            (" + poles, the first frame held", [poled[0]] * len(poled)),
         )
         for variant, stream in streams:
             budget = args.budget_us if args.budget_us > 0 else None
             options = replace(STREAM_DEFAULTS, time_budget_us=budget)
             solver = IKSolver(chain, options, seed=args.seed)
-            solve_us, output_us, solved = [], [], 0
+            solve_us, output_us, steps, solved = [], [], [], 0
             bones = [e.link for e in effectors]
+            previous = None
             for targets in stream:
                 start = time.perf_counter()
                 result = solver.track(targets)
                 mid = time.perf_counter()
+                if previous is not None:  # the largest joint step from the last answer
+                    steps.append(float(np.abs(result.q - previous).max()))
+                previous = result.q.copy()
                 built.local_rotations(result.q)
                 built.world_transforms(result.q, bones)
                 end = time.perf_counter()
@@ -162,7 +171,10 @@ def main(argv: list[str] | None = None) -> int:
                 f"{label}{variant}: {len(built.moving)} bones, {chain.n_dof} variables, "
                 f"solved {solved}/{args.frames}; solve p50 {np.median(solve_us):.0f} us, "
                 f"p99 {np.percentile(solve_us, 99):.0f} us; bone output p50 "
-                f"{np.median(output_us):.0f} us, p99 {np.percentile(output_us, 99):.0f} us"
+                f"{np.median(output_us):.0f} us, p99 {np.percentile(output_us, 99):.0f} us; "
+                f"largest joint step per frame p50 {np.median(steps):.4f} rad, max "
+                f"{max(steps):.4f} rad, p50 over the last half "
+                f"{np.median(steps[len(steps) // 2 :]):.4f} rad"
             )
     return 0
 

@@ -1,26 +1,31 @@
 """Pole (hint) targets: where a limb bends, chosen by a point, without ever making a
 reachable frame fail.
 
-A frame with poles is solved in two calls of the compiled solve (``frame.solve_frame``),
-the article's method unchanged in each:
+A frame with poles is solved in three calls of the compiled solve
+(``frame.solve_frame``), the article's method unchanged in each:
 
-1. Shaping: the IK objective plus w |o_k - pole|^2 for each pole (``pole_term``: o_k
+1. Plain: the usual solve from the frame's seed, as if it had no pole (without the
+   null-space step, which would pull the self-motion the pole chose towards the rest
+   pose).
+2. Shaping: the IK objective plus w |o_k - pole|^2 for each pole (``pole_term``: o_k
    the origin of the pulled link, a knee or an elbow; w = ``POLE_WEIGHT``), from the
    frame's seed, with the goal switched off (f_goal = -inf: the pass does not stop
    when the targets are first met, so the pole gets to swing the limb round), no
    restarts (a random restart would pick the bend side by chance) and at most
    ``SHAPING_MAX_ITER`` iterations (``SHAPING_FIRST_MAX_ITER`` on a frame with no
-   previous answer) and half the time budget.
-2. The usual solve without the pole term, from the shaping pass's answer: it converges
+   previous answer) and half the time budget left.
+3. The usual solve without the pole term, from the shaping pass's answer: it converges
    to the targets on the side the pole chose (a local method stays in the basin it
    starts in), and success is judged as in any frame.
 
-If the second call does not solve the frame, the frame is solved once more as if it had
-no pole, from the original seed: so a pole never turns a frame the plain solve reaches
-into a failure (it only costs the time). A stream's bend side follows a pole that
-moves smoothly (each frame starts from the last answer, and the shaping pass moves the
-limb continuously with the pole). The null-space step is skipped after a shaped frame
-(it would drift the self-motion the pole chose back towards the rest pose).
+The third call's answer is the frame's where it brings the pulled links nearer their
+poles than the plain answer by more than ``SHAPED_GAIN`` of the distance (or where the
+plain solve missed); else the plain answer, which continues the last one. So a pole
+never turns a frame the plain solve reaches into a failure (it only costs the time), a
+stream's bend side follows a pole that moves smoothly (each frame starts from the last
+answer, and the shaping pass moves the limb continuously with the pole), and a limb
+whose pole and target stand still stands still (``PoleShaper.solve`` says why the
+shaped answer alone did not).
 
 The pulled link, when the client names none (``default_pole_link``): the middle of the
 effector's limb. The limb is the effector's path towards the root up to the first link
@@ -68,6 +73,11 @@ _STILL_RATE = 1e-9
 # enough to swing a limb in a few dozen iterations, weak enough that the targets stay
 # nearly met (the second call then has little to do).
 POLE_WEIGHT_VALUE = 0.1
+# The shaped answer is a frame's only where it brings the pulled links nearer their
+# poles than the plain answer, by more than this share of the distance (a knee 0.44 m
+# from its pole: 0.9 mm): a pole that moves is followed within that, and one that
+# stands still leaves the limb still (``PoleShaper.solve``).
+SHAPED_GAIN = 2e-3
 # Iterations of the shaping pass: enough to swing a knee from one side to the other in
 # a one-shot solve (tests/solver/test_poles_weights.py), few enough that a stream frame
 # with four poles costs ~5x a plain one rather than ~7x with 40 (bench/RESULTS.md); a
@@ -293,19 +303,38 @@ class PoleShaper:
         usual: FrameCall,
         shaping_max_iter: int = SHAPING_MAX_ITER,
     ) -> SolveResult:
-        """The frame of ``args`` (``frame.solve_frame``'s arguments) with the poles'
-        shaping pass first (at most ``shaping_max_iter`` iterations), then ``usual``
-        (the frame's solve without poles: the compiled call, or
-        ``blend.solve_blended``); the answer is in ``args``' out_x and out. Iterations,
-        evaluations, restarts and time are summed over the calls; passes are the
-        answer's own (its pass log is the one in ``out``)."""
+        """The frame of ``args`` (``frame.solve_frame``'s arguments): ``usual`` (the
+        frame's solve without poles: the compiled call, or ``blend.solve_blended``)
+        from the seed, then the poles' shaping pass (at most ``shaping_max_iter``
+        iterations) and ``usual`` again from the shaped pose. The shaped answer is the
+        frame's only where it brings the pulled links closer to their poles than the
+        plain one, by more than ``SHAPED_GAIN`` of the distance, or where the plain one
+        misses; the answer is in ``args``' out_x and out. Iterations, evaluations,
+        restarts and time are summed over the calls; passes are the answer's own (its
+        pass log is the one in ``out``).
+
+        Why the plain answer first: the shaping pass trades the targets for the pole
+        and the second call trades back along the targets' self-motion, which need not
+        retrace the first. Where the pulled link is already as near its pole as the
+        targets let it be (a still frame), each frame's round trip moved a ball-joint
+        knee 1-2 cm and its joints up to the stream's step limit, for ever; a hinge
+        knee has no such freedom and kept still (a game developer's trial).
+        """
         data, x0, h0, fopt, iopt, policy, out_x, out, step, scratch, ints = args
+        # The plain answer without the null-space step: with poles the pull towards
+        # the rest pose would fight the pole's, a little every frame.
+        plain_x = np.empty_like(out_x)
+        plain_out = np.empty_like(out)
+        plain = usual(data, x0, h0, fopt, iopt, policy, plain_x, plain_out, 0.0, scratch, ints)
+        if plain[0] != TARGETS_OK:
+            return plain
         misc = data[5]
         dd = data[4]
         self._write(misc, poles)
+        left = max(0.0, fopt[C.F_BUDGET] - plain[7])
         shaping_f = fopt.copy()
         shaping_f[C.F_F_GOAL] = -math.inf
-        shaping_f[C.F_BUDGET] = 0.5 * fopt[C.F_BUDGET]
+        shaping_f[C.F_BUDGET] = 0.5 * left
         shaping_i = iopt.copy()
         shaping_i[C.I_MAX_RESTARTS] = 0
         shaping_i[C.I_MAX_ITER] = min(int(iopt[C.I_MAX_ITER]), shaping_max_iter)
@@ -317,23 +346,35 @@ class PoleShaper:
         finally:
             misc[self._start] = 0.0  # the pole term off for everything after
             dd[DD_XLAST, 0] = math.nan  # cached f and goal include the pole: stale
-        if first[0] != TARGETS_OK:
-            return first
-        left_f = fopt.copy()
-        left_f[C.F_BUDGET] = max(0.0, fopt[C.F_BUDGET] - first[7])
-        second = usual(data, shaped, h0, left_f, iopt, policy, out_x, out, 0.0, scratch, ints)
-        if second[1] == STATUS_SOLVED:
-            return combined(second, (first, second))
-        # The plain solve from the seed: a pole never fails a frame it would reach.
-        left_f[C.F_BUDGET] = max(0.0, left_f[C.F_BUDGET] - second[7])
-        plain_x = np.empty_like(out_x)
-        plain_out = np.empty_like(out)
-        plain = usual(data, x0, h0, left_f, iopt, policy, plain_x, plain_out, step, scratch, ints)
-        if plain[1] != STATUS_SOLVED:
-            return combined(second, (first, second, plain))
+        calls: tuple[SolveResult, ...] = (plain, first)
+        if first[0] == TARGETS_OK:
+            left_f = fopt.copy()
+            left_f[C.F_BUDGET] = max(0.0, left - first[7])
+            second = usual(data, shaped, h0, left_f, iopt, policy, out_x, out, 0.0, scratch, ints)
+            calls = (plain, first, second)
+            plain_solved = plain[1] == STATUS_SOLVED
+            if second[1] == STATUS_SOLVED and (
+                not plain_solved or self._nearer(out_x, plain_x, poles)
+            ):
+                return combined(second, calls)
+            if not plain_solved and second[1] != STATUS_SOLVED:
+                return combined(second, calls)  # neither: the one shaped by the pole
+        # The plain answer: a pole never fails a frame it would reach.
         out_x[:] = plain_x
         out[:] = plain_out
-        return combined(plain, (first, second, plain))
+        return combined(plain, calls)
+
+    def _nearer(self, x: np.ndarray, than: np.ndarray, poles: list[tuple[int, Pole]]) -> bool:
+        """Whether ``x`` puts the pulled links nearer their poles than ``than`` does,
+        by more than ``SHAPED_GAIN`` of the distance (summed over the poles)."""
+        nd_x = node_frames(self.chain, x)
+        nd_than = node_frames(self.chain, than)
+        near = far = 0.0
+        for effector, pole in poles:
+            node = self._nodes[(effector, pole.link)]
+            near += float(np.linalg.norm(nd_x[node, ND_T : ND_T + 3] - pole.point))
+            far += float(np.linalg.norm(nd_than[node, ND_T : ND_T + 3] - pole.point))
+        return near < (1.0 - SHAPED_GAIN) * far
 
     def _write(self, misc: np.ndarray, poles: list[tuple[int, Pole]]) -> None:
         start = self._start

@@ -361,15 +361,7 @@ def test_a_pole_with_no_default_bone_names_its_field(client: TestClient) -> None
     "knee",
     [
         {"axes": "x", "lower": [-2.6], "upper": [2.6]},
-        pytest.param(
-            None,
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="a ball-joint knee under a still pole keeps moving (docs/engines.md, "
-                "'Give a knee or an elbow that carries a pole a hinge'): when this passes, "
-                "update that paragraph",
-            ),
-        ),
+        None,  # a ball joint, the default: it jittered until the plain answer came first
     ],
     ids=["hinge-knee", "ball-knee"],
 )

@@ -429,6 +429,29 @@ def test_the_bend_side_follows_a_moving_pole_without_popping(legs: Chain) -> Non
     assert max(steps) <= 3.0 * float(np.median(steps))
 
 
+def test_a_still_pole_leaves_the_legs_still(legs: Chain) -> None:
+    """The same frame, poles and all, again and again (a character standing still):
+    the answers come to rest with the knees on their poles' side. With the shaped
+    answer taken every frame, these ball-joint knees moved 1-2 cm and their joints up
+    to the step limit every frame, for ever (a game developer's trial)."""
+    target, middle, across = bent_leg(legs)
+    left = foot(legs, np.zeros(legs.n_dof), 1) + [0.0, 0.1, 0.05]
+    knee_pole = Pole(middle + 0.5 * across)
+    left_pole = Pole(left + np.array([0.0, 0.5, 0.6]))
+    frame = [
+        Target(effector="right_foot", position=target, pole=knee_pole),
+        Target(effector="left_foot", position=left, pole=left_pole),
+    ]
+    solver = IKSolver(legs, replace(STREAM_DEFAULTS, time_budget_us=None))
+    answers = []
+    for _ in range(60):
+        result = solver.track(frame)
+        assert result.success, result.status
+        answers.append(result.q.copy())
+    assert np.abs(np.diff(answers[-20:], axis=0)).max() == 0.0
+    assert knee_side(legs, answers[-1], across) > 0.02
+
+
 def test_weight_zero_frees_an_effector(legs: Chain) -> None:
     target, _, _ = bent_leg(legs)
     left = foot(legs, np.zeros(legs.n_dof), 1) + [0.0, 0.1, 0.0]
