@@ -59,7 +59,7 @@ def decode(
         try:
             raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
         except Exception as e:  # msgpack's errors share no useful base class
-            raise Unreadable(raw_id(_lenient(data, binary)), _not_msgpack(e)) from None
+            raise Unreadable(raw_id(_lenient(data, binary)), _not_msgpack(e, data)) from None
     else:
         try:
             raw = orjson.loads(data)
@@ -77,6 +77,10 @@ def decode(
     except ValidationError as e:
         if raw is None:  # orjson refused it: NaN, Infinity, 1e400 (still an object)
             raw = _lenient(data, binary)
+        if binary and (key := _bytes_key(raw)) is not None:
+            message = f"a MessagePack map key must be a string, and this message has the bin "
+            message += f"key {key!r} (bytes packed as bin: pack the keys as str)"
+            raise Unreadable(raw_id(raw), message) from None
         error = most_helpful(e.errors())
         message, field = str(error["msg"]), field_path(error["loc"])
         if field is None and error["type"] in _NO_MESSAGE_TYPE:
@@ -102,12 +106,38 @@ def _lenient(data: str | bytes, binary: bool) -> Any:
         return None
 
 
-def _not_msgpack(e: Exception) -> str:
+def _not_msgpack(e: Exception, data: bytes | str) -> str:
     """What a client is told of a binary message msgpack cannot read. A map key that
     is not a string is valid MessagePack that msgpack refuses (``strict_map_key``, a
-    guard against hash flooding); it is told as such, not as unreadable bytes."""
+    guard against hash flooding); it is told as such, not as unreadable bytes. JSON in
+    a binary frame (a ``ClientWebSocket`` sending bytes) is told to go as text."""
     text = str(e)
     if type(e) is ValueError and "not allowed for map key" in text:
         kind = text.split(" ", 1)[0]
         return f"a MessagePack map key must be a string, and this message has a key of type {kind}"
-    return f"not MessagePack: {type(e).__name__}"
+    try:
+        json_object = isinstance(orjson.loads(data), dict)
+    except orjson.JSONDecodeError:
+        json_object = False
+    if json_object:
+        return "a binary message is read as MessagePack and this one is JSON: send JSON as text"
+    return f"not MessagePack: {type(e).__name__}" + (f" ({text})" if text else "")
+
+
+def _bytes_key(raw: Any, depth: int = 0) -> bytes | None:
+    """The first bin (bytes) map key in a decoded MessagePack message, if any: msgpack
+    lets them through ``strict_map_key``, and the schema would only say a key is
+    missing. Looked for on the error path only, 32 levels deep at most."""
+    if depth > 32:
+        return None
+    if isinstance(raw, dict):
+        for k, v in raw.items():
+            if isinstance(k, bytes):
+                return k
+            if (found := _bytes_key(v, depth + 1)) is not None:
+                return found
+    elif isinstance(raw, list):
+        for v in raw:
+            if (found := _bytes_key(v, depth + 1)) is not None:
+                return found
+    return None

@@ -12,6 +12,7 @@ import math
 from typing import Any
 
 import msgpack
+import orjson
 import pytest
 from starlette.testclient import TestClient
 
@@ -312,6 +313,35 @@ def test_a_msgpack_map_key_that_is_not_a_string_is_named(
         "a MessagePack map key must be a string, and this message has a key of type int"
     ), answer
     assert garbage["id"] is None and garbage["error"]["message"].startswith("not MessagePack")
+
+
+def test_binary_messages_that_are_not_msgpack_say_what_they_are(
+    client: TestClient, session: Created
+) -> None:
+    """A trial's findings: JSON in a binary frame (C#'s ClientWebSocket sending bytes)
+    was told "not MessagePack: ExtraData", cut-off MessagePack "ValueError", and keys
+    packed as bin "the message has no type"."""
+    ping = {"type": "ping", "id": 6}
+    with client.websocket_connect(f"/v1/sessions/{session.id}/ws", headers=session.headers) as ws:
+        answers = []
+        for data in (
+            orjson.dumps(ping),
+            msgpack.packb(ping)[:-2],
+            msgpack.packb({b"type": "ping", "id": 7}, use_bin_type=True),
+        ):
+            ws.send_bytes(data)
+            answers.append(msgpack.unpackb(ws.receive_bytes()))
+        ws.send_bytes(msgpack.packb(ping))  # the socket is still open and answers
+        pong = msgpack.unpackb(ws.receive_bytes())
+    json_bytes, cut, bin_key = (a["error"]["message"] for a in answers)
+    assert json_bytes == (
+        "a binary message is read as MessagePack and this one is JSON: send JSON as text"
+    )
+    assert cut == "not MessagePack: ValueError (Unpack failed: incomplete input)"
+    assert "the bin key b'type'" in bin_key and "pack the keys as str" in bin_key
+    assert answers[2]["id"] == 7  # its id is under a str key
+    assert all(a["error"]["code"] == "invalid_format" for a in answers)
+    assert pong == {"id": 6, "type": "pong"}
 
 
 @pytest.mark.parametrize("scheme", ["", "Token "])
