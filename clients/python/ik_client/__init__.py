@@ -37,7 +37,8 @@ from .errors import (
     TooManyWebSockets,
     UnexpectedAnswer,
 )
-from .stream import AsyncStream, Reconnect, Stream
+from .reconnect import Reconnect
+from .stream import AsyncStream, Stream
 from .types import (
     Answer,
     BatchAnswer,

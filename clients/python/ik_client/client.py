@@ -8,10 +8,11 @@ the server's ``code``, ``field`` and ``retry_after_s``, or ``NoAnswer`` when no 
 came (the connection failed, or the timeout passed). A call that got no answer (the
 connection failed or dropped, not a timeout; or a balancer's or the server's 502 or 503)
 is sent again, as first encoded, when it is repeatable (``calls.Call``: reads, a pose
-or options set, a stateless solve, a frame with an id), as often and as patiently as
-the client's ``reconnect`` says, no sooner than a ``Retry-After`` and not at all when
-that is longer than ``reconnect.max_delay_s``. ``stream()`` opens the session's
-WebSocket (``Stream`` / ``AsyncStream``; its own ``reconnect`` argument).
+or options set, a stateless solve, a frame with an id), as the client's ``reconnect``
+says (reconnect.py: backoff with jitter until a deadline from the call's first
+failure), no sooner than a ``Retry-After`` and not at all when that would end after the
+deadline. ``stream()`` opens the session's WebSocket (``Stream`` / ``AsyncStream``;
+its own ``reconnect`` argument).
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ import httpx
 from . import calls
 from .calls import Call, SessionRef
 from .errors import NoAnswer
-from .stream import PING_INTERVAL_S, PING_TIMEOUT_S, AsyncStream, Reconnect, Stream
+from .reconnect import DEFAULT_RECONNECT, Backoff, Reconnect, retry_after_s
+from .stream import PING_INTERVAL_S, PING_TIMEOUT_S, AsyncStream, Stream
 from .types import Encoding
 
 T = TypeVar("T")
@@ -37,7 +39,6 @@ P = ParamSpec("P")
 HTTP = TypeVar("HTTP", httpx.Client, httpx.AsyncClient)
 S = TypeVar("S", Stream, AsyncStream)
 DEFAULT_TIMEOUT_S = 30.0
-DEFAULT_RECONNECT = Reconnect()
 # What a balancer answers for a worker it cannot reach, and the server for a store or
 # solver it cannot reach yet: the call itself was not answered. (Not 504: the worker may
 # still be solving it.)
@@ -102,10 +103,10 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
         base_url: The service, e.g. ``http://127.0.0.1:8000``.
         api_key: Sent as ``X-API-Key`` when the server has API keys (``IK_API_KEYS``).
         timeout_s: Per-request timeout [s].
-        reconnect: How often and how patiently a repeatable HTTP call that got no
-            answer is sent again (``Reconnect(attempts=0)``: never; the error is raised
-            at once). ``timeout_s`` bounds each attempt. A stream's reconnects are
-            ``stream()``'s own argument.
+        reconnect: How long and how often a repeatable HTTP call that got no answer
+            is sent again (default: for up to 30 s; ``Reconnect.OFF``: never, the
+            error is raised at once). ``timeout_s`` bounds each attempt. A stream's
+            reconnects are ``stream()``'s own argument.
         **httpx_options: Passed on to the httpx client (e.g. ``transport``, ``verify``).
     """
 
@@ -131,22 +132,19 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
     def _http_client(self, **options: Any) -> HTTP: ...
 
     def _wait_before_resending(
-        self, call: Call[Any], attempt: int, response: httpx.Response | None
+        self, call: Call[Any], backoff: Backoff, response: httpx.Response | None
     ) -> float | None:
-        """Seconds to wait before sending ``call`` again after ``attempt`` sends that got
-        ``response`` (None: the connection failed), or None: do not send it again."""
-        if not call.repeatable or attempt >= self.reconnect.attempts:
+        """Seconds to wait before sending ``call`` again after a send that got
+        ``response`` (None: the connection failed), or None: do not send it again (not
+        repeatable, answered, or ``backoff``'s deadline spent or shorter than the
+        answer's ``Retry-After``: the caller decides)."""
+        if not call.repeatable:
             return None
-        wait = self.reconnect.delay_s(attempt)
-        if response is not None:
-            if response.status_code not in _NO_ANSWER_STATUSES:
-                return None
-            retry_after = response.headers.get("Retry-After", "")
-            if retry_after.isdigit():
-                if float(retry_after) > self.reconnect.max_delay_s:
-                    return None  # longer than the client waits: the caller decides
-                wait = max(wait, float(retry_after))
-        return wait
+        if response is None:
+            return backoff.next_wait_s()
+        if response.status_code not in _NO_ANSWER_STATUSES:
+            return None
+        return backoff.next_wait_s(retry_after_s(response.headers.get("Retry-After")))
 
     create_session = _Endpoint(calls.create_session)
     get_session = _Endpoint(calls.get_session)
@@ -184,8 +182,10 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
             session: The session (or anything with ``id`` and ``token``).
             encoding: JSON text or MessagePack binary messages.
             compact: Compact frame results (``?results=compact``).
-            reconnect: How to reconnect after a drop; ``Reconnect(attempts=0)`` raises
-                the drop as a ``StreamClosed`` instead.
+            reconnect: How long and how often to reconnect after a drop (default:
+                for up to 30 s from the drop, each new drop since an answer with the
+                whole budget); ``Reconnect.OFF`` raises the drop as a ``StreamClosed``
+                instead.
             timeout_s: Bounds each wait for an answer [s]; None waits for ever.
             deflate: Offer permessage-deflate (False: messages go uncompressed, which
                 costs less CPU at both ends for frames of a few hundred bytes).
@@ -229,23 +229,22 @@ class Client(_BaseClient[httpx.Client, Stream]):
         self._http.close()
 
     def _send(self, call: Call[T]) -> T:
-        attempt = 0
+        backoff = Backoff(self.reconnect)  # this call's own clock, from its first failure
         request = call.request(self._http)  # encoded once: sent again as first sent
         while True:
             try:
                 response = self._http.send(request)
             except _NO_ANSWER_ERRORS as e:
-                wait = self._wait_before_resending(call, attempt, None)
+                wait = self._wait_before_resending(call, backoff, None)
                 if wait is None:
                     raise _no_answer(call, e) from e
             except httpx.TimeoutException as e:  # not sent again: it may be under way
                 raise _no_answer(call, e) from e
             else:
-                wait = self._wait_before_resending(call, attempt, response)
+                wait = self._wait_before_resending(call, backoff, response)
                 if wait is None:
                     return call.result(response)
             time.sleep(wait)
-            attempt += 1
 
 
 class AsyncClient(_BaseClient[httpx.AsyncClient, AsyncStream]):
@@ -266,20 +265,19 @@ class AsyncClient(_BaseClient[httpx.AsyncClient, AsyncStream]):
         await self._http.aclose()
 
     async def _send(self, call: Call[T]) -> T:
-        attempt = 0
+        backoff = Backoff(self.reconnect)  # this call's own clock, from its first failure
         request = call.request(self._http)  # encoded once: sent again as first sent
         while True:
             try:
                 response = await self._http.send(request)
             except _NO_ANSWER_ERRORS as e:
-                wait = self._wait_before_resending(call, attempt, None)
+                wait = self._wait_before_resending(call, backoff, None)
                 if wait is None:
                     raise _no_answer(call, e) from e
             except httpx.TimeoutException as e:  # not sent again: it may be under way
                 raise _no_answer(call, e) from e
             else:
-                wait = self._wait_before_resending(call, attempt, response)
+                wait = self._wait_before_resending(call, backoff, response)
                 if wait is None:
                     return call.result(response)
             await asyncio.sleep(wait)
-            attempt += 1

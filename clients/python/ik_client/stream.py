@@ -2,17 +2,20 @@
 
 The stream numbers its messages itself (0, 1, 2, ...), so a caller can send many and match
 the answers by the id each ``send_*`` returned; the server answers in order. When the
-connection drops (or the server closes 1011, 1012 or 1013), the stream reconnects with a
-bounded backoff and sends again, in order, every message that had no answer yet, under
+connection drops (or the server closes 1011, 1012 or 1013, or answers ``shutting_down``, or
+``not_ready`` after a reconnect), the stream reconnects within its ``Reconnect`` budget
+(reconnect.py: a deadline, backoff with jitter) and sends again, in order, every message
+that had no answer yet, under
 the id it was first sent with (each connection wants increasing ids; the stream keeps one
 counter over every connection, so they still increase). Answers are reported under the id
 the caller got, and each message gets exactly one. A server that keeps answers (sessions
 in Redis, docs/operations.md) answers a message it had solved, and whose answer was lost
 in the drop, with that stored answer (on another worker too): it is never solved twice.
 
-``_Pipeline`` (ids, encodings, what waits for an answer) and ``_Retries`` (the reconnect
-budget) hold all of that without I/O; ``AsyncStream`` (websockets' asyncio client) and
-``Stream`` (its threading client) only move bytes and wait.
+``_Pipeline`` (ids, encodings, what waits for an answer) and ``_Retries`` (which failures
+a reconnect can mend, and the budget) hold all of that without I/O; ``AsyncStream``
+(websockets' asyncio client) and ``Stream`` (its threading client) only move bytes and
+wait.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from typing import Any, Generic, TypeVar
 import msgpack
 from websockets.asyncio.client import ClientConnection as AsyncConnection
 from websockets.asyncio.client import connect as async_connect
-from websockets.exceptions import ConnectionClosed, InvalidHandshake
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
 from websockets.sync.client import ClientConnection as SyncConnection
 from websockets.sync.client import connect as sync_connect
 
@@ -43,11 +46,14 @@ from .errors import (
     CloseCode,
     ConnectionLost,
     EncodeError,
+    ErrorCode,
     IKClientError,
+    StreamClosed,
     UnexpectedAnswer,
     service_error,
     stream_closed,
 )
+from .reconnect import Backoff, Reconnect, retry_after_s
 from .types import (
     Answer,
     BatchAnswer,
@@ -180,21 +186,6 @@ PING_INTERVAL_S = 20.0
 PING_TIMEOUT_S = 20.0
 
 
-@dataclass(frozen=True, slots=True)
-class Reconnect:
-    """How hard a stream tries to get its connection back: ``attempts`` connections,
-    waiting ``initial_delay_s`` before the first and doubling up to ``max_delay_s``.
-    ``attempts=0`` turns reconnecting off. The count starts again at each answer: a
-    server that accepts and then closes (1013) is not retried for ever."""
-
-    attempts: int = 6
-    initial_delay_s: float = 0.05
-    max_delay_s: float = 2.0
-
-    def delay_s(self, attempt: int) -> float:
-        return float(min(self.initial_delay_s * 2**attempt, self.max_delay_s))
-
-
 @dataclass(slots=True)
 class _Message:
     id: int  # the id the caller was given
@@ -239,17 +230,23 @@ class _Pipeline:
         here can fail to encode."""
         return [m.data for m in self._waiting.values()]
 
-    def answer(self, data: str | bytes) -> Answer:
+    def answer(self, data: str | bytes, *, outage: frozenset[str] = frozenset()) -> Answer:
         """The answer ``data`` carries, under its message's caller id.
+
+        Args:
+            outage: The error codes that are part of an outage now (``_Retries.outage``):
+                such an answer is not the message's.
 
         Raises:
             ServiceError: The message was answered with an error (its subclass by code).
+            _NotServing: The server cannot serve the message now but another connection
+                can; it stays waiting, to be sent again.
         """
         envelope = _envelope(data)
         wire_id = envelope.get("id")
         if wire_id is None and self._waiting:  # the server could not read the id: in order
             wire_id = next(iter(self._waiting))
-        message = self._waiting.pop(wire_id, None) if isinstance(wire_id, int) else None
+        message = self._waiting.get(wire_id) if isinstance(wire_id, int) else None
         if message is None:
             raise UnexpectedAnswer(
                 f"an answer to id {wire_id!r}, which is not waiting: {envelope}",
@@ -259,6 +256,9 @@ class _Pipeline:
         kind = envelope.get("type")
         if "error" in envelope:
             error = envelope["error"]
+            if error.get("code") in outage:
+                raise _NotServing.of(error)
+            del self._waiting[message.wire_id]
             raise service_error(
                 error.get("code"),
                 error.get("message", ""),
@@ -266,6 +266,7 @@ class _Pipeline:
                 retry_after_s=error.get("retry_after_s"),
                 id=message.id,
             )
+        del self._waiting[message.wire_id]
         if kind == "result":
             result = envelope["result"]
             frame = FrameResult.from_json({**result, "id": message.id})
@@ -296,6 +297,40 @@ class _Pipeline:
             raise EncodeError(
                 f"the message cannot be written as {self.encoding.value}: {exc}"
             ) from exc
+
+
+class _NotServing(Exception):
+    """An error answer that says the server cannot serve the message now, where a new
+    connection, after a wait, can: the stream reconnects and sends it again. ``close``
+    is what the stream raises if its reconnect budget runs out."""
+
+    def __init__(self, close: StreamClosed, retry_after_s: float | None) -> None:
+        super().__init__(str(close))
+        self.close = close
+        self.retry_after_s = retry_after_s
+
+    @classmethod
+    def of(cls, error: dict[str, Any]) -> _NotServing:
+        """The error answer ``error`` (one of ``_OUTAGE_CODES``) as the close it stands for."""
+        code = str(error.get("code"))
+        close = (
+            CloseCode.SERVICE_RESTART
+            if code == ErrorCode.SHUTTING_DOWN
+            else CloseCode.TRY_AGAIN_LATER
+        )
+        wait = error.get("retry_after_s")
+        return cls(
+            stream_closed(close, code), float(wait) if isinstance(wait, int | float) else None
+        )
+
+
+# Error answers that are part of an outage, not about the message (when reconnecting is
+# on): ``shutting_down`` (the message was being solved when the server began to stop; it
+# closes 1012 next) always, and ``not_ready`` while recovering from a lost connection (a
+# restarted worker listens before its solver is loaded; a stream opened on a warming
+# server gets ``not_ready`` as before, as its opening fails at once).
+_OUTAGE_CODES = frozenset({ErrorCode.SHUTTING_DOWN.value})
+_RECOVERY_CODES = frozenset({ErrorCode.SHUTTING_DOWN.value, ErrorCode.NOT_READY.value})
 
 
 def _frame(targets: list[Target], bones: BoneOutput | None) -> dict[str, Any]:
@@ -367,37 +402,61 @@ def _close_of(exc: ConnectionClosed) -> tuple[int, str]:
 
 class _Retries:
     """A stream's reconnect budget, without I/O: which closes a reconnect can mend, the
-    wait before each attempt (``Reconnect``), and the error raised when none is left."""
+    wait before each attempt (``Backoff`` under the ``Reconnect`` policy: a deadline from
+    the first failure since the last answer), and the error raised when none is left."""
 
     def __init__(self, policy: Reconnect) -> None:
-        self.policy = policy
-        self.tries = 0  # reconnects since the last answer
-        self._last: ConnectionClosed | None = None
+        self.backoff = Backoff(policy)
+        self._last: StreamClosed | None = None  # raised when the budget is spent
+        self._cause: BaseException | None = None
+        self._retry_after_s: float | None = None  # the server's wait before the next try
+
+    @property
+    def outage(self) -> frozenset[str]:
+        """The error answers that are part of an outage now (none when reconnecting is
+        off: the caller sees them as they are)."""
+        if not self.backoff.policy.enabled:
+            return frozenset()
+        return _RECOVERY_CODES if self.backoff.recovering else _OUTAGE_CODES
+
+    def answered(self) -> None:
+        self.backoff.answered()
 
     def closed(self, exc: ConnectionClosed) -> None:
         """Note a close; raise it as a ``StreamClosed`` when reconnecting cannot mend it."""
         code, reason = _close_of(exc)
         if code not in RECONNECTABLE:
             raise stream_closed(code, reason) from exc
-        self._last = exc
+        self._lost(stream_closed(code, reason), exc)
+
+    def not_serving(self, exc: _NotServing) -> None:
+        """Note an answer that the server cannot serve now (``_NotServing``)."""
+        self._lost(exc.close, exc)
+        self._retry_after_s = exc.retry_after_s
 
     def attempt_failed(self, exc: Exception) -> None:
         """Note a reconnect attempt that failed (one of ``_ATTEMPT_FAILURES``): a close is
         noted as by ``closed``; an unreachable server or a refused handshake is tried
-        again."""
+        again, no sooner than the ``Retry-After`` of a refusal (a balancer's 503 while no
+        worker is ready)."""
         if isinstance(exc, ConnectionClosed):
             self.closed(exc)
+        elif isinstance(exc, InvalidStatus):
+            self._retry_after_s = retry_after_s(exc.response.headers.get("Retry-After"))
 
     def delays(self) -> Iterator[float]:
         """The wait before each reconnect attempt left [s]; then the last close, raised.
         An attempt counts when it starts (a server that accepts and closes again uses
         the budget up)."""
-        while self.tries < self.policy.attempts:
-            delay = self.policy.delay_s(self.tries)
-            self.tries += 1
-            yield delay
-        assert self._last is not None, "closed() notes the close before any attempt"
-        raise stream_closed(*_close_of(self._last)) from self._last
+        while (wait := self.backoff.next_wait_s(self._retry_after_s)) is not None:
+            self._retry_after_s = None
+            yield wait
+        assert self._last is not None, "a failure is noted before any attempt"
+        raise self._last from self._cause
+
+    def _lost(self, close: StreamClosed, cause: BaseException) -> None:
+        self.backoff.failed()
+        self._last, self._cause = close, cause
 
 
 def _expect_frame(answer: Answer) -> FrameResult:
@@ -496,8 +555,25 @@ class _BaseStream(Generic[Connection]):
         return self._pipeline.in_flight
 
     def _answer(self, data: str | bytes) -> Answer:
-        self._retries.tries = 0
-        return self._pipeline.answer(data)
+        """The answer ``data`` carries (``_Pipeline.answer``); any answer but one that
+        is part of the outage (``_NotServing``) gives the reconnect budget back."""
+        serving = True
+        try:
+            return self._pipeline.answer(data, outage=self._retries.outage)
+        except _NotServing:
+            serving = False
+            raise
+        finally:
+            if serving:  # error answers included: the server answered
+                self._retries.answered()
+
+    def _note_failure(self, exc: ConnectionClosed | _NotServing) -> None:
+        """Count ``exc`` against the reconnect budget, or raise it when reconnecting
+        cannot mend it (``_Retries``)."""
+        if isinstance(exc, _NotServing):
+            self._retries.not_serving(exc)
+        else:
+            self._retries.closed(exc)
 
     def _reconnected(self, connection: Connection) -> None:
         self._connection = connection
@@ -564,7 +640,11 @@ class AsyncStream(_BaseStream[AsyncConnection]):
             except ConnectionClosed as exc:
                 await self._recover(connection, exc)
                 continue
-            return self._answer(data)
+            try:
+                return self._answer(data)
+            except _NotServing as exc:
+                await connection.close()  # what waits is sent again on a new connection
+                await self._recover(connection, exc)
 
     async def frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> FrameResult:
         await self.send_frame(targets, bones=bones)
@@ -611,9 +691,9 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         await self._recover(connection, failure)
         return message_id
 
-    async def _recover(self, failed: AsyncConnection, exc: ConnectionClosed) -> None:
+    async def _recover(self, failed: AsyncConnection, exc: ConnectionClosed | _NotServing) -> None:
         """Reconnect and resend what is waiting, or raise the close as a ``StreamClosed``."""
-        self._retries.closed(exc)
+        self._note_failure(exc)
         async with self._lock:
             if self._connection is not failed:
                 return  # another task has reconnected already
@@ -677,7 +757,11 @@ class Stream(_BaseStream[SyncConnection]):
             except ConnectionClosed as exc:
                 self._recover(exc)
                 continue
-            return self._answer(data)
+            try:
+                return self._answer(data)
+            except _NotServing as exc:
+                self.connection.close()  # what waits is sent again on a new connection
+                self._recover(exc)
 
     def frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> FrameResult:
         self.send_frame(targets, bones=bones)
@@ -723,9 +807,9 @@ class Stream(_BaseStream[SyncConnection]):
             self._recover(exc)
         return message_id
 
-    def _recover(self, exc: ConnectionClosed) -> None:
+    def _recover(self, exc: ConnectionClosed | _NotServing) -> None:
         """Reconnect and resend what is waiting, or raise the close as a ``StreamClosed``."""
-        self._retries.closed(exc)
+        self._note_failure(exc)
         for delay in self._retries.delays():
             time.sleep(delay)
             try:

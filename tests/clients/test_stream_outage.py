@@ -1,0 +1,144 @@
+"""The Python stream against a scripted WebSocket server on 127.0.0.1: the error answers
+that are part of an outage (``not_ready`` from a restarted worker still warming up, after
+a drop; ``shutting_down``) are not the caller's answers: the stream reconnects, no
+sooner than their ``retry_after_s``, and sends the message again under its first id.
+Outside an outage, or with reconnecting off, the caller gets them as before."""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import json
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+from ik_client import AsyncClient, Pong, Reconnect, RetryLater, StreamClosed
+from websockets.asyncio.server import ServerConnection, serve
+
+REF = dataclasses.make_dataclass("Ref", ["id", "token"])("s", "t")
+RETRY_AFTER_S = 0.3
+QUICK = Reconnect(initial_delay_s=0.01, max_delay_s=0.05, deadline_s=10.0)
+
+
+def error(message_id: int, code: str) -> str:
+    body = {"code": code, "message": code, "retry_after_s": RETRY_AFTER_S}
+    return json.dumps({"id": message_id, "type": "result", "success": False, "error": body})
+
+
+# What a connection does with a message: answer it (a pong), "drop" the connection, or
+# answer with an error code.
+Script = Callable[[int, int], str]  # (connection number, message id) -> action
+
+
+class Scripted:
+    """A WebSocket server that acts on each message as ``script`` says, and notes every
+    (connection, message id, time) it saw and each connection's opening time."""
+
+    def __init__(self, script: Script) -> None:
+        self.script = script
+        self.seen: list[tuple[int, int]] = []
+        self.opened: list[float] = []
+        self.answered_at: dict[int, float] = {}
+
+    async def handler(self, ws: ServerConnection) -> None:
+        conn = len(self.opened)
+        self.opened.append(time.monotonic())
+        async for raw in ws:
+            message_id = json.loads(raw)["id"]
+            self.seen.append((conn, message_id))
+            action = self.script(conn, message_id)
+            if action == "drop":
+                ws.transport.abort()
+                return
+            if action == "pong":
+                await ws.send(json.dumps({"id": message_id, "type": "pong"}))
+            else:
+                await ws.send(error(message_id, action))
+                self.answered_at[conn] = time.monotonic()
+
+
+async def _pings(server: Scripted, reconnect: Reconnect, n: int) -> tuple[list[Any], int]:
+    """``n`` pings one after the other: each answer (or the error raised), reconnects."""
+    async with serve(server.handler, "127.0.0.1", 0) as ws_server:
+        port = ws_server.sockets[0].getsockname()[1]
+        async with (
+            AsyncClient(f"http://127.0.0.1:{port}") as ik,
+            ik.stream(REF, reconnect=reconnect) as stream,
+        ):
+            out: list[Any] = []
+            for _ in range(n):
+                try:
+                    out.append(await stream.ping())
+                except RetryLater as e:
+                    out.append(e)
+            return out, stream.reconnects
+
+
+def run(server: Scripted, reconnect: Reconnect, n: int) -> tuple[list[Any], int]:
+    return asyncio.run(asyncio.wait_for(_pings(server, reconnect, n), 30.0))
+
+
+def test_not_ready_after_a_drop_is_the_restart_warming_up() -> None:
+    # Connection 0 answers, then drops; 1 is the restarted worker not ready yet; 2 is ready.
+    def script(conn: int, message_id: int) -> str:
+        if conn == 0:
+            return "pong" if message_id == 0 else "drop"
+        return "not_ready" if conn == 1 else "pong"
+
+    server = Scripted(script)
+    answers, reconnects = run(server, QUICK, 2)
+    assert [type(a) for a in answers] == [Pong, Pong]
+    assert reconnects == 2
+    # The message went out three times, always under its first id.
+    assert server.seen == [(0, 0), (0, 1), (1, 1), (2, 1)]
+    # The next connection waited for the answer's retry_after_s.
+    assert server.opened[2] - server.answered_at[1] >= RETRY_AFTER_S
+
+
+def test_shutting_down_is_sent_again_on_a_new_connection() -> None:
+    def script(conn: int, message_id: int) -> str:
+        return "shutting_down" if (conn, message_id) == (0, 1) else "pong"
+
+    server = Scripted(script)
+    answers, reconnects = run(server, QUICK, 3)
+    assert [type(a) for a in answers] == [Pong, Pong, Pong]
+    assert reconnects == 1
+    assert server.seen == [(0, 0), (0, 1), (1, 1), (1, 2)]
+    assert server.opened[1] - server.answered_at[0] >= RETRY_AFTER_S
+
+
+@pytest.mark.parametrize(
+    ("code", "reconnect"),
+    [
+        ("not_ready", QUICK),  # a stream opened on a warming server: no outage of ours
+        ("shutting_down", Reconnect.OFF),  # reconnecting off: the caller decides
+        ("not_ready", Reconnect.OFF),
+    ],
+)
+def test_otherwise_the_caller_gets_the_error(code: str, reconnect: Reconnect) -> None:
+    server = Scripted(lambda conn, message_id: code if message_id == 0 else "pong")
+    answers, reconnects = run(server, reconnect, 2)
+    assert isinstance(answers[0], RetryLater) and answers[0].code == code
+    assert answers[0].retry_after_s == RETRY_AFTER_S
+    assert isinstance(answers[1], Pong)
+    assert reconnects == 0 and server.seen == [(0, 0), (0, 1)]
+
+
+def test_a_server_that_stays_not_ready_ends_the_budget_with_its_code() -> None:
+    def script(conn: int, message_id: int) -> str:
+        if conn == 0:
+            return "pong" if message_id == 0 else "drop"
+        return "not_ready"
+
+    server = Scripted(script)
+    short = Reconnect(initial_delay_s=0.01, max_delay_s=0.05, deadline_s=1.0)
+    t0 = time.monotonic()
+    with pytest.raises(StreamClosed) as raised:
+        run(server, short, 2)
+    # Each try waited the answer's retry_after_s; the one that would end past the
+    # deadline was not made.
+    assert time.monotonic() - t0 < 1.0 + 2.0
+    assert raised.value.close_code == 1013 and raised.value.reason == "not_ready"
+    assert 3 <= len(server.opened) <= 2 + 1.0 / RETRY_AFTER_S  # the first, the one after the drop
