@@ -2,8 +2,10 @@
 
 `npm ci`, `npm run build` (tsc), then `npm test` with IK_BASE_URL set to the live
 server's URL: the TypeScript tests check the client's types against the server's
-/openapi.json, every call, both encodings and a reconnect mid-stream. Without node and
-npm the test is skipped, except under CI=true, where it fails (.ci/run installs them).
+/openapi.json, every call, both encodings and a reconnect mid-stream; the restart tests
+(test/reconnect.test.ts) start their own servers with this interpreter (`PYTHON`) and a
+redis-server. Without node and npm the test is skipped, except under CI=true, where it
+fails (.ci/run installs them).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -51,7 +54,8 @@ def test_typescript_client_against_the_live_server(server: Server) -> None:
     npm = npm_or_skip()
     run([npm, "ci", "--no-audit", "--no-fund"])
     run([npm, "run", "build"])
-    report = run([npm, "test"], IK_BASE_URL=server.base)
+    # PYTHON: the interpreter the restart tests (test/reconnect.test.ts) start servers with.
+    report = run([npm, "test"], IK_BASE_URL=server.base, PYTHON=sys.executable)
     # node --test's summary: tests ran and passed (a runner that found none exits 0 too).
     summary = dict(re.findall(r"^# (tests|pass) (\d+)$", report, flags=re.MULTILINE))
     assert int(summary["tests"]) > 0 and summary["pass"] == summary["tests"], report

@@ -7,14 +7,15 @@
  * a balancer's or the server's 502 or 503) is sent again when it is repeatable (reads, a
  * pose or options set, a stateless solve, a frame with an `id`: behind a balancer with a
  * shared store a frame sent again is answered once; without one, a frame whose answer
- * was lost after it was solved is solved again), as often and as patiently as
- * `reconnect` says, no sooner than a `Retry-After` and not at all when that is longer
- * than `reconnect.maxDelayMs`.
+ * was lost after it was solved is solved again), as `reconnect` says (reconnect.ts:
+ * backoff with jitter until a deadline from the call's first failure), no sooner than a
+ * `Retry-After` and not at all when that would end after the deadline.
  */
 
 import { encodeBody } from "./encode.js";
 import { NoAnswer, serviceError } from "./errors.js";
-import { DEFAULT_RECONNECT, type FkOptions, type Reconnect, Stream, type StreamOptions } from "./stream.js";
+import { Backoff, type Reconnect, reconnectPolicy, retryAfterMs } from "./reconnect.js";
+import { type FkOptions, Stream, type StreamOptions } from "./stream.js";
 import type {
   BatchEntry,
   BatchFrame,
@@ -42,9 +43,10 @@ export interface ClientOptions {
   apiKey?: string;
   /** Per-request timeout [ms]. */
   timeoutMs?: number;
-  /** How often and how patiently a repeatable HTTP call that got no answer is sent again
-   * (`{attempts: 0}`: never; the error is thrown at once); `timeoutMs` bounds each
-   * attempt. A stream's reconnects are `stream()`'s own option. */
+  /** How long and how often a repeatable HTTP call that got no answer is sent again
+   * (`DEFAULT_RECONNECT`: for up to 30 s; `RECONNECT_OFF`: never, the error is thrown
+   * at once); `timeoutMs` bounds each attempt. A stream's reconnects are `stream()`'s
+   * own option. */
   reconnect?: Partial<Reconnect>;
 }
 
@@ -122,7 +124,7 @@ export class Client {
     this.baseUrl = baseUrl.replace(/\/+$/, "");
     this.apiKey = options.apiKey;
     this.timeoutMs = options.timeoutMs ?? 30_000;
-    this.reconnect = { ...DEFAULT_RECONNECT, ...options.reconnect };
+    this.reconnect = reconnectPolicy(options.reconnect);
   }
 
   /** A new session on `chain` (e.g. `{format: "example", name: "panda_arm"}`). */
@@ -259,7 +261,8 @@ export class Client {
     if (init.session !== undefined) headers["Authorization"] = `Bearer ${init.session.token}`;
     if (init.body !== undefined) headers["Content-Type"] = "application/json";
     const query = init.compact ? "?results=compact" : "";
-    for (let attempt = 0; ; attempt++) {
+    const backoff = new Backoff(this.reconnect); // this call's own clock, from its first failure
+    for (;;) {
       let response: Response;
       let text: string;
       let wait: number | null;
@@ -270,7 +273,7 @@ export class Client {
           body,
           signal: AbortSignal.timeout(this.timeoutMs),
         });
-        wait = this.waitBeforeResending(init.repeatable ?? false, attempt, response);
+        wait = this.waitBeforeResending(init.repeatable ?? false, backoff, response);
         // The body is read here too: a connection that drops, or a timeout that passes,
         // while it arrives is no answer either.
         text = wait === null ? await response.text() : "";
@@ -279,7 +282,7 @@ export class Client {
         // fetch rejects with a TypeError when the network fails; the timeout is a
         // DOMException, not sent again (the server may still be solving the call).
         const failed = error instanceof TypeError;
-        const again = failed ? this.waitBeforeResending(init.repeatable ?? false, attempt, null) : null;
+        const again = failed ? this.waitBeforeResending(init.repeatable ?? false, backoff, null) : null;
         if (again === null) {
           const what = failed ? `the connection failed: ${String(error.cause ?? error.message)}` : "timed out";
           throw new NoAnswer(`${method} ${path}: no answer (${what})`, !failed, { cause: error });
@@ -295,19 +298,14 @@ export class Client {
     }
   }
 
-  /** Milliseconds to wait before sending a call again after `attempt` sends that got
-   * `response` (null: the connection failed), or null: do not send it again. */
-  private waitBeforeResending(repeatable: boolean, attempt: number, response: Response | null): number | null {
-    if (!repeatable || attempt >= this.reconnect.attempts) return null;
-    let wait = Math.min(this.reconnect.initialDelayMs * 2 ** attempt, this.reconnect.maxDelayMs);
-    if (response !== null) {
-      if (!NO_ANSWER_STATUSES.has(response.status)) return null;
-      const retryAfterS = Number(response.headers.get("Retry-After") ?? Number.NaN);
-      if (Number.isFinite(retryAfterS)) {
-        if (1000 * retryAfterS > this.reconnect.maxDelayMs) return null; // the caller decides
-        wait = Math.max(wait, 1000 * retryAfterS);
-      }
-    }
-    return wait;
+  /** Milliseconds to wait before sending a call again after a send that got `response`
+   * (null: the connection failed), or null: do not send it again (not repeatable,
+   * answered, or `backoff`'s deadline spent or shorter than the answer's `Retry-After`:
+   * the caller decides). */
+  private waitBeforeResending(repeatable: boolean, backoff: Backoff, response: Response | null): number | null {
+    if (!repeatable) return null;
+    if (response === null) return backoff.nextWaitMs();
+    if (!NO_ANSWER_STATUSES.has(response.status)) return null;
+    return backoff.nextWaitMs(retryAfterMs(response.headers.get("Retry-After")));
   }
 }

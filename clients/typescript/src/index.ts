@@ -15,5 +15,6 @@
 
 export * from "./client.js";
 export * from "./errors.js";
+export * from "./reconnect.js";
 export * from "./stream.js";
 export * from "./types.js";

@@ -4,8 +4,10 @@
  * The stream numbers its messages itself (0, 1, 2, ...): `sendFrame` / `sendClip` /
  * `sendPing` return the id, `receive()` resolves to the next answer in the order sent
  * (the server answers in order), `frame` / `clip` / `ping` send one message and resolve
- * to its answer. When the connection drops (or the server closes 1011, 1012 or 1013),
- * the stream reconnects with a bounded backoff and sends again, in order, every message
+ * to its answer. When the connection drops (or the server closes 1011, 1012 or 1013, or
+ * answers `shutting_down`, or `not_ready` after a reconnect), the stream reconnects
+ * within its `Reconnect` budget (reconnect.ts: a deadline, backoff with jitter) and
+ * sends again, in order, every message
  * that had no answer, under the id it was first sent with (one counter over every
  * connection, so the ids on a new connection still increase). Answers carry the id the
  * caller got, and each message gets exactly one. A server that keeps answers (sessions in
@@ -43,17 +45,7 @@ import type {
   Target,
 } from "./types.js";
 import { fkResultFrom } from "./types.js";
-
-/** How hard a stream tries to get its connection back: `attempts` connections, waiting
- * `initialDelayMs` before the first and doubling up to `maxDelayMs`; the count starts
- * again at each answer. `attempts: 0` turns reconnecting off. */
-export interface Reconnect {
-  attempts: number;
-  initialDelayMs: number;
-  maxDelayMs: number;
-}
-
-export const DEFAULT_RECONNECT: Reconnect = { attempts: 6, initialDelayMs: 50, maxDelayMs: 2000 };
+import { Backoff, type Reconnect, reconnectPolicy } from "./reconnect.js";
 
 /** The part of a WebSocket (browser's or `ws`'s) the stream uses. */
 export interface Socket {
@@ -77,6 +69,9 @@ export type SocketClass = new (
 export interface StreamOptions {
   /** `json` (text messages, the default) or `msgpack` (binary messages). */
   encoding?: Encoding;
+  /** How long and how often to reconnect after a drop (`DEFAULT_RECONNECT`: for up to
+   * 30 s from the drop, each new drop since an answer with the whole budget);
+   * `RECONNECT_OFF` rejects what waits with the drop's `StreamClosed` instead. */
   reconnect?: Partial<Reconnect>;
   /** Where the token goes: `header` (`ws` only) or `subprotocol` (what browsers can do).
    * Default: `header` with `ws`, `subprotocol` with a global WebSocket. */
@@ -153,7 +148,7 @@ export class Stream<R = FrameResult> {
   private nextWireId = 0;
   private waiting = new Map<number, Message<R>>(); // by wire id, in the order sent
   private unread: Message<R>[] = []; // what receive() has not returned yet
-  private tries = 0; // reconnects since the last answer
+  private readonly backoff: Backoff;
   private failure: StreamClosed | null = null;
   private closing = false;
 
@@ -161,16 +156,18 @@ export class Stream<R = FrameResult> {
     readonly url: string,
     private readonly connect: () => Socket,
     private readonly encoding: Encoding,
-    private readonly reconnect: Reconnect,
+    reconnect: Reconnect,
     private readonly onUnexpected: ((error: UnexpectedAnswer) => void) | undefined,
     first: Socket,
   ) {
+    this.backoff = new Backoff(reconnect);
     this.socketNow = first;
     this.watch(first);
   }
 
   /** Open a stream on `url` (see `Client.stream`). */
   static async open<R = FrameResult>(url: string, token: string, options: StreamOptions = {}): Promise<Stream<R>> {
+    const reconnect = reconnectPolicy(options.reconnect); // checked before anything opens
     const [SocketImpl, global] = await platformWebSocket(options);
     const auth = options.auth ?? (global ? "subprotocol" : "header");
     if (auth === "header" && global) throw new IKClientError("a global WebSocket cannot send headers");
@@ -184,7 +181,6 @@ export class Stream<R = FrameResult> {
     };
     const first = connect();
     await opened(first);
-    const reconnect = { ...DEFAULT_RECONNECT, ...options.reconnect };
     return new Stream<R>(url, connect, options.encoding ?? "json", reconnect, options.onUnexpected, first);
   }
 
@@ -341,10 +337,11 @@ export class Stream<R = FrameResult> {
       this.onUnexpected?.(new UnexpectedAnswer(text, null, envelope));
       return;
     }
-    this.waiting.delete(message.wireId);
-    this.tries = 0;
     const id = message.id;
     const error = envelope["error"] as Record<string, unknown> | undefined;
+    if (error !== undefined && this.notServing(error)) return;
+    this.waiting.delete(message.wireId);
+    this.backoff.answered(); // error answers included: the server answered
     if (error !== undefined) {
       message.reject(
         serviceError(String(error["code"]), String(error["message"] ?? ""), {
@@ -372,15 +369,37 @@ export class Stream<R = FrameResult> {
     }
   }
 
-  private closed(code: number, reason: string): void {
+  /** An error answer that is part of an outage: `shutting_down` (the message was being
+   * solved when the server began to stop; it closes 1012 next) always, and `not_ready`
+   * while recovering from a lost connection (a restarted worker listens before its
+   * solver is loaded; a stream opened on a warming server gets `not_ready` as before, as
+   * its opening fails at once). The message stays waiting; this socket is left and the
+   * stream reconnects, no sooner than the error's `retry_after_s`. With reconnecting off
+   * the caller gets such answers as they are. */
+  private notServing(error: Record<string, unknown>): boolean {
+    if (!this.backoff.enabled) return false;
+    const code = error["code"];
+    let close: number;
+    if (code === "shutting_down") close = 1012;
+    else if (code === "not_ready" && this.backoff.recovering) close = 1013;
+    else return false;
+    const socket = this.socketNow;
+    socket.onmessage = null; // its later answers are asked for again on the new socket
+    socket.onclose = null;
+    socket.close(1000);
+    const retryAfterS = error["retry_after_s"];
+    this.closed(close, String(code), typeof retryAfterS === "number" ? 1000 * retryAfterS : null);
+    return true;
+  }
+
+  private closed(code: number, reason: string, retryAfterMs: number | null = null): void {
     if (this.failure !== null) return; // settled already (a close between reconnects)
     // Closed by the caller: a socket cut while connecting says 1006, but the stream ended
     // as asked.
     if (this.closing) [code, reason] = [1000, ""];
-    if (!this.closing && RECONNECTABLE.has(code) && this.tries < this.reconnect.attempts) {
-      const delay = Math.min(this.reconnect.initialDelayMs * 2 ** this.tries, this.reconnect.maxDelayMs);
-      this.tries += 1;
-      setTimeout(() => this.reopen(), delay);
+    const wait = !this.closing && RECONNECTABLE.has(code) ? this.backoff.nextWaitMs(retryAfterMs) : null;
+    if (wait !== null) {
+      setTimeout(() => this.reopen(), wait);
       return;
     }
     this.failure = streamClosed(code, reason);

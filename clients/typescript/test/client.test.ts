@@ -789,7 +789,7 @@ describe("stream", () => {
 
   test("close() while a reconnect waits ends the stream: nothing is sent again, no socket stays open", async () => {
     const session = await ik.createSession(PANDA);
-    const stream = await ik.stream(session, { reconnect: { attempts: 3, initialDelayMs: 50 } });
+    const stream = await ik.stream(session, { reconnect: { attempts: 3, initialDelayMs: 50, jitter: 0 } });
     stream.sendFrame([tool(0.1)]);
     const answer = stream.receive();
     const dropped = stream.socket;

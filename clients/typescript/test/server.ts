@@ -12,7 +12,8 @@ import { fileURLToPath } from "node:url";
 const READY_TIMEOUT_MS = 240_000;
 const REPO_ROOT = fileURLToPath(new URL("../../../../", import.meta.url)); // from dist/test/
 
-function freePort(): Promise<number> {
+/** A TCP port on 127.0.0.1 that nothing listens on right now. */
+export function freePort(): Promise<number> {
   return new Promise((resolve, reject) => {
     const probe = createServer();
     probe.once("error", reject);
@@ -23,7 +24,8 @@ function freePort(): Promise<number> {
   });
 }
 
-async function waitReady(base: string, child: ChildProcess): Promise<void> {
+/** Poll `${base}/readyz` until it answers 200 (bounded); throws if `child` exits first. */
+export async function waitReady(base: string, child: ChildProcess): Promise<void> {
   const deadline = Date.now() + READY_TIMEOUT_MS;
   while (Date.now() < deadline) {
     if (child.exitCode !== null) throw new Error(`python -m service exited with ${child.exitCode}`);
@@ -35,6 +37,16 @@ async function waitReady(base: string, child: ChildProcess): Promise<void> {
     await new Promise((r) => setTimeout(r, 200));
   }
   throw new Error(`python -m service not ready in ${READY_TIMEOUT_MS} ms`);
+}
+
+/** `python -m service` on 127.0.0.1:`port` with `env` added (`PYTHON`: the interpreter,
+ * default `python3`), its output on this process's. */
+export function spawnService(port: number, env: Record<string, string> = {}): ChildProcess {
+  return spawn(process.env["PYTHON"] ?? "python3", ["-m", "service"], {
+    cwd: REPO_ROOT,
+    env: { ...process.env, IK_HOST: "127.0.0.1", IK_PORT: String(port), ...env },
+    stdio: ["ignore", "inherit", "inherit"],
+  });
 }
 
 let started: Promise<string> | undefined;
@@ -51,11 +63,7 @@ export function serverUrl(): Promise<string> {
   if (given) return Promise.resolve(given);
   started ??= (async () => {
     const port = await freePort();
-    child = spawn(process.env["PYTHON"] ?? "python3", ["-m", "service"], {
-      cwd: REPO_ROOT,
-      env: { ...process.env, IK_HOST: "127.0.0.1", IK_PORT: String(port) },
-      stdio: ["ignore", "inherit", "inherit"],
-    });
+    child = spawnService(port);
     const server = child;
     process.on("exit", () => server.kill("SIGTERM")); // also when a test throws
     const base = `http://127.0.0.1:${port}`;
