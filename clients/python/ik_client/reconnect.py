@@ -13,13 +13,13 @@ ends the wait at once (the caller decides). Only failures that waiting can mend 
 budget; a session that is gone (404, close 4404) or a refused token fails at once.
 
 The figures behind the defaults (docs/websocket.md, "Reconnecting"): a worker killed
-and started again on this machine answered ``/readyz`` 200 in about 2-6 s (its
-compiled solver loaded from the disk cache, on two busy cores); deploy/haproxy.cfg marks
-a dead backend down within about 1 s and a restarted one up within 0.5 s of its
-readiness; a Kubernetes rolling update takes a pod out of its Service within a few
-seconds. ``deadline_s=30`` covers those several times over and still tells a game
-within half a minute that the service is gone; a first start that must compile the
-solver (minutes) is not covered: raise ``deadline_s`` for that, or open the stream again.
+and started again on this machine answered ``/readyz`` 200 4.4-4.8 s after its start
+(its compiled solver loaded from the disk cache, on two busy cores), where the old budget
+(6 tries, 0.05 s doubling to 2 s) gave up after 3.15 s; deploy/haproxy.cfg marked a
+killed backend down within 1 s and a restarted one up within 0.5 s of its readiness.
+``deadline_s=30`` covers those several times over and still tells a game within half a
+minute that the service is gone; a first start that must compile the solver (minutes)
+is not covered: raise ``deadline_s`` for that, or open the stream again.
 """
 
 from __future__ import annotations
