@@ -42,6 +42,7 @@ const FAST_MS = 3_000; // a failure the server states is thrown within this
 const N_FRAMES = 40;
 const STOP_AT = 15;
 const IN_FLIGHT = 4;
+const FRAME_MS = 1000 / 60; // a game's pace
 
 function tool(k: number): Target[] {
   return [{ effector: "tool", position: { x: 0.45, y: -0.1 + 0.005 * k, z: 0.45 }, orientation: { w: 0, x: 1, y: 0, z: 0 } }];
@@ -243,7 +244,7 @@ async function restartLater(processes: Processes, child: ChildProcess, port: num
   return performance.now();
 }
 
-/** Stream N_FRAMES frames, IN_FLIGHT at a time, calling `stop` after STOP_AT answers. */
+/** Stream N_FRAMES frames, IN_FLIGHT at a time at FRAME_MS, calling `stop` after STOP_AT answers. */
 async function streamAcross(
   client: Client,
   session: { id: string; token: string },
@@ -260,6 +261,7 @@ async function streamAcross(
         sent += 1;
       }
       const answer = await stream.receive();
+      await sleep(FRAME_MS);
       answered.set(answer.id, (answered.get(answer.id) ?? 0) + 1);
       at.push(performance.now());
       if (answered.size === STOP_AT) stop();
