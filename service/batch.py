@@ -65,7 +65,7 @@ class Entry:
 
     session: Session
     frame_id: int | None
-    targets: list[SolverTarget]
+    targets: Sequence[SolverTarget]
     bones: S.BoneOutput | None = None
 
 

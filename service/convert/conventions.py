@@ -22,6 +22,7 @@ every node's local transform by the same change of basis.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -107,7 +108,7 @@ class Convention:
             pole=pole,
         )
 
-    def targets_in(self, ts: list[SolverTarget]) -> list[SolverTarget]:
+    def targets_in(self, ts: Sequence[SolverTarget]) -> Sequence[SolverTarget]:
         return ts if self.identity else [self.target_in(t) for t in ts]
 
     # -- out -------------------------------------------------------------------------

@@ -13,13 +13,20 @@ says (tests/service/test_fast_path.py feeds both paths the same messages).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from schemas.common import MAX_COORDINATE, QUATERNION_NORM_TOLERANCE
 from schemas.solve import HARD_MAX_TARGETS, MAX_FRAME_ID
-from solver.ik import GIVEN_DIRECTION, GIVEN_POSITION, GIVEN_ROTATION, TARGET_PLACEHOLDER_ROW
+from solver.ik import (
+    GIVEN_DIRECTION,
+    GIVEN_POSITION,
+    GIVEN_ROTATION,
+    TARGET_PLACEHOLDER_ROW,
+    TargetRows,
+)
 from solver.ik import Target as SolverTarget
 from solver.model import EffectorMode
 
@@ -27,7 +34,7 @@ from .chains import ChainView
 from .geometry import Flat9, rotation_rows
 
 # (frame id, solver targets) of a frame message the fast path accepted.
-FastFrame = tuple[int, list[SolverTarget]]
+FastFrame = tuple[int, Sequence[SolverTarget]]
 # A target with a pole takes the pydantic path (its bone is checked there).
 _TARGET_KEYS = frozenset(
     ("effector", "position", "orientation", "direction", "position_weight", "rotation_weight")
@@ -54,7 +61,7 @@ def fast_frame(raw: object, view: ChainView) -> FastFrame | None:
         return None
 
 
-def fast_targets(ts: object, view: ChainView) -> list[SolverTarget] | None:
+def fast_targets(ts: object, view: ChainView) -> Sequence[SolverTarget] | None:
     """The solver targets of a decoded frame's ``targets`` list (a batch entry's) that
     the schema and ``frames.targets`` accept, else None (then validate with pydantic)."""
     try:
@@ -66,10 +73,13 @@ def fast_targets(ts: object, view: ChainView) -> list[SolverTarget] | None:
         return None
 
 
-def _fast_targets(ts: object, modes: dict[str, EffectorMode]) -> list[SolverTarget] | None:
+def _fast_targets(ts: object, modes: dict[str, EffectorMode]) -> Sequence[SolverTarget] | None:
     if type(ts) is not list or not 0 < len(ts) <= HARD_MAX_TARGETS:
         return None
-    out: list[SolverTarget] = []
+    names: list[str] = []
+    rows: list[list[float]] = []
+    bits: list[int] = []
+    weights: list[tuple[float, float]] | None = None  # once a target has weights
     seen: set[str] = set()
     for t in ts:
         if type(t) is not dict or not _TARGET_KEYS.issuperset(t):  # also: an unknown key
@@ -92,10 +102,10 @@ def _fast_targets(ts: object, modes: dict[str, EffectorMode]) -> list[SolverTarg
                 return None
         elif direction is None or orientation is not None:
             return None
-        # The target's packed row, built here in one list and one np.array call
-        # (Target.from_row): the dataclass constructor's checks and copies cost more
-        # than the rest of the fast path (measured). Placeholders as Target's own.
-        # Numbers go in as they came (an int too: np.array converts it as float()).
+        # The target's packed row (all of them in one np.array call, below): the
+        # dataclass constructor's checks and copies cost more than the rest of the fast
+        # path (measured). Placeholders as Target's own. Numbers go in as they came (an
+        # int too: np.array converts it as float()).
         given = 0
         if position is None:
             values = list(_NO_POSITION)
@@ -121,17 +131,27 @@ def _fast_targets(ts: object, modes: dict[str, EffectorMode]) -> list[SolverTarg
                 return None
             values += d
             given |= GIVEN_DIRECTION
-        row = np.array(values, dtype=np.float64)
+        names.append(name)
+        rows.append(values)
+        bits.append(given)
         parts = (position is not None) + (orientation is not None) + (direction is not None)
-        if len(t) == 1 + parts:  # no weights: a stream's usual target
-            out.append(SolverTarget.from_row(name, row, given))
+        if len(t) == 1 + parts and weights is None:  # no weights: a stream's usual target
             continue
         wp = _fast_weight(t.get("position_weight", 1.0))
         wr = _fast_weight(t.get("rotation_weight", 1.0))
         if wp is None or wr is None:
             return None
-        out.append(SolverTarget.from_row(name, row, given, position_weight=wp, rotation_weight=wr))
-    return out
+        if weights is None:  # the targets before this one had none
+            weights = [(1.0, 1.0)] * (len(rows) - 1)
+        weights.append((wp, wr))
+    if weights is None:  # plain targets: their rows as they are (no Target each)
+        return TargetRows(tuple(names), np.array(rows, dtype=np.float64), tuple(bits))
+    return [
+        SolverTarget.from_row(
+            name, np.array(values, dtype=np.float64), given, position_weight=wp, rotation_weight=wr
+        )
+        for name, values, given, (wp, wr) in zip(names, rows, bits, weights, strict=True)
+    ]
 
 
 # Target's placeholders for a part not given, as plain floats for the fast path.

@@ -24,7 +24,7 @@ from .geometry import rotation_matrix, vec3
 # One frame to solve: (the client's frame id, None if it sent none; its solver targets).
 # A plain tuple, not a NamedTuple: one is built per WebSocket frame, and a NamedTuple's
 # constructor costs 0.2 us more (measured), for names that only ever get unpacked.
-FrameJob = tuple[int | None, list[SolverTarget]]
+FrameJob = tuple[int | None, Sequence[SolverTarget]]
 
 
 def clip_jobs(frames: Sequence[S.Frame], view: ChainView, limit: int) -> list[FrameJob]:
@@ -41,7 +41,7 @@ def clip_jobs(frames: Sequence[S.Frame], view: ChainView, limit: int) -> list[Fr
     return [(f.id, targets(f.targets, view, f"frames[{i}].targets")) for i, f in enumerate(frames)]
 
 
-def targets(ts: Sequence[S.Target], view: ChainView, field: str) -> list[SolverTarget]:
+def targets(ts: Sequence[S.Target], view: ChainView, field: str) -> Sequence[SolverTarget]:
     """Solver targets for one frame, checked against the chain's effectors.
 
     Raises:

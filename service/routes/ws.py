@@ -28,6 +28,7 @@ import functools
 import logging
 import math
 import time
+from collections.abc import Sequence
 from typing import Annotated, Any, Unpack, cast
 
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
@@ -270,7 +271,7 @@ class _Connection:
     async def frame(
         self,
         msg_id: int,
-        targets: list[SolverTarget],
+        targets: Sequence[SolverTarget],
         t0: float,
         bones: S.BoneOutput | None = None,
     ) -> dict[str, Any]:

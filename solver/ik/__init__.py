@@ -15,7 +15,7 @@ things are:
     packing.py      an ``IKOptions`` as the compiled core takes it, once per options
     settled.py      for the optimizer's restarts: how settled each variable is (partial
                     restarts), which variables are angles (turn restarts)
-    targets.py      ``Target`` and its packed row, ``Pole``
+    targets.py      ``Target`` and its packed row, ``TargetRows``, ``Pole``
     blend.py        blend weights between 0 and 1: the goal part of the way there
     poles.py        pole targets: the shaping pass, the default pulled link
     pole_term.py    the pole term of the objective (compiled)
@@ -37,6 +37,7 @@ from .targets import (
     TARGET_ROW,
     Pole,
     Target,
+    TargetRows,
     check_weight,
     pose_targets,
 )
@@ -59,6 +60,7 @@ __all__ = [
     "Pole",
     "StreamState",
     "Target",
+    "TargetRows",
     "check_weight",
     "default_pole_link",
     "pole_node",

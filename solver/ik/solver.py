@@ -204,6 +204,8 @@ class IKSolver:
         posture pull, if any, is towards the previous pose. ``options.continuity``: what
         a frame whose target is not reachable nearby does (``continuity``; the first
         after ``set_pose`` is solved as under REACH); ``last_step``: how far it moved.
+        ``targets`` may be a ``TargetRows`` (rows packed by the caller: loaded without
+        building a ``Target`` each).
         """
         opts = options or self.options
         h0 = self._h if opts.carry_hessian else None
@@ -237,7 +239,8 @@ class IKSolver:
         if self._largest_step is largest_step:
             self._largest_step = compiled_entry(largest_step, (result.q, q0))
         # + 1e-9: under SMOOTH, (q0 + box) - q0 may round one ulp above the box.
-        self.last_step = FrameStep(largest, largest > opts.max_joint_step_rad + 1e-9)
+        # tuple.__new__: the NamedTuple's own __new__ is Python code (every frame).
+        self.last_step = _tuple_new(FrameStep, (largest, largest > opts.max_joint_step_rad + 1e-9))
         return result
 
     def set_pose(self, q: Vector) -> None:

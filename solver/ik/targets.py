@@ -6,7 +6,9 @@ target columns): position (3), rotation (9, row-major), direction (3).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import overload
 
 import numpy as np
 
@@ -225,6 +227,69 @@ class Target:
             set_field(self, "rotation", row[3:12].reshape(3, 3))
         if given & GIVEN_DIRECTION:
             set_field(self, "direction", row[12:15])
+
+
+class TargetRows(Sequence[Target]):
+    """A frame's targets, each plain (both weights 1, no pole), as the rows of one
+    packed array: what a caller that builds targets for every frame (the service's fast
+    path) hands ``IKSolver.track`` instead of building a ``Target`` per target.
+
+    A solve copies the rows straight into its arrays (``Task.load``); anything else
+    reads it as the sequence of targets it stands for: indexing builds a row's
+    ``Target`` (``Target.from_row`` of a copy of the row), so the two compare alike.
+    For a stream of one target per frame this costs a fifth of ``Target.from_row``.
+
+    Attributes:
+        effectors: Effector names, one per row.
+        rows: Shape (len(effectors), TARGET_ROW) float64, read-only: position,
+            rotation, direction (``TARGET_PLACEHOLDER_ROW``'s values where a part is not
+            given), as ``Target.packed``.
+        given: The GIVEN_* bits of each row.
+
+    Raises:
+        InvalidProblem: rows of the wrong shape or dtype, a view, as many bit sets
+            as names. The numbers are checked as in any solve (in compiled code).
+    """
+
+    __slots__ = ("effectors", "given", "rows")
+
+    def __init__(
+        self, effectors: tuple[str, ...], rows: np.ndarray, given: tuple[int, ...]
+    ) -> None:
+        """``rows`` must own its data (not a view of another array, which could still
+        change it): it is kept, not copied, and made read-only."""
+        if (
+            type(rows) is not np.ndarray
+            or rows.shape != (len(effectors), TARGET_ROW)
+            or rows.dtype != _FLOAT64
+            or rows.base is not None
+            or len(given) != len(effectors)
+        ):
+            raise InvalidProblem(
+                f"target rows are {TARGET_ROW} float64 values per effector in an array "
+                "of their own, with the GIVEN_* bits of each"
+            )
+        rows.setflags(write=False)
+        self.effectors = effectors
+        self.rows = rows
+        self.given = given
+
+    def __len__(self) -> int:
+        return len(self.effectors)
+
+    @overload
+    def __getitem__(self, index: int) -> Target: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[Target]: ...
+
+    def __getitem__(self, index: int | slice) -> Target | list[Target]:
+        if isinstance(index, slice):
+            return [self[i] for i in range(len(self.effectors))[index]]
+        return Target.from_row(self.effectors[index], self.rows[index].copy(), self.given[index])
+
+    def __repr__(self) -> str:
+        return f"TargetRows({list(self)!r})"
 
 
 _SEQUENCES = (tuple, list)

@@ -39,6 +39,7 @@ from .targets import (
     TARGET_ROW,
     Pole,
     Target,
+    TargetRows,
 )
 
 # What a target must give for each effector mode.
@@ -107,7 +108,22 @@ class Task:
             self._ed[:, ED_TOL_R] = opts.rotation_tolerance_rad
             self._tol_for = opts
         active = self.active
-        if len(targets) == 1 and len(active) == 1 and not self._touched and not self.poles:
+        if type(targets) is TargetRows:
+            # Rows packed by the caller (plain targets): the stream's usual frame copies
+            # its row without building a Target; any other frame reads them as Targets.
+            if len(active) == 1 and not self._touched and not self.poles:
+                i = active[0]
+                need = self._needs[i]
+                given = targets.given
+                if (
+                    len(given) == 1
+                    and given[0] & need == need
+                    and given[0] & GIVEN_POSITION
+                    and targets.effectors[0] == self._effector_names[i]
+                ):
+                    self.target_rows[i] = targets.rows[0]
+                    return
+        elif len(targets) == 1 and len(active) == 1 and not self._touched and not self.poles:
             # A stream's usual frame: one target for the effector of the last frame.
             t = targets[0]
             i = active[0]

@@ -26,7 +26,7 @@ import schemas as S
 from service import convert
 from service.convert.conventions import Z_UP_METRES, Convention, frame_of
 from service.errors import ServiceError
-from solver.ik import Target
+from solver.ik import Target, TargetRows
 from solver.model import EffectorMode
 from solver.model.examples import panda_arm, two_arm_torso
 
@@ -325,3 +325,18 @@ def test_websocket_answers_are_the_same_without_the_fast_path(
     for m, a, b in zip(messages, fast, slow, strict=True):
         assert a == b, m
     assert sum("result" in a for a in fast) >= 5
+
+
+def test_plain_targets_come_as_packed_rows_weighted_ones_as_targets() -> None:
+    """The fast path hands a frame of plain targets to the solver as one packed array
+    (``TargetRows``: no Target built per target); a frame with a weight, as Targets.
+    Either reads as the slow path's targets (``check``)."""
+    view = VIEWS["two"]
+    plain = frame(GOOD["two"])
+    fast = convert.fast_frame(plain, view)
+    assert fast is not None and isinstance(fast[1], TargetRows)
+    assert fast[1].rows.shape == (2, 15) and check(plain, view)
+    weighted = frame([GOOD["two"][0], {**GOOD["two"][1], "position_weight": 0.5}])
+    fast = convert.fast_frame(weighted, view)
+    assert fast is not None and type(fast[1]) is list
+    assert [t.position_weight for t in fast[1]] == [1.0, 0.5] and check(weighted, view)
