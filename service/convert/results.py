@@ -22,6 +22,7 @@ from solver.path import PlannedPath
 # as its string): ``member.value`` is a Python-level property, ~6x the lookup's time,
 # and a frame's answer reads two of them.
 _VALUES: dict[str, str] = {m: m.value for m in (*IKStatus, *Termination)}
+_SOLVED = IKStatus.SOLVED  # IKResult.success, without the property's call
 
 
 class SolvedFrame(NamedTuple):
@@ -48,14 +49,18 @@ def result_dict(
     ``layout`` holds once per session and options, not through ``IKResult.effectors``,
     which builds an object per effector first (the same values; tests compare them).
     """
-    layout = r.layout
-    values = r.q.tolist()
+    # One unpacking instead of an attribute read per field (this is per frame).
+    q, status, termination, nit, nfev, npass, nrest, solve_us, raw, layout = r
+    values = q.tolist()
     tol_p, tol_r = layout.tolerances
     isnan = math.isnan
     effectors = []
-    for name, (pos, rot, targeted) in zip(
-        layout.effector_names, r.raw_errors.tolist(), strict=True
-    ):
+    names = layout.effector_names
+    # raw starts with (position error, rotation error, targeted flag) per effector
+    # (``IKResult.raw_errors``), read here as one flat list.
+    errors = raw[: 3 * len(names)].tolist()
+    for k, name in enumerate(names):
+        pos, rot, targeted = errors[3 * k : 3 * k + 3]
         if not targeted:
             continue
         p = None if isnan(pos) else pos
@@ -71,20 +76,20 @@ def result_dict(
     joints = dict(zip(layout.dof_names, values, strict=True))
     followers = layout.followers
     if followers.names:  # mimic joints: by name only, not in q
-        joints.update(zip(followers.names, followers.values(r.q).tolist(), strict=True))
+        joints.update(zip(followers.names, followers.values(q).tolist(), strict=True))
     return {
         "id": frame_id,
-        "success": r.success,
-        "status": _VALUES[r.status],
-        "termination": _VALUES[r.termination],
+        "success": status is _SOLVED,
+        "status": _VALUES[status],
+        "termination": _VALUES[termination],
         "joints": joints,
         "q": values,
         "effectors": effectors,
-        "iterations": r.iterations,
-        "function_evals": r.function_evals,
-        "passes": r.passes,
-        "restarts": r.restarts,
-        "solve_us": r.solve_us,
+        "iterations": nit,
+        "function_evals": nfev,
+        "passes": npass,
+        "restarts": nrest,
+        "solve_us": solve_us,
         "server_us": server_us,
         "largest_step_rad": None if step is None else step.largest_rad,
         "jumped": False if step is None else step.jumped,
