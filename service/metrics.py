@@ -147,9 +147,21 @@ class Metrics:
         series.server[transport].observe(server_s)
 
     def frames(self, batch: Sequence[SolvedFrame], transport: str) -> None:
-        """Count solved frames. Event loop's thread only."""
+        """Count solved frames, as ``frame`` each. Event loop's thread only."""
+        # ``frame``'s body with its lookups done once: a batch of 50 characters counts
+        # 50 frames per message.
+        series = self.series
+        counts = series.frames
+        slot = series.slot
+        solve = series.solve
+        server = series.server[transport]
         for solved in batch:
-            self.frame(solved.result, solved.server_us * 1e-6, transport)
+            r = solved.result
+            counts[slot[(r.termination, r.status is SOLVED)]] += 1
+            if r.restarts:
+                series.restarts += r.restarts
+            solve.observe(r.solve_us * 1e-6)
+            server.observe(solved.server_us * 1e-6)
 
     def error(self, code: ErrorCode, transport: str) -> None:
         """Count one client-visible error (the label is the code's value)."""
