@@ -308,8 +308,9 @@ class PoleShaper:
         from the seed, then the poles' shaping pass (at most ``shaping_max_iter``
         iterations) and ``usual`` again from the shaped pose. The shaped answer is the
         frame's only where it brings the pulled links closer to their poles than the
-        plain one, by more than ``SHAPED_GAIN`` of the distance, or where the plain one
-        misses; the answer is in ``args``' out_x and out. Iterations, evaluations,
+        plain one, by more than ``SHAPED_GAIN`` of the distance (both solved, or both
+        short of a target out of reach), or where only it solves the frame; the answer
+        is in ``args``' out_x and out. Iterations, evaluations,
         restarts and time are summed over the calls; passes are the answer's own (its
         pass log is the one in ``out``).
 
@@ -331,6 +332,7 @@ class PoleShaper:
         misc = data[5]
         dd = data[4]
         self._write(misc, poles)
+        dd[DD_XLAST, 0] = math.nan  # f cached by the plain call lacks the pole term
         left = max(0.0, fopt[C.F_BUDGET] - plain[7])
         shaping_f = fopt.copy()
         shaping_f[C.F_F_GOAL] = -math.inf
@@ -352,13 +354,14 @@ class PoleShaper:
             left_f[C.F_BUDGET] = max(0.0, left - first[7])
             second = usual(data, shaped, h0, left_f, iopt, policy, out_x, out, 0.0, scratch, ints)
             calls = (plain, first, second)
+            # The shaped answer where it solves a frame the plain one misses, or where
+            # both solve or both miss (a target out of reach) and it is nearer the poles.
             plain_solved = plain[1] == STATUS_SOLVED
-            if second[1] == STATUS_SOLVED and (
-                not plain_solved or self._nearer(out_x, plain_x, poles)
+            shaped_solved = second[1] == STATUS_SOLVED
+            if (shaped_solved and not plain_solved) or (
+                shaped_solved == plain_solved and self._nearer(out_x, plain_x, poles)
             ):
                 return combined(second, calls)
-            if not plain_solved and second[1] != STATUS_SOLVED:
-                return combined(second, calls)  # neither: the one shaped by the pole
         # The plain answer: a pole never fails a frame it would reach.
         out_x[:] = plain_x
         out[:] = plain_out

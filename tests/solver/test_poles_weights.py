@@ -452,6 +452,24 @@ def test_a_still_pole_leaves_the_legs_still(legs: Chain) -> None:
     assert knee_side(legs, answers[-1], across) > 0.02
 
 
+def test_a_still_pole_leaves_a_leg_reaching_out_of_range_still(legs: Chain) -> None:
+    """A foot target beyond the leg's length (a game stretching a limb past its reach):
+    no answer solves the frame, and the one shaped by the pole was taken whenever the
+    plain one missed too, so the joints kept stepping ~0.09 rad a frame (a review)."""
+    _, middle, across = bent_leg(legs)
+    rest = np.zeros(legs.n_dof)
+    hip = link_poses(legs, rest)[HIP][:3, 3]
+    far = hip + 1.6 * (foot(legs, rest) - hip) + 0.3 * across
+    frame = [Target(effector="right_foot", position=far, pole=Pole(middle + 0.5 * across))]
+    solver = IKSolver(legs, replace(STREAM_DEFAULTS, time_budget_us=None))
+    answers = []
+    for _ in range(40):
+        result = solver.track(frame)
+        assert not result.success  # out of reach
+        answers.append(result.q.copy())
+    assert np.abs(np.diff(answers[-10:], axis=0)).max() == 0.0
+
+
 def test_weight_zero_frees_an_effector(legs: Chain) -> None:
     target, _, _ = bent_leg(legs)
     left = foot(legs, np.zeros(legs.n_dof), 1) + [0.0, 0.1, 0.0]
