@@ -142,3 +142,40 @@ def test_a_server_that_stays_not_ready_ends_the_budget_with_its_code() -> None:
     assert time.monotonic() - t0 < 1.0 + 2.0
     assert raised.value.close_code == 1013 and raised.value.reason == "not_ready"
     assert 3 <= len(server.opened) <= 2 + 1.0 / RETRY_AFTER_S  # the first, the one after the drop
+
+
+@pytest.mark.parametrize(("status", "retried"), [(403, False), (503, True)])
+def test_a_refused_reconnect_is_tried_again_only_if_waiting_can_mend_it(
+    status: int, retried: bool
+) -> None:
+    """After a drop, a proxy in front refuses the upgrade: 503 (no worker up yet) is
+    waited out until the server takes the connection again; 403 (a proxy's rule) ends
+    the stream at once, not after the reconnect deadline (a review: every refusal was
+    tried again for the whole budget)."""
+    refusals = {"left": 3}
+
+    def refuse(connection: ServerConnection, request: Any) -> Any:
+        if len(server.opened) == 1 and refusals["left"] > 0:
+            refusals["left"] -= 1
+            return connection.respond(status, "refused\n")
+        return None
+
+    server = Scripted(lambda conn, message_id: "drop" if conn == 0 else "pong")
+
+    async def pings() -> tuple[list[Any], float]:
+        async with serve(server.handler, "127.0.0.1", 0, process_request=refuse) as ws:
+            port = ws.sockets[0].getsockname()[1]
+            async with AsyncClient(f"http://127.0.0.1:{port}") as ik:
+                started = time.monotonic()
+                try:
+                    async with ik.stream(REF, reconnect=QUICK) as stream:
+                        return [await stream.ping()], time.monotonic() - started
+                except StreamClosed as e:
+                    return [e], time.monotonic() - started
+
+    (outcome,), took_s = asyncio.run(asyncio.wait_for(pings(), 30.0))
+    if retried:
+        assert isinstance(outcome, Pong) and refusals["left"] == 0
+    else:
+        assert isinstance(outcome, StreamClosed) and refusals["left"] == 2
+    assert took_s < QUICK.deadline_s / 2

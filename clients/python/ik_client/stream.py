@@ -177,6 +177,10 @@ def _packb(payload: dict[str, Any]) -> bytes:
 
 # What ends one reconnect attempt and lets the next one start (``_Retries.attempt_failed``).
 _ATTEMPT_FAILURES = (ConnectionClosed, OSError, InvalidHandshake, TimeoutError)
+# Handshake refusals a reconnect waits out: a timeout, too many requests, and a server
+# or balancer that cannot serve now (502-504: no worker up). Any other status (401, 403,
+# 404 from a proxy in front) is the same on every try.
+_RETRIED_STATUSES = frozenset({408, 425, 429, 500, 502, 503, 504})
 # Answers of long clips of big chains can be large; the server bounds what it sends.
 MAX_ANSWER_BYTES = 64 * 2**20
 OPEN_TIMEOUT_S = 30.0
@@ -436,12 +440,16 @@ class _Retries:
 
     def attempt_failed(self, exc: Exception) -> None:
         """Note a reconnect attempt that failed (one of ``_ATTEMPT_FAILURES``): a close is
-        noted as by ``closed``; an unreachable server or a refused handshake is tried
-        again, no sooner than the ``Retry-After`` of a refusal (a balancer's 503 while no
-        worker is ready)."""
+        noted as by ``closed``; an unreachable server, or a handshake refused with a
+        status that waiting can mend (``_RETRIED_STATUSES``: a balancer's 503 while no
+        worker is ready), is tried again, no sooner than the refusal's ``Retry-After``;
+        any other refusal (a proxy's 401, 403 or 404) ends the stream at once."""
         if isinstance(exc, ConnectionClosed):
             self.closed(exc)
         elif isinstance(exc, InvalidStatus):
+            if exc.response.status_code not in _RETRIED_STATUSES:
+                assert self._last is not None, "a failure is noted before any attempt"
+                raise self._last from exc
             self._retry_after_s = retry_after_s(exc.response.headers.get("Retry-After"))
 
     def delays(self) -> Iterator[float]:
