@@ -137,8 +137,7 @@ def test_through_nginx_each_client_has_its_own_limit(worker: Server, nginx: Ngin
     for address in ("127.0.0.21", "127.0.0.22"):
         with _from(address) as client:
             assert _creates(client, nginx.base, "192.0.2.9", LIMIT + 1) == [201] * LIMIT + [429]
-        # HTTP/1.0 upstream: that location leaves proxy_http_version at nginx's default.
-        assert _logged(worker, f'{address}:0 - "POST /v1/sessions HTTP/1.0" 201')
+        assert _logged(worker, f'{address}:0 - "POST /v1/sessions HTTP/1.1" 201')
     assert "192.0.2.9" not in worker.log()
 
 
