@@ -211,15 +211,23 @@ def test_fk_errors_name_the_field_over_http_and_websocket(
     error = r.json()
     assert (error["code"], error["field"]) == ("invalid_problem", f"body.{field}")
     assert words in error["detail"]
+    for message, msg_id in _ws_fk_errors(client, s, body):
+        assert message.id == msg_id
+        assert (message.error.code, message.error.field) == ("invalid_problem", field)
+        assert words in message.error.message
+
+
+def _ws_fk_errors(
+    client: TestClient, s: Created, body: dict[str, Any]
+) -> list[tuple[S.ErrorMessage, int]]:
+    """The error answers to an ``fk`` message with ``body``, sent as JSON (id 1) and as
+    MessagePack (id 2), each with the id it was sent with."""
     with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
         ws.send_json({"type": "fk", "id": 1, **body})
         text = S.ErrorMessage.model_validate(ws.receive_json())
         ws.send_bytes(msgpack.packb({"type": "fk", "id": 2, **body}))
         binary = S.ErrorMessage.model_validate(msgpack.unpackb(ws.receive_bytes()))
-    for message, msg_id in ((text, 1), (binary, 2)):
-        assert message.id == msg_id
-        assert (message.error.code, message.error.field) == ("invalid_problem", field)
-        assert words in message.error.message
+    return [(text, 1), (binary, 2)]
 
 
 def test_fk_with_both_q_and_joints_names_a_field_over_http_and_websocket(
@@ -231,12 +239,7 @@ def test_fk_with_both_q_and_joints_names_a_field_over_http_and_websocket(
     r = client.post(f"/v1/sessions/{s.id}/fk", json=both, headers=s.headers)
     assert r.status_code == 422, r.text
     assert (r.json()["code"], r.json()["field"]) == ("invalid_problem", "body")
-    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
-        ws.send_json({"type": "fk", "id": 1, **both})
-        text = S.ErrorMessage.model_validate(ws.receive_json())
-        ws.send_bytes(msgpack.packb({"type": "fk", "id": 2, **both}))
-        binary = S.ErrorMessage.model_validate(msgpack.unpackb(ws.receive_bytes()))
-    for message, msg_id in ((text, 1), (binary, 2)):
+    for message, msg_id in _ws_fk_errors(client, s, both):
         assert message.id == msg_id
         assert (message.error.code, message.error.field) == ("invalid_problem", "joints")
         assert "at most one of 'q' and 'joints'" in message.error.message
