@@ -78,7 +78,7 @@ def decode(
         if raw is None:  # orjson refused it: NaN, Infinity, 1e400 (still an object)
             raw = _lenient(data, binary)
         if binary and (key := _bytes_key(raw)) is not None:
-            message = f"a MessagePack map key must be a string, and this message has the bin "
+            message = "a MessagePack map key must be a string, and this message has the bin "
             message += f"key {key!r} (bytes packed as bin: pack the keys as str)"
             raise Unreadable(raw_id(raw), message) from None
         error = most_helpful(e.errors())
