@@ -58,11 +58,21 @@ import numpy as np
 from ..errors import InvalidProblem
 from ..model import Chain
 from ..model.forward import effector_poses, link_poses, node_frames
-from ..model.layout import ND_JAXIS, ND_R, ND_T, NI_DOF, NI_KIND, NI_PARENT, NODE_ROTATION
+from ..model.layout import (
+    ED_ERR_P,
+    ED_ERR_R,
+    ND_JAXIS,
+    ND_R,
+    ND_T,
+    NI_DOF,
+    NI_KIND,
+    NI_PARENT,
+    NODE_ROTATION,
+)
 from ..optim import codes as C
 from .blend import FrameCall, SolveResult, combined
 from .frame import STATUS_SOLVED, TARGETS_OK
-from .kinematics import DD_XLAST
+from .kinematics import DD_HI, DD_LO, DD_XLAST, MISC_GOAL, MISC_LAST_F
 from .pole_term import POLE_NODE, POLE_POINT, POLE_WEIGHT, POLE_WIDTH
 from .targets import Pole
 
@@ -295,6 +305,26 @@ class PoleShaper:
         self.chain = chain
         self._start = misc_start
         self._nodes: dict[tuple[int, str | None], int] = {}
+        # The inputs of the last frame whose plain answer was kept (``_inputs``): the
+        # same frame again (a character standing still) keeps it again, unshaped.
+        self._held: tuple[Any, ...] | None = None
+
+    def _inputs(
+        self, args: tuple[Any, ...], poles: list[tuple[int, Pole]], cap: int
+    ) -> tuple[Any, ...]:
+        """Everything the shaping and the choice read: the seed and its H, the options,
+        the targets (EI, ED), the bounds, MISC's settings, the poles; not what the
+        calls write there (each effector's errors, the goal and last f). Equal inputs
+        give equal calls, hence the same choice."""
+        data, x0, h0, fopt, iopt, policy = args[:6]
+        ed = data[3].copy()
+        ed[:, ED_ERR_P : ED_ERR_R + 1] = 0.0
+        misc = data[5][: self._start].copy()
+        misc[[MISC_GOAL, MISC_LAST_F]] = 0.0
+        dd = data[4]
+        parts = (x0, h0, fopt, iopt, policy, data[2], ed, dd[DD_LO], dd[DD_HI], misc)
+        held = tuple((effector, pole.link, pole.point.tobytes()) for effector, pole in poles)
+        return (*(a.tobytes() for a in parts), held, cap)
 
     def solve(
         self,
@@ -310,7 +340,10 @@ class PoleShaper:
         frame's only where it brings the pulled links closer to their poles than the
         plain one, by more than ``SHAPED_GAIN`` of the distance (both solved, or both
         short of a target out of reach), or where only it solves the frame; the answer
-        is in ``args``' out_x and out. Iterations, evaluations,
+        is in ``args``' out_x and out. A frame whose inputs are those of the last one
+        that kept its plain answer (a character standing still: same seed, H, targets,
+        bounds, options and poles) keeps it again without the shaping pass, which
+        would choose the same. Iterations, evaluations,
         restarts and time are summed over the calls; passes are the answer's own (its
         pass log is the one in ``out``).
 
@@ -326,8 +359,13 @@ class PoleShaper:
         # the rest pose would fight the pole's, a little every frame.
         plain_x = np.empty_like(out_x)
         plain_out = np.empty_like(out)
+        inputs = self._inputs(args, poles, shaping_max_iter)
         plain = usual(data, x0, h0, fopt, iopt, policy, plain_x, plain_out, 0.0, scratch, ints)
         if plain[0] != TARGETS_OK:
+            return plain
+        if plain[1] == STATUS_SOLVED and inputs == self._held:
+            out_x[:] = plain_x  # the frame of the last one, which kept its plain answer
+            out[:] = plain_out
             return plain
         misc = data[5]
         dd = data[4]
@@ -361,8 +399,10 @@ class PoleShaper:
             if (shaped_solved and not plain_solved) or (
                 shaped_solved == plain_solved and self._nearer(out_x, plain_x, poles)
             ):
+                self._held = None
                 return combined(second, calls)
         # The plain answer: a pole never fails a frame it would reach.
+        self._held = inputs if plain[1] == STATUS_SOLVED else None
         out_x[:] = plain_x
         out[:] = plain_out
         return combined(plain, calls)

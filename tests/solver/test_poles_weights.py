@@ -452,6 +452,37 @@ def test_a_still_pole_leaves_the_legs_still(legs: Chain) -> None:
     assert knee_side(legs, answers[-1], across) > 0.02
 
 
+def test_a_held_frame_skips_the_shaping_and_answers_the_same(
+    legs: Chain, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A frame the same as the last one that kept its plain answer keeps it without the
+    shaping pass (a standing character paid for it every frame): the answers are the
+    same, bit for bit, as with the shaping pass run every time."""
+    target, middle, across = bent_leg(legs)
+    frame = [Target(effector="right_foot", position=target, pole=Pole(middle + 0.5 * across))]
+
+    def stream() -> tuple[list[np.ndarray], int]:
+        solver = IKSolver(legs, replace(STREAM_DEFAULTS, time_budget_us=None))
+        shaped = 0
+        nearer = PoleShaper._nearer
+
+        def counting(self: PoleShaper, *args: Any) -> bool:
+            nonlocal shaped
+            shaped += 1
+            return nearer(self, *args)
+
+        with monkeypatch.context() as m:
+            m.setattr(PoleShaper, "_nearer", counting)
+            answers = [solver.track(frame).q.copy() for _ in range(40)]
+        return answers, shaped
+
+    held, shaped_held = stream()
+    monkeypatch.setattr(PoleShaper, "_inputs", lambda self, *args: object())  # never equal
+    every, shaped_every = stream()
+    assert all(np.array_equal(a, b) for a, b in zip(held, every, strict=True))
+    assert shaped_every >= 35 and shaped_held <= 5
+
+
 def test_a_still_pole_leaves_a_leg_reaching_out_of_range_still(legs: Chain) -> None:
     """A foot target beyond the leg's length (a game stretching a limb past its reach):
     no answer solves the frame, and the one shaped by the pole was taken whenever the
