@@ -14,7 +14,7 @@
 
 import { encodeBody } from "./encode.js";
 import { NoAnswer, serviceError } from "./errors.js";
-import { Backoff, type Reconnect, reconnectPolicy, retryAfterMs } from "./reconnect.js";
+import { Backoff, type Reconnect, type ReconnectOptions, reconnectPolicy, retryAfterMs } from "./reconnect.js";
 import { type FkOptions, Stream, type StreamOptions } from "./stream.js";
 import type {
   BatchEntry,
@@ -47,7 +47,7 @@ export interface ClientOptions {
    * (`DEFAULT_RECONNECT`: for up to 30 s; `RECONNECT_OFF`: never, the error is thrown
    * at once); `timeoutMs` bounds each attempt. A stream's reconnects are `stream()`'s
    * own option. */
-  reconnect?: Partial<Reconnect>;
+  reconnect?: ReconnectOptions | undefined;
 }
 
 // What a balancer answers for a worker it cannot reach, and the server for a store or

@@ -43,12 +43,18 @@ export const DEFAULT_RECONNECT: Readonly<Reconnect> = Object.freeze({
   attempts: Number.POSITIVE_INFINITY,
 });
 
-/** Never try again: the failure is thrown at once. */
-export const RECONNECT_OFF: Readonly<Partial<Reconnect>> = Object.freeze({ deadlineMs: 0 });
+/** The fields of a `Reconnect` a caller sets; one left out or `undefined` keeps its default. */
+export type ReconnectOptions = { [K in keyof Reconnect]?: Reconnect[K] | undefined };
 
-/** `DEFAULT_RECONNECT` with `options` over it, checked (a `RangeError` names the field). */
-export function reconnectPolicy(options: Partial<Reconnect> = {}): Reconnect {
-  const policy: Reconnect = { ...DEFAULT_RECONNECT, ...options };
+/** Never try again: the failure is thrown at once. */
+export const RECONNECT_OFF: Readonly<ReconnectOptions> = Object.freeze({ deadlineMs: 0 });
+
+/** `DEFAULT_RECONNECT` with `options` over it, checked (a `RangeError` names the field).
+ * A field given as `undefined` keeps its default, as if it were left out: a caller's own
+ * optional settings (`{ deadlineMs: config.deadlineMs }`) pass through unchanged. */
+export function reconnectPolicy(options: ReconnectOptions = {}): Reconnect {
+  const given = Object.entries(options).filter(([, value]) => value !== undefined);
+  const policy: Reconnect = { ...DEFAULT_RECONNECT, ...Object.fromEntries(given) };
   for (const name of ["deadlineMs", "initialDelayMs", "maxDelayMs"] as const) {
     const value = policy[name];
     if (!(Number.isFinite(value) && value >= 0)) throw new RangeError(`reconnect.${name} must be a finite number >= 0, got ${value}`);

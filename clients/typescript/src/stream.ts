@@ -45,7 +45,7 @@ import type {
   Target,
 } from "./types.js";
 import { fkResultFrom } from "./types.js";
-import { Backoff, type Reconnect, reconnectPolicy } from "./reconnect.js";
+import { Backoff, type Reconnect, type ReconnectOptions, reconnectPolicy } from "./reconnect.js";
 
 /** The part of a WebSocket (browser's or `ws`'s) the stream uses. */
 export interface Socket {
@@ -72,7 +72,7 @@ export interface StreamOptions {
   /** How long and how often to reconnect after a drop (`DEFAULT_RECONNECT`: for up to
    * 30 s from the drop, each new drop since an answer with the whole budget);
    * `RECONNECT_OFF` rejects what waits with the drop's `StreamClosed` instead. */
-  reconnect?: Partial<Reconnect>;
+  reconnect?: ReconnectOptions | undefined;
   /** Where the token goes: `header` (`ws` only) or `subprotocol` (what browsers can do).
    * Default: `header` with `ws`, `subprotocol` with a global WebSocket. */
   auth?: "header" | "subprotocol";

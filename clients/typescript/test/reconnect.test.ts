@@ -110,6 +110,13 @@ describe("reconnect budget", () => {
     assert.equal(waitsUntilGivenUp(three, clock).length, 3);
     assert.throws(() => reconnectPolicy({ jitter: 2 }), /reconnect\.jitter/);
     assert.throws(() => reconnectPolicy({ deadlineMs: -1 }), /reconnect\.deadlineMs/);
+    assert.throws(() => reconnectPolicy({ deadlineMs: Number.NaN }), /reconnect\.deadlineMs/);
+  });
+
+  test("keeps the default of a field given as undefined", () => {
+    // What a caller's own optional settings pass on: `{ deadlineMs: config.deadlineMs }`.
+    const policy = reconnectPolicy({ deadlineMs: undefined, jitter: undefined, maxDelayMs: 500 });
+    assert.deepEqual(policy, { ...DEFAULT_RECONNECT, maxDelayMs: 500 });
   });
 });
 
