@@ -34,7 +34,7 @@ from solver.model.urdf import chain_from_urdf
 from ..config import Settings
 from ..errors import ServiceError, invalid_problem
 from .conventions import NATIVE, Y_UP_METRES, Z_UP_METRES, Convention, frame_of
-from .geometry import effector, rotation_matrix, vec3
+from .geometry import effectors_of, rotation_matrix, vec3
 from .limits import check_radians
 from .skeletons import skeleton_chain
 
@@ -197,10 +197,21 @@ def _urdf_chain(spec: S.UrdfChain, settings: Settings) -> Chain:
             rest = str(e).removeprefix(f"{where}: ")
             named = e.joint is None or repr(e.joint) in rest
             detail = rest if named else f"{e.joint!r}: {rest}"
-            raise invalid_problem(detail, f"chain.{e.field}") from None
+            raise invalid_problem(detail, _urdf_field(spec, e)) from None
         raise invalid_problem(str(e), "chain.urdf") from None
     _check_urdf_offsets(chain)
     return chain
+
+
+def _urdf_field(spec: S.UrdfChain, e: InvalidModel) -> str:
+    """The request field a URDF reader's error names: a tip link by its index (of two
+    alike the second: the first was fine), else the field."""
+    tips = spec.tip_links
+    if e.field == "tip_links" and e.joint in tips:
+        first = tips.index(e.joint)
+        again = tips.index(e.joint, first + 1) if tips.count(e.joint) > 1 else first
+        return f"chain.tip_links[{again}]"
+    return f"chain.{e.field}"
 
 
 def _check_urdf_offsets(chain: Chain) -> None:
@@ -249,7 +260,7 @@ def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
         )
         for j in spec.joints
     ]
-    effectors = [effector(e, name=e.name, link=e.link) for e in spec.effectors]
+    effectors = effectors_of(spec.effectors)
     try:
         return build_chain(joints, effectors, max_dof=settings.max_dof)
     except InvalidModel as e:

@@ -9,12 +9,15 @@ of a hierarchy chain or a skeleton's bone, whose tip frames are such vectors.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
 import schemas as S
 from solver.arrays import Vector
 from solver.model import Effector, EffectorMode
+
+from ..errors import invalid_problem
 
 # A 3x3 rotation matrix as nine plain floats, row after row.
 Flat9 = tuple[float, float, float, float, float, float, float, float, float]
@@ -56,3 +59,30 @@ def effector(e: S.EffectorSpec | S.BoneEffectorSpec, *, name: str, link: str) ->
         position_weight=e.position_weight,
         rotation_weight=e.rotation_weight,
     )
+
+
+def effectors_of(specs: Sequence[S.EffectorSpec | S.BoneEffectorSpec]) -> list[Effector]:
+    """The solver's effectors of a chain's effector specs, their names checked unique.
+
+    Targets name an effector, so two of one name would be ambiguous. The later one is
+    refused, at the field that gave it its name: ``name``, or ``bone`` for a skeleton's
+    effector without one (it is named after its bone: two on one bone need names).
+    """
+    made: list[Effector] = []
+    first: dict[str, int] = {}
+    for i, e in enumerate(specs):
+        if isinstance(e, S.BoneEffectorSpec):
+            link, by_bone = e.bone, e.name is None
+            name = e.bone if e.name is None else e.name
+        else:
+            name, link, by_bone = e.name, e.link, False
+        if name in first:
+            advice = "; an effector without a name is named after its bone: name one"
+            advice = advice if by_bone else ""
+            raise invalid_problem(
+                f"duplicate effector name {name!r}: chain.effectors[{first[name]}] has it{advice}",
+                f"chain.effectors[{i}].{'bone' if by_bone else 'name'}",
+            )
+        first[name] = i
+        made.append(effector(e, name=name, link=link))
+    return made

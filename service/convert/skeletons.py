@@ -34,7 +34,7 @@ from solver.model.skeleton import (
 
 from ..config import Settings
 from ..errors import ServiceError, invalid_problem
-from .geometry import effector
+from .geometry import effectors_of
 from .limits import check_radians
 
 SkeletonSpec = S.GltfChain | S.BvhChain
@@ -47,6 +47,7 @@ def skeleton_chain(spec: SkeletonSpec, settings: Settings) -> SkeletonChain:
         ServiceError: ``invalid_format`` for base64 that does not decode;
             ``invalid_problem`` for anything else, naming the field.
     """
+    effectors = effectors_of(spec.effectors)  # before the file: the cheaper check first
     skeleton = _read(spec, settings)
     if isinstance(spec, S.BvhChain):
         _check_lengths(skeleton, "chain.bvh", "check the file's units (unit_m)")
@@ -54,10 +55,6 @@ def skeleton_chain(spec: SkeletonSpec, settings: Settings) -> SkeletonChain:
         _check_lengths(skeleton, _source(spec), "glTF is in metres: check the node's values")
     for name, bone in spec.bones.items():
         check_radians(bone.lower, bone.upper, f"bone {name!r}", f"chain.bones.{name}")
-    effectors = [
-        effector(e, name=e.name if e.name is not None else e.bone, link=e.bone)
-        for e in spec.effectors
-    ]
     free_root = None
     if spec.free_root is not None:
         lo, hi = spec.free_root.lower, spec.free_root.upper

@@ -417,20 +417,23 @@ _TWO_LINKS = (
 
 
 @pytest.mark.parametrize(
-    ("base", "tip", "detail"),
+    ("base", "tips", "detail"),
     [
-        ("bsae", "tip", "chain.base_link: unknown base link 'bsae'; did you mean 'base'?"),
-        ("base", "Tip", "chain.tip_links: unknown tip link 'Tip'; did you mean 'tip'?"),
-        ("base", "base", "chain.tip_links: 'base': tip link is the base link"),
+        ("bsae", ["tip"], "chain.base_link: unknown base link 'bsae'; did you mean 'base'?"),
+        ("base", ["Tip"], "chain.tip_links[0]: unknown tip link 'Tip'; did you mean 'tip'?"),
+        ("base", ["base"], "chain.tip_links[0]: 'base': tip link is the base link"),
+        # The later of two alike is the one at fault.
+        ("base", ["tip", "tip"], "chain.tip_links[1]: 'tip': duplicate tip link"),
     ],
 )
 def test_a_link_name_of_the_request_is_named_once_with_the_nearest_names(
-    client: TestClient, base: str, tip: str, detail: str
+    client: TestClient, base: str, tips: list[str], detail: str
 ) -> None:
     # It read "chain.base_link: bsae.base_link: unknown base link 'bsae'", no suggestion.
-    chain = {"format": "urdf", "urdf": _TWO_LINKS, "base_link": base, "tip_links": [tip]}
+    chain = {"format": "urdf", "urdf": _TWO_LINKS, "base_link": base, "tip_links": tips}
     r = client.post("/v1/sessions", json={"chain": chain})
     assert r.status_code == 422 and r.json()["detail"] == detail, r.text
+    assert r.json()["field"] == detail.split(":")[0]
 
 
 def test_chain_over_the_dof_limit(make_client: Callable[..., TestClient]) -> None:

@@ -17,7 +17,7 @@ import pytest
 from starlette.testclient import TestClient
 
 import schemas as S
-from schemas.chain import EXAMPLE_ARM
+from schemas.chain import EXAMPLE_ARM, EXAMPLE_BVH_LEG
 
 from .helpers import Created, create, hand_frame
 
@@ -176,6 +176,61 @@ def test_urdf_limits_are_taken_as_given(client: TestClient, limit: str) -> None:
     chain = {"format": "urdf", "urdf": urdf, "base_link": "base", "tip_links": ["tip"]}
     created = create(client, chain)
     assert created.body["dof"][0]["upper"] == float(limit)
+
+
+# -- 3b. two effectors of one name: the later one is named, with the first ------------------
+_URDF_TWO_LINKS = (
+    '<robot name="r"><link name="base"/><link name="tip"/>'
+    '<joint name="j1" type="revolute"><parent link="base"/><child link="tip"/>'
+    '<axis xyz="0 0 1"/><limit lower="-1" upper="1"/></joint></robot>'
+)
+
+
+@pytest.mark.parametrize(
+    ("chain", "field", "words"),
+    [
+        (
+            {**EXAMPLE_ARM, "effectors": [*EXAMPLE_ARM["effectors"], *EXAMPLE_ARM["effectors"]]},
+            "chain.effectors[1].name",
+            "chain.effectors[0] has it",
+        ),
+        (
+            {**EXAMPLE_BVH_LEG, "effectors": [{"bone": "LeftLeg_end"}] * 2},
+            "chain.effectors[1].bone",
+            "named after its bone",
+        ),
+        (
+            {
+                **EXAMPLE_BVH_LEG,
+                "effectors": [
+                    {"bone": "LeftLeg_end", "name": "foot"},
+                    {"bone": "LeftLeg", "name": "foot"},
+                ],
+            },
+            "chain.effectors[1].name",
+            "'foot'",
+        ),
+        (
+            {
+                "format": "urdf",
+                "urdf": _URDF_TWO_LINKS,
+                "base_link": "base",
+                "tip_links": ["tip"] * 2,
+            },
+            "chain.tip_links[1]",
+            "duplicate tip link",
+        ),
+    ],
+    ids=["json", "bvh-same-bone", "bvh-same-name", "urdf"],
+)
+def test_two_effectors_of_one_name_name_the_later(
+    client: TestClient, chain: dict[str, Any], field: str, words: str
+) -> None:
+    r = client.post("/v1/sessions", json={"chain": chain})
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert (body["code"], body["field"]) == ("invalid_problem", field), body
+    assert words in body["detail"], body
 
 
 # -- 4. JSON bodies end with a newline; WebSocket messages do not ------------------------------
