@@ -17,11 +17,12 @@ import secrets
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 import schemas as S
-from solver.ik import IKOptions, IKSolver
+from solver.ik import IKOptions, IKSolver, StreamState
 
 from .convert import ChainView, FrameJob, SolvedFrame
 from .errors import not_found, store_unavailable
@@ -36,6 +37,15 @@ STALE_RETRIES = 3
 def token_digest(token: str) -> bytes:
     """Tokens are stored as SHA-256 digests: a dump of the store grants no access."""
     return hashlib.sha256(token.encode("utf-8", "surrogatepass")).digest()
+
+
+class StreamMark(NamedTuple):
+    """Where a session's stream stood before frames were solved: what ``Session.rewind``
+    puts back."""
+
+    stream: StreamState
+    frames: int
+    solved: int
 
 
 # weakref_slot: a shared store finds a session it forgot while something still holds it.
@@ -91,6 +101,17 @@ class Session:
         pose so that a shared store can rebuild the solver as it is."""
         self.solver.set_pose(q)
         self.rest = self.solver.q.copy()
+
+    def mark(self) -> StreamMark:
+        """Where the stream stands now (pose, carried BFGS matrix, counters)."""
+        return StreamMark(self.solver.stream_state(), self.frames, self.solved)
+
+    def rewind(self, mark: StreamMark) -> None:
+        """Undo the frames solved since ``mark`` (answered to nobody: their caller went
+        away while a thread solved them), so that they leave no trace: a resend starts
+        where they did, and a shared store's copy is the state it committed."""
+        self.solver.restore(mark.stream)
+        self.frames, self.solved = mark.frames, mark.solved
 
     def take_frames(self, n: int, *, now: float, rate_per_s: float, burst: float) -> float:
         """Spend ``n`` frames from the session's token bucket.

@@ -321,9 +321,12 @@ class Runner:
         """Solve under the session's lock: inline, on the frame threads, or planned.
 
         When the caller is cancelled while a thread solves, the lock goes to the thread:
-        its end releases it (``handoff.handed_over``; the caller must not)."""
+        its end rewinds the session to where it stood (``Session.rewind``: the frames
+        were answered to nobody) and releases it (``handoff.handed_over``; the caller
+        must not)."""
         options = session.options
         metrics = self.metrics
+        before = session.mark()
         fut: asyncio.Future[tuple[list[SolvedFrame], PlannedPath | None]]
         if plan:
             fut = asyncio.get_running_loop().run_in_executor(
@@ -359,8 +362,11 @@ class Runner:
         try:
             return await asyncio.shield(fut)
         except asyncio.CancelledError:
-            if not fut.done():
-                fut.add_done_callback(lambda _: session.lock.release())
+            if fut.done():
+                session.rewind(before)
+            else:
+                fut.add_done_callback(lambda _: session.rewind(before))
+                fut.add_done_callback(lambda _: session.lock.release())  # runs second
                 handoff.handed_over = True
             raise
 

@@ -18,7 +18,7 @@ import shutil
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import msgpack
@@ -28,12 +28,15 @@ import redis
 from pydantic import SecretStr
 from starlette.testclient import TestClient
 
+import schemas as S
 from loadtest.cluster import RedisServer
+from service import convert
 from service.config import Settings
 from service.main import create_app
 from service.redis_store import RedisSessionStore
 from service.sessions import Session
 from service.stored_frames import KEPT_ANSWERS, StreamRecord, unpack_stream
+from solver.ik import Target
 
 from .helpers import Created, create, hand_frame
 
@@ -360,6 +363,11 @@ def _stored_stream(redis_url: str, s: Created) -> StreamRecord:
     return unpack_stream(state, len(s.body["pose"]["q"]))
 
 
+def frame_targets(session: Session, frame: dict[str, Any]) -> Sequence[Target]:
+    """A frame's targets as the solver takes them, for the session's chain."""
+    return convert.targets(S.Frame(**frame).targets, session.view, "targets")
+
+
 def _frame_q(client: TestClient, s: Created, frame_id: int, y: float) -> list[float]:
     r = client.post(
         f"/v1/sessions/{s.id}/frames", json=hand_frame(frame_id, y=y), headers=s.headers
@@ -396,6 +404,63 @@ def test_written_behind_a_flush_during_a_pooled_solve_stores_the_last_answered_p
     stored = _stored_stream(redis_url, s)
     assert stored.frames == 1
     assert stored.q.tolist() == pytest.approx(answered, abs=0)
+
+
+@pytest.mark.parametrize("shared", [True, False], ids=["redis", "memory"])
+def test_a_frame_cancelled_while_its_thread_solves_leaves_no_trace(
+    workers: Workers, make_client: Callable[..., TestClient], redis_url: str, shared: bool
+) -> None:
+    """A frame whose request goes away while a frame thread solves it is answered to
+    nobody and never committed. The thread solves on; its end puts the session back
+    where it stood: otherwise the worker's copy was ahead of Redis at the same version,
+    and the next frame or a GET started from a pose no answer and no other worker knew
+    (in memory: a resend started from the answer it never got)."""
+    settings = {"inline_budget_us": 0}  # every frame on a frame thread
+    (a,) = workers(1, **settings) if shared else [make_client(Settings(**settings))]
+    s = create(a)
+    store = a.app.state.ik.store  # type: ignore[attr-defined]
+    answered = _frame_q(a, s, 0, 0.1)
+    session = a.portal.call(store.get, s.id)
+    assert session is not None
+    runner = a.app.state.ik.runner  # type: ignore[attr-defined]
+    targets = frame_targets(session, hand_frame(1, y=0.16))
+    track = session.solver.track
+    solving, go_on, solved = threading.Event(), threading.Event(), threading.Event()
+
+    def held_track(*args: Any, **kwargs: Any) -> Any:
+        solving.set()
+        go_on.wait(10)
+        result = track(*args, **kwargs)
+        solved.set()
+        return result
+
+    session.solver.track = held_track  # type: ignore[method-assign]
+
+    async def cancel_mid_solve() -> None:
+        task = asyncio.create_task(
+            runner.session_frames(session, store, [(1, targets)], time.perf_counter(), "http")
+        )
+        assert await asyncio.to_thread(solving.wait, 10)
+        task.cancel()  # the client went away
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        go_on.set()
+        async with session.lock:  # the thread's end releases it
+            pass
+
+    a.portal.call(cancel_mid_solve)
+    session.solver.track = track  # type: ignore[method-assign]
+    assert solved.is_set()  # the thread did solve the frame (and moved the pose)
+    assert (session.frames, session.solver.q.tolist()) == (1, pytest.approx(answered, abs=0))
+    r = a.get(f"/v1/sessions/{s.id}", headers=s.headers)
+    assert r.status_code == 200, r.text
+    assert r.json()["pose"]["q"] == pytest.approx(answered, abs=0)
+    # The frame sent again is solved from where it started, and committed.
+    again = _frame_q(a, s, 1, 0.16)
+    assert again != pytest.approx(answered)
+    if shared:
+        stored = _stored_stream(redis_url, s)
+        assert (stored.frames, stored.q.tolist()) == (2, pytest.approx(again, abs=0))
 
 
 def test_a_cancelled_load_leaves_the_other_waiters_their_session(workers: Workers) -> None:
