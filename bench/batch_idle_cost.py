@@ -38,11 +38,12 @@ import orjson  # noqa: E402
 
 import schemas as S  # noqa: E402
 from loadtest.paths import make_path  # noqa: E402
-from service import batch, convert  # noqa: E402
+from service import convert  # noqa: E402
 from service.config import Settings  # noqa: E402
 from service.main import create_app  # noqa: E402
 from service.responses import dumps_message  # noqa: E402
 from service.routes.ws_batch import batch_reply, raw_batch  # noqa: E402
+from service.session_tokens import SessionTokens  # noqa: E402
 
 with warnings.catch_warnings():  # starlette's advice to install httpx2: not ours
     warnings.simplefilter("ignore")
@@ -66,7 +67,7 @@ class _Socket:
         self.svc = svc
         self.build = convert.result_builder(S.ResultView.FULL)
         self.backlog = False
-        self.tokens = batch.SessionTokens()
+        self.tokens = SessionTokens()
         self.client = "bench"
 
 

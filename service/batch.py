@@ -26,7 +26,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-import secrets
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -40,7 +39,6 @@ from solver.errors import IKError
 from solver.ik import Target as SolverTarget
 
 from . import convert, stored_frames
-from .auth import authenticate
 from .errors import (
     ServiceError,
     echoable_id,
@@ -51,12 +49,10 @@ from .errors import (
     solver_error,
     store_unavailable,
 )
-from .sessions import STALE_RETRIES, Session, SessionStore, StaleSession
+from .session_tokens import SessionTokens
+from .sessions import STALE_RETRIES, Session, SessionStore, StaleSession, StreamMark
 from .solving import Runner, rate_limited
 from .work import WorkClass
-
-# A connection remembers at most this many sessions it has opened (SessionTokens).
-MAX_REMEMBERED_SESSIONS = 4096
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,36 +67,6 @@ class Entry:
 
 # What each entry comes to: its solved frame, or its own error.
 Outcome = convert.SolvedFrame | ServiceError
-
-
-class SessionTokens:
-    """The sessions one connection has opened with their tokens (a WebSocket's, for
-    its batches): an entry for one of them costs one constant-time comparison instead
-    of a store lookup and a hash. A session deleted since is looked up again (404)."""
-
-    def __init__(self) -> None:
-        self._opened: dict[str, tuple[str, Session]] = {}
-
-    def known(self, session_id: str, token: str) -> Session | None:
-        """The session if this connection opened it with ``token`` and it still exists."""
-        known = self._opened.get(session_id)
-        if known is not None and not known[1].closed and secrets.compare_digest(known[0], token):
-            return known[1]
-        return None
-
-    async def open(self, store: SessionStore, session_id: str, token: str) -> Session:
-        """The session if ``token`` opens it.
-
-        Raises:
-            ServiceError: unauthorized, not_found, forbidden (as ``auth.authenticate``).
-        """
-        if (session := self.known(session_id, token)) is not None:
-            return session
-        session = await authenticate(store, session_id, token)
-        if len(self._opened) >= MAX_REMEMBERED_SESSIONS:
-            self._opened.pop(next(iter(self._opened)))
-        self._opened[session_id] = (token, session)
-        return session
 
 
 def check_length(n_entries: int, limit: int) -> None:
@@ -184,11 +150,13 @@ async def solve(
             admitted.append((k, entry))
     sessions = sorted({e.session.id: e.session for _, e in admitted}.values(), key=_by_id)
     locked: list[Session] = []
+    marks: list[tuple[Session, StreamMark]] = []  # where each stood (Session.rewind)
     handed_over = False  # the locks went to a solving thread (the caller was cancelled)
     try:
         for session in sessions:
             await session.lock.acquire()
             locked.append(session)
+            marks.append((session, session.mark()))
         live: list[tuple[int, Entry]] = []
         for k, entry in admitted:
             if entry.session.closed:  # deleted while the batch waited for its lock
@@ -240,8 +208,9 @@ async def solve(
             try:
                 solved = await asyncio.shield(fut)
             except asyncio.CancelledError:
-                if not fut.done():  # the thread still solves: its end releases the locks
+                if not fut.done():  # the thread still solves: its end rewinds, releases
                     held = list(locked)
+                    fut.add_done_callback(lambda _: _rewind(marks))
                     fut.add_done_callback(lambda _: _release(held))
                     handed_over = True
                 raise
@@ -257,6 +226,12 @@ async def solve(
                     for g in _by_session(live)
                 )
             )
+    except asyncio.CancelledError:
+        # The caller went away (between slices, or while a thread solved): the frames
+        # were answered to nobody, so they leave no trace (Session.rewind).
+        if not handed_over:
+            _rewind(marks)
+        raise
     finally:
         if not handed_over:
             _release(locked)
@@ -268,6 +243,11 @@ async def solve(
 def _release(sessions: Sequence[Session]) -> None:
     for session in sessions:
         session.lock.release()
+
+
+def _rewind(marks: Sequence[tuple[Session, StreamMark]]) -> None:
+    for session, mark in marks:
+        session.rewind(mark)
 
 
 def _by_session(entries: Sequence[tuple[int, Entry]]) -> list[list[tuple[int, Entry]]]:

@@ -23,6 +23,7 @@ from ..dependencies import OwnerDep, ServicesDep, SessionDep
 from ..errors import ServiceError, not_found
 from ..middleware import received_at
 from ..responses import ORJSONResponse
+from ..session_tokens import SessionTokens
 from ..sessions import (
     OwnerFull,
     Session,
@@ -423,7 +424,7 @@ async def post_batch(
     error (the other entries are still solved)."""
     t0 = received_at(request)
     batch.check_length(len(body.frames), svc.settings.max_frames_per_request)
-    tokens = batch.SessionTokens()
+    tokens = SessionTokens()
     entries = [
         await batch.prepare(i, frame, svc.store, tokens) for i, frame in enumerate(body.frames)
     ]

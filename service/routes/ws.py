@@ -39,7 +39,7 @@ from schemas import ErrorCode
 from solver.errors import IKError
 from solver.ik import Target as SolverTarget
 
-from .. import batch, convert
+from .. import convert
 from ..auth import authenticate, origin_allowed, websocket_subprotocol, websocket_token
 from ..convert import FastFrame
 from ..dependencies import Services, services
@@ -51,6 +51,7 @@ from ..errors import (
     solver_error,
 )
 from ..responses import dumps_message, packb_message
+from ..session_tokens import SessionTokens
 from ..sessions import Session
 from ..solving import session_client
 from .ws_batch import RawBatch, batch_reply
@@ -99,7 +100,7 @@ class _Connection:
         self.build = build
         self.last_id = -1
         self.backlog = False
-        self.tokens = batch.SessionTokens()  # the sessions this socket's batches opened
+        self.tokens = SessionTokens()  # the sessions this socket's batches opened
         self._loop = asyncio.get_running_loop()
         self._task = asyncio.current_task()
         self._send_timeout_s = svc.settings.ws_send_timeout_s

@@ -24,6 +24,7 @@ from schemas.solve import HARD_MAX_FRAMES, MAX_FRAME_ID
 from .. import batch, convert
 from ..dependencies import Services
 from ..errors import ServiceError
+from ..session_tokens import SessionTokens
 from ..sessions import SessionStore
 from .ws_messages import batch_result_message
 
@@ -58,7 +59,7 @@ class Connection(Protocol):
     svc: Services
     build: convert.ResultBuilder
     backlog: bool
-    tokens: batch.SessionTokens
+    tokens: SessionTokens
 
     @property
     def client(self) -> str: ...
@@ -87,7 +88,7 @@ async def batch_reply(
 
 
 async def entries(
-    msg: RawBatch | S.BatchMessage, binary: bool, store: SessionStore, tokens: batch.SessionTokens
+    msg: RawBatch | S.BatchMessage, binary: bool, store: SessionStore, tokens: SessionTokens
 ) -> list[batch.Entry | ServiceError]:
     """Each entry of a batch, ready to solve or as its own error, in order."""
     if isinstance(msg, S.BatchMessage):  # validated as a whole by pydantic
@@ -120,7 +121,7 @@ def _fields(raw: Any) -> tuple[str, str, int | None] | None:
     return None
 
 
-def _known_entry(raw: Any, tokens: batch.SessionTokens) -> batch.Entry | None:
+def _known_entry(raw: Any, tokens: SessionTokens) -> batch.Entry | None:
     """A well-formed entry for a session this socket has opened with the same token."""
     if (fields := _fields(raw)) is None:
         return None
@@ -133,7 +134,7 @@ def _known_entry(raw: Any, tokens: batch.SessionTokens) -> batch.Entry | None:
 
 
 async def _entry(
-    index: int, raw: Any, binary: bool, store: SessionStore, tokens: batch.SessionTokens
+    index: int, raw: Any, binary: bool, store: SessionStore, tokens: SessionTokens
 ) -> batch.Entry | ServiceError:
     if (fields := _fields(raw)) is not None:
         session_id, token, frame_id = fields

@@ -179,13 +179,7 @@ def test_urdf_limits_are_taken_as_given(client: TestClient, limit: str) -> None:
 
 
 # -- 3b. two effectors of one name: the later one is named, with the first ------------------
-_URDF_TWO_LINKS = (
-    '<robot name="r"><link name="base"/><link name="tip"/>'
-    '<joint name="j1" type="revolute"><parent link="base"/><child link="tip"/>'
-    '<axis xyz="0 0 1"/><limit lower="-1" upper="1"/></joint></robot>'
-)
-
-
+# (two tip links alike: test_http.py's test of a URDF chain's link names)
 @pytest.mark.parametrize(
     ("chain", "field", "words"),
     [
@@ -210,18 +204,8 @@ _URDF_TWO_LINKS = (
             "chain.effectors[1].name",
             "'foot'",
         ),
-        (
-            {
-                "format": "urdf",
-                "urdf": _URDF_TWO_LINKS,
-                "base_link": "base",
-                "tip_links": ["tip"] * 2,
-            },
-            "chain.tip_links[1]",
-            "duplicate tip link",
-        ),
     ],
-    ids=["json", "bvh-same-bone", "bvh-same-name", "urdf"],
+    ids=["json", "bvh-same-bone", "bvh-same-name"],
 )
 def test_two_effectors_of_one_name_name_the_later(
     client: TestClient, chain: dict[str, Any], field: str, words: str

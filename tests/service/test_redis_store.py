@@ -18,7 +18,7 @@ import shutil
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Awaitable, Callable, Iterator, Sequence
 from typing import Any
 
 import msgpack
@@ -30,7 +30,7 @@ from starlette.testclient import TestClient
 
 import schemas as S
 from loadtest.cluster import RedisServer
-from service import convert
+from service import batch, convert
 from service.config import Settings
 from service.main import create_app
 from service.redis_store import RedisSessionStore
@@ -406,25 +406,13 @@ def test_written_behind_a_flush_during_a_pooled_solve_stores_the_last_answered_p
     assert stored.q.tolist() == pytest.approx(answered, abs=0)
 
 
-@pytest.mark.parametrize("shared", [True, False], ids=["redis", "memory"])
-def test_a_frame_cancelled_while_its_thread_solves_leaves_no_trace(
-    workers: Workers, make_client: Callable[..., TestClient], redis_url: str, shared: bool
+def _cancelled_mid_solve(
+    client: TestClient, held: Session, work: Callable[[], Awaitable[Any]]
 ) -> None:
-    """A frame whose request goes away while a frame thread solves it is answered to
-    nobody and never committed. The thread solves on; its end puts the session back
-    where it stood: otherwise the worker's copy was ahead of Redis at the same version,
-    and the next frame or a GET started from a pose no answer and no other worker knew
-    (in memory: a resend started from the answer it never got)."""
-    settings = {"inline_budget_us": 0}  # every frame on a frame thread
-    (a,) = workers(1, **settings) if shared else [make_client(Settings(**settings))]
-    s = create(a)
-    store = a.app.state.ik.store  # type: ignore[attr-defined]
-    answered = _frame_q(a, s, 0, 0.1)
-    session = a.portal.call(store.get, s.id)
-    assert session is not None
-    runner = a.app.state.ik.runner  # type: ignore[attr-defined]
-    targets = frame_targets(session, hand_frame(1, y=0.16))
-    track = session.solver.track
+    """Start ``work`` (frames solved on a frame thread), cancel it while the thread is
+    inside ``held``'s ``track`` (the client went away), let the thread finish, and wait
+    until it has released ``held``'s lock. Asserts the thread did solve."""
+    track = held.solver.track
     solving, go_on, solved = threading.Event(), threading.Event(), threading.Event()
 
     def held_track(*args: Any, **kwargs: Any) -> Any:
@@ -434,23 +422,54 @@ def test_a_frame_cancelled_while_its_thread_solves_leaves_no_trace(
         solved.set()
         return result
 
-    session.solver.track = held_track  # type: ignore[method-assign]
-
     async def cancel_mid_solve() -> None:
-        task = asyncio.create_task(
-            runner.session_frames(session, store, [(1, targets)], time.perf_counter(), "http")
-        )
+        task = asyncio.create_task(work())
         assert await asyncio.to_thread(solving.wait, 10)
-        task.cancel()  # the client went away
+        task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
         go_on.set()
-        async with session.lock:  # the thread's end releases it
+        async with held.lock:  # the thread's end releases it
             pass
 
-    a.portal.call(cancel_mid_solve)
-    session.solver.track = track  # type: ignore[method-assign]
+    held.solver.track = held_track  # type: ignore[method-assign]
+    try:
+        client.portal.call(cancel_mid_solve)
+    finally:
+        held.solver.track = track  # type: ignore[method-assign]
     assert solved.is_set()  # the thread did solve the frame (and moved the pose)
+
+
+def _two_stores(
+    workers: Workers, make_client: Callable[..., TestClient], shared: bool
+) -> TestClient:
+    """A worker that solves every frame on a frame thread, with Redis or in memory."""
+    settings = {"inline_budget_us": 0}
+    return workers(1, **settings)[0] if shared else make_client(Settings(**settings))
+
+
+@pytest.mark.parametrize("shared", [True, False], ids=["redis", "memory"])
+def test_a_frame_cancelled_while_its_thread_solves_leaves_no_trace(
+    workers: Workers, make_client: Callable[..., TestClient], redis_url: str, shared: bool
+) -> None:
+    """A frame whose request goes away while a frame thread solves it is answered to
+    nobody and never committed. The thread solves on; its end puts the session back
+    where it stood: otherwise the worker's copy was ahead of Redis at the same version,
+    and the next frame or a GET started from a pose no answer and no other worker knew
+    (in memory: a resend started from the answer it never got)."""
+    a = _two_stores(workers, make_client, shared)
+    s = create(a)
+    store = a.app.state.ik.store  # type: ignore[attr-defined]
+    answered = _frame_q(a, s, 0, 0.1)
+    session = a.portal.call(store.get, s.id)
+    assert session is not None
+    runner = a.app.state.ik.runner  # type: ignore[attr-defined]
+    targets = frame_targets(session, hand_frame(1, y=0.16))
+    _cancelled_mid_solve(
+        a,
+        session,
+        lambda: runner.session_frames(session, store, [(1, targets)], time.perf_counter(), "http"),
+    )
     assert (session.frames, session.solver.q.tolist()) == (1, pytest.approx(answered, abs=0))
     r = a.get(f"/v1/sessions/{s.id}", headers=s.headers)
     assert r.status_code == 200, r.text
@@ -461,6 +480,31 @@ def test_a_frame_cancelled_while_its_thread_solves_leaves_no_trace(
     if shared:
         stored = _stored_stream(redis_url, s)
         assert (stored.frames, stored.q.tolist()) == (2, pytest.approx(again, abs=0))
+
+
+@pytest.mark.parametrize("shared", [True, False], ids=["redis", "memory"])
+def test_a_batch_cancelled_while_its_thread_solves_leaves_no_trace(
+    workers: Workers, make_client: Callable[..., TestClient], shared: bool
+) -> None:
+    """The same for a batch: every session of it is put back where it stood, the ones
+    the thread had solved before the cancel and the one it was solving."""
+    a = _two_stores(workers, make_client, shared)
+    store = a.app.state.ik.store  # type: ignore[attr-defined]
+    runner = a.app.state.ik.runner  # type: ignore[attr-defined]
+    made = [create(a) for _ in range(2)]
+    answered = [_frame_q(a, s, 0, 0.1) for s in made]
+    sessions = [a.portal.call(store.get, s.id) for s in made]
+    entries = [
+        batch.Entry(session, 1, frame_targets(session, hand_frame(1, y=0.16)))
+        for session in sessions
+    ]
+    _cancelled_mid_solve(
+        a,
+        sessions[1],  # entries are solved in order: the first one is solved by then
+        lambda: batch.solve(runner, store, entries, time.perf_counter(), "ws", "tester"),
+    )
+    for session, q in zip(sessions, answered, strict=True):
+        assert (session.frames, session.solver.q.tolist()) == (1, pytest.approx(q, abs=0))
 
 
 def test_a_cancelled_load_leaves_the_other_waiters_their_session(workers: Workers) -> None:
