@@ -135,7 +135,18 @@ def hint(error: Mapping[str, Any]) -> str | None:
             return _did_you_mean(loc[-1])
     if kind == JSON_INVALID:
         return _json_hint(error)
+    if kind == "int_type" and type(value) is float:
+        return _whole_number_hint(value)
     return None
+
+
+def _whole_number_hint(value: float) -> str:
+    """An id or count sent as a float: engines whose numbers are all floats (Godot's
+    JSON, a C# double) write ``3.0``, which the contract refuses as an integer."""
+    text = f"a whole number without a decimal point is expected, got {_shown(value)}"
+    if value.is_integer() and abs(value) <= 2**53:
+        text += f" (send {int(value)}: convert the engine's float to an integer first)"
+    return text
 
 
 def _json_hint(error: Mapping[str, Any]) -> str:

@@ -266,6 +266,24 @@ def test_a_misspelt_field_is_told_the_near_name_on_the_websocket_too(
     assert error["field"] == "frame.target", error
 
 
+@pytest.mark.parametrize("binary", [False, True], ids=["json", "msgpack"])
+def test_an_id_sent_as_a_float_is_told_to_send_the_integer(
+    client: TestClient, session: Created, binary: bool
+) -> None:
+    """Godot's JSON and a C# double write an id as 3.0; the contract's ids are integers."""
+    message = {"type": "frame", "id": 3.0, **{"targets": hand_frame(None)["targets"]}}
+    error = ws_exchange(client, session, message, binary=binary)["error"]
+    assert (error["code"], error["field"]) == ("invalid_format", "frame.id"), error
+    assert "got 3.0 (send 3:" in error["message"], error
+    message["id"] = 2.5  # not a whole number: nothing to suggest
+    error = ws_exchange(client, session, message, binary=binary)["error"]
+    assert error["message"].endswith("got 2.5"), error
+    # Over HTTP too, for any integer field.
+    r = client.patch(f"/v1/sessions/{session.id}", json={"max_iter": 50.0}, headers=session.headers)
+    assert r.status_code == 422, r.text
+    assert "got 50.0 (send 50:" in r.json()["detail"][0]["msg"], r.text
+
+
 def test_a_misspelt_field_in_a_batch_entry_is_told_the_near_name(
     client: TestClient, session: Created
 ) -> None:
