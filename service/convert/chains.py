@@ -237,11 +237,6 @@ def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
         raise invalid_problem(
             f"too many joints: {len(spec.joints)} > {settings.max_joints}", "chain.joints"
         )
-    if len(spec.effectors) > settings.max_effectors:
-        raise invalid_problem(
-            f"too many effectors: {len(spec.effectors)} > {settings.max_effectors}",
-            "chain.effectors",
-        )
     for i, j in enumerate(spec.joints):
         _check_radians(j, f"chain.joints[{i}]")
     joints = [
@@ -260,7 +255,7 @@ def _hierarchy_chain(spec: S.HierarchyChain, settings: Settings) -> Chain:
         )
         for j in spec.joints
     ]
-    effectors = effectors_of(spec.effectors)
+    effectors = effectors_of(spec.effectors, settings.max_effectors)
     try:
         return build_chain(joints, effectors, max_dof=settings.max_dof)
     except InvalidModel as e:

@@ -61,13 +61,20 @@ def effector(e: S.EffectorSpec | S.BoneEffectorSpec, *, name: str, link: str) ->
     )
 
 
-def effectors_of(specs: Sequence[S.EffectorSpec | S.BoneEffectorSpec]) -> list[Effector]:
-    """The solver's effectors of a chain's effector specs, their names checked unique.
+def effectors_of(
+    specs: Sequence[S.EffectorSpec | S.BoneEffectorSpec], limit: int
+) -> list[Effector]:
+    """The solver's effectors of a chain's effector specs (at most ``limit``,
+    IK_MAX_EFFECTORS), their names checked unique.
 
     Targets name an effector, so two of one name would be ambiguous. The later one is
     refused, at the field that gave it its name: ``name``, or ``bone`` for a skeleton's
     effector without one (it is named after its bone: two on one bone need names).
     """
+    if len(specs) > limit:
+        raise invalid_problem(
+            f"too many effectors: {len(specs)} > {limit} (IK_MAX_EFFECTORS)", "chain.effectors"
+        )
     made: list[Effector] = []
     first: dict[str, int] = {}
     for i, e in enumerate(specs):

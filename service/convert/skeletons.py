@@ -47,7 +47,8 @@ def skeleton_chain(spec: SkeletonSpec, settings: Settings) -> SkeletonChain:
         ServiceError: ``invalid_format`` for base64 that does not decode;
             ``invalid_problem`` for anything else, naming the field.
     """
-    effectors = effectors_of(spec.effectors)  # before the file: the cheaper check first
+    # Before the file: the cheaper checks first.
+    effectors = effectors_of(spec.effectors, settings.max_effectors)
     skeleton = _read(spec, settings)
     if isinstance(spec, S.BvhChain):
         _check_lengths(skeleton, "chain.bvh", "check the file's units (unit_m)")

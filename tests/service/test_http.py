@@ -10,6 +10,7 @@ import pytest
 from starlette.testclient import TestClient
 
 import schemas as S
+from schemas.chain import EXAMPLE_ARM, EXAMPLE_BVH_LEG
 from service.config import Settings
 from solver.model.examples import panda_arm
 
@@ -440,6 +441,24 @@ def test_chain_over_the_dof_limit(make_client: Callable[..., TestClient]) -> Non
     client = make_client(Settings(max_dof=10))
     r = client.post("/v1/sessions", json={"chain": {"format": "example", "name": "tail"}})
     assert r.status_code == 422 and r.json()["field"] == "chain"
+
+
+@pytest.mark.parametrize("kind", ["hierarchy", "bvh"])
+def test_chain_over_the_effector_limit(make_client: Callable[..., TestClient], kind: str) -> None:
+    """IK_MAX_EFFECTORS holds for every chain format (skeletons were not checked)."""
+    client = make_client(Settings(max_effectors=2))
+    if kind == "bvh":
+        bones = ["LeftLeg_end", "LeftLeg", "LeftUpLeg"]
+        chain = {**EXAMPLE_BVH_LEG, "effectors": [{"bone": b} for b in bones]}
+    else:
+        effectors = [{**EXAMPLE_ARM["effectors"][0], "name": f"e{i}"} for i in range(3)]
+        chain = {**EXAMPLE_ARM, "effectors": effectors}
+    r = client.post("/v1/sessions", json={"chain": chain})
+    assert r.status_code == 422, r.text
+    assert r.json()["field"] == "chain.effectors", r.text
+    assert "too many effectors: 3 > 2" in r.json()["detail"], r.text
+    chain["effectors"] = chain["effectors"][:2]
+    assert client.post("/v1/sessions", json={"chain": chain}).status_code == 201
 
 
 def test_options_over_the_budget_cap(client: TestClient, session: Created) -> None:
