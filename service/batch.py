@@ -227,8 +227,9 @@ async def solve(
                 )
             )
     except asyncio.CancelledError:
-        # The caller went away (between slices, or while a thread solved): the frames
-        # were answered to nobody, so they leave no trace (Session.rewind).
+        # Cancelled (between slices, or while a thread solved; uvicorn cancels what still
+        # runs at the end of a graceful shutdown): the frames were answered to nobody, so
+        # they leave no trace (Session.rewind).
         if not handed_over:
             _rewind(marks)
         raise

@@ -107,9 +107,10 @@ class Session:
         return StreamMark(self.solver.stream_state(), self.frames, self.solved)
 
     def rewind(self, mark: StreamMark) -> None:
-        """Undo the frames solved since ``mark`` (answered to nobody: their caller went
-        away while a thread solved them), so that they leave no trace: a resend starts
-        where they did, and a shared store's copy is the state it committed."""
+        """Undo the frames solved since ``mark`` (answered to nobody: their request was
+        cancelled while a thread solved them, as uvicorn cancels what still runs at the
+        end of a graceful shutdown), so that they leave no trace: a resend starts where
+        they did, and a shared store's copy is the state it committed."""
         self.solver.restore(mark.stream)
         self.frames, self.solved = mark.frames, mark.solved
 

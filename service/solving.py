@@ -326,8 +326,10 @@ class Runner:
         must not)."""
         options = session.options
         metrics = self.metrics
-        before = session.mark()
         fut: asyncio.Future[tuple[list[SolvedFrame], PlannedPath | None]]
+        if not plan and may_inline and self.inline(len(jobs), options):
+            return _track_all(session, jobs, options, t0, metrics.frames, transport)
+        before = session.mark()  # a solve on a thread: what a cancel puts back
         if plan:
             fut = asyncio.get_running_loop().run_in_executor(
                 self.plan_pool, _plan_all, session, jobs, options, t0
@@ -336,8 +338,6 @@ class Runner:
             fut.add_done_callback(functools.partial(_count_plan, metrics, transport))
             if on_submit is not None:
                 on_submit(fut)
-        elif may_inline and self.inline(len(jobs), options):
-            return _track_all(session, jobs, options, t0, metrics.frames, transport)
         else:
             loop = asyncio.get_running_loop()
 

@@ -410,7 +410,7 @@ def _cancelled_mid_solve(
     client: TestClient, held: Session, work: Callable[[], Awaitable[Any]]
 ) -> None:
     """Start ``work`` (frames solved on a frame thread), cancel it while the thread is
-    inside ``held``'s ``track`` (the client went away), let the thread finish, and wait
+    inside ``held``'s ``track``, let the thread finish, and wait
     until it has released ``held``'s lock. Asserts the thread did solve."""
     track = held.solver.track
     solving, go_on, solved = threading.Event(), threading.Event(), threading.Event()
@@ -452,11 +452,12 @@ def _two_stores(
 def test_a_frame_cancelled_while_its_thread_solves_leaves_no_trace(
     workers: Workers, make_client: Callable[..., TestClient], redis_url: str, shared: bool
 ) -> None:
-    """A frame whose request goes away while a frame thread solves it is answered to
-    nobody and never committed. The thread solves on; its end puts the session back
-    where it stood: otherwise the worker's copy was ahead of Redis at the same version,
-    and the next frame or a GET started from a pose no answer and no other worker knew
-    (in memory: a resend started from the answer it never got)."""
+    """A frame whose request is cancelled while a frame thread solves it (uvicorn
+    cancels what still runs at the end of a graceful shutdown) is answered to nobody
+    and never committed. The thread solves on; its end puts the session back where it
+    stood: otherwise the worker's copy was ahead of Redis at the same version, and the
+    next frame or a GET started from a pose no answer and no other worker knew (in
+    memory: a resend started from the answer it never got)."""
     a = _two_stores(workers, make_client, shared)
     s = create(a)
     store = a.app.state.ik.store  # type: ignore[attr-defined]
