@@ -78,6 +78,10 @@ def measure(gaps_ms: list[float], characters: int, messages: int, block: int) ->
         svc = app.state.ik
         while not svc.runner.warmup.ready.wait(1.0):
             pass
+        # The entries must be solved on the loop, where thread_time sees them: a budget
+        # over IK_INLINE_BUDGET_US would send them to the frame threads.
+        config = svc.settings
+        assert config.default_time_budget_us <= config.inline_budget_us, "not solved inline"
         targets = [orjson.loads(t) for t in make_path(CHAIN, RATE_HZ).targets]
         chain = {"chain": {"format": "example", "name": CHAIN}}
         sessions: list[list[dict[str, Any]]] = []
