@@ -189,8 +189,9 @@ def _parse_xml(text: str, max_bytes: int) -> ET.Element:
     return root
 
 
-# xacro's namespace, and what its expressions and substitutions look like in a value.
-_XACRO_NS = "{http://www.ros.org/wiki/xacro}"
+# xacro's namespace under any URI naming it (files declare http://www.ros.org/wiki/xacro,
+# http://ros.org/wiki/xacro, ...; xacro reads the prefix), and ${...} / $(...) in a value.
+_XACRO_TAG = re.compile(r"\{[^}]*xacro[^}]*\}(.+)", re.IGNORECASE)
 _XACRO_VALUE = re.compile(r"\$[{(]")
 
 
@@ -198,8 +199,8 @@ def _refuse_xacro(root: ET.Element) -> None:
     """Refuse a file that is still xacro: an element of xacro's namespace (read as URDF,
     an ``<xacro:if>`` block's joints were silently left out), or ``${...}`` / ``$(...)``
     in a link or joint (a leftover in a mesh path, not read here, is let through)."""
-    tags = (e.tag for e in root.iter() if isinstance(e.tag, str) and e.tag.startswith(_XACRO_NS))
-    found = next((f"<xacro:{t[len(_XACRO_NS) :]}>" for t in tags), None)
+    tags = (_XACRO_TAG.fullmatch(e.tag) for e in root.iter() if isinstance(e.tag, str))
+    found = next((f"<xacro:{t.group(1)}>" for t in tags if t is not None), None)
     for element in (e for e in root if _tag(e) in ("link", "joint")):
         parts = [element] if _tag(element) == "link" else [element, *element]
         values = ((k, v, p) for p in parts for k, v in p.attrib.items())

@@ -522,6 +522,21 @@ def test_a_file_that_is_still_xacro_says_so(edit: Any, words: str) -> None:
     assert "xacro, not URDF" in str(info.value) and words in str(info.value), str(info.value)
 
 
+@pytest.mark.parametrize(
+    "uri",
+    ["http://ros.org/wiki/xacro", "http://wiki.ros.org/xacro", "https://www.ros.org/wiki/xacro"],
+)
+def test_xacro_is_recognised_under_the_namespace_uris_files_declare(uri: str) -> None:
+    # ur_description's files declare http://ros.org/wiki/xacro: its top file (an include
+    # and a macro call) was read as URDF and answered "child link 'base_link' is not
+    # declared" instead of "expand it first".
+    text = _in_xacro_if(PLANAR.replace(_ROBOT, f'{_ROBOT[:-1]} xmlns:xacro="{uri}">'))
+    with pytest.raises(InvalidModel) as info:
+        chain_from_urdf(text, base_link="base", tip_links="tip")
+    assert info.value.field == "urdf"
+    assert "xacro, not URDF (<xacro:if>)" in str(info.value), str(info.value)
+
+
 def test_xacro_leftovers_where_the_chain_is_not_read_are_ignored() -> None:
     # A mesh path with a substitution and a declared (unused) xacro namespace.
     text = PLANAR.replace("package://nowhere/base.stl", "$(find nowhere)/base.stl")
