@@ -139,6 +139,15 @@ def test_fk_of_an_aim_effector_gives_its_direction(client: TestClient) -> None:
     assert np.allclose(third_column, direction, atol=1e-9)
 
 
+def test_a_urdf_tip_in_aim_mode_aims_its_z_axis(client: TestClient) -> None:
+    """A URDF chain has no per-tip aim_axis: "mode": "aim" aims each tip link's z axis
+    (docs/chains.md says so), the approach axis of ROS tool frames."""
+    s = create(client, {**PANDA, "mode": "aim"})
+    answer = _fk(client, s, {"q": Q})
+    for effector, pose in zip(answer["effectors"], _solver_poses(Q), strict=True):
+        assert np.allclose(_vec(effector["direction"]), pose[:3, 2], atol=1e-12)
+
+
 # The URDF's frame (Z up, right-handed, metres) -> each convention's numbers, from the
 # importers' maps (test_conventions.py's, composed with ROS's inverse).
 CONVENTIONS: list[tuple[dict[str, str], Any, Any]] = [
