@@ -86,6 +86,15 @@ def test_patch_changes_only_the_given_options(client: TestClient, session: Creat
     }
 
 
+def test_patch_null_keeps_the_value_as_docs_say(client: TestClient, session: Created) -> None:
+    # JSON Merge Patch users expect null to reset a field; here it is as if left out
+    # (docs/api.md says so), so a client learns it does not get the default back.
+    url = f"/v1/sessions/{session.id}"
+    client.patch(url, json={"time_budget_us": 400}, headers=session.headers)
+    r = client.patch(url, json={"time_budget_us": None}, headers=session.headers)
+    assert r.status_code == 200 and r.json()["options"]["time_budget_us"] == 400
+
+
 def test_put_pose_sets_and_clips_the_pose(client: TestClient, session: Created) -> None:
     r = client.put(
         f"/v1/sessions/{session.id}/pose", json={"q": [0.5, 0.25, 9.0]}, headers=session.headers
