@@ -27,6 +27,7 @@ from .config import (  # noqa: E402
     unknown_variables,
     usage,
 )
+from .listen_check import listen_problem  # noqa: E402
 from .log_format import log_config  # noqa: E402
 from .main import create_app  # noqa: E402
 from .peer_limits import PeerLimits, protocols  # noqa: E402
@@ -80,6 +81,10 @@ def main() -> None:
         raise SystemExit(settings_errors(e) + also) from None
     if typos := misspelt_variables(os.environ):
         raise SystemExit("invalid configuration:\n  " + "\n  ".join(typos.values()) + also)
+    # Before the app starts (and a first start compiles): a port in use or a host name
+    # that does not resolve, said naming the variable (service/listen_check.py).
+    if (problem := listen_problem(settings.host, settings.port)) is not None:
+        raise SystemExit("cannot start: " + problem)
     logging.config.dictConfig(log_config(settings.log_level))
     for warning in unknown_variables(os.environ):
         logging.getLogger("service").warning(warning)

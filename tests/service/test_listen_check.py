@@ -1,0 +1,83 @@
+"""IK_HOST:IK_PORT that cannot be listened on stops ``python -m service`` at once, in one
+line naming the variable (an operator trial: uvicorn said "[Errno -2] Name or service
+not known" for an unresolvable host, and a port in use only after the app had started)."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from service.listen_check import listen_problem
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def taken_port() -> Iterator[int]:
+    """A port another program listens on (127.0.0.1)."""
+    with socket.socket() as other:
+        other.bind(("127.0.0.1", 0))
+        other.listen()
+        yield other.getsockname()[1]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+    return port
+
+
+def test_a_port_in_use_is_named_with_what_to_do(taken_port: int) -> None:
+    said = listen_problem("127.0.0.1", taken_port)
+    assert said is not None
+    assert said.startswith(f"IK_HOST:IK_PORT: cannot listen on 127.0.0.1:{taken_port} (")
+    assert "another process listens there" in said and "set IK_PORT" in said
+    # Every interface includes the loopback one that is taken.
+    assert listen_problem("0.0.0.0", taken_port) is not None
+
+
+def test_a_host_that_does_not_resolve_names_ik_host() -> None:
+    said = listen_problem("no-such-host.invalid", _free_port())  # .invalid: RFC 2606
+    assert said is not None
+    assert said.startswith("IK_HOST: 'no-such-host.invalid' does not resolve to an address (")
+
+
+def test_an_address_this_machine_does_not_have_names_ik_host() -> None:
+    said = listen_problem("192.0.2.1", _free_port())  # TEST-NET-1: on no interface here
+    assert said is not None
+    assert "cannot listen on 192.0.2.1:" in said and "set IK_HOST" in said
+
+
+def test_a_free_address_is_no_problem_and_stays_free() -> None:
+    port = _free_port()
+    assert listen_problem("127.0.0.1", port) is None
+    assert listen_problem("localhost", port) is None
+    with socket.socket() as again:  # the probe let go of it
+        again.bind(("127.0.0.1", port))
+
+
+def test_python_m_service_stops_before_the_app_starts(taken_port: int) -> None:
+    """Exit 1 with the one line, and nothing of uvicorn's or the app's start before it."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("IK_")}
+    env.update(IK_HOST="127.0.0.1", IK_PORT=str(taken_port))
+    done = subprocess.run(
+        [sys.executable, "-m", "service"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 1, done
+    assert done.stderr.strip().splitlines() == [
+        f"cannot start: IK_HOST:IK_PORT: cannot listen on 127.0.0.1:{taken_port} "
+        "(Address already in use): another process listens there: stop it, or set "
+        "IK_PORT to a free port"
+    ], done.stderr
