@@ -219,7 +219,10 @@ class FailureLog:
             return
         more = self.left_out.pop(cause, 0)
         since = f"; {more} more since the last such line" if more else ""
-        log.warning("a request failed: %s (%s)%s", cause, e, since)
+        # A refusal's cause quotes Redis's message already: not twice on one line.
+        said = str(e)
+        detail = "" if not said or said in cause else f" ({said})"
+        log.warning("a request failed: %s%s%s", cause, detail, since)
         self.last[cause] = now
 
     def answered(self) -> None:

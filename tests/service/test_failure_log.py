@@ -96,3 +96,25 @@ def test_the_end_of_an_outage_is_one_line_with_the_failures_left_out(
     assert lines[3][1].startswith("a request failed: Redis did not answer within")
     assert lines[4][1].startswith("a request failed: Redis cannot be reached")
     assert "more since" not in lines[4][1]
+
+
+@pytest.mark.parametrize(
+    "error",
+    [
+        OutOfMemoryError(
+            "command not allowed when used memory > 'maxmemory'. script: bf03..., on "
+            "@user_script:22."
+        ),
+        ResponseError("DB index is out of range"),
+    ],
+)
+def test_redis_s_message_is_said_once_per_line(
+    caplog: pytest.LogCaptureFixture, error: ResponseError
+) -> None:
+    # An operator trial at maxmemory: the cause quotes Redis's message, and the line
+    # then repeated it in parentheses.
+    caplog.set_level(logging.WARNING, logger="service")
+    FailureLog().failed(error)
+    (line,) = [r.getMessage() for r in caplog.records]
+    assert line.count(str(error)) == 1, line
+    assert line == f"a request failed: {redis_cause(error)}"
