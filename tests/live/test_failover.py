@@ -289,6 +289,21 @@ def test_the_balancer_runs_the_shipped_configuration() -> None:
     assert only_ran == {"server w0 127.0.0.1:1", "server w1 127.0.0.1:2"}
 
 
+def test_metrics_are_read_on_each_worker_not_through_the_balancer(cluster: Cluster) -> None:
+    """An operator trial: through the balancer /metrics answered the one worker its path
+    hashes to (a third of the figures, to anyone); the shipped file refuses it, also
+    percent-encoded (uvicorn decodes the path), and each worker serves its own."""
+    for path in ("/metrics", "/%6detrics", "/metrics?name=ik_websockets"):
+        r = httpx.get(httpx.URL(cluster.base + path), timeout=5)
+        assert r.status_code == 404, (path, r.text)
+        assert r.json()["code"] == "not_found"
+        assert "scrape each worker" in r.json()["detail"]
+    for w in cluster.workers:
+        r = httpx.get(f"{w.base}/metrics", timeout=5)
+        assert r.status_code == 200 and "ik_websockets " in r.text
+    assert httpx.get(f"{cluster.base}/readyz", timeout=5).status_code == 200
+
+
 @pytest.fixture(scope="module")
 def behind(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
     """Two workers writing behind (IK_REDIS_WRITE_BEHIND_MS)."""

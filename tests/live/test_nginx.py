@@ -20,8 +20,10 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import httpx
 import orjson
 import pytest
+import yaml  # PyYAML, installed with schemathesis (the test extra)
 from websockets.sync.client import connect
 
 from loadtest.cluster import free_port
@@ -68,6 +70,25 @@ http {{
 """
 
 
+def ingress_server_block() -> str:
+    """deploy/k8s/ik.yaml's Ingress as ingress-nginx renders what it adds: an upstream
+    hashed by its ``upstream-hash-by``, its ``configuration-snippet`` inside ``location
+    /`` (no ingress controller runs here; this runs the snippet's nginx for real)."""
+    docs = yaml.safe_load_all((ROOT / "deploy/k8s/ik.yaml").read_text())
+    (ingress,) = [d for d in docs if d and d["kind"] == "Ingress"]
+    annotations = ingress["metadata"]["annotations"]
+    snippet = annotations["nginx.ingress.kubernetes.io/configuration-snippet"]
+    hash_by = annotations["nginx.ingress.kubernetes.io/upstream-hash-by"]
+    return f"""upstream ik {{ hash {hash_by} consistent; server {DOC_UPSTREAM}; }}
+server {{
+    location / {{
+{snippet}
+        proxy_pass http://ik;
+    }}
+}}
+"""
+
+
 def nginx_program() -> str:
     found = shutil.which("nginx", path=f"{os.environ.get('PATH', '')}:/usr/sbin")
     if found is not None:
@@ -80,14 +101,15 @@ def nginx_program() -> str:
 class Nginx:
     """nginx in the foreground on a free loopback port, in front of ``upstream``."""
 
-    def __init__(self, upstream: int) -> None:
+    def __init__(self, upstream: int, block: str | None = None) -> None:
         program = nginx_program()
+        block = documented_server_block() if block is None else block
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
         self._dir = tempfile.TemporaryDirectory(prefix="ik-nginx-")
         work = Path(self._dir.name)
         self.conf = work / "nginx.conf"
-        self.conf.write_text(nginx_config(documented_server_block(), self.port, upstream, work))
+        self.conf.write_text(nginx_config(block, self.port, upstream, work))
         checked = subprocess.run(
             [program, "-t", "-c", str(self.conf)], capture_output=True, text=True, timeout=30
         )
@@ -179,3 +201,22 @@ def test_through_nginx_a_websocket_streams_and_sees_its_client(
 
 def _auth(token: str) -> dict[str, str]:
     return {"Authorization": f"Bearer {token}"}
+
+
+def test_the_ingress_snippet_routes_sessions_and_keeps_metrics_inside(worker: Server) -> None:
+    """The Ingress's nginx (its hash and snippet, run in a real nginx): a session's
+    calls pass, /metrics (one pod's figures, anyone's to read through the ingress) is
+    refused, also percent-encoded; the pod still serves it to a scraper."""
+    ingress = Nginx(worker.port, ingress_server_block())
+    try:
+        r = httpx.post(f"{ingress.base}/v1/sessions", json={"chain": PANDA}, timeout=TIMEOUT_S)
+        assert r.status_code == 201, r.text
+        sid, token = r.json()["id"], r.json()["token"]
+        got = httpx.get(f"{ingress.base}/v1/sessions/{sid}", headers=_auth(token), timeout=5)
+        assert got.status_code == 200 and got.json()["id"] == sid
+        for path in ("/metrics", "/%6detrics", "/metrics?name=ik_websockets"):
+            assert httpx.get(httpx.URL(ingress.base + path), timeout=5).status_code == 404, path
+        assert httpx.get(f"{ingress.base}/readyz", timeout=5).status_code == 200
+        assert httpx.get(f"{worker.base}/metrics", timeout=5).status_code == 200
+    finally:
+        ingress.stop()
