@@ -86,7 +86,7 @@ def create_app(
         runner = Runner(settings, metrics=metrics, warmup=warm)
         sessions = store
         if sessions is None:  # (not `store or ...`: an empty store is falsy)
-            sessions = default_store(settings, runner)
+            sessions = default_store(settings, runner, metrics)
         app.state.ik = Services(
             settings=settings,
             store=sessions,
@@ -138,7 +138,7 @@ def create_app(
     return app
 
 
-def default_store(settings: Settings, runner: Runner) -> SessionStore:
+def default_store(settings: Settings, runner: Runner, metrics: Metrics) -> SessionStore:
     """Redis when IK_REDIS_URL is set (sessions shared by every worker), else memory."""
     url = settings.redis_url.get_secret_value()
     if not url:
@@ -188,6 +188,7 @@ def default_store(settings: Settings, runner: Runner) -> SessionStore:
         load_options=load_options,
         dump_options=convert.options_dict,
         write_behind_s=settings.redis_write_behind_ms / 1000,
+        observe_commit=metrics.watch_commits(),
     )
 
 

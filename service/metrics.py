@@ -4,7 +4,10 @@ Series: ``ik_frames_total{termination,success}``, ``ik_restarts_total``,
 ``ik_solve_duration_seconds`` (the solver alone), ``ik_server_duration_seconds{transport}``
 (message received to reply ready), ``ik_active_sessions``, ``ik_websockets``
 (open WebSockets), ``ik_errors_total{code,transport}``, ``ik_sessions_created_total``,
-``ik_sessions_expired_total``, ``ik_event_loop_tasks``. Labels are enum values, never session ids.
+``ik_sessions_expired_total``, ``ik_event_loop_tasks``; with sessions in Redis
+``ik_redis_commit_duration_seconds`` (a group commit's pipeline, which a frame's answer
+waits for after ``ik_server_duration_seconds`` ends). Labels are enum values, never
+session ids.
 
 The per-frame series (frames, restarts, the two duration histograms) are plain numbers
 updated on the event loop and turned into Prometheus families at scrape time
@@ -20,7 +23,7 @@ import time
 from bisect import bisect_left
 from collections.abc import Callable, Iterator, Sequence
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, generate_latest
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from prometheus_client.core import CounterMetricFamily, HistogramMetricFamily, Metric
 from prometheus_client.registry import Collector
 from prometheus_client.utils import floatToGoString
@@ -33,6 +36,9 @@ from .convert import SolvedFrame
 
 # 10 us .. ~0.33 s, x2 steps: solves take microseconds to the frame's budget.
 DURATION_BUCKETS_S = tuple(10e-6 * 2**k for k in range(16))
+# 100 us .. ~1.6 s, x2 steps: a Redis round trip on a LAN, up to a timed-out one
+# (IK_REDIS_TIMEOUT_S, 0.5 s by default).
+COMMIT_BUCKETS_S = tuple(100e-6 * 2**k for k in range(15))
 SOLVED = IKStatus.SOLVED
 
 
@@ -134,6 +140,19 @@ class Metrics:
         self.tasks.set_function(_loop_tasks)
         self.sessions_created = Counter("ik_sessions_created", "Sessions created", registry=r)
         self.sessions_expired = Counter("ik_sessions_expired", "Sessions expired", registry=r)
+        # One observation per pipeline (frames committed together share it), not per
+        # frame; exported only by a worker with IK_REDIS_URL (``watch_commits``).
+        self.redis_commit = Histogram(
+            "ik_redis_commit_duration_seconds",
+            "Redis round trip of a group commit (stored or failed)",
+            buckets=COMMIT_BUCKETS_S,
+            registry=None,
+        )
+
+    def watch_commits(self) -> Callable[[float], None]:
+        """Export ``ik_redis_commit_duration_seconds``; returns what observes it."""
+        self.registry.register(self.redis_commit)
+        return self.redis_commit.observe
 
     def frame(self, r: IKResult, server_s: float, transport: str) -> None:
         """Count one solved frame. Call on the event loop's thread only."""

@@ -14,6 +14,7 @@ import asyncio
 import logging
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import redis.asyncio as aioredis
@@ -91,11 +92,18 @@ class GroupCommit:
     Redis answers NOSCRIPT (it restarted and lost it)."""
 
     def __init__(
-        self, client: aioredis.Redis, script: str, failures: FailureLog | None = None
+        self,
+        client: aioredis.Redis,
+        script: str,
+        failures: FailureLog | None = None,
+        observe: Callable[[float], None] | None = None,
     ) -> None:
         self._client = client
         self._script = script
         self._failures = failures or FailureLog()  # told when a commit succeeds
+        # Told each pipeline's seconds, stored or failed (ik_redis_commit_duration_seconds:
+        # a frame's answer waits for it, and ik_server_duration_seconds ends before).
+        self._observe = observe
         self._sha: str | None = None
         self._pending: list[tuple[list[str], list[Any], asyncio.Future[Any]]] = []
         self._flushing = False
@@ -111,10 +119,15 @@ class GroupCommit:
     async def execute(self, batch: list[tuple[list[str], list[Any], Any]]) -> list[Any]:
         """Run the script for each (keys, args, _) of ``batch`` in one pipeline; the
         results in order (an exception for a failed one). Raises when all failed."""
-        results = await self._execute(batch)
-        if any(isinstance(r, NoScriptError) for r in results):
-            self._sha = None  # Redis restarted: load it, run the batch again
+        start = time.perf_counter()
+        try:
             results = await self._execute(batch)
+            if any(isinstance(r, NoScriptError) for r in results):
+                self._sha = None  # Redis restarted: load it, run the batch again
+                results = await self._execute(batch)
+        finally:
+            if self._observe is not None:
+                self._observe(time.perf_counter() - start)
         # Only a batch stored whole is Redis answering again: with raise_on_error=False
         # a refusal (OOM at maxmemory, READONLY, MISCONF) is a result, not a raise, and
         # each refused frame would end the outage in the log and restart its throttle.

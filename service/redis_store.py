@@ -104,6 +104,7 @@ class RedisSessionStore(SessionStore):
         dump_options: OptionsDumper,
         max_per_owner: int | None = None,
         write_behind_s: float = 0.0,
+        observe_commit: Callable[[float], None] | None = None,
         prefix: str = "ik:",
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -124,7 +125,7 @@ class RedisSessionStore(SessionStore):
         self._forgotten = weakref.WeakValueDictionary[str, Session]()
         self._views: OrderedDict[str, ChainView] = OrderedDict()
         self._failures = redis_commit.FailureLog()  # the requests' WARNING, throttled
-        self._commit = GroupCommit(client, COMMIT_SCRIPT, self._failures)
+        self._commit = GroupCommit(client, COMMIT_SCRIPT, self._failures, observe_commit)
         # Written behind (IK_REDIS_WRITE_BEHIND_MS > 0): None when written through.
         self.behind = WriteBehind(write_behind_s, self._write_behind) if write_behind_s else None
         self._count = 0

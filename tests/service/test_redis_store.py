@@ -13,6 +13,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import math
 import os
 import shutil
 import socket
@@ -974,3 +975,37 @@ def test_get_and_fk_read_the_session_whole_only_when_another_worker_changed_it(
     assert info["counters"]["frames"] == 2
     assert info["pose"]["q"] == pytest.approx(q_b)
     assert _hgetalls(redis_url) == before + 2  # the session's hash and its answers
+
+
+def _histogram(text: str, name: str, label: str = "") -> dict[float, float]:
+    """A histogram's cumulative counts by upper bound, from /metrics."""
+    out = {}
+    for line in text.splitlines():
+        if line.startswith(f"{name}_bucket{{") and label in line:
+            bound = line.split('le="')[1].split('"')[0]
+            out[float(bound)] = float(line.rsplit(" ", 1)[1])
+    return out
+
+
+def test_a_slow_redis_shows_in_the_commit_histogram_not_only_to_clients(
+    workers: Workers, redis_url: str, make_client: Callable[..., TestClient]
+) -> None:
+    """An operator trial: Redis pausing writes 300 ms made frames that slow for the
+    client, and ik_server_duration_seconds (which ends before the commit) showed none
+    of it: no series said Redis was slow."""
+    (a,) = workers(1)
+    s = create(a)
+    assert a.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(1), headers=s.headers).is_success
+    redis.Redis.from_url(redis_url).execute_command("CLIENT", "PAUSE", "300", "WRITE")
+    started = time.perf_counter()
+    r = a.post(f"/v1/sessions/{s.id}/frames", json=hand_frame(2, x=0.31), headers=s.headers)
+    assert r.status_code == 200, r.text
+    assert time.perf_counter() - started > 0.2  # the client waited for Redis
+    text = a.get("/metrics").text
+    commits = _histogram(text, "ik_redis_commit_duration_seconds")
+    assert commits[math.inf] >= 2  # the session's creation, then its frames
+    assert commits[math.inf] - commits[0.1024] >= 1  # the paused one
+    server = _histogram(text, "ik_server_duration_seconds", 'transport="http"')
+    assert server[math.inf] - server[0.08192] == 0  # blind to it, as documented
+    # Without Redis there is no commit, and no such series.
+    assert "ik_redis_commit" not in make_client(Settings()).get("/metrics").text
