@@ -33,12 +33,17 @@ class Settings(BaseSettings):
     # "unset") keeps the default, where a number was refused as "not a valid integer"
     # (API keys, CORS and Redis: empty was their default anyway). IK_HOST excepted: an
     # empty one is refused at start (``misspelt_variables``).
+    # allow_inf_nan=False: no setting means "no limit" by inf (0 does, where one can), and
+    # an operator trial's IK_SESSION_TTL_S=inf started, then answered every new session
+    # with a 500 (Redis keys' TTL in ms); inf also turned off IK_REDIS_TIMEOUT_S's bound
+    # and IK_REDIS_WRITE_BEHIND_MS's writes, without a word.
     model_config = SettingsConfigDict(
         env_prefix="IK_",
         frozen=True,
         extra="ignore",
         hide_input_in_errors=True,
         env_ignore_empty=True,
+        allow_inf_nan=False,
     )
 
     # Network (used by ``python -m service``).
@@ -153,7 +158,11 @@ class Settings(BaseSettings):
     )
 
     # Sessions.
-    session_ttl_s: float = Field(default=300.0, gt=0, description="Idle time before expiry [s]")
+    # At most a year: Redis refuses a key expiry near 1e300 s ("value is not an integer
+    # or out of range"), which every new session then met as a 503 blaming the URL.
+    session_ttl_s: float = Field(
+        default=300.0, gt=0, le=31_536_000, description="Idle time before expiry [s]"
+    )
     max_sessions: int = Field(default=1000, ge=1, description="Session cap (503 when full)")
     max_sessions_per_key: int = Field(
         default=100, ge=1, description="Sessions per API key (429 when reached)"

@@ -308,3 +308,38 @@ def test_forwarded_allow_ips_lists_addresses_and_networks(monkeypatch: pytest.Mo
     outside = ("10.0.0.6", "10.245.0.1", "127.0.0.1", "not-an-address", "")
     assert all(a in proxies for a in inside)
     assert not any(a in proxies for a in outside)
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("IK_SESSION_TTL_S", "inf"),
+        ("IK_REDIS_TIMEOUT_S", "Infinity"),
+        ("IK_REDIS_WRITE_BEHIND_MS", "inf"),
+        ("IK_HEADER_TIMEOUT_S", "1e400"),
+        ("IK_MAX_FRAMES_PER_S", "-inf"),
+        ("IK_SWEEP_INTERVAL_S", "nan"),
+    ],
+)
+def test_numbers_that_are_not_finite_are_refused(
+    monkeypatch: pytest.MonkeyPatch, name: str, value: str
+) -> None:
+    """An operator trial: IK_SESSION_TTL_S=inf started and answered every new session
+    with a 500 (OverflowError, Redis keys' expiry in ms); inf also unbounded the Redis
+    timeout and never wrote behind."""
+    monkeypatch.setenv(name, value)
+    with pytest.raises(ValidationError) as err:
+        Settings()
+    assert settings_errors(err.value).startswith(f"invalid configuration:\n  {name}: ")
+
+
+def test_a_session_ttl_redis_cannot_set_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    # 1e300 s started, and every new session was a 503 saying to check IK_REDIS_URL.
+    monkeypatch.setenv("IK_SESSION_TTL_S", "1e300")
+    with pytest.raises(ValidationError) as err:
+        Settings()
+    assert "IK_SESSION_TTL_S: Input should be less than or equal to 31536000" in (
+        settings_errors(err.value)
+    )
+    monkeypatch.setenv("IK_SESSION_TTL_S", "31536000")
+    assert Settings().session_ttl_s == 31_536_000
