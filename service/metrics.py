@@ -19,11 +19,17 @@ worker). The rest are ordinary prometheus_client metrics (rare events).
 from __future__ import annotations
 
 import asyncio
-import time
 from bisect import bisect_left
 from collections.abc import Callable, Iterator, Sequence
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+from prometheus_client import (
+    CollectorRegistry,
+    Counter,
+    Gauge,
+    Histogram,
+    disable_created_metrics,
+    generate_latest,
+)
 from prometheus_client.core import CounterMetricFamily, HistogramMetricFamily, Metric
 from prometheus_client.registry import Collector
 from prometheus_client.utils import floatToGoString
@@ -33,6 +39,11 @@ from solver.ik import IKResult, IKStatus
 from solver.optim import Termination
 
 from .convert import SolvedFrame
+
+# No ``<name>_created`` series beside each counter and histogram: it doubled the series
+# a Prometheus stores per worker and says only when the worker started (an operator
+# trial). prometheus_client's switch is global to the process, which is the service.
+disable_created_metrics()
 
 # 10 us .. ~0.33 s, x2 steps: solves take microseconds to the frame's budget.
 DURATION_BUCKETS_S = tuple(10e-6 * 2**k for k in range(16))
@@ -84,7 +95,6 @@ class _FrameSeries(Collector):
     """
 
     def __init__(self) -> None:
-        self.created = time.time()
         self.keys = [(t.value, ok) for t in Termination for ok in (True, False)]
         self.slot = {key: i for i, key in enumerate(self.keys)}
         self.frames = [0] * len(self.keys)
@@ -99,10 +109,10 @@ class _FrameSeries(Collector):
             labels=["termination", "success"],
         )
         for (term, ok), n in zip(self.keys, self.frames, strict=True):
-            frames.add_metric([term, str(ok).lower()], float(n), created=self.created)
+            frames.add_metric([term, str(ok).lower()], float(n))
         yield frames
         restarts = CounterMetricFamily("ik_restarts", "Random restarts over all frames")
-        restarts.add_metric([], float(self.restarts), created=self.created)
+        restarts.add_metric([], float(self.restarts))
         yield restarts
         solve = HistogramMetricFamily(
             "ik_solve_duration_seconds", "Time in the compiled solver per frame"

@@ -127,6 +127,7 @@ def test_metrics_series(client: TestClient, session: Created) -> None:
     assert 'ik_errors_total{code="invalid_format",transport="ws"} 1.0' in text
     assert "ik_sessions_created_total 1.0" in text
     assert session.id not in text and session.token not in text
+    assert "_created" not in text.replace("ik_sessions_created", "")  # no series of starts
     after = client.get("/metrics").text
     assert "ik_websockets 0.0" in after
 
