@@ -40,9 +40,9 @@ import { fkResultFrom } from "./types.js";
 
 export interface ClientOptions {
   /** Sent as `X-API-Key` when the server has API keys (`IK_API_KEYS`). */
-  apiKey?: string;
+  apiKey?: string | undefined;
   /** Per-request timeout [ms]. */
-  timeoutMs?: number;
+  timeoutMs?: number | undefined;
   /** How long and how often a repeatable HTTP call that got no answer is sent again
    * (`DEFAULT_RECONNECT`: for up to 30 s; `RECONNECT_OFF`: never, the error is thrown
    * at once); `timeoutMs` bounds each attempt. A stream's reconnects are `stream()`'s
@@ -60,22 +60,22 @@ function sleep(ms: number): Promise<void> {
 }
 
 export interface CreateSessionOptions {
-  options?: OptionsPatch;
-  initialPose?: PoseIn;
+  options?: OptionsPatch | undefined;
+  initialPose?: PoseIn | undefined;
   /** The client's coordinates (docs/engines.md): targets in, bone output out. */
-  conventions?: Conventions;
+  conventions?: Conventions | undefined;
   /** Bone output on every answer (skeleton chains). */
-  bones?: BoneOutput;
+  bones?: BoneOutput | undefined;
 }
 
 export interface SolveOptions {
-  seed?: PoseIn;
-  options?: OptionsPatch;
-  id?: number;
+  seed?: PoseIn | undefined;
+  options?: OptionsPatch | undefined;
+  id?: number | undefined;
   /** The client's coordinates (docs/engines.md): targets in, bone output out. */
-  conventions?: Conventions;
+  conventions?: Conventions | undefined;
   /** Bone output on the answer (skeleton chains). */
-  bones?: BoneOutput;
+  bones?: BoneOutput | undefined;
 }
 
 
@@ -171,7 +171,7 @@ export class Client {
   async frame<C extends boolean = false>(
     session: SessionRef,
     targets: Target[],
-    options: { id?: number; compact?: C; bones?: BoneOutput } = {},
+    options: { id?: number | undefined; compact?: C | undefined; bones?: BoneOutput | undefined } = {},
   ): Promise<Result<C>> {
     const out: FrameResults<Result<C>> = await this.request("POST", `/v1/sessions/${session.id}/frames`, {
       session,
@@ -186,7 +186,7 @@ export class Client {
   async clip<C extends boolean = false>(
     session: SessionRef,
     frames: Frame[],
-    options: { plan?: boolean; compact?: C } = {},
+    options: { plan?: boolean | undefined; compact?: C | undefined } = {},
   ): Promise<FrameResults<Result<C>>> {
     const out: FrameResults<Result<C>> = await this.request("POST", `/v1/sessions/${session.id}/frames`, {
       session,
@@ -203,7 +203,7 @@ export class Client {
    */
   async batch<C extends boolean = false>(
     frames: BatchFrame[],
-    options: { compact?: C } = {},
+    options: { compact?: C | undefined } = {},
   ): Promise<BatchEntry<Result<C>>[]> {
     const out: BatchResults<Result<C>> = await this.request("POST", "/v1/batch", {
       body: { frames },
@@ -241,7 +241,7 @@ export class Client {
    * stream.ping()` checks at once. */
   stream<C extends boolean = false>(
     session: SessionRef,
-    options: StreamOptions & { compact?: C } = {},
+    options: StreamOptions & { compact?: C | undefined } = {},
   ): Promise<Stream<Result<C>>> {
     const url = new URL(`${this.baseUrl}/v1/sessions/${session.id}/ws`);
     url.protocol = url.protocol === "https:" ? "wss:" : "ws:";

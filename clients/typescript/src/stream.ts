@@ -68,27 +68,27 @@ export type SocketClass = new (
 
 export interface StreamOptions {
   /** `json` (text messages, the default) or `msgpack` (binary messages). */
-  encoding?: Encoding;
+  encoding?: Encoding | undefined;
   /** How long and how often to reconnect after a drop (`DEFAULT_RECONNECT`: for up to
    * 30 s from the drop, each new drop since an answer with the whole budget);
    * `RECONNECT_OFF` rejects what waits with the drop's `StreamClosed` instead. */
   reconnect?: ReconnectOptions | undefined;
   /** Where the token goes: `header` (`ws` only) or `subprotocol` (what browsers can do).
    * Default: `header` with `ws`, `subprotocol` with a global WebSocket. */
-  auth?: "header" | "subprotocol";
+  auth?: "header" | "subprotocol" | undefined;
   /** A WebSocket class to use instead of the global one (or `ws` when there is none). */
-  WebSocket?: SocketClass;
+  WebSocket?: SocketClass | undefined;
   /** Called with an answer to an id nothing waits for, or one that cannot be decoded
    * (not JSON or MessagePack, or not an object): an `UnexpectedAnswer` whose `id` is
    * null; no message's promise can take it, and the stream goes on. Default: such
    * answers are dropped. */
-  onUnexpected?: (error: UnexpectedAnswer) => void;
+  onUnexpected?: ((error: UnexpectedAnswer) => void) | undefined;
 }
 
 /** What one frame message may add to its targets. */
 export interface FrameOptions {
   /** This frame's bone output instead of the session's (skeleton chains; docs/websocket.md). */
-  bones?: BoneOutput;
+  bones?: BoneOutput | undefined;
 }
 
 /** `fk`'s pose: `q` (every DOF), or `joints` (some, by name; the others: the session's
@@ -96,9 +96,9 @@ export interface FrameOptions {
  * (skeleton chains; the server's default: the local rotations; a chain without bones
  * refuses any). */
 export interface FkOptions {
-  q?: number[];
-  joints?: Record<string, number>;
-  bones?: BoneOutput;
+  q?: number[] | undefined;
+  joints?: Record<string, number> | undefined;
+  bones?: BoneOutput | undefined;
 }
 
 function fkMessage(options: FkOptions): Envelope {
@@ -199,7 +199,7 @@ export class Stream<R = FrameResult> {
     return this.send(frameMessage(targets, options)).id;
   }
 
-  sendClip(frames: Frame[], options: { plan?: boolean } = {}): number {
+  sendClip(frames: Frame[], options: { plan?: boolean | undefined } = {}): number {
     return this.send({ type: "clip", frames, plan: options.plan ?? false }).id;
   }
 
@@ -232,7 +232,7 @@ export class Stream<R = FrameResult> {
     return answer.result;
   }
 
-  async clip(frames: Frame[], options: { plan?: boolean } = {}): Promise<FrameResults<R>> {
+  async clip(frames: Frame[], options: { plan?: boolean | undefined } = {}): Promise<FrameResults<R>> {
     const answer = await this.answerOf(this.send({ type: "clip", frames, plan: options.plan ?? false }));
     if (answer.type !== "clip_result") throw new IKClientError(`expected a clip result, got ${answer.type}`);
     return { results: (answer as ClipAnswer<R>).results, plan: (answer as ClipAnswer<R>).plan };

@@ -39,6 +39,9 @@ export const Encoding = { Json: "json", MessagePack: "msgpack" } as const;
 export type Encoding = (typeof Encoding)[keyof typeof Encoding];
 
 // --- requests ------------------------------------------------------------------------------
+// The types a game fills every frame (Target, Pole, Frame, BoneOutput) take `undefined`
+// for an optional field, as if it were left out (it is not sent, in either encoding):
+// under `exactOptionalPropertyTypes`, `{ position_weight: settings.weight }` compiles.
 /** Schema `Vec3`: a point [m] or a direction. */
 export interface Vec3 {
   x: number;
@@ -60,7 +63,7 @@ export interface Quaternion {
  */
 export interface Pole {
   position: Vec3;
-  bone?: string | null;
+  bone?: string | null | undefined;
 }
 
 /**
@@ -70,20 +73,20 @@ export interface Pole {
  */
 export interface Target {
   effector: string;
-  position?: Vec3 | null;
-  orientation?: Quaternion | null;
-  direction?: Vec3 | null;
-  position_weight?: number;
-  rotation_weight?: number;
-  pole?: Pole | null;
+  position?: Vec3 | null | undefined;
+  orientation?: Quaternion | null | undefined;
+  direction?: Vec3 | null | undefined;
+  position_weight?: number | undefined;
+  rotation_weight?: number | undefined;
+  pole?: Pole | null | undefined;
 }
 
 /** Schema `Frame`: one frame of a clip; `id` is echoed in its result. */
 export interface Frame {
-  id?: number | null;
+  id?: number | null | undefined;
   targets: Target[];
   /** Bone output for this frame (skeleton chains; default: the session's). */
-  bones?: BoneOutput | null;
+  bones?: BoneOutput | null | undefined;
 }
 
 /** Schema `BatchFrame`: one session's frame in a batch, with that session's id and token. */
@@ -94,8 +97,8 @@ export interface BatchFrame extends Frame {
 
 /** Schema `BoneOutput`: which bone data an answer carries (docs/engines.md). */
 export interface BoneOutput {
-  local_rotations?: boolean;
-  world?: string[];
+  local_rotations?: boolean | undefined;
+  world?: string[] | undefined;
 }
 
 /** Schema `Conventions`: the client's coordinates (a preset, or up / handedness / unit). */

@@ -875,6 +875,37 @@ describe("stream", () => {
     assert.equal((await ik.getSession(session)).counters.frames, 0);
   });
 
+  test("options given as undefined are as if left out (exactOptionalPropertyTypes compiles them)", async () => {
+    // test/ compiles with exactOptionalPropertyTypes: these calls did not compile when the
+    // option types did not take undefined, a caller's own optional settings passed on.
+    const config: { apiKey?: string; timeoutMs?: number; encoding?: Encoding } = {};
+    const client = new Client(await serverUrl(), { apiKey: config.apiKey, timeoutMs: config.timeoutMs, reconnect: undefined });
+    const session = await client.createSession(PANDA, {
+      options: undefined,
+      initialPose: undefined,
+      conventions: undefined,
+      bones: undefined,
+    });
+    assert.equal(session.conventions.up, "z"); // an example chain's own frame: no conventions sent
+    const stream = await client.stream(session, {
+      encoding: config.encoding,
+      auth: undefined,
+      WebSocket: undefined,
+      onUnexpected: undefined,
+      compact: undefined,
+    });
+    try {
+      const result = await stream.frame([tool(0.1)]);
+      assertSolved(result);
+      assert.ok("joints" in result, "a full result: compact left out");
+      assertSolved(await client.frame(session, [tool(0.11)], { id: undefined, compact: undefined, bones: undefined }));
+      assertSolved(await client.solve(PANDA, [tool(0.1)], { seed: undefined, id: undefined, conventions: undefined }));
+    } finally {
+      stream.close();
+      await client.deleteSession(session);
+    }
+  });
+
   test("without reconnects, a drop rejects what is in flight", async () => {
     const session = await ik.createSession(PANDA);
     const stream = await ik.stream(session, { reconnect: { attempts: 0 } });
@@ -905,6 +936,24 @@ describe("stream", () => {
         const result = await stream.frame([tool(0.1)]);
         assertSolved(result);
         assert.equal(result.id, 0);
+      } finally {
+        stream.close();
+      }
+    });
+
+    test(`an optional field given as undefined is left out, as in JSON (${encoding})`, async () => {
+      // MessagePack wrote `undefined` as nil, which the server refuses for a number: the
+      // same frame was answered over JSON and refused (invalid_format) over MessagePack.
+      const session = await ik.createSession(PANDA);
+      const stream = await ik.stream(session, { encoding });
+      try {
+        const settings: { weight?: number; pole?: Pole } = {}; // a game's optional settings
+        const target: Target = { ...tool(0.12), position_weight: settings.weight, pole: settings.pole };
+        assertSolved(await stream.frame([target], { bones: undefined }));
+        const clip = await stream.clip([{ id: undefined, targets: [target], bones: undefined }], { plan: undefined });
+        assert.equal(clip.results.length, 1);
+        assertSolved(clip.results[0]!);
+        assert.deepEqual(await stream.fk({ q: undefined, joints: undefined, bones: undefined }), await ik.fk(session));
       } finally {
         stream.close();
       }
