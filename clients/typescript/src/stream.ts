@@ -114,6 +114,10 @@ function frameMessage(targets: Target[], options: FrameOptions): Envelope {
   return options.bones === undefined ? { type: "frame", targets } : { type: "frame", targets, bones: options.bones };
 }
 
+/** Where a stream is (`Stream.state`). */
+export const StreamState = { Open: "open", Reconnecting: "reconnecting", Closed: "closed" } as const;
+export type StreamState = (typeof StreamState)[keyof typeof StreamState];
+
 const OPEN = 1;
 const CLOSED = 3;
 const SUBPROTOCOL = "ik.v1";
@@ -192,6 +196,24 @@ export class Stream<R = FrameResult> {
   /** Messages sent that have no answer yet. */
   get inFlight(): number {
     return this.waiting.size;
+  }
+
+  /** `open`, `reconnecting` (the connection dropped and the stream connects again: what
+   * is sent meanwhile waits, and goes out on the new connection) or `closed` (the stream
+   * ended, `closedBy` says why, or `close()` was called). A game that sends targets every
+   * frame can skip its sends while reconnecting, rather than queue targets that will be
+   * stale when they are solved, and show it; and learn that the stream ended without a
+   * send (a reconnect refused 4404 while nothing was in flight rejects no message). */
+  get state(): StreamState {
+    if (this.failure !== null || this.closing) return StreamState.Closed;
+    return this.socketNow.readyState === OPEN ? StreamState.Open : StreamState.Reconnecting;
+  }
+
+  /** What ended the stream (`SessionGone`, `StreamAuthError`, `ConnectionLost` once the
+   * reconnect budget is spent, a `StreamClosed` 1000 after `close()`, ...), which every
+   * later send throws; null while it goes on. */
+  get closedBy(): StreamClosed | null {
+    return this.failure;
   }
 
   /** `options.bones` overrides the session's bone output for this frame only. */

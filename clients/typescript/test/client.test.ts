@@ -32,6 +32,7 @@ import {
   Status,
   type Stream,
   StreamAuthError,
+  StreamState,
   Termination,
   UnexpectedAnswer,
   serviceError,
@@ -903,6 +904,48 @@ describe("stream", () => {
     } finally {
       stream.close();
       await client.deleteSession(session);
+    }
+  });
+
+  test("state: open, reconnecting after a drop, open again, closed after close()", async () => {
+    const session = await ik.createSession(PANDA);
+    const stream = await ik.stream(session);
+    try {
+      assert.equal(stream.state, StreamState.Open);
+      (stream.socket as unknown as NodeWebSocket).terminate();
+      assert.equal(stream.state, StreamState.Reconnecting);
+      const id = stream.sendFrame([tool(0.1)]); // waits for the new connection
+      const answer = await within(20_000, stream.receive());
+      assert.ok(answer.type === "result" && answer.id === id);
+      assert.equal(stream.reconnects, 1);
+      assert.equal(stream.state, StreamState.Open);
+      assert.equal(stream.closedBy, null);
+    } finally {
+      stream.close();
+    }
+    assert.equal(stream.state, StreamState.Closed);
+    await assert.rejects(stream.ping(), StreamClosed);
+    const closedBy = (stream as Stream).closedBy; // a fresh read: the null asserted above has passed
+    assert.equal(closedBy?.closeCode, 1000);
+  });
+
+  test("state: a reconnect refused 4404 with nothing in flight ends the stream, without a send", async () => {
+    // What a restarted server without Redis does to an idle stream: no message is
+    // rejected, so only state and closedBy can tell the game to make a new session.
+    const session = await ik.createSession(PANDA);
+    const stream = await ik.stream(session);
+    try {
+      await stream.ping();
+      await ik.deleteSession(session);
+      (stream.socket as unknown as NodeWebSocket).terminate();
+      const deadline = Date.now() + 20_000;
+      while (stream.state !== StreamState.Closed && Date.now() < deadline) await new Promise((r) => setTimeout(r, 20));
+      assert.equal(stream.state, StreamState.Closed);
+      assert.ok(stream.closedBy instanceof SessionGone, String(stream.closedBy));
+      assert.equal(stream.closedBy.code, ErrorCode.NotFound);
+      assert.throws(() => stream.sendPing(), SessionGone);
+    } finally {
+      stream.close();
     }
   });
 
