@@ -37,6 +37,7 @@ import type {
   Target,
 } from "./types.js";
 import { fkResultFrom } from "./types.js";
+import { framesAsSent, targetsAsSent } from "./targets.js";
 
 export interface ClientOptions {
   /** Sent as `X-API-Key` when the server has API keys (`IK_API_KEYS`). */
@@ -175,7 +176,7 @@ export class Client {
   ): Promise<Result<C>> {
     const out: FrameResults<Result<C>> = await this.request("POST", `/v1/sessions/${session.id}/frames`, {
       session,
-      body: withoutUndefined({ id: options.id, targets, bones: options.bones }),
+      body: withoutUndefined({ id: options.id, targets: targetsAsSent(targets), bones: options.bones }),
       compact: options.compact ?? false,
       repeatable: options.id !== undefined,
     });
@@ -190,7 +191,7 @@ export class Client {
   ): Promise<FrameResults<Result<C>>> {
     const out: FrameResults<Result<C>> = await this.request("POST", `/v1/sessions/${session.id}/frames`, {
       session,
-      body: { frames, plan: options.plan ?? false },
+      body: { frames: framesAsSent(frames), plan: options.plan ?? false },
       compact: options.compact ?? false,
     });
     return { results: out.results, plan: out.plan ?? null }; // no `plan` key when not planned
@@ -206,7 +207,7 @@ export class Client {
     options: { compact?: C | undefined } = {},
   ): Promise<BatchEntry<Result<C>>[]> {
     const out: BatchResults<Result<C>> = await this.request("POST", "/v1/batch", {
-      body: { frames },
+      body: { frames: framesAsSent(frames) },
       compact: options.compact ?? false,
     });
     return out.results;
@@ -216,7 +217,7 @@ export class Client {
   solve(chain: Chain, targets: Target[], options: SolveOptions = {}): Promise<FrameResult> {
     const body = withoutUndefined({
       chain,
-      targets,
+      targets: targetsAsSent(targets),
       seed: options.seed,
       options: options.options,
       id: options.id,

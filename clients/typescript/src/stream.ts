@@ -45,6 +45,7 @@ import type {
   Target,
 } from "./types.js";
 import { fkResultFrom } from "./types.js";
+import { framesAsSent, targetsAsSent } from "./targets.js";
 import { Backoff, type Reconnect, type ReconnectOptions, reconnectPolicy } from "./reconnect.js";
 
 /** The part of a WebSocket (browser's or `ws`'s) the stream uses. */
@@ -110,8 +111,13 @@ function fkMessage(options: FkOptions): Envelope {
   return message;
 }
 
-function frameMessage(targets: Target[], options: FrameOptions): Envelope {
+function frameMessage(given: Target[], options: FrameOptions): Envelope {
+  const targets = targetsAsSent(given);
   return options.bones === undefined ? { type: "frame", targets } : { type: "frame", targets, bones: options.bones };
+}
+
+function clipMessage(frames: Frame[], options: { plan?: boolean | undefined }): Envelope {
+  return { type: "clip", frames: framesAsSent(frames), plan: options.plan ?? false };
 }
 
 /** Where a stream is (`Stream.state`). */
@@ -222,7 +228,7 @@ export class Stream<R = FrameResult> {
   }
 
   sendClip(frames: Frame[], options: { plan?: boolean | undefined } = {}): number {
-    return this.send({ type: "clip", frames, plan: options.plan ?? false }).id;
+    return this.send(clipMessage(frames, options)).id;
   }
 
   sendPing(): number {
@@ -232,7 +238,7 @@ export class Stream<R = FrameResult> {
   /** One frame for each of several sessions (a game server's characters), each with its
    * session's id and token: answered by one `batch_result`, an entry per frame, in order. */
   sendBatch(frames: BatchFrame[]): number {
-    return this.send({ type: "batch", frames }).id;
+    return this.send({ type: "batch", frames: framesAsSent(frames) }).id;
   }
 
   /** Forward kinematics of `options.q`, of `options.joints` by name, or of neither (the
@@ -255,7 +261,7 @@ export class Stream<R = FrameResult> {
   }
 
   async clip(frames: Frame[], options: { plan?: boolean | undefined } = {}): Promise<FrameResults<R>> {
-    const answer = await this.answerOf(this.send({ type: "clip", frames, plan: options.plan ?? false }));
+    const answer = await this.answerOf(this.send(clipMessage(frames, options)));
     if (answer.type !== "clip_result") throw new IKClientError(`expected a clip result, got ${answer.type}`);
     return { results: (answer as ClipAnswer<R>).results, plan: (answer as ClipAnswer<R>).plan };
   }
@@ -263,7 +269,7 @@ export class Stream<R = FrameResult> {
   /** Each entry's result or its own error (an entry's error does not reject: the other
    * entries were solved). */
   async batch(frames: BatchFrame[]): Promise<BatchEntry<R>[]> {
-    const answer = await this.answerOf(this.send({ type: "batch", frames }));
+    const answer = await this.answerOf(this.send({ type: "batch", frames: framesAsSent(frames) }));
     if (answer.type !== "batch_result") throw new IKClientError(`expected a batch result, got ${answer.type}`);
     return answer.results;
   }

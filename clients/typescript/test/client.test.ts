@@ -9,6 +9,7 @@ import assert from "node:assert/strict";
 import { type AddressInfo, connect, createServer, type Socket as NetSocket } from "node:net";
 import { after, before, describe, test } from "node:test";
 
+import * as THREE from "three";
 import { WebSocket as NodeWebSocket, WebSocketServer } from "ws";
 
 import {
@@ -859,6 +860,21 @@ describe("stream", () => {
     }
   });
 
+  test("HTTP: three.js's Vector3 and Quaternion are sent by their x, y, z, w", async () => {
+    const session = await ik.createSession(PANDA);
+    const position = new THREE.Vector3(0.4, 0.1, 0.5);
+    const orientation = new THREE.Quaternion(DOWN.x, DOWN.y, DOWN.z, DOWN.w);
+    const pole = { position: new THREE.Vector3(0.4, 0.5, 1.0) };
+    assertSolved(await ik.frame(session, [{ effector: "tool", position, orientation }]));
+    const clip = await ik.clip(session, [{ targets: [{ effector: "tool", position, orientation }] }]);
+    clip.results.forEach(assertSolved);
+    const [entry] = await ik.batch([{ session: session.id, token: session.token, targets: [{ effector: "tool", position, orientation }] }]);
+    assert.ok(entry !== undefined && "result" in entry, JSON.stringify(entry));
+    assertSolved(await ik.solve(PANDA, [{ effector: "tool", position, orientation }]));
+    assertSolved(await ik.frame(session, [{ effector: "tool", position, orientation, pole }]));
+    await ik.deleteSession(session);
+  });
+
   test("HTTP: NaN and unwritable values are an EncodeError before anything is sent", async () => {
     const session = await ik.createSession(PANDA);
     const nan: Target = { effector: "tool", position: { x: 0.4, y: Number.NaN, z: 0.5 } };
@@ -997,6 +1013,35 @@ describe("stream", () => {
         assert.equal(clip.results.length, 1);
         assertSolved(clip.results[0]!);
         assert.deepEqual(await stream.fk({ q: undefined, joints: undefined, bones: undefined }), await ik.fk(session));
+      } finally {
+        stream.close();
+      }
+    });
+
+    test(`three.js's Vector3 and Quaternion are sent by their x, y, z, w (${encoding})`, async () => {
+      // They satisfy Vec3 and Quaternion, but JSON wrote a Quaternion by its toJSON,
+      // [x, y, z, w] (refused as ambiguous), and MessagePack by its fields _x, _y, ...
+      // ("orientation.w: Field required"): a game passing bone.quaternion got a 422.
+      const session = await ik.createSession(PANDA);
+      const stream = await ik.stream(session, { encoding });
+      try {
+        const down = new THREE.Quaternion(DOWN.x, DOWN.y, DOWN.z, DOWN.w);
+        const target = (y: number): Target => ({
+          effector: "tool",
+          position: new THREE.Vector3(0.4, y, 0.5),
+          orientation: down,
+        });
+        assertSolved(await stream.frame([target(0.1)]));
+        const clip = await stream.clip([{ targets: [target(0.11)] }, { targets: [target(0.12)] }]);
+        clip.results.forEach(assertSolved);
+        const [entry] = await stream.batch([{ session: session.id, token: session.token, targets: [target(0.13)] }]);
+        assert.ok(entry !== undefined && "result" in entry, JSON.stringify(entry));
+        assertSolved(entry.result);
+        // An array is still the server's to explain (not read as x, y, z, w here).
+        const array = { ...tool(0.1), orientation: [1, 0, 0, 0] } as unknown as Target;
+        const refused = await stream.frame([array]).catch((e: unknown) => e);
+        assert.ok(refused instanceof InvalidRequest && refused.field === "frame.targets[0].orientation", String(refused));
+        assert.match(refused.serverMessage, /not an array/);
       } finally {
         stream.close();
       }
