@@ -6,10 +6,9 @@ previous answer (a stream). Success is judged from the pose errors against the
 tolerances, never from the optimizer's code alone: the core's goal measure is
 max(error / tolerance) over effectors, so "goal met" means "IK succeeded".
 
-Its documented surface for code built on it (the planner, ``solver.path``; benchmarks)
-is ``check_seed``, ``judge``, ``load_frame`` (the compiled data for a frame, which
-``kinematics.ik_objective`` and the planner's kernels read), ``free_mask``,
-``free_directions``, ``stream_state`` and ``restore``.
+Its documented surface for code built on it (the planner, ``solver.path``; benchmarks):
+``check_seed``, ``judge``, ``load_frame`` (the compiled data for a frame, which the
+planner's kernels read), ``free_mask``, ``free_directions``, ``stream_state``, ``restore``.
 """
 
 from __future__ import annotations
@@ -59,6 +58,7 @@ from .options import IKOptions
 from .packing import OptionPacks
 from .pole_term import pole_block_size
 from .poles import SHAPING_FIRST_MAX_ITER, SHAPING_MAX_ITER, PoleShaper
+from .reach import ReachBounds
 from .result import STATUSES, EffectorError, IKResult, IKStatus
 from .settled import settled_variables, variable_periods
 from .split import LimbSplit
@@ -133,6 +133,7 @@ class IKSolver:
         self.last_step: FrameStep = NO_STEP  # how far the last ``track`` frame moved
         self._answered = False  # has ``track`` answered since the pose was set?
         self._split = LimbSplit(chain, lambda limb: IKSolver(limb, self.options, seed=seed))
+        self._reach = ReachBounds(chain)  # a target beyond it: not_reached, no global search
 
     # -- public API ------------------------------------------------------------
     def solve(
@@ -170,8 +171,10 @@ class IKSolver:
                 and np.isfinite(q0).all()  # else the whole solve words the error
             ):
                 packed = self._packs.get(opts)
-                return split.solve(groups, targets, q0, opts, rng, packed.layout, packed.out_size)
-        return self._frame(targets, q0, opts, rng, initial_inverse_hessian, 0.0)
+                out = split.solve(groups, targets, q0, opts, rng, packed.layout, packed.out_size)
+                return self._reach.judged(out, targets, opts)
+        out = self._frame(targets, q0, opts, rng, initial_inverse_hessian, 0.0)
+        return self._reach.judged(out, targets, opts)
 
     def solve_within(
         self,
@@ -214,23 +217,22 @@ class IKSolver:
         step = float(opts.null_space_step_rad)
         # ``q`` is public: check it as a seed (length, dtype, layout) every frame.
         q0 = self.check_seed(self.q)
-        # The first frame of a stream (after set_pose) has no previous answer to stay
-        # near: it is solved as REACH would.
+        # A stream's first frame (after set_pose) has no answer to stay near: as REACH.
         smooth = opts.continuity is Continuity.SMOOTH and self._answered
         box = float(opts.max_joint_step_rad) if smooth else 0.0
         fallback = not smooth and opts.global_fallback and math.isfinite(opts.restart_radius_rad)
         budget = opts.time_budget_us
-        # With a global search to follow, the local one (restarts near the last answer)
-        # gets half a finite budget: for a target far away it spent all of it.
+        # With a global search to follow, the local one gets half a finite budget.
         local = budget * 0.5 if fallback and budget is not None else None
         result = self._frame(targets, q0, opts, rng, h0, step, box, time_left_us=local, stream=True)
-        if fallback and not result.success:
+        if fallback and not result.success and not self._reach.beyond(targets, opts):
             left = None if budget is None else budget - (time.perf_counter() - started) * 1e6
             if left is None or left > 0.0:
                 wide = replace(opts, restart_radius_rad=_GLOBAL_RADIUS, time_budget_us=left)
                 retry = self._frame(targets, q0, wide, rng, None, step, stream=True)
                 if retry.success:
                     result = retry
+        result = self._reach.judged(result, targets, opts)
         self.q = result.q.copy()
         self._answered = True
         # A copy: the result's block is the caller's to keep (and to write to).
@@ -471,9 +473,8 @@ class IKSolver:
 
 
 _REGISTERED = False
-# ``track``'s global fallback samples a full turn either side of the seed (every angle of
-# a revolute joint). Not inf: the optimizer samples an unbounded side within 10 x |seed|,
-# so each fallback took PR2's continuous wrist ten times further (20,000 rad).
+# ``track``'s global fallback samples a full turn either side of the seed. Not inf: the
+# optimizer samples an unbounded side within 10 x |seed| (PR2's wrist went to 20,000 rad).
 _GLOBAL_RADIUS = 2.0 * math.pi
 
 
