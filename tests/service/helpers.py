@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -55,3 +59,20 @@ def panda_target(q: np.ndarray) -> dict[str, Any]:
         "position": {"x": px, "y": py, "z": pz},
         "orientation": {"w": w, "x": x, "y": y, "z": z},
     }
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def python_m_service(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
+    """``python -m service`` run to its end (a refused start), in the repository, with
+    no IK_* variable of this process's and ``env`` added (names as they are)."""
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("IK_")}
+    return subprocess.run(
+        [sys.executable, "-m", "service", *args],
+        cwd=ROOT,
+        env={**clean, **env},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )

@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 from pydantic import ValidationError
@@ -19,7 +16,7 @@ from service.config import (
     unknown_variables,
 )
 
-ROOT = Path(__file__).resolve().parents[2]
+from .helpers import python_m_service
 
 
 @pytest.fixture(autouse=True)
@@ -168,16 +165,7 @@ def test_redis_variables_other_than_the_url_are_refused_without_it() -> None:
 def test_a_misspelt_setting_stops_the_start_with_its_name() -> None:
     """``python -m service`` with IK_REDIS_UR: exit 1 before binding, saying what was
     meant (a worker without its Redis would pass /readyz and lose sessions)."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("IK_")}
-    env.update(IK_REDIS_UR="redis://127.0.0.1:1/0", IK_PORT="1")
-    done = subprocess.run(
-        [sys.executable, "-m", "service"],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    done = python_m_service(IK_REDIS_UR="redis://127.0.0.1:1/0", IK_PORT="1")
     assert done.returncode == 1, done
     assert done.stderr.strip().endswith(
         "invalid configuration:\n  IK_REDIS_UR is not a setting of this service: "
@@ -188,19 +176,13 @@ def test_a_misspelt_setting_stops_the_start_with_its_name() -> None:
 def test_python_m_service_takes_no_arguments_and_help_lists_the_variables() -> None:
     """An operator trial: ``--help`` started the server and ``--port 18012`` was
     silently ignored (it bound IK_PORT)."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("IK_")}
-    env["IK_PORT"] = "1"  # were the server to start, it could not bind
-    run = [sys.executable, "-m", "service"]
-    helped = subprocess.run(
-        [*run, "--help"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
-    )
+    # IK_PORT=1: were the server to start, it could not bind.
+    helped = python_m_service("--help", IK_PORT="1")
     assert helped.returncode == 0, helped
     assert helped.stdout.startswith("usage: [IK_VARIABLE=value ...] python -m service")
     for name in Settings.model_fields:
         assert f"  IK_{name.upper()} (default " in helped.stdout
-    refused = subprocess.run(
-        [*run, "--port", "18012"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
-    )
+    refused = python_m_service("--port", "18012", IK_PORT="1")
     assert refused.returncode == 1, refused
     assert "takes no arguments (got '--port 18012')" in refused.stderr
     assert "IK_PORT=8001 python -m service" in refused.stderr
@@ -230,16 +212,11 @@ def test_service_links_are_named_as_the_cause_of_a_refused_start() -> None:
     """A pod started after a Service named ik gets IK_PORT=tcp://ip:80 (and ik-redis
     IK_REDIS_PORT=...): the start stops naming the variable, and says where it came
     from and what to set."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("IK_")}
-    env.update(
+    done = python_m_service(
         KUBERNETES_SERVICE_HOST="10.96.0.1",
         IK_PORT="tcp://10.96.0.12:80",
         IK_SERVICE_HOST="10.96.0.12",
     )
-    done = subprocess.run(
-        [sys.executable, "-m", "service"], cwd=ROOT, env=env, capture_output=True, text=True,
-        timeout=120,
-    )  # fmt: skip
     assert done.returncode == 1, done
     assert "IK_PORT: " in done.stderr, done.stderr
     assert "IK_PORT come from Kubernetes' service links" in done.stderr

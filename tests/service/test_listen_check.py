@@ -4,18 +4,14 @@ not known" for an unresolvable host, and a port in use only after the app had st
 
 from __future__ import annotations
 
-import os
 import socket
-import subprocess
-import sys
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
 from service.listen_check import listen_problem
 
-ROOT = Path(__file__).resolve().parents[2]
+from .helpers import python_m_service
 
 
 @pytest.fixture
@@ -65,16 +61,7 @@ def test_a_free_address_is_no_problem_and_stays_free() -> None:
 
 def test_python_m_service_stops_before_the_app_starts(taken_port: int) -> None:
     """Exit 1 with the one line, and nothing of uvicorn's or the app's start before it."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("IK_")}
-    env.update(IK_HOST="127.0.0.1", IK_PORT=str(taken_port))
-    done = subprocess.run(
-        [sys.executable, "-m", "service"],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    done = python_m_service(IK_HOST="127.0.0.1", IK_PORT=str(taken_port))
     assert done.returncode == 1, done
     assert done.stderr.strip().splitlines() == [
         f"cannot start: IK_HOST:IK_PORT: cannot listen on 127.0.0.1:{taken_port} "
