@@ -20,6 +20,7 @@ it infinite (nothing is ever refused restarts). Targets are in the root's frame.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
@@ -34,26 +35,30 @@ _POSITIONED = frozenset({EffectorMode.POSITION, EffectorMode.POSE})
 
 
 class ReachBounds:
-    """Each effector's reach from the root's origin [m] (``bound``), and the options a
-    frame whose targets lie beyond it is solved with."""
+    """Each effector's reach from the root's origin [m] (``bound``, worked out when
+    first needed: a one-shot solve builds a solver per request, and a 256-joint chain
+    took 20 ms), and the judgement of a frame whose targets lie beyond it."""
 
     def __init__(self, chain: Chain) -> None:
+        self.chain = chain
+
+    @functools.cached_property
+    def bound(self) -> dict[str, float]:
+        chain = self.chain
         by_child = {j.child: j for j in chain.joints}
-        by_name = {j.name: j for j in chain.joints}
-        self.bound: dict[str, float] = {}
+        bound: dict[str, float] = {}
         for e in chain.effectors:
             if e.mode not in _POSITIONED or e.position_weight <= 0.0:
                 continue  # its targets pull no point to a place
-            total = float(np.linalg.norm(e.tip_offset))
+            total = math.hypot(*e.tip_offset)
             link = e.link
             while (j := by_child.get(link)) is not None:
-                total += float(np.linalg.norm(j.origin.translation))
-                total += 2.0 * float(np.linalg.norm(j.pivot))
+                total += math.hypot(*j.origin.translation) + 2.0 * math.hypot(*j.pivot)
                 if j.kind is JointKind.PRISMATIC:
-                    total += _slide(j, by_name)
+                    total += _slide(j, chain)
                 link = j.parent
-            self.bound[e.name] = total
-        self._without: tuple[IKOptions, IKOptions] | None = None  # (options, no restarts)
+            bound[e.name] = total
+        return bound
 
     def beyond(self, targets: Sequence[Target], options: IKOptions) -> bool:
         """Whether a target asks a point further from the root than its effector can
@@ -78,14 +83,21 @@ class ReachBounds:
         return result
 
 
-def _slide(joint: Joint, by_name: dict[str, Joint]) -> float:
-    """The longest slide of a prismatic joint [m] (a follower's from its leader's range)."""
-    mimic = joint.mimic
-    if mimic is None:
-        ends = (*joint.lower[:1], *joint.upper[:1])
-        return max((abs(v) for v in ends), default=math.inf) if len(ends) == 2 else math.inf
-    leader = by_name[mimic.joint]
-    if len(leader.lower) != 1 or len(leader.upper) != 1:
+def _slide(joint: Joint, chain: Chain) -> float:
+    """The longest slide of a prismatic joint [m]; a follower's from the range of the
+    variable it follows (``Chain.followers``: chains of mimics composed, the leader's
+    limits as narrowed for its followers; a follower's own limits may be ignored)."""
+    if joint.mimic is None:
+        if len(joint.lower) != 1 or len(joint.upper) != 1:
+            return math.inf
+        return max(abs(joint.lower[0]), abs(joint.upper[0]))
+    followers = chain.followers
+    i = followers.names.index(joint.name)
+    m, o = float(followers.multiplier[i]), float(followers.offset[i])
+    k = int(followers.leader[i])
+    lo, hi = float(chain.lower[k]), float(chain.upper[k])
+    if m == 0.0:
+        return abs(o)
+    if not (math.isfinite(lo) and math.isfinite(hi)):
         return math.inf
-    m, o = mimic.multiplier, mimic.offset
-    return max(abs(m * leader.lower[0] + o), abs(m * leader.upper[0] + o))
+    return max(abs(m * lo + o), abs(m * hi + o))

@@ -13,7 +13,7 @@ import pytest
 from solver.ik import STREAM_DEFAULTS, IKOptions, IKSolver, IKStatus, Target
 from solver.ik.continuity import Continuity
 from solver.ik.reach import ReachBounds
-from solver.model import Effector, EffectorMode, Joint, JointKind, Transform, build_chain
+from solver.model import Effector, EffectorMode, Joint, JointKind, Mimic, Transform, build_chain
 from solver.model.examples import panda_arm
 from solver.model.forward import effector_poses
 
@@ -74,6 +74,34 @@ def test_the_bound_is_the_links_the_slide_and_the_tip() -> None:
     assert unlimited.bound["tip"] == np.inf
     far = [Target(effector="tip", position=np.array([1e6, 0.0, 0.0]))]
     assert not unlimited.beyond(far, IKOptions())
+
+
+def test_a_slide_following_a_follower_reaches_its_leader_s_range() -> None:
+    """F2 slides as -F1 = L, L in [0, 1]; F1's own limits contradict its map and are
+    ignored (a model note): the bound takes the range F2 really has (a review found
+    0.6 m taken from F1's declared limits, so a reachable 0.9 m target read beyond)."""
+    z, x = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
+    joints = [
+        Joint(
+            name="L", parent="base", child="a", kind=JointKind.REVOLUTE, axis=z,
+            lower=(0.0,), upper=(1.0,),
+        ),
+        Joint(
+            name="F1", parent="a", child="b", kind=JointKind.REVOLUTE, axis=z,
+            lower=(0.5,), upper=(0.6,), mimic=Mimic("L", -1.0, 0.0),
+        ),
+        Joint(
+            name="F2", parent="b", child="c", kind=JointKind.PRISMATIC, axis=x,
+            lower=(-2.0,), upper=(2.0,), mimic=Mimic("F1", -1.0, 0.0),
+        ),
+    ]  # fmt: skip
+    chain = build_chain(joints, [Effector(name="tip", link="c")])
+    assert chain.notes  # F1's limits were set aside
+    reach = ReachBounds(chain)
+    assert reach.bound["tip"] >= 1.0
+    target = [Target(effector="tip", position=np.array([0.9, 0.0, 0.0]))]
+    assert not reach.beyond(target, IKOptions())
+    assert IKSolver(chain).solve(target).success
 
 
 def test_a_target_beyond_reach_is_not_reached_whatever_the_budget() -> None:
