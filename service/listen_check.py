@@ -37,7 +37,11 @@ def listen_problem(host: str, port: int) -> str | None:
             "address (127.0.0.1, 0.0.0.0, ::) or a name this machine resolves"
         )
     for family, kind, proto, _, address in addresses:
-        with socket.socket(family, kind, proto) as probe:
+        try:
+            probe = socket.socket(family, kind, proto)
+        except OSError:  # a family this kernel lacks (IPv6 off): asyncio skips it too
+            continue
+        with probe:
             probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             if family == socket.AF_INET6:  # as asyncio: IPv4 is a socket of its own
                 probe.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)

@@ -68,3 +68,30 @@ def test_python_m_service_stops_before_the_app_starts(taken_port: int) -> None:
         "(Address already in use): another process listens there: stop it, or set "
         "IK_PORT to a free port"
     ], done.stderr
+
+
+def test_an_address_family_the_kernel_lacks_is_skipped_as_asyncio_does(
+    monkeypatch: pytest.MonkeyPatch, taken_port: int
+) -> None:
+    """A kernel with IPv6 off and a host name that resolves to ::1 and 127.0.0.1 (as
+    Debian's localhost does): uvicorn listens on 127.0.0.1; the check raised OSError
+    from the IPv6 socket it could not create (a review). The kernel's refusal is
+    stood in for by a socket class that refuses AF_INET6."""
+    real_socket = socket.socket
+
+    def no_ipv6(family: int = socket.AF_INET, *args: object, **kwargs: object) -> socket.socket:
+        if family == socket.AF_INET6:
+            raise OSError(97, "Address family not supported by protocol")
+        return real_socket(family, *args, **kwargs)  # type: ignore[arg-type]
+
+    def both(host: str, port: int, **_: object) -> list[tuple[object, ...]]:
+        return [
+            (socket.AF_INET6, socket.SOCK_STREAM, 6, "", ("::1", port, 0, 0)),
+            (socket.AF_INET, socket.SOCK_STREAM, 6, "", ("127.0.0.1", port)),
+        ]
+
+    monkeypatch.setattr(socket, "socket", no_ipv6)
+    monkeypatch.setattr(socket, "getaddrinfo", both)
+    assert listen_problem("dual-stack-name", _free_port()) is None
+    # The IPv4 address is still checked.
+    assert listen_problem("dual-stack-name", taken_port) is not None
