@@ -60,6 +60,7 @@ _NOT_COMPILED = frozenset(
         "model/skeleton.py",
         "model/skeleton_settings.py",
         "model/urdf.py",
+        "model/urdf_xml.py",
     }
 )
 

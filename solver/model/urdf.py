@@ -57,14 +57,15 @@ import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
-import defusedxml
-import defusedxml.ElementTree as DET
 import numpy as np
 
 from ..errors import InvalidModel
 from .chain import MAX_DOF_HARD, Chain, build_chain
 from .joints import Effector, EffectorMode, Joint, JointKind, Mimic, Transform
 from .notes import ModelNote, NoteKind
+from .urdf_xml import first_child as _child
+from .urdf_xml import local_name as _tag
+from .urdf_xml import parse_urdf_xml
 
 _KINDS = {
     "revolute": JointKind.REVOLUTE,
@@ -73,10 +74,6 @@ _KINDS = {
     "fixed": JointKind.FIXED,
 }
 _UNSUPPORTED_TYPES = frozenset({"floating", "planar"})
-# Dropped around the document: a byte-order mark or blank lines before <?xml (which
-# must be the first characters), NULs after the root (a C string written whole).
-_LEADING_JUNK = "\ufeff \t\r\n"
-_TRAILING_JUNK = "\x00 \t\r\n"
 # build_chain's cycle check walks up from every joint (quadratic in the path length):
 # 18,000 fixed joints fit in 2 MB and took 39 s. Real robots have a handful per path.
 MAX_FIXED_JOINTS = 1000
@@ -127,7 +124,7 @@ def chain_from_urdf(
             checks, e.g. a chain with no joint); ``field`` says which
             check failed and ``joint`` names the joint or link at fault.
     """
-    root = _parse_xml(text, max_bytes)
+    root = parse_urdf_xml(text, max_bytes)
     tips = _check_tips(tip_links)
     try:
         mode = EffectorMode(mode)
@@ -160,75 +157,11 @@ def chain_from_urdf(
     return dataclasses.replace(chain, notes=(*notes, *chain.notes))
 
 
-def _parse_xml(text: str, max_bytes: int) -> ET.Element:
-    if not isinstance(text, str):
-        raise InvalidModel(f"URDF must be text (str), got {type(text).__name__}", field="urdf")
-    # len(text) <= UTF-8 size, so the cheap test first spares encoding a huge string.
-    if len(text) > max_bytes:
-        raise InvalidModel(f"URDF is larger than {max_bytes} bytes", field="urdf")
-    try:
-        size = len(text.encode("utf-8"))
-    except UnicodeEncodeError:
-        raise InvalidModel("URDF is not valid Unicode (lone surrogate)", field="urdf") from None
-    if size > max_bytes:
-        raise InvalidModel(f"URDF is larger than {max_bytes} bytes ({size})", field="urdf")
-    text = text.lstrip(_LEADING_JUNK).rstrip(_TRAILING_JUNK)
-    try:
-        root: ET.Element = DET.fromstring(text, forbid_dtd=True)
-    except defusedxml.DTDForbidden:
-        raise InvalidModel("URDF must not contain a DTD (<!DOCTYPE ...>)", field="urdf") from None
-    except defusedxml.EntitiesForbidden:
-        raise InvalidModel("URDF must not declare entities", field="urdf") from None
-    except defusedxml.ExternalReferenceForbidden:
-        raise InvalidModel("URDF must not reference external resources", field="urdf") from None
-    except (defusedxml.DefusedXmlException, ET.ParseError) as e:
-        raise InvalidModel(f"URDF is not well-formed XML: {e}", field="urdf") from None
-    if _tag(root) != "robot":
-        raise InvalidModel(f"root element must be <robot>, got <{_tag(root)}>", field="urdf")
-    _refuse_xacro(root)
-    return root
-
-
-# xacro's namespace under any URI naming it (files declare http://www.ros.org/wiki/xacro,
-# http://ros.org/wiki/xacro, ...; xacro reads the prefix), and ${...} / $(...) in a value.
-_XACRO_TAG = re.compile(r"\{[^}]*xacro[^}]*\}(.+)", re.IGNORECASE)
-_XACRO_VALUE = re.compile(r"\$[{(]")
-
-
-def _refuse_xacro(root: ET.Element) -> None:
-    """Refuse a file that is still xacro: an element of xacro's namespace (read as URDF,
-    an ``<xacro:if>`` block's joints were silently left out), or ``${...}`` / ``$(...)``
-    in a link or joint (a leftover in a mesh path, not read here, is let through)."""
-    tags = (_XACRO_TAG.fullmatch(e.tag) for e in root.iter() if isinstance(e.tag, str))
-    found = next((f"<xacro:{t.group(1)}>" for t in tags if t is not None), None)
-    for element in (e for e in root if _tag(e) in ("link", "joint")):
-        parts = [element] if _tag(element) == "link" else [element, *element]
-        values = ((k, v, p) for p in parts for k, v in p.attrib.items())
-        bad = (f"{k}={v!r} in <{_tag(p)}>" for k, v, p in values if _XACRO_VALUE.search(v))
-        found = found or next(bad, None)
-    if found is not None:
-        raise InvalidModel(
-            f"the file is xacro, not URDF ({found}): expand it first, e.g. "
-            "`xacro robot.urdf.xacro > robot.urdf`",
-            field="urdf",
-        )
-
-
 def _unknown_link(role: str, name: str, links: set[str]) -> str:
     """``unknown <role> link 'x'`` with the file's nearest link names."""
     close = difflib.get_close_matches(name, sorted(links), n=3, cutoff=0.6)
     hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
     return f"unknown {role} link {name!r}{hint}"
-
-
-def _tag(element: ET.Element) -> str:
-    """Tag without a namespace: some exporters put URDF in a default xmlns."""
-    tag = element.tag
-    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
-
-
-def _child(element: ET.Element, tag: str) -> ET.Element | None:
-    return next((c for c in element if _tag(c) == tag), None)
 
 
 def _check_tips(tip_links: Sequence[str] | str) -> list[str]:

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-import solver.model.urdf
+import solver.model.urdf_xml
 from solver.errors import InvalidModel
 from solver.model import EffectorMode, JointKind, NoteKind
 from solver.model.forward import effector_poses, link_poses
@@ -213,7 +213,7 @@ def test_oversize_is_rejected_before_parsing(monkeypatch: pytest.MonkeyPatch) ->
     def no_parse(*args: object, **kwargs: object) -> None:
         raise AssertionError("the parser must not see oversize text")
 
-    monkeypatch.setattr(solver.model.urdf.DET, "fromstring", no_parse)
+    monkeypatch.setattr(solver.model.urdf_xml.DET, "fromstring", no_parse)
     big = '<robot name="t">' + " " * 2_000_000 + "</robot>"
     with pytest.raises(InvalidModel) as info:
         chain_from_urdf(big, base_link="base", tip_links="tip")
