@@ -345,7 +345,11 @@ class FollowerInfo(StrictModel):
 
 
 ModelWarningCode = Literal[
-    "unlimited_by_convention", "default_limit", "mimic_narrows_leader", "mimic_limits_ignored"
+    "unlimited_by_convention",
+    "default_limit",
+    "mimic_narrows_leader",
+    "mimic_limits_ignored",
+    "unlikely_units",
 ]
 assert set(ModelWarningCode.__args__) == {k.value for k in NoteKind}  # type: ignore[attr-defined]
 

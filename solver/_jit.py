@@ -57,6 +57,7 @@ _NOT_COMPILED = frozenset(
         "model/examples.py",
         "model/gltf.py",
         "model/gltf_container.py",
+        "model/notes.py",
         "model/skeleton.py",
         "model/skeleton_settings.py",
         "model/urdf.py",

@@ -5,6 +5,7 @@ the user should hear about rather than find out from the solutions."""
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 
 
@@ -17,6 +18,9 @@ class NoteKind(enum.StrEnum):
     # A follower's limits leave its leader no room (written for the other sense of the
     # map, e.g. PR2's grippers): ignored, as ROS and pinocchio ignore a mimic's limits.
     MIMIC_LIMITS_IGNORED = "mimic_limits_ignored"
+    # Numbers that read like degrees or millimetres where the format wants radians and
+    # metres (a revolute limit of 170, an rpy of 90, a slide of 500): taken as written.
+    UNLIKELY_UNITS = "unlikely_units"
 
 
 @dataclass(frozen=True, slots=True)
@@ -27,3 +31,50 @@ class ModelNote:
     joint: str
     field: str
     message: str
+
+
+# Beyond two turns either way a revolute limit reads as degrees (multi-turn joints stop
+# at +-2 pi: UR's wrists), up to two turns in degrees; an origin angle beyond a turn,
+# likewise. Larger numbers are another convention (1e16 for "no limit", Gazebo's rotors).
+_LIMIT_RAD = (4.0 * math.pi, 720.0)
+_ANGLE_RAD = (2.0 * math.pi, 360.0)
+# Beyond 10 m a slide reads as millimetres or centimetres (a gantry's is a few metres).
+_SLIDE_M = (10.0, 10_000.0)
+
+
+def _unlikely(values: tuple[float, ...], band: tuple[float, float]) -> list[float]:
+    return [v for v in values if band[0] < abs(v) <= band[1]]
+
+
+def unit_notes(
+    joint: str, limits: tuple[float, ...], rpy: tuple[float, ...], *, slide: bool = False
+) -> list[ModelNote]:
+    """An ``unlikely_units`` note for limits or origin angles that read as degrees (or a
+    slide as millimetres), for a format whose angles are radians and lengths metres.
+    Only a note: the numbers are kept as written, since a joint may mean them."""
+    notes = []
+    band, unit = (_SLIDE_M, "m") if slide else (_LIMIT_RAD, "rad")
+    wide = _unlikely(limits, band)
+    if wide:
+        meant = "millimetres or centimetres" if slide else "degrees"
+        notes.append(
+            ModelNote(
+                NoteKind.UNLIKELY_UNITS,
+                joint,
+                "limit",
+                f"limit {wide[0]!r} {unit} is beyond {band[0]:.4g} {unit}: were the limits "
+                f"written in {meant}? They are read in {unit}, as the format says",
+            )
+        )
+    turned = _unlikely(rpy, _ANGLE_RAD)
+    if turned:
+        notes.append(
+            ModelNote(
+                NoteKind.UNLIKELY_UNITS,
+                joint,
+                "origin.rpy",
+                f"origin angle {turned[0]!r} rad is beyond a turn: were the angles written in "
+                "degrees? They are read in radians, as the format says",
+            )
+        )
+    return notes

@@ -12,6 +12,8 @@ The specification's defaults and the conventions of files in the wild:
   - ``<limit>`` is required on revolute and prismatic joints (as in urdfdom), but its
     ``lower`` and ``upper`` default to 0 (a ``default_limit`` note says so);
     ``effort`` and ``velocity`` may be missing (urdfdom requires them; IK needs neither).
+  - Limits beyond two turns (or a slide beyond 10 m) and origin angles beyond a turn
+    are kept as written, with an ``unlikely_units`` note (degrees? millimetres?).
   - ``lower > upper`` is read as "no limits" (Bullet's convention, used by pybullet's
     files): a revolute joint turns like a continuous one, a prismatic one slides
     freely; an ``unlimited_by_convention`` note says so.
@@ -62,7 +64,7 @@ import numpy as np
 from ..errors import InvalidModel
 from .chain import MAX_DOF_HARD, Chain, build_chain
 from .joints import Effector, EffectorMode, Joint, JointKind, Mimic, Transform
-from .notes import ModelNote, NoteKind
+from .notes import ModelNote, NoteKind, unit_notes
 from .urdf_xml import first_child as _child
 from .urdf_xml import local_name as _tag
 from .urdf_xml import parse_urdf_xml
@@ -316,6 +318,7 @@ def _joint(raw: _RawJoint, base: str, notes: list[ModelNote]) -> Joint:
     rpy = _vector(origin, "rpy", name, "origin.rpy", default=(0.0, 0.0, 0.0))
     transform = Transform.from_rpy(xyz, rpy[0], rpy[1], rpy[2], owner=name)
     if kind is JointKind.FIXED:  # axis and limits mean nothing here (iiwa's tool0 has axis 0 0 0)
+        notes.extend(unit_notes(name, (), rpy))
         return Joint(name=name, parent=raw.parent, child=raw.child, kind=kind, origin=transform)
     axis = np.array(_vector(_child(e, "axis"), "xyz", name, "axis", default=(1.0, 0.0, 0.0)))
     if float(np.linalg.norm(axis)) < 1e-9:
@@ -326,8 +329,9 @@ def _joint(raw: _RawJoint, base: str, notes: list[ModelNote]) -> Joint:
         )
     lower: tuple[float, ...] = ()
     upper: tuple[float, ...] = ()
+    written: tuple[float, ...] = ()  # the limits as the file gives them
     if kind is not JointKind.CONTINUOUS:
-        lo, hi = _limits(_child(e, "limit"), raw.type, name, notes)
+        lo, hi = written = _limits(_child(e, "limit"), raw.type, name, notes)
         if lo > hi:
             notes.append(
                 ModelNote(
@@ -341,6 +345,7 @@ def _joint(raw: _RawJoint, base: str, notes: list[ModelNote]) -> Joint:
             if kind is JointKind.REVOLUTE:
                 kind = JointKind.CONTINUOUS
         lower, upper = (lo,), (hi,)
+    notes.extend(unit_notes(name, written, rpy, slide=kind is JointKind.PRISMATIC))
     return Joint(
         name=name,
         parent=raw.parent,

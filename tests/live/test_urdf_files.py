@@ -133,6 +133,24 @@ def test_the_files_conventions_are_read_with_a_warning(server: Server) -> None:
     ]
 
 
+def test_limits_in_degrees_are_kept_with_a_warning(server: Server) -> None:
+    r = _create(
+        server,
+        _small('type="revolute"><limit lower="-1" upper="1"/>', limit1='lower="-170" upper="170"'),
+        ["tip"],
+    )
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert body["dof"][0] == {"name": "j1", "lower": -170.0, "upper": 170.0}
+    [warning] = body["warnings"]
+    assert (warning["code"], warning["joint"], warning["field"]) == (
+        "unlikely_units",
+        "j1",
+        "limit",
+    )
+    assert "degrees" in warning["message"]
+
+
 # (id, joint j2's type and limit, what the detail must name, what it must tell to change)
 REFUSED = [
     ("floating", 'type="floating">', "j2.type", "base_link='tip'"),

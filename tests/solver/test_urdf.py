@@ -405,6 +405,49 @@ def test_lower_above_upper_is_bullets_unlimited_joint(type_: str) -> None:
     ]
 
 
+@pytest.mark.parametrize(
+    ("type_", "inner", "field", "value"),
+    [
+        # Degrees where URDF wants radians: kept as written, with a note.
+        ("revolute", '<limit lower="-170" upper="170"/>', "limit", -170.0),
+        ("revolute", '<origin rpy="0 0 90"/><limit lower="-1" upper="1"/>', "origin.rpy", 90.0),
+        ("continuous", '<origin rpy="-180 0 0"/>', "origin.rpy", -180.0),
+        # Millimetres where URDF wants metres.
+        ("prismatic", '<limit lower="0" upper="500"/>', "limit", 500.0),
+        ("fixed", '<origin rpy="0 45 0"/>', "origin.rpy", 45.0),
+    ],
+)
+def test_numbers_that_read_as_degrees_or_millimetres_are_kept_with_a_note(
+    type_: str, inner: str, field: str, value: float
+) -> None:
+    text = _robot(_j2(inner, type_=type_))
+    chain = chain_from_urdf(text, base_link="base", tip_links="l2")
+    assert [(n.kind, n.joint, n.field) for n in chain.notes] == [
+        (NoteKind.UNLIKELY_UNITS, "j2", field)
+    ]
+    assert repr(value) in chain.notes[0].message
+    if field == "limit":
+        assert value in (chain.lower[-1], chain.upper[-1])  # read as written
+
+
+@pytest.mark.parametrize(
+    ("type_", "inner"),
+    [
+        # One turn either way (UR's wrists), a slide of a few metres, a half-turn origin.
+        ("revolute", '<limit lower="-6.2832" upper="6.2832"/>'),
+        ("revolute", '<origin rpy="3.14159 0 -1.5708"/><limit lower="-12.5" upper="12.5"/>'),
+        ("prismatic", '<limit lower="-2.5" upper="9.9"/>'),
+        # Another convention for "no limit" (example-robot-data's Iris rotors): no note.
+        ("revolute", '<limit lower="-1e16" upper="1e16"/>'),
+    ],
+)
+def test_radians_and_metres_make_no_units_note(type_: str, inner: str) -> None:
+    chain = chain_from_urdf(_robot(_j2(inner, type_=type_)), base_link="base", tip_links="l2")
+    assert chain.notes == ()
+    panda = chain_from_urdf(PANDA, base_link="panda_link0", tip_links="panda_hand_tcp")
+    assert not [n for n in panda.notes if n.kind is NoteKind.UNLIKELY_UNITS]
+
+
 def test_whitespace_before_the_declaration_and_nuls_after_the_root() -> None:
     text = '\n  \ufeff<?xml version="1.0"?>\n' + PLANAR.split("?>", 1)[1] + "\n\x00\x00"
     chain = chain_from_urdf(text, base_link="base", tip_links="tip")

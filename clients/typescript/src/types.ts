@@ -365,7 +365,12 @@ export interface FollowerInfo {
 
 /** Schema `ModelWarning`: the chain's file read by a convention or a default. */
 export interface ModelWarning {
-  code: "unlimited_by_convention" | "default_limit" | "mimic_narrows_leader" | "mimic_limits_ignored";
+  code:
+    | "unlimited_by_convention"
+    | "default_limit"
+    | "mimic_narrows_leader"
+    | "mimic_limits_ignored"
+    | "unlikely_units";
   joint: string;
   field: string;
   message: string;
