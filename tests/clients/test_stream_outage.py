@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
-from ik_client import AsyncClient, Pong, Reconnect, RetryLater, StreamClosed
+from ik_client import AsyncClient, Client, MessageDropped, Pong, Reconnect, RetryLater, StreamClosed
 from websockets.asyncio.server import ServerConnection, serve
 
 REF = dataclasses.make_dataclass("Ref", ["id", "token"])("s", "t")
@@ -179,3 +179,55 @@ def test_a_refused_reconnect_is_tried_again_only_if_waiting_can_mend_it(
     else:
         assert isinstance(outcome, StreamClosed) and refusals["left"] == 2
     assert took_s < QUICK.deadline_s / 2
+
+
+def test_sends_while_reconnecting_wait_at_most_max_queued() -> None:
+    """While one task reconnects, another's sends return at once and wait for the new
+    connection, at most ``max_queued`` of them: the newest go out, the older are dropped
+    unsent (``receive`` raises ``MessageDropped`` in their turn), and the message that
+    had gone out before the drop is sent again and answered (the TypeScript client's
+    test/queue.test.ts, alike)."""
+    down = {"on": False}
+
+    def refuse(connection: ServerConnection, request: Any) -> Any:
+        return connection.respond(503, "down\n") if down["on"] else None
+
+    server = Scripted(lambda conn, message_id: "drop" if (conn, message_id) == (0, 1) else "pong")
+
+    async def outage() -> tuple[list[int], int, list[Any], bool]:
+        async with serve(server.handler, "127.0.0.1", 0, process_request=refuse) as ws:
+            port = ws.sockets[0].getsockname()[1]
+            async with (
+                AsyncClient(f"http://127.0.0.1:{port}") as ik,
+                ik.stream(REF, reconnect=QUICK, max_queued=3) as stream,
+            ):
+                await stream.ping()
+                down["on"] = True
+                await stream.send_ping()  # id 1: goes out, and the server drops the connection
+                first = asyncio.create_task(stream.receive())  # meets the drop, reconnects
+                while not stream.reconnecting:
+                    await asyncio.sleep(0.005)
+                ids = [await stream.send_ping() for _ in range(5)]
+                peak = stream.queued
+                down["on"] = False
+                outcomes: list[Any] = [await first]
+                for _ in ids:
+                    try:
+                        outcomes.append(await stream.receive())
+                    except MessageDropped as e:
+                        outcomes.append(e)
+                return ids, peak, outcomes, stream.reconnecting
+
+    ids, peak, outcomes, reconnecting = asyncio.run(asyncio.wait_for(outage(), 30.0))
+    assert ids == [2, 3, 4, 5, 6] and peak == 3 and not reconnecting
+    assert outcomes[0] == Pong(1)
+    dropped = [(type(d), d.id, d.max_queued) for d in outcomes[1:3]]
+    assert dropped == [(MessageDropped, 2, 3), (MessageDropped, 3, 3)]
+    assert outcomes[3:] == [Pong(4), Pong(5), Pong(6)]
+    assert [m for conn, m in server.seen if conn == 1] == [1, 4, 5, 6]  # 2, 3 never sent
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, float("nan"), True])
+def test_max_queued_is_checked_before_anything_opens(bad: Any) -> None:
+    with Client("http://127.0.0.1:9") as ik, pytest.raises(ValueError, match="max_queued"):
+        ik.stream(REF, max_queued=bad)

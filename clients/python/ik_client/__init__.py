@@ -23,6 +23,7 @@ from .errors import (
     ErrorCode,
     IKClientError,
     InvalidRequest,
+    MessageDropped,
     MessageTooBig,
     NoAnswer,
     NotFound,
@@ -37,6 +38,7 @@ from .errors import (
     TooManyWebSockets,
     UnexpectedAnswer,
 )
+from .queued import DEFAULT_MAX_QUEUED
 from .reconnect import Reconnect
 from .stream import AsyncStream, Stream
 from .types import (
@@ -82,6 +84,7 @@ from .types import (
 )
 
 __all__ = [
+    "DEFAULT_MAX_QUEUED",
     "CLOSE_CODE_MEANINGS",
     "Answer",
     "AsyncClient",
@@ -98,6 +101,7 @@ __all__ = [
     "CloseCode",
     "ConnectionLost",
     "EncodeError",
+    "MessageDropped",
     "Conventions",
     "ConventionsOut",
     "Dof",

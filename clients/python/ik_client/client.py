@@ -30,6 +30,7 @@ import httpx
 from . import calls
 from .calls import Call, SessionRef
 from .errors import NoAnswer
+from .queued import DEFAULT_MAX_QUEUED
 from .reconnect import DEFAULT_RECONNECT, Backoff, Reconnect, retry_after_s
 from .stream import PING_INTERVAL_S, PING_TIMEOUT_S, AsyncStream, Stream
 from .types import Encoding
@@ -169,6 +170,7 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
         sock: socket.socket | None = None,
         ping_interval_s: float | None = PING_INTERVAL_S,
         ping_timeout_s: float | None = PING_TIMEOUT_S,
+        max_queued: float = DEFAULT_MAX_QUEUED,
     ) -> S:
         """The session's WebSocket; open it with ``with`` (``Stream``) or ``async with``
         (``AsyncStream``). The server accepts the handshake and then closes a socket
@@ -196,6 +198,12 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
                 20); None sends none (a load client: they would add to what it measures).
             ping_timeout_s: How long a ping may wait for its pong before the connection
                 counts as dropped [s] (its default, 20); None waits for ever.
+            max_queued: How many messages other tasks send to an ``AsyncStream`` while
+                it reconnects may wait for the new connection (``DEFAULT_MAX_QUEUED``,
+                60; ``math.inf``: all); one more drops the oldest of them unsent
+                (``receive`` raises ``MessageDropped`` in its turn). Messages sent
+                before the drop are sent again and answered, whatever this is. The
+                blocking ``Stream`` never holds any: its sends wait for the reconnect.
         """
         url = calls.ws_url(self.base_url, session, compact)
         return self._stream_type(
@@ -208,6 +216,7 @@ class _BaseClient(abc.ABC, Generic[HTTP, S]):
             sock=sock,
             ping_interval_s=ping_interval_s,
             ping_timeout_s=ping_timeout_s,
+            max_queued=max_queued,
         )
 
 

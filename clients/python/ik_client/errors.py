@@ -87,6 +87,26 @@ class NoAnswer(IKClientError):
         self.timed_out = timed_out
 
 
+class MessageDropped(IKClientError):
+    """A stream message dropped before it went out (the TypeScript client's
+    ``MessageDropped``): it was sent while the stream was reconnecting, more than
+    ``max_queued`` such messages waited for the new connection, and it was the oldest of
+    them. The server never saw it; ``receive`` raises this in its turn, in the order sent.
+
+    Attributes:
+        id: The id ``send_*`` returned for it.
+        max_queued: The stream's limit.
+    """
+
+    def __init__(self, id: int, max_queued: float) -> None:
+        super().__init__(
+            f"message {id} was dropped unsent: more than {max_queued} messages waited for "
+            "the stream to reconnect, and it was the oldest"
+        )
+        self.id = id
+        self.max_queued = max_queued
+
+
 class UnexpectedAnswer(IKClientError):
     """A stream's answer that this client cannot read: an answer to an id that waits
     for none (``id`` None: nothing was taken off the stream's in-flight messages), or an

@@ -7,8 +7,12 @@ connection drops (or the server closes 1011, 1012 or 1013, or answers ``shutting
 (reconnect.py: a deadline, backoff with jitter) and sends again, in order, every message
 that had no answer yet, under
 the id it was first sent with (each connection wants increasing ids; the stream keeps one
-counter over every connection, so they still increase). Answers are reported under the id
-the caller got, and each message gets exactly one. A server that keeps answers (sessions
+counter over every connection, so they still increase). Of what other tasks send to an
+``AsyncStream`` while it reconnects, at most ``max_queued`` messages wait for the new
+connection (queued.py: the oldest beyond it are dropped unsent, ``MessageDropped``); the
+blocking ``Stream`` reconnects inside the call that met the drop, so nothing waits
+behind it. Answers are reported under the id the caller got, and each message gets
+exactly one (a dropped one: its ``MessageDropped``). A server that keeps answers (sessions
 in Redis, docs/operations.md) answers a message it had solved, and whose answer was lost
 in the drop, with that stored answer (on another worker too): it is never solved twice.
 
@@ -48,11 +52,13 @@ from .errors import (
     EncodeError,
     ErrorCode,
     IKClientError,
+    MessageDropped,
     StreamClosed,
     UnexpectedAnswer,
     service_error,
     stream_closed,
 )
+from .queued import DEFAULT_MAX_QUEUED, SendQueue, max_queued_option
 from .reconnect import Backoff, Reconnect, retry_after_s
 from .types import (
     Answer,
@@ -208,6 +214,9 @@ class _Pipeline:
         self._next_id = 0  # the caller's ids
         self._next_wire_id = 0  # ids on the wire: one counter over every connection
         self._waiting: OrderedDict[int, _Message] = OrderedDict()  # by wire id
+        # Held while reconnecting and dropped unsent (queued.py): wire id -> caller id,
+        # each raised as MessageDropped in its turn.
+        self._dropped: OrderedDict[int, int] = OrderedDict()
 
     @property
     def in_flight(self) -> int:
@@ -226,6 +235,25 @@ class _Pipeline:
         self._next_wire_id += 1
         self._waiting[message.wire_id] = message
         return message.id, data
+
+    def hold(self, body: dict[str, Any], held: SendQueue[int]) -> int:
+        """Number a message sent while reconnecting: it waits for the new connection in
+        ``held``, and the oldest held beyond its limit is dropped (never sent); returns
+        its id. Raises as ``add``."""
+        message_id, _ = self.add(body)
+        for wire_id in held.add(self._next_wire_id - 1):
+            self._dropped[wire_id] = self._waiting.pop(wire_id).id
+        return message_id
+
+    def take_dropped(self) -> int | None:
+        """The caller id of the next message in the order sent, taken off, if it was
+        dropped; else None (its answer comes from the server)."""
+        if not self._dropped:
+            return None
+        wire_id = next(iter(self._dropped))
+        if self._waiting and next(iter(self._waiting)) < wire_id:
+            return None
+        return self._dropped.pop(wire_id)
 
     def resend(self) -> list[str | bytes]:
         """Every waiting message, in order, as first sent: what a new connection gets.
@@ -526,12 +554,16 @@ class _BaseStream(Generic[Connection]):
         sock: socket.socket | None = None,
         ping_interval_s: float | None = PING_INTERVAL_S,
         ping_timeout_s: float | None = PING_TIMEOUT_S,
+        max_queued: float = DEFAULT_MAX_QUEUED,
     ) -> None:
         self.url = url
         self.reconnects = 0  # connections made after the first
         self.timeout_s = timeout_s
         self._pipeline = _Pipeline(encoding)
         self._retries = _Retries(reconnect)
+        self.max_queued = max_queued_option(max_queued)
+        # While an asyncio stream reconnects: what is sent meanwhile (None otherwise).
+        self._held: SendQueue[int] | None = None
         self._connection: Connection | None = None
         self._sock = sock  # taken by the first _open()
         self._connect_options: dict[str, Any] = {
@@ -561,6 +593,19 @@ class _BaseStream(Generic[Connection]):
     def in_flight(self) -> int:
         """Messages sent that have no answer yet."""
         return self._pipeline.in_flight
+
+    @property
+    def reconnecting(self) -> bool:
+        """A task is reconnecting this (asyncio) stream: a send now waits for the new
+        connection (at most ``max_queued`` of them); a game can skip its sends meanwhile
+        rather than have stale targets solved."""
+        return self._held is not None
+
+    @property
+    def queued(self) -> int:
+        """Of those, the ones sent while reconnecting, waiting for the new connection
+        (at most ``max_queued``; always 0 for the blocking ``Stream``)."""
+        return 0 if self._held is None else len(self._held)
 
     def _answer(self, data: str | bytes) -> Answer:
         """The answer ``data`` carries (``_Pipeline.answer``); any answer but one that
@@ -593,8 +638,11 @@ class AsyncStream(_BaseStream[AsyncConnection]):
 
     ``send_frame`` / ``send_clip`` / ``send_batch`` / ``send_ping`` return the message's
     id; ``receive`` returns the next answer (in the order sent) or raises its
-    ``ServiceError`` (an answer it cannot read: ``UnexpectedAnswer``), waiting at most
-    ``timeout_s`` (``TimeoutError``). ``frame``, ``clip``, ``batch`` and ``ping`` send
+    ``ServiceError`` (an answer it cannot read: ``UnexpectedAnswer``; a message dropped
+    unsent while reconnecting: ``MessageDropped``), waiting at most ``timeout_s``
+    (``TimeoutError``). While a task reconnects, a send from another task returns at
+    once and its message waits for the new connection (``queued``, at most
+    ``max_queued``). ``frame``, ``clip``, ``batch`` and ``ping`` send
     one message and wait for its answer. Sends may come from several tasks; answers are read
     by one task at a time.
     """
@@ -641,6 +689,8 @@ class AsyncStream(_BaseStream[AsyncConnection]):
 
     async def receive(self) -> Answer:
         while True:
+            if (dropped := self._pipeline.take_dropped()) is not None:
+                raise MessageDropped(dropped, self.max_queued)
             connection = self.connection
             try:
                 # Cancelling recv() loses nothing (websockets' guarantee).
@@ -687,6 +737,8 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         return await async_connect(self.url, **self._connect_options, **self._take_sock())
 
     async def _send(self, body: dict[str, Any]) -> int:
+        if self._held is not None:  # reconnecting: it goes out on the new connection
+            return self._pipeline.hold(body, self._held)
         async with self._lock:
             # Waiting before it is sent: a send that fails is sent again after reconnecting.
             message_id, data = self._pipeline.add(body)
@@ -705,17 +757,30 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         async with self._lock:
             if self._connection is not failed:
                 return  # another task has reconnected already
-            for delay in self._retries.delays():
-                await asyncio.sleep(delay)
-                try:
-                    connection = await self._open()
-                    for data in self._pipeline.resend():
-                        await connection.send(data)
-                except _ATTEMPT_FAILURES as failure:
-                    self._retries.attempt_failed(failure)
-                    continue
-                self._reconnected(connection)
-                return
+            self._held = SendQueue(self.max_queued)  # what other tasks send meanwhile
+            try:
+                await self._reconnect()
+            finally:
+                self._held = None
+
+    async def _reconnect(self) -> None:
+        """Connect again (holding the lock) and resend what waits, within the budget."""
+        for delay in self._retries.delays():
+            await asyncio.sleep(delay)
+            try:
+                connection = await self._open()
+                # What is held goes out now with the rest; a send from here on waits
+                # for the lock and goes out after them.
+                self._held = None
+                for data in self._pipeline.resend():
+                    await connection.send(data)
+            except _ATTEMPT_FAILURES as failure:
+                if self._held is None:  # they went out on a connection that failed:
+                    self._held = SendQueue(self.max_queued)  # kept, and counted no more
+                self._retries.attempt_failed(failure)
+                continue
+            self._reconnected(connection)
+            return
 
 
 class Stream(_BaseStream[SyncConnection]):
