@@ -2,11 +2,47 @@
  * Writing what the client sends, for the HTTP `Client` and the `Stream` alike: a
  * non-finite number or a value the encoding cannot write throws an `EncodeError`
  * before anything is sent.
+ *
+ * MessagePack is not imported here: `msgpack.ts` hands its codec over
+ * (`useMessagePack`) when an entry point imports it (`ik-client` does;
+ * `ik-client/json` does not, and a bundle of it holds no `@msgpack/msgpack`, which is
+ * over half of the whole client's minified size).
  */
 
-import { encode } from "@msgpack/msgpack";
+import { EncodeError, IKClientError } from "./errors.js";
+import type { Encoding } from "./types.js";
 
-import { EncodeError } from "./errors.js";
+/** What the client needs of a MessagePack library (`@msgpack/msgpack`'s `encode`,
+ * `decode`). */
+export interface MessagePackCodec {
+  /** `value` as MessagePack; a key whose value is undefined left out (as JSON leaves it). */
+  encode(value: unknown): Uint8Array;
+  decode(data: ArrayBuffer | Uint8Array): unknown;
+}
+
+let messagePack: MessagePackCodec | null = null;
+
+/** Make `encoding: "msgpack"` available (what `import "ik-client/msgpack"` does). */
+export function useMessagePack(codec: MessagePackCodec): void {
+  messagePack = codec;
+}
+
+/** The MessagePack codec; throws naming the way to get it when no entry point brought it. */
+export function messagePackCodec(): MessagePackCodec {
+  if (messagePack !== null) return messagePack;
+  throw new IKClientError(
+    'encoding "msgpack": MessagePack is not loaded, as "ik-client/json" leaves it out; ' +
+      'import the client from "ik-client", or import "ik-client/msgpack" once',
+  );
+}
+
+/** `encoding` checked: one the client speaks, and its codec loaded (throws otherwise,
+ * before anything is sent or opened). */
+export function checkEncoding(encoding: unknown): Encoding {
+  if (encoding === "msgpack") messagePackCodec();
+  else if (encoding !== "json") throw new RangeError(`encoding must be "json" or "msgpack", got ${String(encoding)}`);
+  return encoding;
+}
 
 /**
  * Throw naming the first NaN or infinity in `value` (a body, or its part at `field`):
@@ -38,11 +74,10 @@ export function encodeBody(body: Record<string, unknown>, encoding: "json"): str
 export function encodeBody(body: Record<string, unknown>, encoding: "json" | "msgpack"): string | Uint8Array;
 export function encodeBody(body: Record<string, unknown>, encoding: "json" | "msgpack"): string | Uint8Array {
   refuseNonFinite(body, "", new Set());
+  const codec = encoding === "msgpack" ? messagePackCodec() : null;
   try {
-    // A key whose value is undefined is left out, as JSON.stringify leaves it out:
-    // MessagePack would write it as nil, which the server refuses for a number
-    // (`position_weight: undefined`) where the same message as JSON is answered.
-    return encoding === "msgpack" ? encode(body, { ignoreUndefined: true }) : JSON.stringify(body);
+    // A key whose value is undefined is left out in both (msgpack.ts says why).
+    return codec !== null ? codec.encode(body) : JSON.stringify(body);
   } catch (error) {
     const reason = error instanceof Error ? error.message : String(error);
     throw new EncodeError(`the message cannot be written as ${encoding}: ${reason}`, null, { cause: error });

@@ -107,6 +107,24 @@ export class EncodeError extends IKClientError {
   }
 }
 
+/** A stream message dropped before it went out (ik_client's `MessageDropped`): it was
+ * sent while the stream was reconnecting, more than `maxQueued` (`StreamOptions`) such
+ * messages waited for the new connection, and it was the oldest of them. The server
+ * never saw it. `id` is the id `send*` returned for it. */
+export class MessageDropped extends IKClientError {
+  override name = "MessageDropped";
+
+  constructor(
+    readonly id: number,
+    readonly maxQueued: number,
+  ) {
+    super(
+      `message ${id} was dropped unsent: more than ${maxQueued} messages waited for the ` +
+        "stream to reconnect, and it was the oldest",
+    );
+  }
+}
+
 /** A stream's answer that this client cannot read (ik_client's `UnexpectedAnswer`): one
  * of a type it does not know, which rejects the message it answers (`id`: that
  * message's id; it counts as answered), or an answer to an id that nothing waits for

@@ -11,10 +11,10 @@
  * const result = await stream.frame([{ effector: "tool", position: { x: 0.4, y: 0.1, z: 0.5 },
  *                                      orientation: { w: 0, x: 1, y: 0, z: 0 } }]);
  * ```
+ *
+ * `ik-client/json` is the same client without MessagePack (a smaller browser bundle).
  */
 
-export * from "./client.js";
-export * from "./errors.js";
-export * from "./reconnect.js";
-export * from "./stream.js";
-export * from "./types.js";
+import "./msgpack.js"; // encoding: "msgpack" (ik-client/json, the same without it)
+
+export * from "./json.js";

@@ -7,10 +7,12 @@
  * to its answer. When the connection drops (or the server closes 1011, 1012 or 1013, or
  * answers `shutting_down`, or `not_ready` after a reconnect), the stream reconnects
  * within its `Reconnect` budget (reconnect.ts: a deadline, backoff with jitter) and
- * sends again, in order, every message
- * that had no answer, under the id it was first sent with (one counter over every
- * connection, so the ids on a new connection still increase). Answers carry the id the
- * caller got, and each message gets exactly one. A server that keeps answers (sessions in
+ * sends again, in order, every message that had no answer, under the id it was first
+ * sent with (one counter over every connection, so the ids on a new connection still
+ * increase); of the messages sent while reconnecting, at most `maxQueued` wait for the
+ * new connection (queued.ts: the oldest beyond it are dropped, `MessageDropped`).
+ * Answers carry the id the caller got, and each message gets exactly one (a dropped
+ * one: its `MessageDropped`). A server that keeps answers (sessions in
  * Redis, docs/operations.md) answers a message it had solved, and whose answer was lost
  * in the drop, with that stored answer: on another worker too, and never solved twice.
  *
@@ -19,11 +21,10 @@
  * stable global WebSocket, it uses the `ws` package and an `Authorization` header.
  */
 
-import { decode } from "@msgpack/msgpack";
-
-import { encodeBody } from "./encode.js";
+import { checkEncoding, encodeBody, messagePackCodec } from "./encode.js";
 import {
   IKClientError,
+  MessageDropped,
   RECONNECTABLE,
   StreamClosed,
   UnexpectedAnswer,
@@ -34,7 +35,6 @@ import type {
   Answer,
   BatchEntry,
   BatchFrame,
-  BoneOutput,
   ClipAnswer,
   Encoding,
   FkResult,
@@ -45,8 +45,10 @@ import type {
   Target,
 } from "./types.js";
 import { fkResultFrom } from "./types.js";
-import { framesAsSent, targetsAsSent } from "./targets.js";
+import { framesAsSent } from "./targets.js";
+import { type Envelope, type FkOptions, type FrameOptions, clipMessage, fkMessage, frameMessage } from "./messages.js";
 import { Backoff, type Reconnect, type ReconnectOptions, reconnectPolicy } from "./reconnect.js";
+import { SendQueue, maxQueuedOption } from "./queued.js";
 
 /** The part of a WebSocket (browser's or `ws`'s) the stream uses. */
 export interface Socket {
@@ -68,12 +70,18 @@ export type SocketClass = new (
 ) => unknown;
 
 export interface StreamOptions {
-  /** `json` (text messages, the default) or `msgpack` (binary messages). */
+  /** `json` (text messages, the default) or `msgpack` (binary messages; with
+   * `ik-client/json`, only after `import "ik-client/msgpack"`). */
   encoding?: Encoding | undefined;
   /** How long and how often to reconnect after a drop (`DEFAULT_RECONNECT`: for up to
    * 30 s from the drop, each new drop since an answer with the whole budget);
    * `RECONNECT_OFF` rejects what waits with the drop's `StreamClosed` instead. */
   reconnect?: ReconnectOptions | undefined;
+  /** How many messages sent while reconnecting may wait for the new connection
+   * (`DEFAULT_MAX_QUEUED`, 60; `Infinity`: all). One more drops the oldest of them, which
+   * rejects with `MessageDropped` (it never went out). Messages sent before the drop are
+   * not counted: they are sent again and answered, whatever this is. */
+  maxQueued?: number | undefined;
   /** Where the token goes: `header` (`ws` only) or `subprotocol` (what browsers can do).
    * Default: `header` with `ws`, `subprotocol` with a global WebSocket. */
   auth?: "header" | "subprotocol" | undefined;
@@ -86,39 +94,7 @@ export interface StreamOptions {
   onUnexpected?: ((error: UnexpectedAnswer) => void) | undefined;
 }
 
-/** What one frame message may add to its targets. */
-export interface FrameOptions {
-  /** This frame's bone output instead of the session's (skeleton chains; docs/websocket.md). */
-  bones?: BoneOutput | undefined;
-}
-
-/** `fk`'s pose: `q` (every DOF), or `joints` (some, by name; the others: the session's
- * current pose), or neither (the current pose); `bones`: the bone data to return
- * (skeleton chains; the server's default: the local rotations; a chain without bones
- * refuses any). */
-export interface FkOptions {
-  q?: number[] | undefined;
-  joints?: Record<string, number> | undefined;
-  bones?: BoneOutput | undefined;
-}
-
-function fkMessage(options: FkOptions): Envelope {
-  // The three fields by name: an object with more (a session's `pose`) sends no others.
-  const message: Envelope = { type: "fk" };
-  if (options.q !== undefined) message["q"] = options.q;
-  if (options.joints !== undefined) message["joints"] = options.joints;
-  if (options.bones !== undefined) message["bones"] = options.bones;
-  return message;
-}
-
-function frameMessage(given: Target[], options: FrameOptions): Envelope {
-  const targets = targetsAsSent(given);
-  return options.bones === undefined ? { type: "frame", targets } : { type: "frame", targets, bones: options.bones };
-}
-
-function clipMessage(frames: Frame[], options: { plan?: boolean | undefined }): Envelope {
-  return { type: "clip", frames: framesAsSent(frames), plan: options.plan ?? false };
-}
+export type { FkOptions, FrameOptions } from "./messages.js";
 
 /** Where a stream is (`Stream.state`). */
 export const StreamState = { Open: "open", Reconnecting: "reconnecting", Closed: "closed" } as const;
@@ -141,8 +117,6 @@ interface Message<R> {
   answer: Promise<Answer<R>>;
 }
 
-type Envelope = Record<string, unknown>;
-
 async function platformWebSocket(options: StreamOptions): Promise<[SocketClass, boolean]> {
   if (options.WebSocket !== undefined) return [options.WebSocket, false];
   if (typeof globalThis.WebSocket === "function") return [globalThis.WebSocket as SocketClass, true];
@@ -159,6 +133,7 @@ export class Stream<R = FrameResult> {
   private waiting = new Map<number, Message<R>>(); // by wire id, in the order sent
   private unread: Message<R>[] = []; // what receive() has not returned yet
   private readonly backoff: Backoff;
+  private readonly held: SendQueue<Message<R>>; // sent while reconnecting: not out yet
   private failure: StreamClosed | null = null;
   private closing = false;
 
@@ -167,10 +142,12 @@ export class Stream<R = FrameResult> {
     private readonly connect: () => Socket,
     private readonly encoding: Encoding,
     reconnect: Reconnect,
+    maxQueued: number,
     private readonly onUnexpected: ((error: UnexpectedAnswer) => void) | undefined,
     first: Socket,
   ) {
     this.backoff = new Backoff(reconnect);
+    this.held = new SendQueue(maxQueued);
     this.socketNow = first;
     this.watch(first);
   }
@@ -178,6 +155,8 @@ export class Stream<R = FrameResult> {
   /** Open a stream on `url` (see `Client.stream`). */
   static async open<R = FrameResult>(url: string, token: string, options: StreamOptions = {}): Promise<Stream<R>> {
     const reconnect = reconnectPolicy(options.reconnect); // checked before anything opens
+    const encoding = checkEncoding(options.encoding ?? "json");
+    const maxQueued = maxQueuedOption(options.maxQueued);
     const [SocketImpl, global] = await platformWebSocket(options);
     const auth = options.auth ?? (global ? "subprotocol" : "header");
     if (auth === "header" && global) throw new IKClientError("a global WebSocket cannot send headers");
@@ -191,7 +170,7 @@ export class Stream<R = FrameResult> {
     };
     const first = connect();
     await opened(first);
-    return new Stream<R>(url, connect, options.encoding ?? "json", reconnect, options.onUnexpected, first);
+    return new Stream<R>(url, connect, encoding, reconnect, maxQueued, options.onUnexpected, first);
   }
 
   /** The current socket (a test drops it: `ws`'s `terminate()`). */
@@ -204,8 +183,14 @@ export class Stream<R = FrameResult> {
     return this.waiting.size;
   }
 
+  /** Of those, the ones sent while reconnecting, waiting for the new connection (at most
+   * `maxQueued`). */
+  get queued(): number {
+    return this.held.size;
+  }
+
   /** `open`, `reconnecting` (the connection dropped and the stream connects again: what
-   * is sent meanwhile waits, and goes out on the new connection) or `closed` (the stream
+   * is sent meanwhile waits, up to `maxQueued` of it, and goes out on the new connection) or `closed` (the stream
    * ended, `closedBy` says why, or `close()` was called). A game that sends targets every
    * frame can skip its sends while reconnecting, rather than queue targets that will be
    * stale when they are solved, and show it; and learn that the stream ended without a
@@ -321,7 +306,16 @@ export class Stream<R = FrameResult> {
     this.unread.push(message);
     // While reconnecting it waits: the new connection gets it with the others.
     if (this.socketNow.readyState === OPEN) this.socketNow.send(data);
+    else this.hold(message);
     return message;
+  }
+
+  /** Keep `message` for the new connection; the oldest held beyond `maxQueued` is dropped. */
+  private hold(message: Message<R>): void {
+    for (const dropped of this.held.add(message)) {
+      this.waiting.delete(dropped.wireId);
+      dropped.reject(new MessageDropped(dropped.id, this.held.max));
+    }
   }
 
   /** `body` with its id, as sent; throws an `EncodeError` for a non-finite number
@@ -335,7 +329,7 @@ export class Stream<R = FrameResult> {
   private decode(data: unknown): Envelope | UnexpectedAnswer {
     let envelope: unknown;
     try {
-      envelope = typeof data === "string" ? JSON.parse(data) : decode(data as ArrayBuffer);
+      envelope = typeof data === "string" ? JSON.parse(data) : messagePackCodec().decode(data as ArrayBuffer);
     } catch (error) {
       const reason = error instanceof Error ? error.message : String(error);
       return new UnexpectedAnswer(`an answer that cannot be decoded (${reason})`, null, {}, data);
@@ -436,6 +430,7 @@ export class Stream<R = FrameResult> {
     this.failure = streamClosed(code, reason);
     for (const message of this.waiting.values()) message.reject(this.failure);
     this.waiting.clear();
+    this.held.clear();
   }
 
   private reopen(): void {
@@ -445,6 +440,7 @@ export class Stream<R = FrameResult> {
     this.watch(socket);
     socket.onopen = () => {
       this.reconnects += 1;
+      this.held.clear(); // they go out now, with what had gone out before
       // Every waiting message, in order, as first sent: a server that stored its answer
       // recognises it (same id, same content) and does not solve it twice.
       for (const message of [...this.waiting.values()]) this.resend(socket, message);

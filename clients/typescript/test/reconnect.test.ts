@@ -12,11 +12,8 @@
  */
 
 import assert from "node:assert/strict";
-import { type ChildProcess, execFileSync, spawn } from "node:child_process";
-import { connect } from "node:net";
+import type { ChildProcess } from "node:child_process";
 import { after, describe, test } from "node:test";
-
-import { WebSocketServer, type WebSocket as NodeWebSocket } from "ws";
 
 import {
   Backoff,
@@ -31,7 +28,8 @@ import {
   reconnectPolicy,
   retryAfterMs,
 } from "../src/index.js";
-import { freePort, serverUrl, spawnService, stopServer, waitReady } from "./server.js";
+import { Processes, freePort, hasRedis, serverUrl, stopServer } from "./server.js";
+import { RETRY_AFTER_S, scripted } from "./scripted.js";
 
 after(stopServer); // server.ts's shared server, if a test here started it
 
@@ -120,35 +118,6 @@ describe("reconnect budget", () => {
   });
 });
 
-/** A WebSocket server on 127.0.0.1 that acts on each message as `script` says (for a
- * connection number and a message id: "pong", "drop" the connection, or an error code
- * with `retry_after_s` RETRY_AFTER_S), noting what it saw and when. */
-const RETRY_AFTER_S = 0.3;
-async function scripted(script: (conn: number, id: number) => string) {
-  const server = new WebSocketServer({ host: "127.0.0.1", port: 0 });
-  const seen: [number, number][] = [];
-  const opened: number[] = [];
-  const answeredAt = new Map<number, number>();
-  server.on("connection", (socket: NodeWebSocket) => {
-    const conn = opened.length;
-    opened.push(performance.now());
-    socket.on("message", (data) => {
-      const id = (JSON.parse(String(data)) as { id: number }).id;
-      seen.push([conn, id]);
-      const action = script(conn, id);
-      if (action === "drop") socket.terminate();
-      else if (action === "pong") socket.send(JSON.stringify({ id, type: "pong" }));
-      else {
-        socket.send(JSON.stringify({ id, type: "result", success: false, error: { code: action, message: action, retry_after_s: RETRY_AFTER_S } }));
-        answeredAt.set(conn, performance.now());
-      }
-    });
-  });
-  await new Promise((resolve) => server.once("listening", resolve));
-  const { port } = server.address() as { port: number };
-  return { client: new Client(`http://127.0.0.1:${port}`), seen, opened, answeredAt, close: () => server.close() };
-}
-
 describe("error answers that are part of an outage", () => {
   const quick = { initialDelayMs: 10, maxDelayMs: 50 };
 
@@ -200,49 +169,6 @@ describe("error answers that are part of an outage", () => {
   }
 });
 
-function hasRedis(): boolean {
-  try {
-    execFileSync("redis-server", ["--version"], { stdio: "ignore" });
-    return true;
-  } catch {
-    return false;
-  }
-}
-
-async function waitPort(port: number, limitMs = 10_000): Promise<void> {
-  const deadline = Date.now() + limitMs;
-  while (Date.now() < deadline) {
-    const open = await new Promise<boolean>((resolve) => {
-      const socket = connect(port, "127.0.0.1");
-      socket.once("connect", () => (socket.destroy(), resolve(true)));
-      socket.once("error", () => resolve(false));
-    });
-    if (open) return;
-    await sleep(50);
-  }
-  throw new Error(`nothing listens on 127.0.0.1:${port}`);
-}
-
-/** Every process a test started, stopped when the test ends. */
-class Processes {
-  private all: ChildProcess[] = [];
-
-  add(child: ChildProcess): ChildProcess {
-    this.all.push(child);
-    return child;
-  }
-
-  async service(port: number, env: Record<string, string>): Promise<ChildProcess> {
-    const child = this.add(spawnService(port, env));
-    await waitReady(`http://127.0.0.1:${port}`, child);
-    return child;
-  }
-
-  stop(): void {
-    for (const child of this.all) if (child.exitCode === null && child.signalCode === null) child.kill("SIGKILL");
-  }
-}
-
 /** Kill `child` now, and start a service on `port` RESTART_DELAY_MS later: the time it is ready. */
 async function restartLater(processes: Processes, child: ChildProcess, port: number, env: Record<string, string>): Promise<number> {
   child.kill("SIGKILL");
@@ -288,10 +214,7 @@ describe("a restart slower than the old budget", { timeout: 180_000 }, () => {
     }
     const processes = new Processes();
     try {
-      const redisPort = await freePort();
-      processes.add(spawn("redis-server", ["--port", String(redisPort), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"], { stdio: "ignore" }));
-      await waitPort(redisPort);
-      const env = { IK_REDIS_URL: `redis://127.0.0.1:${redisPort}/0` };
+      const env = { IK_REDIS_URL: await processes.redis() };
       const port = await freePort();
       const first = await processes.service(port, env);
       const client = new Client(`http://127.0.0.1:${port}`);

@@ -5,8 +5,8 @@
  * polled on /readyz (bounded) and stopped when the tests end.
  */
 
-import { spawn, type ChildProcess } from "node:child_process";
-import { createServer } from "node:net";
+import { type ChildProcess, execFileSync, spawn } from "node:child_process";
+import { connect, createServer } from "node:net";
 import { fileURLToPath } from "node:url";
 
 const READY_TIMEOUT_MS = 240_000;
@@ -71,4 +71,58 @@ export function serverUrl(): Promise<string> {
     return base;
   })();
   return started;
+}
+
+/** Whether a `redis-server` can be started here. */
+export function hasRedis(): boolean {
+  try {
+    execFileSync("redis-server", ["--version"], { stdio: "ignore" });
+    return true;
+  } catch {
+    return false;
+  }
+}
+
+/** Wait (bounded) until something listens on 127.0.0.1:`port`. */
+export async function waitPort(port: number, limitMs = 10_000): Promise<void> {
+  const deadline = Date.now() + limitMs;
+  while (Date.now() < deadline) {
+    const open = await new Promise<boolean>((resolve) => {
+      const socket = connect(port, "127.0.0.1");
+      socket.once("connect", () => (socket.destroy(), resolve(true)));
+      socket.once("error", () => resolve(false));
+    });
+    if (open) return;
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  throw new Error(`nothing listens on 127.0.0.1:${port}`);
+}
+
+/** Every process a test started, stopped when the test ends. */
+export class Processes {
+  private all: ChildProcess[] = [];
+
+  add(child: ChildProcess): ChildProcess {
+    this.all.push(child);
+    return child;
+  }
+
+  /** A `redis-server` on a free 127.0.0.1 port, no persistence: its URL. */
+  async redis(): Promise<string> {
+    const port = await freePort();
+    const args = ["--port", String(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"];
+    this.add(spawn("redis-server", args, { stdio: "ignore" }));
+    await waitPort(port);
+    return `redis://127.0.0.1:${port}/0`;
+  }
+
+  async service(port: number, env: Record<string, string>): Promise<ChildProcess> {
+    const child = this.add(spawnService(port, env));
+    await waitReady(`http://127.0.0.1:${port}`, child);
+    return child;
+  }
+
+  stop(): void {
+    for (const child of this.all) if (child.exitCode === null && child.signalCode === null) child.kill("SIGKILL");
+  }
 }
