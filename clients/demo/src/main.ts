@@ -30,7 +30,7 @@ import {
   RetryLater,
   type SessionCreated,
   type Target,
-} from "../../typescript/src/index.js";
+} from "../../typescript/src/json.js"; // HTTP only here: no MessagePack in this bundle
 import { Character, EFFECTORS, type EffectorName } from "./character.js";
 import { ExampleChain } from "./examples.js";
 import { drawPaths } from "./paths.js";
