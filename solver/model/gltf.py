@@ -17,6 +17,8 @@ What is read:
   - buffers: only checked, never used. A GLB buffer without ``uri`` must fit the BIN
     chunk; a ``data:`` URI must decode (base64) to at least ``byteLength`` bytes; other
     URIs (external files) are not fetched, which is fine: no buffer data is needed.
+  - ``extensionsRequired``: those of meshes, materials, textures and the like are
+    accepted (nothing here reads them); any other is refused (``gltf_container``).
   - nodes: ``name``, ``children``, ``translation``, ``rotation`` (x, y, z, w),
     ``scale`` or ``matrix`` (16 numbers, column-major).
   - skins: ``joints``, ``name``, and ``skeleton`` (range-checked only: a bone's parent
@@ -29,13 +31,18 @@ without a name gets ``node_<index>``; a name shared by several joints becomes
 skin; the nodes between them, and for a root bone the path from the top of the node
 tree (a "Z_UP" node, an "Armature" node), are folded into the bone's ``offset``.
 
-Scale. A rigid chain cannot scale, so a node on these paths may carry a uniform scale
-only (components within ``SCALE_TOLERANCE`` of each other, e.g. the 0.01 of an
+Scale. A rigid chain cannot scale, so a node with a joint below it (the bones with
+children bones, the nodes between them and above the root bone) may carry a uniform
+scale only (components within ``SCALE_TOLERANCE`` of each other, e.g. the 0.01 of an
 exporter's centimetre armature); it is folded exactly into the translations below it:
 a node's translation is multiplied by the product of its ancestors' scales. World
 transforms of bones are then the glTF world matrices with the scale divided out.
 Non-uniform, zero or negative (mirroring) scale, shear, or a projective matrix row on
-these paths is refused. glTF is in metres, Y up, right-handed (spec 3.4).
+these nodes is refused. A bone with no joint below it (a hand's tip, a hidden prop
+bone scaled to 0) scales nothing of the chain: its own scale, whatever it is, is left
+to the engine, which keeps it beside the rotation it is sent (a ``matrix`` there must
+still give a rotation: no mirror, shear or zero column). glTF is in metres, Y up,
+right-handed (spec 3.4).
 
 Errors are ``InvalidModel``. ``joint`` names the part: ``glb``, ``json``, ``asset``,
 ``buffers[i]``, ``nodes[i]`` (with the node's name in parentheses when it has one),
@@ -86,11 +93,18 @@ MATRIX_TOLERANCE = 1e-4  # orthogonality of a node matrix's columns after scale
 
 @dataclass(frozen=True, slots=True)
 class _Local:
-    """A node's rest transform split into its rigid part and a uniform scale."""
+    """A node's rest transform split into its rigid part and its scale, checked only
+    when something below the node is scaled by it (``uniform_scale``)."""
 
     translation: Vector
     rotation: Matrix
-    scale: float
+    scale: Vector  # per axis (a matrix's column norms)
+    part: str
+    field: str  # the member the scale came from: "scale" or "matrix"
+
+    def uniform_scale(self) -> float:
+        """The scale as one number, refused unless uniform and positive."""
+        return _uniform(self.scale, self.part, self.field)
 
 
 def read_gltf(
@@ -332,8 +346,8 @@ def _local(nodes: list[Any], i: int) -> _Local:
             )
         x, y, z, w = r / norm
         rotation = quaternion_to_matrix(np.array([w, x, y, z]))
-    scale = 1.0 if s is None else _uniform(s, part, "scale")
-    return _Local(np.zeros(3) if t is None else t, rotation, scale)
+    scale = np.ones(3) if s is None else s
+    return _Local(np.zeros(3) if t is None else t, rotation, scale, part, "scale")
 
 
 def _from_matrix(values: Vector, part: str) -> _Local:
@@ -351,10 +365,9 @@ def _from_matrix(values: Vector, part: str) -> _Local:
     rotation = a / column_scale
     if not np.allclose(rotation.T @ rotation, np.eye(3), atol=MATRIX_TOLERANCE):
         raise InvalidModel("matrix has shear", joint=part, field="matrix")
-    scale = _uniform(column_scale, part, "matrix")
     # Re-orthonormalise (SVD) so float32 noise does not reach the chain's strict check.
     u, _, vt = np.linalg.svd(rotation)
-    return _Local(m[:3, 3].copy(), u @ vt, scale)
+    return _Local(m[:3, 3].copy(), u @ vt, column_scale, part, "matrix")
 
 
 # -- skeleton --------------------------------------------------------------------
@@ -395,7 +408,7 @@ def _skeleton(
             node = parent[node]
         acc = 1.0 if node < 0 else cumulative[node]
         for k in reversed(path):
-            acc *= local(k).scale
+            acc *= local(k).uniform_scale()
             cumulative[k] = acc
         return 1.0 if parent[i] < 0 else cumulative[parent[i]]
 
@@ -418,7 +431,7 @@ def _skeleton(
                 offset.rotation @ step.translation + offset.translation,
                 offset.rotation @ step.rotation,
             )
-        local(j)  # refuse a bad transform on a leaf bone too
+        local(j)  # refuse a bad transform on a leaf bone too (its scale: see the docstring)
         bones.append(
             Bone(
                 name=names[j],

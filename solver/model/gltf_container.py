@@ -6,12 +6,19 @@
     skipped (spec 4.4.3.1). ``.gltf``: the JSON document itself (bytes or str).
   - JSON: UTF-8 (a BOM is allowed), an object; NaN, Infinity and over-deep nesting are
     refused. ``asset.version`` must be 2.x.
+  - ``extensionsRequired``: an extension a loader must know to read the file correctly
+    (spec 3.12). Those that change only data this reader never reads (meshes,
+    accessors, materials, textures, lights, animations: ``REQUIRED_BUT_UNREAD``, and
+    any ``<VENDOR>_materials_*`` or ``<VENDOR>_texture_*``) are accepted; any other is
+    refused, naming it: it could change the nodes or skins.
   - buffers: only checked, never used. A GLB buffer without ``uri`` must fit the BIN
     chunk; a ``data:`` URI must decode (base64) to at least ``byteLength`` bytes; other
     URIs (external files) are not fetched, which is fine: no buffer data is needed.
+    Another buffer without ``uri`` is a meshopt placeholder (gltfpack's output), allowed
+    when ``EXT_meshopt_compression`` or ``KHR_meshopt_compression`` is required.
 
 Errors are ``InvalidModel`` with ``joint`` ``glb``, ``json``, ``asset`` or
-``buffers[i]`` and ``field`` the member at fault.
+``buffers[i]`` and ``field`` the member at fault (``extensionsRequired`` with ``json``).
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ from __future__ import annotations
 import base64
 import binascii
 import json
+import re
 import struct
 from dataclasses import dataclass
 from typing import Any
@@ -28,6 +36,29 @@ from solver.errors import InvalidModel
 MAX_BYTES = 32_000_000  # a whole .glb or .gltf
 MAX_JSON_BYTES = 8_000_000  # a GLB's JSON chunk (a .gltf is all JSON: MAX_BYTES)
 MAX_BUFFERS = 1024
+
+# Required extensions that change nothing this reader reads (nodes, skins): mesh and
+# buffer-view compression, quantized accessors, instancing of meshes, lights, LODs of
+# meshes, metadata, animation targets. Materials and textures: _UNREAD_FAMILY.
+REQUIRED_BUT_UNREAD = frozenset(
+    {
+        "KHR_draco_mesh_compression",
+        "KHR_mesh_quantization",
+        "EXT_meshopt_compression",
+        "KHR_meshopt_compression",
+        "EXT_mesh_gpu_instancing",
+        "KHR_lights_punctual",
+        "EXT_lights_image_based",
+        "KHR_animation_pointer",
+        "KHR_xmp_json_ld",
+        "KHR_techniques_webgl",
+        "MSFT_lod",
+    }
+)
+_UNREAD_FAMILY = re.compile(r"[A-Z0-9]+_(materials|texture)_\w+")
+# A buffer of these may be a placeholder without uri (the extension's "fallback").
+_MESHOPT = frozenset({"EXT_meshopt_compression", "KHR_meshopt_compression"})
+MAX_EXTENSIONS = 256
 
 _GLB_MAGIC = b"glTF"
 _CHUNK_JSON = 0x4E4F534A
@@ -49,7 +80,8 @@ def read_document(data: bytes | str, *, max_bytes: int, max_json_bytes: int) -> 
     """
     container = _container(data, max_bytes=max_bytes, max_json_bytes=max_json_bytes)
     _check_asset(container.document)
-    _check_buffers(container.document, container)
+    required = _required_extensions(container.document)
+    _check_buffers(container.document, container, placeholders=bool(required & _MESHOPT))
     return container.document
 
 
@@ -167,7 +199,29 @@ def _check_asset(doc: dict[str, Any]) -> None:
         )
 
 
-def _check_buffers(doc: dict[str, Any], container: _Container) -> None:
+def _required_extensions(doc: dict[str, Any]) -> set[str]:
+    """``extensionsRequired``, refused if one of them may change the nodes or skins."""
+    names = json_array(doc, "extensionsRequired", "json", max_len=MAX_EXTENSIONS, what="extensions")
+    if not all(isinstance(n, str) for n in names):
+        raise InvalidModel(
+            "extensionsRequired must be an array of strings",
+            joint="json",
+            field="extensionsRequired",
+        )
+    unknown = [n for n in names if n not in REQUIRED_BUT_UNREAD and not _UNREAD_FAMILY.fullmatch(n)]
+    if unknown:
+        raise InvalidModel(
+            f"the file requires {', '.join(repr(n[:64]) for n in unknown[:5])}, an extension "
+            "this reader does not know: it may change the nodes or skins, so the skeleton "
+            "cannot be read without it (the mesh, material and texture extensions, such as "
+            "KHR_draco_mesh_compression or EXT_meshopt_compression, are accepted)",
+            joint="json",
+            field="extensionsRequired",
+        )
+    return set(names)
+
+
+def _check_buffers(doc: dict[str, Any], container: _Container, *, placeholders: bool) -> None:
     buffers = json_array(doc, "buffers", "json", max_len=MAX_BUFFERS, what="buffers")
     for i, buf in enumerate(buffers):
         part = f"buffers[{i}]"
@@ -181,13 +235,16 @@ def _check_buffers(doc: dict[str, Any], container: _Container) -> None:
                 field="byteLength",
             )
         uri = buf.get("uri")
+        if uri is None and (not container.is_glb or i != 0):
+            if placeholders:  # meshopt's placeholder: never loaded (its spec, "Fallback")
+                continue
+            raise InvalidModel(
+                "only the first buffer of a .glb may omit uri (it is the BIN chunk), or a "
+                "placeholder buffer of a file that requires EXT_meshopt_compression",
+                joint=part,
+                field="uri",
+            )
         if uri is None:
-            if not container.is_glb or i != 0:
-                raise InvalidModel(
-                    "only the first buffer of a .glb may omit uri (it is the BIN chunk)",
-                    joint=part,
-                    field="uri",
-                )
             available = container.bin_length
             if available is None or declared > available:
                 raise InvalidModel(
