@@ -21,7 +21,7 @@ import schemas as S
 from schemas.common import MAX_COORDINATE
 from schemas.errors import ErrorCode
 from solver.errors import InvalidModel
-from solver.model.bvh import read_bvh
+from solver.model.bvh import read_bvh_skeleton
 from solver.model.gltf import read_gltf
 from solver.model.skeleton import (
     BoneSettings,
@@ -136,7 +136,8 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
     cap = settings.max_body_bytes
     if isinstance(spec, S.BvhChain):
         try:
-            return read_bvh(spec.bvh, unit_m=spec.unit_m, max_bytes=cap).skeleton
+            # The hierarchy only: the chain needs no clip (its MOTION block is not read).
+            return read_bvh_skeleton(spec.bvh, unit_m=spec.unit_m, max_bytes=cap)
         except InvalidModel as e:
             raise _file_problem(e, "chain.bvh") from None
     if spec.glb_base64 is not None:

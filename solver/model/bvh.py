@@ -25,6 +25,9 @@ reads the same order as its reversed extrinsic Euler). Rotation values are degre
 converted to radians; lengths are the file's unit times ``unit_m`` (BVH states no unit:
 0.01 for centimetres).
 
+``read_bvh`` reads both parts; ``read_bvh_skeleton`` the hierarchy alone (what a chain
+needs: the MOTION block is not parsed, nor refused).
+
 Bones: every ROOT and JOINT, named as in the file, with ``rotation_order`` its rotation
 channels' axes (so by default it moves about exactly those); every End Site a fixed bone
 named ``<parent>_end`` (a fingertip or toe tip to put an effector on).
@@ -104,13 +107,7 @@ def read_bvh(
     Raises:
         InvalidModel: see the module docstring.
     """
-    if not isinstance(text, str):
-        raise InvalidModel(f"BVH must be text (str), got {type(text).__name__}", joint="bvh")
-    if len(text) > max_bytes or len(text.encode("utf-8", "surrogatepass")) > max_bytes:
-        raise InvalidModel(f"BVH is larger than {max_bytes} bytes", joint="bvh")
-    if not (isinstance(unit_m, int | float) and math.isfinite(unit_m) and unit_m > 0.0):
-        raise InvalidModel(f"unit_m must be finite and > 0, got {unit_m!r}", joint="bvh")
-    lines = text.removeprefix("\ufeff").replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    lines = _lines(text, unit_m, max_bytes)
     nodes, motion_line = _hierarchy(lines, max_bones=max_bones, max_depth=max_depth)
     skeleton = Skeleton(name, tuple(_bone(node, unit_m) for node in nodes))
     motion = None
@@ -118,6 +115,39 @@ def read_bvh(
         layout = tuple((n.name, c) for n in nodes for c in n.channels)
         motion = _motion(lines, motion_line, layout, unit_m, max_frames)
     return BvhFile(skeleton, motion)
+
+
+def read_bvh_skeleton(
+    text: str,
+    *,
+    unit_m: float = 1.0,
+    name: str = "bvh",
+    max_bytes: int = MAX_BYTES,
+    max_bones: int = MAX_BONES,
+    max_depth: int = MAX_DEPTH,
+) -> Skeleton:
+    """The skeleton of a BVH document, its MOTION block not read: for a caller that
+    builds a chain and needs no clip (the service). A motion block that ``read_bvh``
+    refuses (``Frames`` off by one, a comma decimal) does not stop the skeleton, and a
+    long clip costs no parsing.
+
+    Raises:
+        InvalidModel: as ``read_bvh``, for the hierarchy and the arguments.
+    """
+    lines = _lines(text, unit_m, max_bytes)
+    nodes, _ = _hierarchy(lines, max_bones=max_bones, max_depth=max_depth)
+    return Skeleton(name, tuple(_bone(node, unit_m) for node in nodes))
+
+
+def _lines(text: str, unit_m: float, max_bytes: int) -> list[str]:
+    """The text's lines (any line breaks), after the checks on the arguments."""
+    if not isinstance(text, str):
+        raise InvalidModel(f"BVH must be text (str), got {type(text).__name__}", joint="bvh")
+    if len(text) > max_bytes or len(text.encode("utf-8", "surrogatepass")) > max_bytes:
+        raise InvalidModel(f"BVH is larger than {max_bytes} bytes", joint="bvh")
+    if not (isinstance(unit_m, int | float) and math.isfinite(unit_m) and unit_m > 0.0):
+        raise InvalidModel(f"unit_m must be finite and > 0, got {unit_m!r}", joint="bvh")
+    return text.removeprefix("\ufeff").replace("\r\n", "\n").replace("\r", "\n").split("\n")
 
 
 def _bone(node: _Node, unit_m: float) -> Bone:
