@@ -381,6 +381,15 @@ def chain_from_skeleton(skeleton: Skeleton, settings: SkeletonSettings) -> Skele
                 field="free_root",
             )
         free_root_bone = roots[0].name
+        # Its translations are links <bone>.tx, .ty, .tz: a bone of that name would clash.
+        clash = [n for n in (f"{free_root_bone}.t{a}" for a in "xyz") if n in known]
+        if clash:
+            raise InvalidModel(
+                f"the free root's translations are named {free_root_bone}.tx, .ty, .tz, "
+                f"and a bone is named {clash[0]!r}: rename that bone to use free_root",
+                joint=free_root_bone,
+                field="free_root",
+            )
 
     joints: list[Joint] = []
     no_settings = BoneSettings()

@@ -155,3 +155,18 @@ def test_a_bvh_whose_motion_block_is_sloppy_imports(client: TestClient, motion: 
     r = client.post("/v1/sessions", json={"chain": broken})
     assert r.status_code == 422
     assert r.json()["field"] == "chain.bvh"
+
+
+def test_a_bone_named_like_the_free_roots_translation_is_named_in_the_error(
+    client: TestClient,
+) -> None:
+    """A free root's translations are links ``<root>.tx/.ty/.tz``: a bone called so
+    was reported as ``chain.effectors[0]: duplicate joint name``."""
+    nodes = [{"name": "Hips", "children": [1]}, {"name": "Hips.ty", "translation": [0, 1, 0]}]
+    doc = {"asset": {"version": "2.0"}, "nodes": nodes, "skins": [{"joints": [0, 1]}]}
+    chain = {"format": "gltf", "gltf": doc, "effectors": [{"bone": "Hips.ty"}]}
+    r = client.post("/v1/sessions", json={"chain": {**chain, "free_root": {}}})
+    assert r.status_code == 422, r.text
+    assert r.json()["field"] == "chain.free_root"
+    assert "'Hips.ty'" in r.json()["detail"]
+    create(client, chain)  # without a free root there is no clash
