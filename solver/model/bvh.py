@@ -8,7 +8,7 @@ Grammar read (line breaks LF, CRLF or CR, mixed; any whitespace between tokens):
       OFFSET x y z
       CHANNELS n <channel>...      X/Y/Z position, X/Y/Z rotation, any subset, any order
       JOINT <name> { ... }         (nested)
-      End Site { OFFSET x y z }
+      End Site { OFFSET x y z }   ("End" and "Site" in any case; a name after them ignored)
     }
     MOTION                 (optional)
     Frames: N
@@ -196,7 +196,8 @@ def _hierarchy(
         where = f"line {line}"
         keyword = tokens[0]
         current = stack[-1] if stack else None
-        if keyword in ("ROOT", "JOINT") or _end_site(tokens):
+        end = _end_site(tokens)
+        if keyword in ("ROOT", "JOINT") or end:
             if (keyword == "ROOT") != (current is None):
                 raise InvalidModel(
                     "ROOT only at the top level, JOINT and End Site only inside a joint",
@@ -205,14 +206,14 @@ def _hierarchy(
                 )
             if current is not None and current.end_site:
                 raise InvalidModel("an End Site has no children", joint=current.name, field=where)
-            rest = tokens[2:] if keyword == "End" else tokens[1:]
+            rest = tokens[2:] if end else tokens[1:]
             brace = bool(rest) and rest[-1] == "{"
             if brace:
                 rest = rest[:-1]
-            if keyword == "End":
+            if end:
                 assert current is not None
-                if rest:
-                    raise InvalidModel("End Site takes no name", joint=current.name, field=where)
+                # A name after "End Site" (some exporters write one) is ignored, as
+                # Blender's importer does: the bone is always <parent>_end.
                 name = f"{current.name}_end"
             else:
                 name = " ".join(rest)
@@ -234,7 +235,7 @@ def _hierarchy(
                 brace_line, brace_tokens = stream.next(name)
                 if brace_tokens != ["{"]:
                     raise InvalidModel("expected '{'", joint=name, field=f"line {brace_line}")
-            node = _Node(name, current.name if current else None, line, end_site=keyword == "End")
+            node = _Node(name, current.name if current else None, line, end_site=end)
             names.add(name)
             nodes.append(node)
             stack.append(node)
@@ -269,7 +270,7 @@ def _hierarchy(
 
 
 def _end_site(tokens: list[str]) -> bool:
-    return tokens[0] == "End" and len(tokens) > 1 and tokens[1].lower() == "site"
+    return tokens[0].lower() == "end" and len(tokens) > 1 and tokens[1].lower() == "site"
 
 
 def _channels(node: _Node, tokens: list[str], where: str) -> tuple[Channel, ...]:

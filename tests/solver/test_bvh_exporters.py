@@ -105,3 +105,17 @@ def test_the_skeleton_alone_does_not_read_a_sloppy_motion_block(frames: str, ref
     # The hierarchy is still checked.
     with pytest.raises(InvalidModel, match="CHANNELS declares 7"):
         read_bvh_skeleton(text.replace("CHANNELS 6", "CHANNELS 7", 1))
+
+
+@pytest.mark.parametrize("end_site", ["End Site Thigh_Tip", "end site", "End Site Tip {"])
+def test_end_site_with_a_name_or_in_lower_case(end_site: str) -> None:
+    """Some exporters name the End Site (Blender's importer ignores the name): the bone
+    is still ``<parent>_end``, at its OFFSET."""
+    text = _BVH.replace("{frames}", _FRAMES)
+    if end_site.endswith("{"):
+        text = text.replace("\t\tEnd Site\r\n\t\t{\r\n", f"\t\t{end_site}\r\n", 1)
+    else:
+        text = text.replace("End Site", end_site, 1)
+    skeleton = read_bvh(text, unit_m=0.01).skeleton
+    assert skeleton.names == ("Hips", "Thigh", "Thigh_end")
+    assert_allclose(skeleton.bone("Thigh_end").rest.translation, [0, -0.4, 0], rtol=0, atol=0)
