@@ -99,7 +99,15 @@ def _float32_scale(doc: dict[str, Any]) -> None:
     doc["nodes"][0]["scale"] = [1.0000001, 0.99999994, 1.0]
 
 
+def _scenes_and_skins(doc: dict[str, Any]) -> None:
+    # No default scene, an empty scene first, the hand and arm in a second skin too.
+    del doc["scene"]
+    doc["scenes"].insert(0, {"nodes": []})
+    doc["skins"].append({"name": "gloves", "joints": [5, 4]})
+
+
 VARIANTS = {
+    "no_scene_and_a_joint_in_two_skins": (_scenes_and_skins, 1.0),
     "trs": (lambda doc: None, 1.0),
     "matrix": (_as_matrices, 1.0),
     "mixamo_armature": (_mixamo, 100.0),
