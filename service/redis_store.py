@@ -169,9 +169,9 @@ class RedisSessionStore(SessionStore):
     @staticmethod
     def _record(session: Session) -> StreamRecord:
         """The session's stream state now, copied (call it under the session's lock)."""
-        q, h, answered = session.solver.stream_state()
+        q, h, solved = session.solver.stream_state()
         h = None if h is None else h.copy()
-        return StreamRecord(q.copy(), h, session.rest, session.frames, session.solved, answered)
+        return StreamRecord(q.copy(), h, session.rest, session.frames, session.solved, solved)
 
     # -- the interface ---------------------------------------------------------------
     async def add(self, session: Session) -> None:
@@ -286,7 +286,8 @@ class RedisSessionStore(SessionStore):
         record = unpack_stream(stored[b"state"], session.view.chain.n_dof)
         if record.rest is not None:
             session.set_pose(record.rest)
-        session.solver.restore(StreamState(record.q, record.inverse_hessian, record.answered))
+        state = StreamState(record.q, record.inverse_hessian, record.solved_since_pose)
+        session.solver.restore(state)
         session.frames, session.solved = record.frames, record.solved
         session.version = int(stored[b"v"])
         followers = session.view.chain.followers

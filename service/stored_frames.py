@@ -84,8 +84,8 @@ class StreamRecord:
     rest: np.ndarray | None  # None: the middle of the limits
     frames: int
     solved: int
-    # A frame answered since the pose was set (solver.ik.StreamState.answered).
-    answered: bool = True
+    # A frame solved since the pose was set (solver.ik.StreamState.solved).
+    solved_since_pose: bool = True
 
 
 def _array(a: np.ndarray | None) -> bytes | None:
@@ -107,7 +107,7 @@ def pack_stream(record: StreamRecord) -> bytes:
                 _array(record.rest),
                 record.frames,
                 record.solved,
-                record.answered,
+                record.solved_since_pose,
             ]
         )
     )
@@ -116,12 +116,12 @@ def pack_stream(record: StreamRecord) -> bytes:
 def unpack_stream(data: bytes, n_dof: int) -> StreamRecord:
     values = msgpack.unpackb(data)
     q, h, rest, frames, solved = values[:5]
-    # A record written before ``answered`` was stored holds five values.
-    answered = bool(values[5]) if len(values) > 5 else True
+    # A record written before the sixth value was stored holds five.
+    since_pose = bool(values[5]) if len(values) > 5 else True
     q_arr = _unarray(q, (n_dof,))
     assert q_arr is not None
     return StreamRecord(
-        q_arr, _unarray(h, (n_dof, n_dof)), _unarray(rest, (n_dof,)), frames, solved, answered
+        q_arr, _unarray(h, (n_dof, n_dof)), _unarray(rest, (n_dof,)), frames, solved, since_pose
     )
 
 

@@ -71,12 +71,12 @@ IKData = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.nd
 
 class StreamState(NamedTuple):
     """What ``track`` carries from frame to frame: the pose, the BFGS matrix when
-    ``IKOptions.carry_hessian`` is on (else None), and whether a frame has been answered
-    since ``set_pose`` (else the next is a stream's first: solved as REACH would)."""
+    ``IKOptions.carry_hessian`` is on (else None), and whether a frame has been solved
+    since ``set_pose`` (else the next has no answer to stay near: solved as REACH)."""
 
     q: Vector
     inverse_hessian: Matrix | None
-    answered: bool = True
+    solved: bool = True
 
 
 _tuple_new = tuple.__new__
@@ -131,7 +131,7 @@ class IKSolver:
         self._largest_step: Callable[..., float] = largest_step
         self._narrow_bounds: Callable[..., None] = narrow_bounds
         self.last_step: FrameStep = NO_STEP  # how far the last ``track`` frame moved
-        self._answered = False  # has ``track`` answered since the pose was set?
+        self._solved = False  # has ``track`` solved a frame since the pose was set?
         self._split = LimbSplit(chain, lambda limb: IKSolver(limb, self.options, seed=seed))
         self._reach = ReachBounds(chain)  # a target beyond it: not_reached, no global search
 
@@ -205,8 +205,8 @@ class IKSolver:
 
         The pose (and, with ``carry_hessian``, the BFGS matrix) carries over; the
         posture pull, if any, is towards the previous pose. ``options.continuity``: what
-        a frame whose target is not reachable nearby does (``continuity``; the first
-        after ``set_pose`` is solved as under REACH); ``last_step``: how far it moved.
+        a frame whose target is not reachable nearby does (``continuity``; until one is
+        solved after ``set_pose``, as under REACH); ``last_step``: how far it moved.
         ``targets`` may be a ``TargetRows`` (rows packed by the caller: loaded without
         building a ``Target`` each).
         """
@@ -217,8 +217,8 @@ class IKSolver:
         step = float(opts.null_space_step_rad)
         # ``q`` is public: check it as a seed (length, dtype, layout) every frame.
         q0 = self.check_seed(self.q)
-        # A stream's first frame (after set_pose) has no answer to stay near: as REACH.
-        smooth = opts.continuity is Continuity.SMOOTH and self._answered
+        # No solved answer to stay near (a stream's first frame, or all missed so far): REACH.
+        smooth = opts.continuity is Continuity.SMOOTH and self._solved
         box = float(opts.max_joint_step_rad) if smooth else 0.0
         fallback = not smooth and opts.global_fallback and math.isfinite(opts.restart_radius_rad)
         budget = opts.time_budget_us
@@ -234,7 +234,7 @@ class IKSolver:
                     result = retry
         result = self._reach.judged(result, targets, opts)
         self.q = result.q.copy()
-        self._answered = True
+        self._solved = self._solved or result.success
         # A copy: the result's block is the caller's to keep (and to write to).
         self._h = result.inverse_hessian.copy() if opts.carry_hessian else None
         largest = self._largest_step(result.q, q0)
@@ -255,7 +255,7 @@ class IKSolver:
         self._dd[DD_REST] = self.q
         self._h = None
         self.last_step = NO_STEP
-        self._answered = False
+        self._solved = False
 
     def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:
         """Pose errors of q against targets with the solver's tolerances (no solving)."""
@@ -338,13 +338,13 @@ class IKSolver:
 
     def stream_state(self) -> StreamState:
         """The pose and carried BFGS matrix the next ``track`` starts from."""
-        return StreamState(self.q, self._h, self._answered)
+        return StreamState(self.q, self._h, self._solved)
 
     def restore(self, state: StreamState) -> None:
         """Continue a stream from ``state`` (the rest pose is kept: see ``set_pose``)."""
         self.q = state.q
         self._h = state.inverse_hessian
-        self._answered = state.answered
+        self._solved = state.solved
 
     # -- internals -------------------------------------------------------------
     def _frame(
@@ -444,7 +444,7 @@ class IKSolver:
             if self._shaper is None:
                 self._shaper = PoleShaper(self.chain, MISC_SIZE)
             # A stream's later frame carries on the swing of the one before it.
-            first = not (stream and self._answered)
+            first = not (stream and self._solved)
             cap = SHAPING_FIRST_MAX_ITER if first else SHAPING_MAX_ITER
             solved = self._shaper.solve(args, task.poles, usual, cap)
         else:

@@ -84,6 +84,28 @@ def test_the_first_frame_after_set_pose_has_no_step_limit() -> None:
     assert solver.last_step.jumped
 
 
+def test_smooth_holds_no_step_limit_until_a_frame_is_solved() -> None:
+    # The first target is out of reach (2 m on a 1 m dial): the closest pose, pointing
+    # at it from far away, is no answer to stay near.
+    solver = IKSolver(dial(), SMOOTH)
+    solver.set_pose(np.array([2.9]))
+    far = solver.track([Target(effector="hand", position=np.array([2.0, 0.0, 0.0]))])
+    assert far.status is IKStatus.NOT_REACHED
+    assert far.q[0] == pytest.approx(0.0, abs=1e-3)
+    # The next target needs a 2.9 rad turn from there: solved, and said to jump.
+    r = solver.track(at_angle(-2.9))
+    assert r.status is IKStatus.SOLVED
+    assert r.q[0] == pytest.approx(-2.9, abs=1e-3)
+    assert solver.last_step.jumped
+    # Solved once: from now on the stream keeps to the step limit.
+    r = solver.track(at_angle(2.9))
+    assert r.status is IKStatus.NOT_REACHED
+    assert solver.last_step.largest_rad <= 0.1 + 1e-9
+    assert not solver.last_step.jumped
+    # And the state carried between workers says so.
+    assert solver.stream_state().solved
+
+
 def test_a_small_step_is_no_jump_under_either_policy() -> None:
     for options in (SMOOTH, REACH):
         solver = IKSolver(dial(), options)
