@@ -96,8 +96,9 @@ class _FrameOutcome(StrictModel):
         "(a planned clip: from the frame before) [rad] or [m]; null for one-shot solves"
     )
     jumped: bool = Field(
-        description="`largest_step_rad` is over the session's `max_joint_step_rad` (never "
-        "under `continuity: smooth`)"
+        description="`largest_step_rad` is over the session's `max_joint_step_rad` (under "
+        "`continuity: smooth` only on frames before the first one solved after the pose "
+        "was set, which are solved without the step limit)"
     )
     bones: BonesOut | None = Field(
         default=None,
