@@ -32,6 +32,7 @@ from .stored_frames import StoredAnswer
 # shared store): the session is reloaded each time, so more than one retry means the
 # session is being fought over by several streams at once.
 STALE_RETRIES = 3
+_tuple_new = tuple.__new__
 
 
 def token_digest(token: str) -> bytes:
@@ -104,7 +105,9 @@ class Session:
 
     def mark(self) -> StreamMark:
         """Where the stream stands now (pose, carried BFGS matrix, counters)."""
-        return StreamMark(self.solver.stream_state(), self.frames, self.solved)
+        # tuple.__new__: the NamedTuple's own __new__ is Python code (a batch marks
+        # each of its sessions).
+        return _tuple_new(StreamMark, (self.solver.stream_state(), self.frames, self.solved))
 
     def rewind(self, mark: StreamMark) -> None:
         """Undo the frames solved since ``mark`` (answered to nobody: their request was

@@ -73,7 +73,10 @@ def result_dict(
                 "within_tolerance": (p is None or p <= tol_p) and (e is None or e <= tol_r),
             }
         )
-    joints = dict(zip(layout.dof_names, values, strict=True))
+    # zip without a keyword: the layout and q come from the same solver, so their lengths
+    # agree, and any keyword (strict=True or False alike) took zip's slower call, ~0.3 us
+    # of a panda answer's ~2 (timeit, interleaved).
+    joints = dict(zip(layout.dof_names, values))  # noqa: B905
     followers = layout.followers
     if followers.names:  # mimic joints: by name only, not in q
         joints.update(zip(followers.names, followers.values(q).tolist(), strict=True))

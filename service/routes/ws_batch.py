@@ -130,7 +130,7 @@ def _known_entry(raw: Any, tokens: SessionTokens) -> batch.Entry | None:
     if session is None:
         return None
     targets = convert.fast_targets(raw.get("targets"), session.view)
-    return None if targets is None else batch.Entry(session, frame_id, targets)
+    return None if targets is None else batch.new_entry(session, frame_id, targets)
 
 
 async def _entry(
@@ -144,7 +144,7 @@ async def _entry(
             session = await tokens.open(store, session_id, token)
             targets = convert.fast_targets(raw.get("targets"), session.view)
             if targets is not None:
-                return batch.Entry(session, frame_id, targets)
+                return batch.new_entry(session, frame_id, targets)
     if binary:
         frame = _ENTRY.validate_python(raw)
     else:  # the schema's JSON mode, as for a whole text message (ws.py decode)
