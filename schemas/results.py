@@ -97,8 +97,8 @@ class _FrameOutcome(StrictModel):
     )
     jumped: bool = Field(
         description="`largest_step_rad` is over the session's `max_joint_step_rad` (under "
-        "`continuity: smooth` only on frames before the first one solved after the pose "
-        "was set, which are solved without the step limit)"
+        "`continuity: smooth` only on the frames that open a stream, solved without the "
+        "step limit: see the option `continuity`)"
     )
     bones: BonesOut | None = Field(
         default=None,

@@ -66,9 +66,11 @@ _OPTION_FIELDS: dict[str, dict[str, Any]] = {
         "description": "What a session frame does when its target cannot be reached near "
         "the previous answer: `smooth` never moves a joint more than `max_joint_step_rad` "
         "from the previous answer (such a frame answers `not_reached` with the closest pose "
-        "inside that step), once a frame has been solved since the pose was set (until "
-        "then frames are solved as under `reach`); `reach` solves every frame, jumping to "
-        "another branch if it must (the result says `jumped`). One-shot solves ignore it",
+        "inside that step), once the stream has an answer to stay near: a frame solved "
+        "since the pose was set, one whose target is beyond reach, or the 10th missed in a "
+        "row (until then frames are solved as under `reach`); `reach` solves every frame, "
+        "jumping to another branch if it must (the result says `jumped`). One-shot solves "
+        "ignore it",
     },
     "max_joint_step_rad": {
         "gt": 0.0,

@@ -286,7 +286,7 @@ class RedisSessionStore(SessionStore):
         record = unpack_stream(stored[b"state"], session.view.chain.n_dof)
         if record.rest is not None:
             session.set_pose(record.rest)
-        state = StreamState(record.q, record.inverse_hessian, record.solved_since_pose)
+        state = StreamState(record.q, record.inverse_hessian, record.anchored)
         session.solver.restore(state)
         session.frames, session.solved = record.frames, record.solved
         session.version = int(stored[b"v"])

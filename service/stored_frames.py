@@ -84,8 +84,8 @@ class StreamRecord:
     rest: np.ndarray | None  # None: the middle of the limits
     frames: int
     solved: int
-    # A frame solved since the pose was set (solver.ik.StreamState.solved).
-    solved_since_pose: bool = True
+    # The stream has an answer to stay near (solver.ik.StreamState.anchored).
+    anchored: bool = True
 
 
 def _array(a: np.ndarray | None) -> bytes | None:
@@ -107,7 +107,7 @@ def pack_stream(record: StreamRecord) -> bytes:
                 _array(record.rest),
                 record.frames,
                 record.solved,
-                record.solved_since_pose,
+                record.anchored,
             ]
         )
     )
@@ -117,11 +117,11 @@ def unpack_stream(data: bytes, n_dof: int) -> StreamRecord:
     values = msgpack.unpackb(data)
     q, h, rest, frames, solved = values[:5]
     # A record written before the sixth value was stored holds five.
-    since_pose = bool(values[5]) if len(values) > 5 else True
+    anchored = bool(values[5]) if len(values) > 5 else True
     q_arr = _unarray(q, (n_dof,))
     assert q_arr is not None
     return StreamRecord(
-        q_arr, _unarray(h, (n_dof, n_dof)), _unarray(rest, (n_dof,)), frames, solved, since_pose
+        q_arr, _unarray(h, (n_dof, n_dof)), _unarray(rest, (n_dof,)), frames, solved, anchored
     )
 
 

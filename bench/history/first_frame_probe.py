@@ -41,7 +41,7 @@ for i in range(sessions):
         if r.success:
             continue
         if label == "before":
-            solver._solved = True  # any first answer, missed or not, was one to stay near
+            solver._anchored = True  # any first answer, missed or not, was one to stay near
         k = 1
         while not r.success and k < 30:
             r = solver.track(target)

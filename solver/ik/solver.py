@@ -71,12 +71,12 @@ IKData = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.nd
 
 class StreamState(NamedTuple):
     """What ``track`` carries from frame to frame: the pose, the BFGS matrix when
-    ``IKOptions.carry_hessian`` is on (else None), and whether a frame has been solved
-    since ``set_pose`` (else the next has no answer to stay near: solved as REACH)."""
+    ``IKOptions.carry_hessian`` is on (else None), and whether the stream has an answer
+    to stay near since ``set_pose`` (else its frames are as REACH: ``_MISSES_UNBOXED``)."""
 
     q: Vector
     inverse_hessian: Matrix | None
-    solved: bool = True
+    anchored: bool = True
 
 
 _tuple_new = tuple.__new__
@@ -131,7 +131,8 @@ class IKSolver:
         self._largest_step: Callable[..., float] = largest_step
         self._narrow_bounds: Callable[..., None] = narrow_bounds
         self.last_step: FrameStep = NO_STEP  # how far the last ``track`` frame moved
-        self._solved = False  # has ``track`` solved a frame since the pose was set?
+        self._anchored = False  # an answer to stay near since the pose was set?
+        self._misses = 0  # frames missed since the pose was set, until anchored
         self._split = LimbSplit(chain, lambda limb: IKSolver(limb, self.options, seed=seed))
         self._reach = ReachBounds(chain)  # a target beyond it: not_reached, no global search
 
@@ -217,8 +218,8 @@ class IKSolver:
         step = float(opts.null_space_step_rad)
         # ``q`` is public: check it as a seed (length, dtype, layout) every frame.
         q0 = self.check_seed(self.q)
-        # No solved answer to stay near (a stream's first frame, or all missed so far): REACH.
-        smooth = opts.continuity is Continuity.SMOOTH and self._solved
+        # No answer to stay near (a stream's first frame, or all missed so far): REACH.
+        smooth = opts.continuity is Continuity.SMOOTH and self._anchored
         box = float(opts.max_joint_step_rad) if smooth else 0.0
         fallback = not smooth and opts.global_fallback and math.isfinite(opts.restart_radius_rad)
         budget = opts.time_budget_us
@@ -234,7 +235,10 @@ class IKSolver:
                     result = retry
         result = self._reach.judged(result, targets, opts)
         self.q = result.q.copy()
-        self._solved = self._solved or result.success
+        if not self._anchored:  # is this an answer to stay near? (_MISSES_UNBOXED)
+            self._misses += 1
+            self._anchored = result.success or self._misses >= _MISSES_UNBOXED
+            self._anchored = self._anchored or self._reach.beyond(targets, opts)
         # A copy: the result's block is the caller's to keep (and to write to).
         self._h = result.inverse_hessian.copy() if opts.carry_hessian else None
         largest = self._largest_step(result.q, q0)
@@ -255,7 +259,7 @@ class IKSolver:
         self._dd[DD_REST] = self.q
         self._h = None
         self.last_step = NO_STEP
-        self._solved = False
+        self._anchored, self._misses = False, 0
 
     def errors_at(self, q: Vector, targets: Sequence[Target]) -> tuple[EffectorError, ...]:
         """Pose errors of q against targets with the solver's tolerances (no solving)."""
@@ -338,13 +342,13 @@ class IKSolver:
 
     def stream_state(self) -> StreamState:
         """The pose and carried BFGS matrix the next ``track`` starts from."""
-        return StreamState(self.q, self._h, self._solved)
+        return StreamState(self.q, self._h, self._anchored)
 
     def restore(self, state: StreamState) -> None:
         """Continue a stream from ``state`` (the rest pose is kept: see ``set_pose``)."""
         self.q = state.q
         self._h = state.inverse_hessian
-        self._solved = state.solved
+        self._anchored, self._misses = state.anchored, 0
 
     # -- internals -------------------------------------------------------------
     def _frame(
@@ -402,18 +406,9 @@ class IKSolver:
             bad, measure = report_only(self._data, q0, out)
             raise_bad_target(self.chain, bad)
             ok = measure <= 1.0
-            return IKResult(
-                q0.copy(),
-                IKStatus.SOLVED if ok else IKStatus.NOT_REACHED,
-                Termination.GOAL_REACHED if ok else Termination.GTOL,
-                0,
-                0,
-                0,
-                0,
-                0.0,
-                out,
-                packed.layout,
-            )
+            judged = IKStatus.SOLVED if ok else IKStatus.NOT_REACHED
+            why = Termination.GOAL_REACHED if ok else Termination.GTOL
+            return IKResult(q0.copy(), judged, why, 0, 0, 0, 0, 0.0, out, packed.layout)
         if h0 is None:
             h0 = self._identity
         elif not (type(h0) is np.ndarray and h0.dtype == _F64 and h0.flags.carray):
@@ -444,7 +439,7 @@ class IKSolver:
             if self._shaper is None:
                 self._shaper = PoleShaper(self.chain, MISC_SIZE)
             # A stream's later frame carries on the swing of the one before it.
-            first = not (stream and self._solved)
+            first = not (stream and self._anchored)
             cap = SHAPING_FIRST_MAX_ITER if first else SHAPING_MAX_ITER
             solved = self._shaper.solve(args, task.poles, usual, cap)
         else:
@@ -473,6 +468,11 @@ class IKSolver:
 
 
 _REGISTERED = False
+# Under SMOOTH, frames are solved as under REACH until one is solved after set_pose,
+# at most this many: a missed frame whose target is beyond reach (its closest pose
+# points at it), or the tenth missed in a row, is an answer to stay near (a target that
+# stays out of reach keeps the step limit).
+_MISSES_UNBOXED = 10
 # ``track``'s global fallback samples a full turn either side of the seed. Not inf: the
 # optimizer samples an unbounded side within 10 x |seed| (PR2's wrist went to 20,000 rad).
 _GLOBAL_RADIUS = 2.0 * math.pi

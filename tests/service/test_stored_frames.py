@@ -180,9 +180,9 @@ def test_a_stream_record_keeps_whether_a_frame_was_answered() -> None:
     answered (a rolling deploy reads the old workers' records)."""
     q = np.arange(3, dtype=np.float64)
     fresh = unpack_stream(pack_stream(StreamRecord(q, None, None, 0, 0, False)), 3)
-    assert fresh.solved_since_pose is False and np.array_equal(fresh.q, q)
+    assert fresh.anchored is False and np.array_equal(fresh.q, q)
     old = msgpack.packb([q.tobytes(), None, None, 4, 4])
-    assert unpack_stream(old, 3).solved_since_pose is True
+    assert unpack_stream(old, 3).anchored is True
 
 
 def test_an_id_listed_twice_is_as_old_as_its_last_place() -> None:

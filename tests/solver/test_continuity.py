@@ -85,25 +85,60 @@ def test_the_first_frame_after_set_pose_has_no_step_limit() -> None:
 
 
 def test_smooth_holds_no_step_limit_until_a_frame_is_solved() -> None:
-    # The first target is out of reach (2 m on a 1 m dial): the closest pose, pointing
-    # at it from far away, is no answer to stay near.
+    # The first frame misses a reachable target (one iteration is not enough to turn
+    # 2.9 rad): its answer reached nothing, so it is no pose to stay near.
     solver = IKSolver(dial(), SMOOTH)
-    solver.set_pose(np.array([2.9]))
-    far = solver.track([Target(effector="hand", position=np.array([2.0, 0.0, 0.0]))])
-    assert far.status is IKStatus.NOT_REACHED
-    assert far.q[0] == pytest.approx(0.0, abs=1e-3)
-    # The next target needs a 2.9 rad turn from there: solved, and said to jump.
+    solver.set_pose(np.array([0.0]))
+    short = solver.track(at_angle(2.9), options=replace(SMOOTH, max_iter=1, max_restarts=0))
+    assert not short.success
+    assert not solver.stream_state().anchored
+    # The next target needs a turn of over 2 rad from there: solved, and said to jump.
     r = solver.track(at_angle(-2.9))
     assert r.status is IKStatus.SOLVED
     assert r.q[0] == pytest.approx(-2.9, abs=1e-3)
     assert solver.last_step.jumped
     # Solved once: from now on the stream keeps to the step limit.
+    assert solver.stream_state().anchored
     r = solver.track(at_angle(2.9))
     assert r.status is IKStatus.NOT_REACHED
     assert solver.last_step.largest_rad <= 0.1 + 1e-9
     assert not solver.last_step.jumped
-    # And the state carried between workers says so.
-    assert solver.stream_state().solved
+
+
+def far_at_angle(a: float) -> list[Target]:
+    """2 m away on the 1 m dial: out of reach."""
+    return [Target(effector="hand", position=np.array([2 * math.cos(a), 2 * math.sin(a), 0.0]))]
+
+
+def test_a_target_beyond_reach_anchors_the_stream_at_once() -> None:
+    # The closest pose points at the target: an answer to stay near. A target that
+    # stays out of reach keeps the step limit as it moves.
+    solver = IKSolver(dial(), SMOOTH)
+    solver.set_pose(np.array([0.0]))
+    for a in (0.5, 0.55):
+        assert solver.track(far_at_angle(a)).status is IKStatus.NOT_REACHED
+        assert solver.stream_state().anchored
+    r = solver.track(far_at_angle(-2.5))
+    assert r.status is IKStatus.NOT_REACHED
+    assert solver.last_step.largest_rad <= 0.1 + 1e-9
+    assert r.q[0] == pytest.approx(0.45, abs=1e-6)  # 0.55 - 0.1: the box's edge
+
+
+def test_a_target_no_pose_meets_anchors_the_stream_after_ten_misses() -> None:
+    # Angle pi, 1 m away: inside the dial's reach, outside its limits (+-3 rad). From
+    # 1 rad the closest pose is the upper limit, 3.
+    behind = at_angle(math.pi)
+    for misses in (3, 10):
+        solver = IKSolver(dial(), SMOOTH)
+        solver.set_pose(np.array([1.0]))
+        for _ in range(misses):
+            assert not solver.track(behind).success
+        r = solver.track(at_angle(-2.9))  # from the answer near +3: 5.9 rad away
+        if misses < 10:  # still unanchored: solved wherever it is
+            assert r.status is IKStatus.SOLVED and solver.last_step.jumped
+        else:  # anchored: held to the step limit
+            assert r.status is IKStatus.NOT_REACHED
+            assert solver.last_step.largest_rad <= 0.1 + 1e-9
 
 
 def test_a_small_step_is_no_jump_under_either_policy() -> None:

@@ -64,7 +64,7 @@ def test_smooth_keeps_its_step_limit_in_the_exact_solve() -> None:
     options = replace(TIGHT, posture_weight=1.0, limit_weight=0.0)
     solver = IKSolver(chain, options)
     solver.set_pose(np.array([0.3, 1.0]))
-    solver.restore(solver.stream_state()._replace(solved=True))  # not a stream's first
+    solver.restore(solver.stream_state()._replace(anchored=True))  # not a stream's first
     goal = effector_poses(chain, np.array([0.38, 0.92]))[0][:3, 3]
     r = solver.track([Target(effector="hand", position=goal)])
     assert r.status is IKStatus.SOLVED
@@ -99,7 +99,7 @@ def test_the_humanoid_arm_frame_bench_tracking_missed() -> None:
     target = [Target(effector=chain.effectors[0].name, position=pose[:3, 3], rotation=pose[:3, :3])]
     solver = IKSolver(chain, REACH)
     solver.set_pose(seed)
-    solver.restore(solver.stream_state()._replace(solved=True))  # not a stream's first
+    solver.restore(solver.stream_state()._replace(anchored=True))  # not a stream's first
     r = solver.track(target)
     assert r.status is IKStatus.SOLVED
     assert r.max_position_error_m <= 1e-5

@@ -104,7 +104,7 @@ def test_the_polish_stays_inside_smooths_step_box() -> None:
     q0 = np.array([0.2, 1.0])
     solver = IKSolver(chain, options)
     solver.set_pose(q0)
-    solver.restore(solver.stream_state()._replace(solved=True))  # not a stream's first
+    solver.restore(solver.stream_state()._replace(anchored=True))  # not a stream's first
     goal = effector_poses(chain, q0 + np.array([0.1 + 2e-5, 0.0]))[0][:3, 3]
     r = solver.track([Target(effector="hand", position=goal)])
     assert np.abs(r.q - q0).max() <= 0.1 + 1e-9
