@@ -169,9 +169,10 @@ class RedisSessionStore(SessionStore):
     @staticmethod
     def _record(session: Session) -> StreamRecord:
         """The session's stream state now, copied (call it under the session's lock)."""
-        q, h, solved = session.solver.stream_state()
+        q, h, anchored, misses = session.solver.stream_state()
         h = None if h is None else h.copy()
-        return StreamRecord(q.copy(), h, session.rest, session.frames, session.solved, solved)
+        frames, solved = session.frames, session.solved
+        return StreamRecord(q.copy(), h, session.rest, frames, solved, anchored, misses)
 
     # -- the interface ---------------------------------------------------------------
     async def add(self, session: Session) -> None:
@@ -286,7 +287,7 @@ class RedisSessionStore(SessionStore):
         record = unpack_stream(stored[b"state"], session.view.chain.n_dof)
         if record.rest is not None:
             session.set_pose(record.rest)
-        state = StreamState(record.q, record.inverse_hessian, record.anchored)
+        state = StreamState(record.q, record.inverse_hessian, record.anchored, record.misses)
         session.solver.restore(state)
         session.frames, session.solved = record.frames, record.solved
         session.version = int(stored[b"v"])

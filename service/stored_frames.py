@@ -86,6 +86,9 @@ class StreamRecord:
     solved: int
     # The stream has an answer to stay near (solver.ik.StreamState.anchored).
     anchored: bool = True
+    # Frames missed while not anchored (StreamState.misses): the tenth anchors the
+    # stream on whichever worker solves it.
+    misses: int = 0
 
 
 def _array(a: np.ndarray | None) -> bytes | None:
@@ -108,6 +111,7 @@ def pack_stream(record: StreamRecord) -> bytes:
                 record.frames,
                 record.solved,
                 record.anchored,
+                record.misses,
             ]
         )
     )
@@ -116,13 +120,14 @@ def pack_stream(record: StreamRecord) -> bytes:
 def unpack_stream(data: bytes, n_dof: int) -> StreamRecord:
     values = msgpack.unpackb(data)
     q, h, rest, frames, solved = values[:5]
-    # A record written before the sixth value was stored holds five.
+    # A record written before the sixth value was stored holds five, before the
+    # seventh six (a worker of an older release reads the first six and ignores it).
     anchored = bool(values[5]) if len(values) > 5 else True
+    misses = int(values[6]) if len(values) > 6 else 0
     q_arr = _unarray(q, (n_dof,))
     assert q_arr is not None
-    return StreamRecord(
-        q_arr, _unarray(h, (n_dof, n_dof)), _unarray(rest, (n_dof,)), frames, solved, anchored
-    )
+    h_arr, rest_arr = _unarray(h, (n_dof, n_dof)), _unarray(rest, (n_dof,))
+    return StreamRecord(q_arr, h_arr, rest_arr, frames, solved, anchored, misses)
 
 
 def _pack_frame(f: SolvedFrame) -> list[Any]:

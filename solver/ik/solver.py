@@ -71,12 +71,13 @@ IKData = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.nd
 
 class StreamState(NamedTuple):
     """What ``track`` carries from frame to frame: the pose, the BFGS matrix when
-    ``IKOptions.carry_hessian`` is on (else None), and whether the stream has an answer
-    to stay near since ``set_pose`` (else its frames are as REACH: ``_MISSES_UNBOXED``)."""
+    ``IKOptions.carry_hessian`` is on (else None), whether the stream has an answer to
+    stay near since ``set_pose`` (``_MISSES_UNBOXED``) and the frames it missed until then."""
 
     q: Vector
     inverse_hessian: Matrix | None
     anchored: bool = True
+    misses: int = 0
 
 
 _tuple_new = tuple.__new__
@@ -342,13 +343,13 @@ class IKSolver:
 
     def stream_state(self) -> StreamState:
         """The pose and carried BFGS matrix the next ``track`` starts from."""
-        return StreamState(self.q, self._h, self._anchored)
+        return StreamState(self.q, self._h, self._anchored, self._misses)
 
     def restore(self, state: StreamState) -> None:
         """Continue a stream from ``state`` (the rest pose is kept: see ``set_pose``)."""
         self.q = state.q
         self._h = state.inverse_hessian
-        self._anchored, self._misses = state.anchored, 0
+        self._anchored, self._misses = state.anchored, state.misses
 
     # -- internals -------------------------------------------------------------
     def _frame(
@@ -468,10 +469,9 @@ class IKSolver:
 
 
 _REGISTERED = False
-# Under SMOOTH, frames are solved as under REACH until one is solved after set_pose,
-# at most this many: a missed frame whose target is beyond reach (its closest pose
-# points at it), or the tenth missed in a row, is an answer to stay near (a target that
-# stays out of reach keeps the step limit).
+# Under SMOOTH, frames are solved as under REACH until the stream is anchored: a frame
+# solved after set_pose, one whose target is beyond reach (its closest pose points at
+# it), or the tenth missed in a row (a target out of reach keeps the step limit).
 _MISSES_UNBOXED = 10
 # ``track``'s global fallback samples a full turn either side of the seed. Not inf: the
 # optimizer samples an unbounded side within 10 x |seed| (PR2's wrist went to 20,000 rad).

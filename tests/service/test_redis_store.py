@@ -40,6 +40,7 @@ from service.stored_frames import KEPT_ANSWERS, StreamRecord, unpack_stream
 from solver.ik import Target
 
 from .helpers import Created, create, hand_frame
+from .test_continuity import DIAL
 
 
 def _need_redis() -> None:
@@ -859,6 +860,36 @@ def test_a_stream_s_first_frame_is_first_on_every_worker(workers: Workers) -> No
     r = a.put(f"/v1/sessions/{s.id}/pose", json={"q": [0.0, 0.0, 0.0]}, headers=s.headers)
     assert r.status_code == 200, r.text
     assert _step(b, s, 3, -0.3) > 0.1  # first again after the pose set on A
+
+
+def test_a_smooth_stream_served_by_two_workers_anchors_at_its_tenth_miss(
+    workers: Workers,
+) -> None:
+    """The frames a stream missed before it is anchored are counted in Redis: a stream
+    whose frames go to one worker, then the other, anchors at its tenth miss as on one
+    worker. (With the count kept in each worker's solver only, it started again at
+    every reload, and the frame after ten misses turned the dial 5.9 rad.)"""
+    a, b = workers()
+    s = create(
+        a,
+        DIAL,
+        options={"max_joint_step_rad": 0.1, "time_budget_us": 50_000.0},
+        initial_pose={"q": [1.0]},
+    )
+
+    def frame(worker: TestClient, frame_id: int, angle: float) -> dict[str, Any]:
+        position = {"x": math.cos(angle), "y": math.sin(angle), "z": 0.0}
+        body = {"id": frame_id, "targets": [{"effector": "hand", "position": position}]}
+        r = worker.post(f"/v1/sessions/{s.id}/frames", json=body, headers=s.headers)
+        assert r.status_code == 200, r.text
+        result: dict[str, Any] = r.json()["results"][0]
+        return result
+
+    # Angle pi: inside the dial's reach, outside its limits (+-3 rad): missed each time.
+    for k in range(10):
+        assert not frame((a, b)[k % 2], k + 1, math.pi)["success"]
+    far = frame(a, 11, -2.9)  # 5.9 rad from the answer at the limit, 3
+    assert far["largest_step_rad"] <= 0.1 + 1e-9 and not far["jumped"]
 
 
 def test_the_last_64_answered_frames_are_answered_again_and_an_older_one_is_solved(

@@ -185,6 +185,17 @@ def test_a_stream_record_keeps_whether_a_frame_was_answered() -> None:
     assert unpack_stream(old, 3).anchored is True
 
 
+def test_a_stream_record_keeps_the_frames_missed_before_the_stream_anchored() -> None:
+    """The misses count (StreamState.misses) goes with the record, so that a stream
+    served by another worker still anchors at its tenth miss; a record of six values
+    (an older worker's) reads as none missed."""
+    q = np.arange(3, dtype=np.float64)
+    record = unpack_stream(pack_stream(StreamRecord(q, None, None, 4, 0, False, 4)), 3)
+    assert (record.anchored, record.misses) == (False, 4)
+    six = msgpack.packb([q.tobytes(), None, None, 4, 0, False])
+    assert unpack_stream(six, 3).misses == 0
+
+
 def test_an_id_listed_twice_is_as_old_as_its_last_place() -> None:
     """An order list written before the commit script moved a reused id to the end may
     hold it twice: it is restored as the newest, not evicted first."""

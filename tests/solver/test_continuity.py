@@ -141,6 +141,27 @@ def test_a_target_no_pose_meets_anchors_the_stream_after_ten_misses() -> None:
             assert solver.last_step.largest_rad <= 0.1 + 1e-9
 
 
+def test_the_misses_count_travels_with_the_stream_state() -> None:
+    # A stream moved to another worker each frame (a solver built there and restored
+    # from the stored state), or rewound: the tenth miss still anchors it. With the
+    # count reset by restore, it never did, and the next frame turned 5.9 rad.
+    behind = at_angle(math.pi)
+    state = None
+    for _ in range(10):
+        solver = IKSolver(dial(), SMOOTH)
+        solver.set_pose(np.array([1.0]))
+        if state is not None:
+            solver.restore(state)
+        assert not solver.track(behind).success
+        state = solver.stream_state()
+    assert state is not None and state.anchored
+    solver = IKSolver(dial(), SMOOTH)
+    solver.set_pose(np.array([1.0]))
+    solver.restore(state)
+    assert solver.track(at_angle(-2.9)).status is IKStatus.NOT_REACHED
+    assert solver.last_step.largest_rad <= 0.1 + 1e-9
+
+
 def test_a_small_step_is_no_jump_under_either_policy() -> None:
     for options in (SMOOTH, REACH):
         solver = IKSolver(dial(), options)
