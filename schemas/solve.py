@@ -67,10 +67,10 @@ _OPTION_FIELDS: dict[str, dict[str, Any]] = {
         "the previous answer: `smooth` never moves a joint more than `max_joint_step_rad` "
         "from the previous answer (such a frame answers `not_reached` with the closest pose "
         "inside that step), once the stream has an answer to stay near: a frame solved "
-        "since the pose was set, one whose target is beyond reach, or the 10th missed in a "
-        "row (until then frames are solved as under `reach`); `reach` solves every frame, "
-        "jumping to another branch if it must (the result says `jumped`). One-shot solves "
-        "ignore it",
+        "since the pose was set, one that misses only targets beyond reach (every other "
+        "target met), or the 10th missed in a row (until then frames are solved as under "
+        "`reach`); `reach` solves every frame, jumping to another branch if it must (the "
+        "result says `jumped`). One-shot solves ignore it",
     },
     "max_joint_step_rad": {
         "gt": 0.0,

@@ -39,8 +39,9 @@ class FrameStep(NamedTuple):
 
     ``largest_rad``: the largest change of one variable (radians, or metres for a
     prismatic joint). ``jumped``: it is larger than ``IKOptions.max_joint_step_rad``
-    (under ``SMOOTH`` only on frames before the first solved one after ``set_pose``,
-    which are solved without the limit; the first is measured from the pose set).
+    (under ``SMOOTH`` only on the frames after ``set_pose`` before the stream is
+    anchored, ``IKSolver.track``, which are solved without the limit; the first is
+    measured from the pose set).
     """
 
     largest_rad: float

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
@@ -64,6 +64,10 @@ class ReachBounds:
         """Whether a target asks a point further from the root than its effector can
         be (by more than the position tolerance); weighted targets are not judged (a
         blend aims short of its target)."""
+        return next(self._beyond(targets, options), None) is not None
+
+    def _beyond(self, targets: Sequence[Target], options: IKOptions) -> Iterator[str]:
+        """The effectors whose targets are beyond reach (``beyond``)."""
         bound = self.bound
         tolerance_m = options.position_tolerance_m
         for t in targets:
@@ -72,8 +76,20 @@ class ReachBounds:
             if reach is None or position is None or not (t.plain and t.given & GIVEN_POSITION):
                 continue
             if float(np.linalg.norm(position)) > reach + tolerance_m:
-                return True
-        return False
+                yield t.effector
+
+    def only_beyond_missed(
+        self, result: IKResult, targets: Sequence[Target], options: IKOptions
+    ) -> bool:
+        """Whether ``result`` misses only targets beyond reach: at least one is (its
+        closest pose points at it), and every other targeted effector is within its
+        tolerances. With a target met by no pose of its own limb (behind a limit) and
+        another beyond reach, the frame is no answer to stay near: a stream anchored
+        there keeps the first effector at its local minimum for good."""
+        far = set(self._beyond(targets, options))
+        if not far:
+            return False
+        return all(e.within_tolerance for e in result.effectors if e.name not in far)
 
     def judged(self, result: IKResult, targets: Sequence[Target], options: IKOptions) -> IKResult:
         """``result``, ``not_reached`` rather than ``budget_exhausted`` when a target is

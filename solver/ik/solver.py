@@ -239,7 +239,7 @@ class IKSolver:
         if not self._anchored:  # is this an answer to stay near? (_MISSES_UNBOXED)
             self._misses += 1
             self._anchored = result.success or self._misses >= _MISSES_UNBOXED
-            self._anchored = self._anchored or self._reach.beyond(targets, opts)
+            self._anchored = self._anchored or self._reach.only_beyond_missed(result, targets, opts)
         # A copy: the result's block is the caller's to keep (and to write to).
         self._h = result.inverse_hessian.copy() if opts.carry_hessian else None
         largest = self._largest_step(result.q, q0)
@@ -470,8 +470,8 @@ class IKSolver:
 
 _REGISTERED = False
 # Under SMOOTH, frames are solved as under REACH until the stream is anchored: a frame
-# solved after set_pose, one whose target is beyond reach (its closest pose points at
-# it), or the tenth missed in a row (a target out of reach keeps the step limit).
+# solved after set_pose, one whose only misses are targets beyond reach (every other
+# target met), or the tenth missed in a row (a target out of reach keeps the step limit).
 _MISSES_UNBOXED = 10
 # ``track``'s global fallback samples a full turn either side of the seed. Not inf: the
 # optimizer samples an unbounded side within 10 x |seed| (PR2's wrist went to 20,000 rad).

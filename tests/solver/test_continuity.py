@@ -11,7 +11,7 @@ import pytest
 
 from solver.errors import InvalidProblem
 from solver.ik import STREAM_DEFAULTS, Continuity, IKOptions, IKSolver, IKStatus, Target
-from solver.model import Chain, Joint, JointKind
+from solver.model import Chain, Effector, Joint, JointKind, Transform, build_chain
 from solver.model.examples import panda_arm, with_tip
 from solver.model.forward import effector_poses
 from tests.solver.helpers import joint_stream
@@ -160,6 +160,58 @@ def test_the_misses_count_travels_with_the_stream_state() -> None:
     solver.restore(state)
     assert solver.track(at_angle(-2.9)).status is IKStatus.NOT_REACHED
     assert solver.last_step.largest_rad <= 0.1 + 1e-9
+
+
+def two_dials() -> Chain:
+    """Two 1 m dials on one base (limits +-3 rad each), effectors ``hand_a`` and
+    ``hand_b``: one's target may be out of reach while the other's is not."""
+    joints: list[Joint] = []
+    for n in ("a", "b"):
+        joints.append(
+            Joint(
+                name=f"turn_{n}",
+                parent="world",
+                child=f"link_{n}",
+                kind=JointKind.REVOLUTE,
+                axis=np.array([0.0, 0.0, 1.0]),
+                lower=(-3.0,),
+                upper=(3.0,),
+            )
+        )
+        joints.append(
+            Joint(
+                name=f"tip_{n}",
+                parent=f"link_{n}",
+                child=f"hand_{n}",
+                kind=JointKind.FIXED,
+                origin=Transform(np.array([1.0, 0.0, 0.0])),
+            )
+        )
+    return build_chain(
+        joints, [Effector(name="hand_a", link="hand_a"), Effector(name="hand_b", link="hand_b")]
+    )
+
+
+def test_a_target_beyond_reach_anchors_only_when_every_other_target_is_met() -> None:
+    def frame(a_distance: float, b_angle: float) -> list[Target]:
+        a = np.array([a_distance, 0.0, 0.0])
+        b = np.array([math.cos(b_angle), math.sin(b_angle), 0.0])
+        return [Target(effector="hand_a", position=a), Target(effector="hand_b", position=b)]
+
+    # hand_b's target needs a turn down from 1 rad; the way up (shorter) ends at the
+    # limit, 3: a local minimum the frame with hand_a's target 2 m away stops in.
+    solver = IKSolver(two_dials(), SMOOTH)
+    solver.set_pose(np.array([0.0, 1.0]))
+    assert not solver.track(frame(2.0, -2.9)).success
+    assert not solver.stream_state().anchored  # hand_b reached nothing
+    # hand_a's target back in reach: both solved (anchored at 3, hand_b never was).
+    r = solver.track(frame(1.0, -2.9))
+    assert r.status is IKStatus.SOLVED
+    assert r.q[1] == pytest.approx(-2.9, abs=1e-3)
+    # Out of reach again, hand_b met: the closest pose is an answer to stay near.
+    solver.set_pose(np.array([0.0, 1.0]))
+    assert not solver.track(frame(2.0, 1.1)).success
+    assert solver.stream_state().anchored
 
 
 def test_a_small_step_is_no_jump_under_either_policy() -> None:
