@@ -97,7 +97,8 @@ SHAPING_MAX_ITER = 15
 # solve): the limb starts wherever the seed put it, often on the far side of the pole,
 # and there is no next frame to carry the swing on. 15 left CesiumMan's left arm a
 # quarter turn short of a pole behind it (tests/solver/test_poles_weights.py); the cost
-# is the first frame's only.
+# is the first frame's only, or the first few's while they miss (IKSolver.track's
+# frames before the stream is anchored, at most 10).
 SHAPING_FIRST_MAX_ITER = 60
 
 

@@ -111,7 +111,7 @@ def plan_path(
             return PlannedPath(results, 0.0, 0.0, len(results), 0.0)
         return _plan(solver, frames, opts, popts, start)
     except BaseException:
-        solver.restore(StreamState(start, carried.inverse_hessian))
+        solver.restore(carried._replace(q=start))
         raise
 
 
@@ -138,6 +138,7 @@ def _plan(
         # tracker freezes them at its previous answer; a node carries its own).
         boxes.append((lower, upper, solver.free_mask()))
         walks.append(solver.free_directions() == 1)
+    tracked_state = solver.stream_state()  # the stream's anchoring, frame by frame
     planner = Planner(solver, frames, opts, popts, tracked, boxes)
     if popts.key_every > 1 and n >= 2 * popts.key_every and len(set(walks)) == 1:
         path = plan_keyed(planner, start, walks[0])
@@ -166,8 +167,12 @@ def _plan(
         else solver.judge(path[k].copy(), frames[k], options=opts, solve_us=share)
         for k in range(n)
     )
-    # The tracker's carried BFGS matrix is not the plan's.
-    solver.restore(StreamState(results[-1].q.copy() if results else start, None))
+    # The tracker's carried BFGS matrix is not the plan's. The stream is anchored as its
+    # frames tracked one by one left it (IKSolver.track), or by a frame the plan solved.
+    anchored = tracked_state.anchored or any(r.success for r in results)
+    misses = 0 if anchored else tracked_state.misses
+    q_end = results[-1].q.copy() if results else start
+    solver.restore(StreamState(q_end, None, anchored, misses))
     largest = largest_step(start, path)
     return PlannedPath(results, largest, tracked_step, planner.considered, plan_us)
 

@@ -255,6 +255,31 @@ def test_a_rejected_plan_keeps_the_carried_state() -> None:
     assert solver.stream_state().inverse_hessian is h and np.array_equal(solver.q, q)
 
 
+def test_a_plan_anchors_the_stream_only_if_a_frame_is_solved() -> None:
+    # A smooth stream keeps to its step limit once it has an answer to stay near
+    # (IKSolver.track); a clip none of whose frames reaches its target is none.
+    chain = panda_arm()
+    path = joint_stream(chain, 0, 4)
+    frames = [pose_targets(chain, q) for q in path]
+    near = frames[0][0]
+    far = [[dataclasses.replace(near, position=np.array([3.0, 0.0, 0.5]))]] * 2
+    behind = [[dataclasses.replace(near, position=np.array([0.0, 0.0, -0.4]))]] * 2
+    for clip, anchored in ((frames, True), (behind, False), (far, True)):
+        solver = IKSolver(chain, STREAM)
+        solver.set_pose(path[0])
+        plan = plan_path(solver, clip)
+        assert solver.stream_state().anchored is anchored, (clip is frames, plan.success)
+        # A rejected clip keeps the state it found (here: not anchored, no misses).
+        if clip is behind:
+            assert solver.stream_state().misses == 2
+    fresh = IKSolver(chain, STREAM)
+    fresh.set_pose(path[0])
+    bad = Target(effector=near.effector, position=near.position, rotation=2.0 * near.rotation)
+    with pytest.raises(InvalidProblem):
+        plan_path(fresh, [[bad]])
+    assert fresh.stream_state().anchored is False and fresh.stream_state().misses == 0
+
+
 def test_plan_of_no_frames_changes_nothing() -> None:
     chain = panda_arm()
     solver = IKSolver(chain, STREAM)
