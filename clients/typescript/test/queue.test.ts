@@ -12,7 +12,7 @@ import { after, describe, test } from "node:test";
 
 import { Client, DEFAULT_MAX_QUEUED, MessageDropped, type Stream, StreamState, type Target } from "../src/index.js";
 import { scripted } from "./scripted.js";
-import { Processes, freePort, hasRedis, stopServer } from "./server.js";
+import { Processes, redisOrSkip, stopServer } from "./server.js";
 
 after(stopServer);
 
@@ -133,16 +133,10 @@ function game(stream: Stream): { sent: Sent[]; queuedPeak: () => number; stop: (
 
 describe("a game that keeps sending through a server restart", { timeout: 180_000 }, () => {
   test("at most maxQueued wait; every frame that went out is answered once and solved once", async (t) => {
-    if (!hasRedis()) {
-      if (process.env["CI"] === "true") assert.fail("redis-server is not installed (CI=true)");
-      t.skip("redis-server is not installed");
-      return;
-    }
+    if (!redisOrSkip(t)) return;
     const processes = new Processes();
     try {
-      const env = { IK_REDIS_URL: await processes.redis() };
-      const port = await freePort();
-      const first = await processes.service(port, env);
+      const { port, env, first } = await processes.serviceWithRedis();
       const client = new Client(`http://127.0.0.1:${port}`);
       const session = await client.createSession(PANDA);
       const stream = await client.stream(session); // the default budget and maxQueued

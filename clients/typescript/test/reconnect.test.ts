@@ -28,7 +28,7 @@ import {
   reconnectPolicy,
   retryAfterMs,
 } from "../src/index.js";
-import { Processes, freePort, hasRedis, serverUrl, stopServer } from "./server.js";
+import { Processes, freePort, redisOrSkip, serverUrl, stopServer } from "./server.js";
 import { RETRY_AFTER_S, scripted } from "./scripted.js";
 
 after(stopServer); // server.ts's shared server, if a test here started it
@@ -207,16 +207,10 @@ async function streamAcross(
 
 describe("a restart slower than the old budget", { timeout: 180_000 }, () => {
   test("with the sessions in Redis the stream resumes: every frame answered once, solved once", async (t) => {
-    if (!hasRedis()) {
-      if (process.env["CI"] === "true") assert.fail("redis-server is not installed (CI=true)");
-      t.skip("redis-server is not installed");
-      return;
-    }
+    if (!redisOrSkip(t)) return;
     const processes = new Processes();
     try {
-      const env = { IK_REDIS_URL: await processes.redis() };
-      const port = await freePort();
-      const first = await processes.service(port, env);
+      const { port, env, first } = await processes.serviceWithRedis();
       const client = new Client(`http://127.0.0.1:${port}`);
       const session = await client.createSession(PANDA);
       let restarted: Promise<number> | undefined;
