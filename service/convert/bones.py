@@ -12,7 +12,7 @@ from solver.arrays import Matrix, Vector
 from solver.model import EffectorMode, matrix_to_quaternion
 from solver.model.forward import effector_poses
 
-from ..errors import ServiceError, invalid_problem
+from ..errors import invalid_problem
 from .chains import ChainView, check_bone_output
 from .conventions import Convention
 from .poses import pose_vector
@@ -103,23 +103,24 @@ def fk_dict(
     q: list[float] | None,
     joints: dict[str, float] | None,
     output: S.BoneOutput | None,
-    field: str,
+    field: str = "",
 ) -> dict[str, Any]:
     """An ``FkResult``: the pose (``q`` or ``joints`` over ``current``, clipped into the
     limits; neither: ``current``), its effectors' world poses and, on skeleton chains,
-    its bone data (``output``; None: ``DEFAULT_FK_BONES``). ``field`` prefixes the error
-    fields (``body`` over HTTP; empty for a WebSocket message).
+    its bone data (``output``; None: ``DEFAULT_FK_BONES``). ``field``: where the request
+    sits in its message ("": the HTTP body and a WebSocket message alike, whose errors
+    name ``q``, ``joints.<name>``, ``bones``).
 
     Raises:
-        ServiceError: ``invalid_problem``: both ``q`` and ``joints`` (``field``, or
-            ``joints`` on a WebSocket), a wrong length or
-            DOF name, bone data asked of a chain without bones, an unknown bone.
+        ServiceError: ``invalid_problem``: both ``q`` and ``joints`` (named ``joints``),
+            a wrong length or DOF name, bone data asked of a chain without bones, an
+            unknown bone.
     """
+    at = f"{field}." if field else ""
     if q is not None and joints is not None:
-        # Over HTTP the body is at fault; a WebSocket error names a field of the
-        # message, and an error with no field at all tells the client nothing to fix.
-        raise invalid_problem("give at most one of 'q' and 'joints'", field or "joints")
-    bones_field = f"{field}.bones" if field else "bones"
+        # An error with no field tells the client nothing to fix: name the second one.
+        raise invalid_problem("give at most one of 'q' and 'joints'", f"{at}joints")
+    bones_field = f"{at}bones"
     skeleton = view.skeleton
     if skeleton is None:
         if output is not None and (output.local_rotations or output.world):
@@ -133,13 +134,7 @@ def fk_dict(
         check_bone_output(output, skeleton, bones_field)
     pose = current
     if q is not None or joints is not None:
-        try:
-            pose = pose_vector(S.PoseIn(q=q, joints=joints), view, current, field or "_")
-        except ServiceError as e:
-            if not field and e.field is not None:  # a WebSocket message: "q", not "_.q"
-                e.field = e.field.removeprefix("_.")
-                e.detail = e.detail.removeprefix("_.")
-            raise
+        pose = pose_vector(S.PoseIn(q=q, joints=joints), view, current, field)
     out: dict[str, Any] = {"q": pose.tolist(), "effectors": effectors_out(view, pose)}
     if skeleton is not None:
         assert output is not None

@@ -42,10 +42,12 @@ def apply_options(
     patch: S.OptionsPatch | None, base: IKOptions, settings: Settings, *, field: str = "options"
 ) -> IKOptions:
     """``base`` with the fields ``patch`` sets, validated by the solver and the server caps.
+    ``field``: where the options sit in the request ("" for a request that is them).
 
     Raises:
         ServiceError: ``invalid_problem`` naming ``<field>.time_budget_us`` (over
-            IK_MAX_TIME_BUDGET_US) or ``<field>`` (a value the solver refuses).
+            IK_MAX_TIME_BUDGET_US) or ``<field>`` (a value the solver refuses; the
+            request's ``body`` when it is the options).
     """
     if patch is None:
         return base
@@ -55,12 +57,12 @@ def apply_options(
         raise invalid_problem(
             f"time_budget_us must be at most {settings.max_time_budget_us:g} "
             "(IK_MAX_TIME_BUDGET_US)",
-            f"{field}.time_budget_us",
+            f"{field}.time_budget_us" if field else "time_budget_us",
         )
     try:
         return replace(base, **changes)
     except IKError as e:
-        raise invalid_problem(str(e), field) from None
+        raise invalid_problem(str(e), field or "body") from None
 
 
 # The options a client sees (schema ``SolverOptions``), each an ``IKOptions`` field of

@@ -14,18 +14,20 @@ from ..errors import invalid_problem
 from .chains import ChainView
 
 
-def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str) -> Vector:
+def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str = "") -> Vector:
     """A full q from a PoseIn (``joints`` fills in ``current``), clipped into the limits.
+    ``field``: where the pose sits in the request ("" for a request that is the pose).
 
     Raises:
         ServiceError: ``invalid_problem`` naming ``<field>.q`` (wrong length) or
             ``<field>.joints.<name>`` (no such DOF).
     """
+    at = f"{field}." if field else ""
     chain = view.chain
     if pose.q is not None:
         if len(pose.q) != chain.n_dof:
             raise invalid_problem(
-                f"q must have {chain.n_dof} values (one per DOF), got {len(pose.q)}", f"{field}.q"
+                f"q must have {chain.n_dof} values (one per DOF), got {len(pose.q)}", f"{at}q"
             )
         q = np.array(pose.q, dtype=np.float64)
     else:
@@ -38,12 +40,12 @@ def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str) ->
                 leader = chain.dof_names[int(chain.followers.leader[k])]
                 raise invalid_problem(
                     f"{name!r} is a mimic joint: it follows {leader!r}; set {leader!r} instead",
-                    f"{field}.joints.{name}",
+                    f"{at}joints.{name}",
                 )
             if i is None:
                 raise invalid_problem(
                     f"unknown DOF {name!r} (DOFs: {list(chain.dof_names)})",
-                    f"{field}.joints.{name}",
+                    f"{at}joints.{name}",
                 )
             q[i] = value
     return np.clip(q, chain.lower, chain.upper)

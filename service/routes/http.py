@@ -301,7 +301,7 @@ async def patch_session(
     """Change solver options; fields left out keep their value. Applies to later frames."""
 
     def apply() -> None:
-        session.options = convert.apply_options(body, session.options, svc.settings, field="body")
+        session.options = convert.apply_options(body, session.options, svc.settings, field="")
 
     await _change(session, svc.store, apply)
     return _session_info(session, svc.store)
@@ -320,7 +320,7 @@ async def put_pose(
     are set to the nearest limit, and the answer's ``clipped`` names those DOFs."""
 
     def apply() -> None:
-        session.set_pose(convert.pose_vector(body, session.view, session.solver.q, "body"))
+        session.set_pose(convert.pose_vector(body, session.view, session.solver.q))
 
     await _change(session, svc.store, apply)
     clipped = convert.clipped_dofs(body, session.view)
@@ -455,7 +455,7 @@ async def post_fk(
     if body.q is None:  # the current pose is read (all of it, or under ``joints``)
         await svc.store.latest(session)
     svc.store.touch(session)
-    out = convert.fk_dict(session.view, session.solver.q, body.q, body.joints, body.bones, "body")
+    out = convert.fk_dict(session.view, session.solver.q, body.q, body.joints, body.bones)
     return ORJSONResponse(out)
 
 

@@ -267,7 +267,7 @@ def test_fk_of_an_arm_gives_its_tool_over_http_and_stream(ik: Client, encoding: 
     assert solved.success
     reached = here.effectors[0].position
     assert [reached[k] for k in "xyz"] == pytest.approx([pose.position[k] for k in "xyz"], abs=1e-3)
-    assert caught.value.field == "bones" and over_http_caught.value.field == "body.bones"
+    assert caught.value.field == "bones" and over_http_caught.value.field == "bones"
 
 
 def test_errors_carry_code_and_field(ik: Client, session: Session) -> None:

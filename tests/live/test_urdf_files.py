@@ -95,7 +95,7 @@ def test_a_mimic_gripper_solved_through_the_api(server: Server) -> None:
         headers=headers,
         timeout=TIMEOUT_S,
     )
-    assert r.status_code == 422 and r.json()["field"] == "body.joints.panda_finger_joint2"
+    assert r.status_code == 422 and r.json()["field"] == "joints.panda_finger_joint2"
     assert "set 'panda_finger_joint1' instead" in r.json()["detail"]
 
 

@@ -378,7 +378,7 @@ HTTP_ROWS = [
         {"q": [0.0]},
         422,
         "invalid_problem",
-        "body.q",
+        "q",
         method="PUT",
     ),
     # -- sessions and tokens ---------------------------------------------------------------

@@ -218,7 +218,7 @@ def test_fk_errors_name_the_field_over_http_and_websocket(
     r = client.post(f"/v1/sessions/{s.id}/fk", json=body, headers=s.headers)
     assert r.status_code == 422, r.text
     error = r.json()
-    assert (error["code"], error["field"]) == ("invalid_problem", f"body.{field}")
+    assert (error["code"], error["field"]) == ("invalid_problem", field)
     assert words in error["detail"]
     for message, msg_id in _ws_fk_errors(client, s, body):
         assert message.id == msg_id
@@ -242,12 +242,13 @@ def _ws_fk_errors(
 def test_fk_with_both_q_and_joints_names_a_field_over_http_and_websocket(
     client: TestClient,
 ) -> None:
-    # Over the WebSocket this error had no field (null) where HTTP names the body.
+    # Over the WebSocket this error had no field (null); HTTP named the whole body. Both
+    # now name the same field, as every other error of the request does.
     s = create(client, PANDA)
     both = {"q": Q, "joints": {"panda_joint1": 0.1}}
     r = client.post(f"/v1/sessions/{s.id}/fk", json=both, headers=s.headers)
     assert r.status_code == 422, r.text
-    assert (r.json()["code"], r.json()["field"]) == ("invalid_problem", "body")
+    assert (r.json()["code"], r.json()["field"]) == ("invalid_problem", "joints")
     for message, msg_id in _ws_fk_errors(client, s, both):
         assert message.id == msg_id
         assert (message.error.code, message.error.field) == ("invalid_problem", "joints")

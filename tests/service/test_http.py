@@ -493,14 +493,14 @@ def test_options_over_the_budget_cap(client: TestClient, session: Created) -> No
     r = client.patch(
         f"/v1/sessions/{session.id}", json={"time_budget_us": 999_999}, headers=session.headers
     )
-    assert r.status_code == 422 and r.json()["field"] == "body.time_budget_us"
+    assert r.status_code == 422 and r.json()["field"] == "time_budget_us"
     r = client.patch(f"/v1/sessions/{session.id}", json={"max_iter": 0}, headers=session.headers)
     assert r.status_code == 422 and r.json()["code"] == "invalid_format"
 
 
 @pytest.mark.parametrize(
     ("pose", "field"),
-    [({"q": [0.0, 1.0]}, "body.q"), ({"joints": {"knee": 1.0}}, "body.joints.knee")],
+    [({"q": [0.0, 1.0]}, "q"), ({"joints": {"knee": 1.0}}, "joints.knee")],
 )
 def test_bad_pose(client: TestClient, session: Created, pose: Any, field: str) -> None:
     r = client.put(f"/v1/sessions/{session.id}/pose", json=pose, headers=session.headers)

@@ -83,7 +83,7 @@ def test_dotted_and_unicode_bone_names_in_every_setting(client: TestClient) -> N
         f"/v1/sessions/{s.id}/fk", json={"joints": {"thigh.R.x": 0.1}}, headers=s.headers
     )
     assert bad.status_code == 422
-    assert bad.json()["field"] == "body.joints.thigh.R.x"
+    assert bad.json()["field"] == "joints.thigh.R.x"
 
 
 @pytest.mark.parametrize("as_glb", [False, True])

@@ -711,7 +711,7 @@ describe("stream", () => {
         assert.ok(far <= 1e-3, JSON.stringify([reached, tool.position]));
         // Bone data of a chain without bones: refused, naming the field.
         await assert.rejects(stream.fk({ bones: { local_rotations: true } }), (e: unknown) => e instanceof InvalidRequest && e.field === "bones");
-        await assert.rejects(ik.fk(session, { bones: { local_rotations: true } }), (e: unknown) => e instanceof InvalidRequest && e.field === "body.bones");
+        await assert.rejects(ik.fk(session, { bones: { local_rotations: true } }), (e: unknown) => e instanceof InvalidRequest && e.field === "bones");
       } finally {
         stream.close();
         await ik.deleteSession(session);
