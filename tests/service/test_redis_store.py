@@ -854,7 +854,9 @@ def test_a_stream_s_first_frame_is_first_on_every_worker(workers: Workers) -> No
     set) is solved as ``reach`` would: on the worker that loads the session from Redis
     too, not only on the one that set the pose."""
     a, b = workers()
-    s = create(a)
+    # A budget no load on the machine exhausts: a first frame cut short would leave the
+    # stream unanchored (solved as reach) and frame 2 unlimited.
+    s = create(a, options={"time_budget_us": 50_000.0})
     assert _step(b, s, 1, -0.3) > 0.1  # the first frame, on another worker: not limited
     assert _step(a, s, 2, 0.3) <= 0.1 + 1e-9  # a later frame: the step limit
     r = a.put(f"/v1/sessions/{s.id}/pose", json={"q": [0.0, 0.0, 0.0]}, headers=s.headers)
