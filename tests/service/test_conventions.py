@@ -183,3 +183,69 @@ def test_sessions_say_which_conventions_they_speak(client: TestClient) -> None:
     info = client.get(f"/v1/sessions/{leg.id}", headers=leg.headers).json()
     assert info["conventions"] == expected
     assert create(client, _pose_leg()).body["conventions"]["up"] == "y"  # glTF's own
+
+
+# An engine's bone-frame axis and rotation -> the file's, as docs/engines.md ("Not
+# converted") tells a client to send an effector's aim_axis and tip_rotation.
+AXIS_TO_FILE: dict[str, Callable[[Vec], Vec]] = {
+    "unreal": lambda a: (a[0], a[2], a[1]),
+    "unity": lambda a: (-a[0], a[1], a[2]),
+    "ros": lambda a: (a[0], a[2], -a[1]),
+}
+TIP_ROTATION_TO_FILE: dict[str, Callable[[Quat], Quat]] = {
+    "unreal": lambda q: (q[0], -q[1], -q[3], -q[2]),
+    "unity": lambda q: (q[0], q[1], -q[2], -q[3]),
+    "ros": lambda q: (q[0], q[1], q[3], -q[2]),
+}
+
+
+def _product(a: Quat, b: Quat) -> Quat:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+def _rotated(q: Quat, v: Vec) -> Vec:
+    w, *xyz = _product(_product(q, (0.0, *v)), (q[0], -q[1], -q[2], -q[3]))
+    return xyz[0], xyz[1], xyz[2]
+
+
+@pytest.mark.parametrize("preset", sorted(AXIS_TO_FILE))
+def test_an_engines_bone_axis_and_tip_rotation_are_sent_in_the_files_frame(
+    client: TestClient, preset: str
+) -> None:
+    """aim_axis and tip_rotation are not converted: a bone axis read in the engine
+    (Unreal's bone Z, say) is sent in the file's frame, mapped back as engines.md says,
+    and the effector then points along that engine axis of the bone."""
+    # Neither is left alone by any of the maps (nor by a map's inverse in its place).
+    engine_axis: Vec = (0.6, 0.0, 0.8)
+    about = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+    w, x, y, z = (np.cos(0.4), *(np.sin(0.4) * about))
+    engine_tip: Quat = (w, x, y, z)
+    chain = _pose_leg()
+    chain["effectors"] = [
+        {
+            "bone": "ankle",
+            "name": "sole",
+            "mode": "pose",
+            "tip_rotation": _as_quat(TIP_ROTATION_TO_FILE[preset](engine_tip)),
+        },
+        {
+            "bone": "ankle",
+            "name": "toe",
+            "mode": "aim",
+            "aim_axis": _as_vec(AXIS_TO_FILE[preset](engine_axis)),
+        },
+    ]
+    s = create(client, chain, conventions={"preset": preset})
+    body = {"q": [0.3, -0.2, 0.4, 1.1], "bones": {"world": ["ankle"]}}
+    fk = client.post(f"/v1/sessions/{s.id}/fk", json=body, headers=s.headers).json()
+    bone = _quat(fk["bones"]["world"]["ankle"]["rotation"])
+    sole, toe = fk["effectors"]
+    assert np.allclose(_vec(toe["direction"]), _rotated(bone, engine_axis), atol=1e-9)
+    assert _angle_deg(_quat(sole["orientation"]), _product(bone, engine_tip)) < 1e-6
