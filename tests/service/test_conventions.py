@@ -249,3 +249,28 @@ def test_an_engines_bone_axis_and_tip_rotation_are_sent_in_the_files_frame(
     sole, toe = fk["effectors"]
     assert np.allclose(_vec(toe["direction"]), _rotated(bone, engine_axis), atol=1e-9)
     assert _angle_deg(_quat(sole["orientation"]), _product(bone, engine_tip)) < 1e-6
+
+
+def test_conventions_are_the_sessions_and_no_request_after_creation_takes_a_unit(
+    client: TestClient,
+) -> None:
+    """A unit or conventions on a frame, a target, a pose or an FK request is refused,
+    naming the field (docs/engines.md): an engine developer must not think they apply."""
+    s = create(client, _pose_leg(), conventions={"preset": "unreal"})
+    sid, headers = s.id, s.headers
+    identity = {"w": 1, "x": 0, "y": 0, "z": 0}
+    target = {"effector": "foot", "position": {"x": 10, "y": 0, "z": 40}, "orientation": identity}
+    refused = [
+        ("post", f"/v1/sessions/{sid}/frames", {"targets": [{**target, "unit": "cm"}]},
+         "frame.targets[0].unit"),
+        ("post", f"/v1/sessions/{sid}/frames", {"targets": [target], "conventions": {"unit": "m"}},
+         "frame.conventions"),
+        ("put", f"/v1/sessions/{sid}/pose", {"joints": {"knee.x": 0.5}, "unit": "cm"}, "unit"),
+        ("post", f"/v1/sessions/{sid}/fk", {"conventions": {"preset": "ros"}}, "conventions"),
+    ]  # fmt: skip
+    for method, path, body, field in refused:
+        r = getattr(client, method)(path, json=body, headers=headers)
+        assert r.status_code == 422 and r.json()["field"] == field, (path, r.text)
+    # The answer's form of the unit is not the request's.
+    r = client.post("/v1/sessions", json={"chain": _pose_leg(), "conventions": {"unit_m": 0.01}})
+    assert r.status_code == 422 and r.json()["field"] == "conventions.unit_m"
