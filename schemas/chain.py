@@ -221,11 +221,15 @@ class BoneEffectorSpec(StrictModel):
         default=ZERO3, description="Tip point in the bone's frame [m, the file's frame]"
     )
     tip_rotation: Quaternion = Field(
-        default=IDENTITY, description="Orientation of the tip frame in the bone's frame"
+        default=IDENTITY,
+        description="Orientation of the tip frame in the bone's frame (the file's axes: "
+        "the session's conventions do not convert it)",
     )
     mode: EffectorModeName = Field(default="position", description="As in hierarchy chains")
     aim_axis: Vec3 = Field(
-        default=Vec3(x=0.0, y=0.0, z=1.0), description="Aim mode: tip-frame axis to point"
+        default=Vec3(x=0.0, y=0.0, z=1.0),
+        description="Aim mode: tip-frame axis to point (the file's axes: the session's "
+        "conventions do not convert it)",
     )
     position_weight: FiniteFloat = Field(default=1.0, ge=0.0, le=MAX_COORDINATE)
     rotation_weight: FiniteFloat = Field(default=0.01, ge=0.0, le=MAX_COORDINATE)

@@ -45,8 +45,9 @@ def check_exactly_one(model: BaseModel, first: str, second: str) -> None:
 
 
 class Vec3(StrictModel):
-    """A 3-vector: a point or offset [m], or a direction (unitless); each component
-    finite and within +-1e6."""
+    """A 3-vector: a point or offset (a target's or pole's in the session's unit; a
+    chain's in metres), or a direction (unitless); each component finite and within
+    +-1e6."""
 
     model_config = ConfigDict(json_schema_extra={"examples": [{"x": 0.3, "y": 0.0, "z": 0.5}]})
 

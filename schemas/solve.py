@@ -157,7 +157,7 @@ class Pole(StrictModel):
 
 
 class Target(StrictModel):
-    """What one effector should reach in this frame, in the chain's root frame.
+    """What one effector should reach in this frame, in the session's conventions and unit.
 
     position effectors need ``position``; pose effectors need ``orientation`` (and
     ``position``, unless only the orientation matters); aim effectors need
@@ -187,7 +187,7 @@ class Target(StrictModel):
     )
 
     effector: Name = Field(description="Effector name")
-    position: Vec3 | None = Field(default=None, description="Target tip position [m]")
+    position: Vec3 | None = Field(default=None, description="Target tip position [session unit]")
     orientation: Quaternion | None = Field(
         default=None, description="Target tip orientation (pose effectors)"
     )

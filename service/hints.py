@@ -31,6 +31,21 @@ QUATERNION_ARRAY = (
     "ROS: x, y, z, w; Blender: w, x, y, z)"
 )
 VECTOR_ARRAY = 'a vector is an object {"x": ..., "y": ..., "z": ...}, not an array'
+# Unreal's FRotator (and Euler angles in general) where a quaternion belongs.
+EULER_ANGLES = (
+    'Euler angles (pitch, yaw, roll) are not taken: a rotation is a quaternion {"w": ..., '
+    '"x": ..., "y": ..., "z": ...} in the session\'s conventions (Unreal: '
+    "FRotator::Quaternion(); Unity: Quaternion.Euler(...); Godot: Basis.get_rotation_quaternion())"
+)
+_EULER_NAMES = frozenset({"pitch", "yaw", "roll", "heading", "bank", "euler"})
+# The answer's form of the conventions (ConventionsOut) sent back in a request.
+CONVENTIONS_UNIT = (
+    "unknown field 'unit_m' in conventions: a request names the unit, "
+    '"unit": "m" or "cm" (unit_m is how the answer reports it)'
+)
+CONVENTIONS_OBJECT = (
+    'conventions is an object, not {}: {{"preset": "unreal"}}, or "up", "handedness", "unit"'
+)
 # pydantic's error for a non-object where a model belongs: model_type when it validates
 # JSON (it names the model in ctx), model_attributes_type for Python objects (FastAPI's
 # bodies, MessagePack), which does not.
@@ -114,12 +129,34 @@ def _array_hint(error: Mapping[str, Any], values: list[Any] | tuple[Any, ...]) -
     return None
 
 
-def _did_you_mean(name: str) -> str | None:
+def _did_you_mean(name: str, parent: Any = None) -> str | None:
+    if parent == "conventions" and name == "unit_m":
+        return CONVENTIONS_UNIT
     names = _field_names()
     if name in names or len(name) > _LONGEST_GUESS:  # a real field in the wrong place,
         return None  # or nothing like one (and not echoed back)
+    if name.lower() in names:  # Unreal's and C#'s X, Y, Z, W
+        return f"unknown field {name!r}; field names are lower case: {name.lower()!r}"
     close = difflib.get_close_matches(name, names, n=1, cutoff=0.8)
     return f"unknown field {name!r}; did you mean {close[0]!r}?" if close else None
+
+
+def _missing_hint(error: Mapping[str, Any]) -> str | None:
+    """A quaternion or vector object missing a component, said in the terms of what it
+    holds instead: upper-case keys (``{"X": ..}``), or Euler angles (an FRotator's
+    pitch, yaw, roll), which pydantic reports as a missing ``w`` first."""
+    loc: tuple[Any, ...] = tuple(error.get("loc") or ())
+    given = error.get("input")
+    if len(loc) < 2 or not isinstance(given, Mapping) or not isinstance(loc[-2], str):
+        return None
+    kind = _object_fields().get(loc[-2])
+    keys = {k.lower() for k in given if isinstance(k, str)}
+    if kind == S.Quaternion.__name__ and keys & _EULER_NAMES:
+        return EULER_ANGLES
+    wanted = "wxyz" if kind == S.Quaternion.__name__ else "xyz" if kind == S.Vec3.__name__ else ""
+    if wanted and set(wanted) <= keys:
+        return f"{loc[-1]!r} is missing: field names are lower case ({', '.join(wanted)})"
+    return None
 
 
 def hint(error: Mapping[str, Any]) -> str | None:
@@ -132,12 +169,22 @@ def hint(error: Mapping[str, Any]) -> str | None:
     if kind == "extra_forbidden":
         loc = error.get("loc") or ()
         if loc and isinstance(loc[-1], str):
-            return _did_you_mean(loc[-1])
+            return _did_you_mean(loc[-1], loc[-2] if len(loc) > 1 else None)
+    if kind == "missing":
+        return _missing_hint(error)
+    if kind in _NOT_AN_OBJECT and isinstance(value, str) and _names_conventions(error):
+        return CONVENTIONS_OBJECT.format(_shown(value))
     if kind == JSON_INVALID:
         return _json_hint(error)
     if kind == "int_type" and type(value) is float:
         return _whole_number_hint(value)
     return None
+
+
+def _names_conventions(error: Mapping[str, Any]) -> bool:
+    loc: tuple[Any, ...] = tuple(error.get("loc") or ())
+    named = (error.get("ctx") or {}).get("class_name")
+    return named == S.Conventions.__name__ or (bool(loc) and loc[-1] == "conventions")
 
 
 def _whole_number_hint(value: float) -> str:

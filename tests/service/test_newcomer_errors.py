@@ -425,3 +425,66 @@ def test_a_body_that_cannot_be_decoded_names_the_body(client: TestClient, body: 
     error = r.json()
     assert error["code"] == "invalid_format" and error["field"] == "body", error
     assert "not UTF-8" in error["detail"][0]["msg"], error
+
+
+# -- an engine's own forms of a rotation, a vector and the conventions (Unreal trial) --------
+@pytest.mark.parametrize(
+    ("field_name", "value", "words", "field"),
+    [
+        ("orientation", {"pitch": 10, "yaw": 90, "roll": 0}, "Euler angles", ".orientation.w"),
+        ("orientation", {"X": 0, "Y": 0, "Z": 0, "W": 1}, "lower case", ".orientation.w"),
+        ("position", {"X": 0.3, "Y": 0.1, "Z": 0.6}, "lower case", ".position.x"),
+    ],
+    ids=["frotator", "upper-case-quaternion", "upper-case-vector"],
+)
+@pytest.mark.parametrize("transport", ["http", "json", "msgpack"])
+def test_an_engines_rotation_or_vector_form_is_told_the_contracts(
+    client: TestClient, field_name: str, value: Any, words: str, field: str, transport: str
+) -> None:
+    pose_arm = copy.deepcopy(EXAMPLE_ARM)
+    pose_arm["effectors"] = [{"name": "hand", "link": "hand", "mode": "pose"}]
+    s = create(client, pose_arm)
+    target = {
+        "effector": "hand",
+        "position": {"x": 0.3, "y": 0.1, "z": 0.6},
+        "orientation": {"w": 1.0, "x": 0.0, "y": 0.0, "z": 0.0},
+        field_name: value,
+    }
+    if transport == "http":
+        r = client.post(
+            f"/v1/sessions/{s.id}/frames", json={"targets": [target]}, headers=s.headers
+        )
+        assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
+        assert r.json()["field"] == f"frame.targets[0]{field}"
+        message = r.json()["detail"][0]["msg"]
+    else:
+        frame = {"type": "frame", "id": 1, "targets": [target]}
+        error = ws_exchange(client, s, frame, binary=transport == "msgpack")["error"]
+        assert error["code"] == "invalid_format", error
+        message = error["message"]
+    assert words in message, message
+
+
+def test_a_misspelt_upper_case_field_is_told_the_lower_case_name(
+    client: TestClient, session: Created
+) -> None:
+    frame = {"targets": [{"effector": "hand", "Position": {"x": 0.3, "y": 0.1, "z": 0.6}}]}
+    r = client.post(f"/v1/sessions/{session.id}/frames", json=frame, headers=session.headers)
+    assert r.status_code == 422, r.text
+    messages = [e["msg"] for e in r.json()["detail"]]
+    assert any("field names are lower case: 'position'" in m for m in messages), messages
+
+
+@pytest.mark.parametrize(
+    ("conventions", "words"),
+    [({"unit_m": 0.01}, '"unit": "m" or "cm"'), ("unreal", '{"preset": "unreal"}')],
+    ids=["the-answers-unit_m", "a-bare-preset"],
+)
+def test_conventions_in_the_answers_form_or_bare_are_told_the_requests(
+    client: TestClient, conventions: Any, words: str
+) -> None:
+    body = {"chain": EXAMPLE_ARM, "conventions": conventions}
+    r = client.post("/v1/sessions", json=body)
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
+    assert r.json()["field"].startswith("conventions")
+    assert words in r.json()["detail"][0]["msg"], r.text
