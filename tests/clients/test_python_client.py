@@ -559,8 +559,8 @@ def test_json_with_or_without_orjson(
     (ik-client[fast]), else json: the same typed answers either way, and NaN refused
     before it is sent, counting as nothing sent."""
     if codec == "json":
-        monkeypatch.setattr("ik_client.stream._loads", json.loads)
-        monkeypatch.setattr("ik_client.stream._orjson_dumps", None)
+        monkeypatch.setattr("ik_client.encoding._loads", json.loads)
+        monkeypatch.setattr("ik_client.encoding._orjson_dumps", None)
     nan: Target = {"effector": "tool", "position": {"x": float("nan"), "y": 0.1, "z": 0.5}}
     with ik.stream(session) as stream:
         result = stream.frame([tool(0.1)])
@@ -591,7 +591,7 @@ def test_json_refuses_the_same_with_or_without_orjson(
     """orjson writes dataclasses and datetimes, json does not: refused either way
     (TypeError), before anything is sent."""
     if codec == "json":
-        monkeypatch.setattr("ik_client.stream._orjson_dumps", None)
+        monkeypatch.setattr("ik_client.encoding._orjson_dumps", None)
     target: Any = {"effector": "tool", "position": position}
     with ik.stream(session) as stream:
         with pytest.raises(TypeError):
@@ -611,11 +611,13 @@ CYCLE: list[object] = []
 CYCLE.append(CYCLE)
 
 
-def pipeline(codec: str, monkeypatch: pytest.MonkeyPatch) -> ik_client.stream._Pipeline:
+def pipeline(codec: str, monkeypatch: pytest.MonkeyPatch) -> ik_client.stream.pipeline._Pipeline:
     """A stream's encoder (no I/O): orjson, json (orjson not installed) or msgpack."""
     if codec == "json":
-        monkeypatch.setattr("ik_client.stream._orjson_dumps", None)
-    return ik_client.stream._Pipeline(Encoding.MSGPACK if codec == "msgpack" else Encoding.JSON)
+        monkeypatch.setattr("ik_client.encoding._orjson_dumps", None)
+    return ik_client.stream.pipeline._Pipeline(
+        Encoding.MSGPACK if codec == "msgpack" else Encoding.JSON
+    )
 
 
 @pytest.mark.parametrize("codec", CODECS)

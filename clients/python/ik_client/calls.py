@@ -11,8 +11,8 @@ from typing import Any, Generic, Protocol, TypeVar
 
 import httpx
 
+from .encoding import json_body
 from .errors import service_error
-from .stream import json_body
 from .types import (
     BatchEntryResult,
     BatchFrame,
