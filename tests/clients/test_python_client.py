@@ -611,11 +611,11 @@ CYCLE: list[object] = []
 CYCLE.append(CYCLE)
 
 
-def pipeline(codec: str, monkeypatch: pytest.MonkeyPatch) -> ik_client.stream.pipeline._Pipeline:
+def pipeline(codec: str, monkeypatch: pytest.MonkeyPatch) -> ik_client.stream.pipeline.Pipeline:
     """A stream's encoder (no I/O): orjson, json (orjson not installed) or msgpack."""
     if codec == "json":
         monkeypatch.setattr("ik_client.encoding._orjson_dumps", None)
-    return ik_client.stream.pipeline._Pipeline(
+    return ik_client.stream.pipeline.Pipeline(
         Encoding.MSGPACK if codec == "msgpack" else Encoding.JSON
     )
 

@@ -18,6 +18,7 @@ from typing import Any
 import msgpack
 
 from .errors import EncodeError, UnexpectedAnswer
+from .types import Encoding
 
 # JSON messages are written and answers read with orjson when it is installed (``pip
 # install ik-client[fast]``): several times faster than json, which counts for a client
@@ -122,7 +123,7 @@ def _packb(payload: dict[str, Any]) -> bytes:
     return data
 
 
-def _envelope(data: str | bytes) -> dict[str, Any]:
+def decode_answer(data: str | bytes) -> dict[str, Any]:
     """An answer decoded (MessagePack when binary, else JSON) to the object it must be.
 
     Raises:
@@ -143,3 +144,19 @@ def _envelope(data: str | bytes) -> dict[str, Any]:
             f"an answer that is not an object: {data[:80]!r}", id=None, envelope={}, data=data
         )
     return envelope
+
+
+def encode_message(payload: dict[str, Any], encoding: Encoding) -> str | bytes:
+    """``payload``, a stream message with its id, in ``encoding``.
+
+    Raises:
+        EncodeError: ``payload`` cannot be written (a ValueError and a TypeError too).
+    """
+    try:
+        if encoding is Encoding.MSGPACK:
+            return _packb(payload)
+        return _dumps(payload)
+    except EncodeError:
+        raise
+    except (TypeError, ValueError, OverflowError) as exc:  # a dataclass, a cycle, 2**64
+        raise EncodeError(f"the message cannot be written as {encoding.value}: {exc}") from exc

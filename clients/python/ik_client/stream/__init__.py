@@ -4,12 +4,12 @@ The stream numbers its messages itself (0, 1, 2, ...), so a caller can send many
 the answers by the id each ``send_*`` returned; the server answers in order. When the
 connection drops (or the server closes 1011, 1012 or 1013, or answers ``shutting_down``, or
 ``not_ready`` after a reconnect), the stream reconnects within its ``Reconnect`` budget
-(reconnect.py: a deadline, backoff with jitter) and sends again, in order, every message
+(../reconnect.py: a deadline, backoff with jitter) and sends again, in order, every message
 that had no answer yet, under
 the id it was first sent with (each connection wants increasing ids; the stream keeps one
 counter over every connection, so they still increase). Of what other tasks send to an
 ``AsyncStream`` while it reconnects, at most ``max_queued`` messages wait for the new
-connection (queued.py: the oldest beyond it are dropped unsent, ``MessageDropped``); the
+connection (../queued.py: the oldest beyond it are dropped unsent, ``MessageDropped``); the
 blocking ``Stream`` reconnects inside the call that met the drop, so nothing waits
 behind it. Answers are reported under the id the caller got, and each message gets
 exactly one (a dropped one: its ``MessageDropped``). A server that keeps answers (sessions

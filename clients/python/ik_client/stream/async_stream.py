@@ -26,22 +26,12 @@ from ..types import (
     Pong,
     Target,
 )
-from .base import _BaseStream
-from .messages import (
-    _batch,
-    _clip,
-    _expect_batch,
-    _expect_clip,
-    _expect_fk,
-    _expect_frame,
-    _expect_pong,
-    _fk,
-    _frame,
-)
-from .recovery import _ATTEMPT_FAILURES, _NotServing, _open_failed
+from . import messages
+from .base import BaseStream
+from .recovery import ATTEMPT_FAILURES, NotServing, open_failed
 
 
-class AsyncStream(_BaseStream[AsyncConnection]):
+class AsyncStream(BaseStream[AsyncConnection]):
     """A session's WebSocket (asyncio). Use as ``async with client.stream(session) as s``.
 
     ``send_frame`` / ``send_clip`` / ``send_batch`` / ``send_ping`` return the message's
@@ -63,8 +53,8 @@ class AsyncStream(_BaseStream[AsyncConnection]):
     async def __aenter__(self) -> AsyncStream:
         try:
             self._connection = await self._open()
-        except _ATTEMPT_FAILURES as exc:
-            raise _open_failed(self.url, exc) from exc
+        except ATTEMPT_FAILURES as exc:
+            raise open_failed(self.url, exc) from exc
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:
@@ -75,13 +65,13 @@ class AsyncStream(_BaseStream[AsyncConnection]):
             await self._connection.close()
 
     async def send_frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> int:
-        return await self._send(_frame(targets, bones))
+        return await self._send(messages.frame(targets, bones))
 
     async def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
-        return await self._send(_clip(frames, plan))
+        return await self._send(messages.clip(frames, plan))
 
     async def send_batch(self, frames: list[BatchFrame]) -> int:
-        return await self._send(_batch(frames))
+        return await self._send(messages.batch(frames))
 
     async def send_ping(self) -> int:
         return await self._send({"type": "ping"})
@@ -93,7 +83,7 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         joints: dict[str, float] | None = None,
         bones: BoneOutput | None = None,
     ) -> int:
-        return await self._send(_fk(q, joints, bones))
+        return await self._send(messages.fk(q, joints, bones))
 
     async def receive(self) -> Answer:
         while True:
@@ -108,25 +98,25 @@ class AsyncStream(_BaseStream[AsyncConnection]):
                 continue
             try:
                 return self._answer(data)
-            except _NotServing as exc:
+            except NotServing as exc:
                 await connection.close()  # what waits is sent again on a new connection
                 await self._recover(connection, exc)
 
     async def frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> FrameResult:
         await self.send_frame(targets, bones=bones)
-        return _expect_frame(await self.receive())
+        return messages.expect_frame(await self.receive())
 
     async def clip(self, frames: list[Frame], *, plan: bool = False) -> ClipResult:
         await self.send_clip(frames, plan=plan)
-        return _expect_clip(await self.receive())
+        return messages.expect_clip(await self.receive())
 
     async def batch(self, frames: list[BatchFrame]) -> list[BatchEntryResult]:
         await self.send_batch(frames)
-        return _expect_batch(await self.receive())
+        return messages.expect_batch(await self.receive())
 
     async def ping(self) -> Pong:
         await self.send_ping()
-        return _expect_pong(await self.receive())
+        return messages.expect_pong(await self.receive())
 
     async def fk(
         self,
@@ -139,7 +129,7 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         session's current pose): its effectors' world poses (and, on skeleton chains,
         bone data) in the session's conventions; the pose does not change."""
         await self.send_fk(q=q, joints=joints, bones=bones)
-        return _expect_fk(await self.receive())
+        return messages.expect_fk(await self.receive())
 
     async def _open(self) -> AsyncConnection:
         return await async_connect(self.url, **self._connect_options, **self._take_sock())
@@ -159,7 +149,7 @@ class AsyncStream(_BaseStream[AsyncConnection]):
         await self._recover(connection, failure)
         return message_id
 
-    async def _recover(self, failed: AsyncConnection, exc: ConnectionClosed | _NotServing) -> None:
+    async def _recover(self, failed: AsyncConnection, exc: ConnectionClosed | NotServing) -> None:
         """Reconnect and resend what is waiting, or raise the close as a ``StreamClosed``."""
         self._note_failure(exc)
         async with self._lock:
@@ -182,7 +172,7 @@ class AsyncStream(_BaseStream[AsyncConnection]):
                 self._held = None
                 for data in self._pipeline.resend():
                     await connection.send(data)
-            except _ATTEMPT_FAILURES as failure:
+            except ATTEMPT_FAILURES as failure:
                 if self._held is None:  # they went out on a connection that failed:
                     self._held = SendQueue(self.max_queued)  # kept, and counted no more
                 self._retries.attempt_failed(failure)

@@ -1,4 +1,4 @@
-"""What both streams hold (``_BaseStream``): the URL and token, the pipeline, the
+"""What both streams hold (``BaseStream``): the URL and token, the pipeline, the
 reconnect budget, the current websockets connection and its options.
 """
 
@@ -15,8 +15,8 @@ from ..errors import IKClientError
 from ..queued import DEFAULT_MAX_QUEUED, SendQueue, max_queued_option
 from ..reconnect import Reconnect
 from ..types import Answer, Encoding
-from .pipeline import _Pipeline
-from .recovery import _NotServing, _Retries
+from .pipeline import Pipeline
+from .recovery import NotServing, Retries
 
 # Answers of long clips of big chains can be large; the server bounds what it sends.
 MAX_ANSWER_BYTES = 64 * 2**20
@@ -30,7 +30,7 @@ PING_TIMEOUT_S = 20.0
 Connection = TypeVar("Connection", SyncConnection, AsyncConnection)
 
 
-class _BaseStream(Generic[Connection]):
+class BaseStream(Generic[Connection]):
     """What both streams hold: the URL and token, the pipeline, the reconnect budget and
     the current websockets connection (``Connection``, threading or asyncio).
 
@@ -61,8 +61,8 @@ class _BaseStream(Generic[Connection]):
         self.url = url
         self.reconnects = 0  # connections made after the first
         self.timeout_s = timeout_s
-        self._pipeline = _Pipeline(encoding)
-        self._retries = _Retries(reconnect)
+        self._pipeline = Pipeline(encoding)
+        self._retries = Retries(reconnect)
         self.max_queued = max_queued_option(max_queued)
         # While an asyncio stream reconnects: what is sent meanwhile (None otherwise).
         self._held: SendQueue[int] | None = None
@@ -110,22 +110,22 @@ class _BaseStream(Generic[Connection]):
         return 0 if self._held is None else len(self._held)
 
     def _answer(self, data: str | bytes) -> Answer:
-        """The answer ``data`` carries (``_Pipeline.answer``); any answer but one that
-        is part of the outage (``_NotServing``) gives the reconnect budget back."""
+        """The answer ``data`` carries (``Pipeline.answer``); any answer but one that
+        is part of the outage (``NotServing``) gives the reconnect budget back."""
         serving = True
         try:
             return self._pipeline.answer(data, outage=self._retries.outage)
-        except _NotServing:
+        except NotServing:
             serving = False
             raise
         finally:
             if serving:  # error answers included: the server answered
                 self._retries.answered()
 
-    def _note_failure(self, exc: ConnectionClosed | _NotServing) -> None:
+    def _note_failure(self, exc: ConnectionClosed | NotServing) -> None:
         """Count ``exc`` against the reconnect budget, or raise it when reconnecting
-        cannot mend it (``_Retries``)."""
-        if isinstance(exc, _NotServing):
+        cannot mend it (``Retries``)."""
+        if isinstance(exc, NotServing):
             self._retries.not_serving(exc)
         else:
             self._retries.closed(exc)

@@ -25,22 +25,22 @@ from ..types import (
 )
 
 
-def _frame(targets: list[Target], bones: BoneOutput | None) -> dict[str, Any]:
+def frame(targets: list[Target], bones: BoneOutput | None) -> dict[str, Any]:
     """A frame message; ``bones`` overrides the session's bone output for this frame."""
     if bones is None:
         return {"type": "frame", "targets": targets}
     return {"type": "frame", "targets": targets, "bones": bones}
 
 
-def _clip(frames: list[Frame], plan: bool) -> dict[str, Any]:
+def clip(frames: list[Frame], plan: bool) -> dict[str, Any]:
     return {"type": "clip", "frames": frames, "plan": plan}
 
 
-def _batch(frames: list[BatchFrame]) -> dict[str, Any]:
+def batch(frames: list[BatchFrame]) -> dict[str, Any]:
     return {"type": "batch", "frames": frames}
 
 
-def _fk(
+def fk(
     q: list[float] | None, joints: dict[str, float] | None, bones: BoneOutput | None
 ) -> dict[str, Any]:
     """An fk message: the pose ``q``, or ``joints`` by name, or neither (the session's)."""
@@ -51,31 +51,31 @@ def _fk(
     return body
 
 
-def _expect_frame(answer: Answer) -> FrameResult:
+def expect_frame(answer: Answer) -> FrameResult:
     if not isinstance(answer, FrameAnswer):
         raise IKClientError(f"expected a frame result, got {answer!r}")
     return answer.result
 
 
-def _expect_fk(answer: Answer) -> FkResult:
+def expect_fk(answer: Answer) -> FkResult:
     if not isinstance(answer, FkAnswer):
         raise IKClientError(f"expected an fk result, got {answer!r}")
     return answer.result
 
 
-def _expect_pong(answer: Answer) -> Pong:
+def expect_pong(answer: Answer) -> Pong:
     if not isinstance(answer, Pong):
         raise IKClientError(f"expected a pong, got {answer!r}")
     return answer
 
 
-def _expect_clip(answer: Answer) -> ClipResult:
+def expect_clip(answer: Answer) -> ClipResult:
     if not isinstance(answer, ClipAnswer):
         raise IKClientError(f"expected a clip result, got {answer!r}")
     return answer.clip
 
 
-def _expect_batch(answer: Answer) -> list[BatchEntryResult]:
+def expect_batch(answer: Answer) -> list[BatchEntryResult]:
     if not isinstance(answer, BatchAnswer):
         raise IKClientError(f"expected a batch result, got {answer!r}")
     return answer.results

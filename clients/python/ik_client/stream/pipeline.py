@@ -9,8 +9,8 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
-from ..encoding import _dumps, _envelope, _packb
-from ..errors import EncodeError, UnexpectedAnswer, service_error
+from ..encoding import decode_answer, encode_message
+from ..errors import UnexpectedAnswer, service_error
 from ..queued import SendQueue
 from ..types import (
     Answer,
@@ -25,7 +25,7 @@ from ..types import (
     FrameResult,
     Pong,
 )
-from .recovery import _NotServing
+from .recovery import NotServing
 
 
 @dataclass(slots=True)
@@ -38,7 +38,7 @@ class _Message:
     data: str | bytes
 
 
-class _Pipeline:
+class Pipeline:
     """Ids, encoding, and the messages still waiting for an answer, in order."""
 
     def __init__(self, encoding: Encoding) -> None:
@@ -61,7 +61,7 @@ class _Pipeline:
             EncodeError: ``body`` cannot be written (a ValueError and a TypeError too);
                 nothing was counted.
         """
-        data = self._encode(body, self._next_wire_id)
+        data = encode_message({**body, "id": self._next_wire_id}, self.encoding)
         message = _Message(self._next_id, self._next_wire_id, data)
         self._next_id += 1
         self._next_wire_id += 1
@@ -98,15 +98,15 @@ class _Pipeline:
         """The answer ``data`` carries, under its message's caller id.
 
         Args:
-            outage: The error codes that are part of an outage now (``_Retries.outage``):
+            outage: The error codes that are part of an outage now (``Retries.outage``):
                 such an answer is not the message's.
 
         Raises:
             ServiceError: The message was answered with an error (its subclass by code).
-            _NotServing: The server cannot serve the message now but another connection
+            NotServing: The server cannot serve the message now but another connection
                 can; it stays waiting, to be sent again.
         """
-        envelope = _envelope(data)
+        envelope = decode_answer(data)
         wire_id = envelope.get("id")
         if wire_id is None and self._waiting:  # the server could not read the id: in order
             wire_id = next(iter(self._waiting))
@@ -121,7 +121,7 @@ class _Pipeline:
         if "error" in envelope:
             error = envelope["error"]
             if error.get("code") in outage:
-                raise _NotServing.of(error)
+                raise NotServing.of(error)
             del self._waiting[message.wire_id]
             raise service_error(
                 error.get("code"),
@@ -148,16 +148,3 @@ class _Pipeline:
         raise UnexpectedAnswer(
             f"an answer of unknown type {kind!r} to id {wire_id}", id=message.id, envelope=envelope
         )
-
-    def _encode(self, body: dict[str, Any], wire_id: int) -> str | bytes:
-        payload = {**body, "id": wire_id}
-        try:
-            if self.encoding is Encoding.MSGPACK:
-                return _packb(payload)
-            return _dumps(payload)
-        except EncodeError:
-            raise
-        except (TypeError, ValueError, OverflowError) as exc:  # a dataclass, a cycle, 2**64
-            raise EncodeError(
-                f"the message cannot be written as {self.encoding.value}: {exc}"
-            ) from exc

@@ -22,15 +22,15 @@ from ..errors import (
 )
 from ..reconnect import Backoff, Reconnect, retry_after_s
 
-# What ends one reconnect attempt and lets the next one start (``_Retries.attempt_failed``).
-_ATTEMPT_FAILURES = (ConnectionClosed, OSError, InvalidHandshake, TimeoutError)
+# What ends one reconnect attempt and lets the next one start (``Retries.attempt_failed``).
+ATTEMPT_FAILURES = (ConnectionClosed, OSError, InvalidHandshake, TimeoutError)
 # Handshake refusals a reconnect waits out: a timeout, too many requests, and a server
 # or balancer that cannot serve now (502-504: no worker up). Any other status (401, 403,
 # 404 from a proxy in front) is the same on every try.
 _RETRIED_STATUSES = frozenset({408, 425, 429, 500, 502, 503, 504})
 
 
-class _NotServing(Exception):
+class NotServing(Exception):
     """An error answer that says the server cannot serve the message now, where a new
     connection, after a wait, can: the stream reconnects and sends it again. ``close``
     is what the stream raises if its reconnect budget runs out."""
@@ -41,7 +41,7 @@ class _NotServing(Exception):
         self.retry_after_s = retry_after_s
 
     @classmethod
-    def of(cls, error: dict[str, Any]) -> _NotServing:
+    def of(cls, error: dict[str, Any]) -> NotServing:
         """The error answer ``error`` (one of ``_OUTAGE_CODES``) as the close it stands for."""
         code = str(error.get("code"))
         close = (
@@ -64,7 +64,7 @@ _OUTAGE_CODES = frozenset({ErrorCode.SHUTTING_DOWN.value})
 _RECOVERY_CODES = frozenset({ErrorCode.SHUTTING_DOWN.value, ErrorCode.NOT_READY.value})
 
 
-def _open_failed(url: str, exc: Exception) -> ConnectionLost:
+def open_failed(url: str, exc: Exception) -> ConnectionLost:
     """The first connection could not be opened (nothing listens, the handshake was
     refused, e.g. a balancer's 502, or no answer in ``OPEN_TIMEOUT_S``): a
     ``ConnectionLost`` (1006), so that a caller catches every stream failure as an
@@ -82,7 +82,7 @@ def _close_of(exc: ConnectionClosed) -> tuple[int, str]:
     return 1006, ""
 
 
-class _Retries:
+class Retries:
     """A stream's reconnect budget, without I/O: which closes a reconnect can mend, the
     wait before each attempt (``Backoff`` under the ``Reconnect`` policy: a deadline from
     the first failure since the last answer), and the error raised when none is left."""
@@ -111,13 +111,13 @@ class _Retries:
             raise stream_closed(code, reason) from exc
         self._lost(stream_closed(code, reason), exc)
 
-    def not_serving(self, exc: _NotServing) -> None:
-        """Note an answer that the server cannot serve now (``_NotServing``)."""
+    def not_serving(self, exc: NotServing) -> None:
+        """Note an answer that the server cannot serve now (``NotServing``)."""
         self._lost(exc.close, exc)
         self._retry_after_s = exc.retry_after_s
 
     def attempt_failed(self, exc: Exception) -> None:
-        """Note a reconnect attempt that failed (one of ``_ATTEMPT_FAILURES``): a close is
+        """Note a reconnect attempt that failed (one of ``ATTEMPT_FAILURES``): a close is
         noted as by ``closed``; an unreachable server, or a handshake refused with a
         status that waiting can mend (``_RETRIED_STATUSES``: a balancer's 503 while no
         worker is ready), is tried again, no sooner than the refusal's ``Retry-After``;

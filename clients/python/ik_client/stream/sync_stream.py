@@ -23,22 +23,12 @@ from ..types import (
     Pong,
     Target,
 )
-from .base import _BaseStream
-from .messages import (
-    _batch,
-    _clip,
-    _expect_batch,
-    _expect_clip,
-    _expect_fk,
-    _expect_frame,
-    _expect_pong,
-    _fk,
-    _frame,
-)
-from .recovery import _ATTEMPT_FAILURES, _NotServing, _open_failed
+from . import messages
+from .base import BaseStream
+from .recovery import ATTEMPT_FAILURES, NotServing, open_failed
 
 
-class Stream(_BaseStream[SyncConnection]):
+class Stream(BaseStream[SyncConnection]):
     """A session's WebSocket (blocking; one thread at a time). Use as
     ``with client.stream(session) as s``; the same calls as ``AsyncStream``.
     ``receive`` waits at most ``timeout_s`` (``TimeoutError``)."""
@@ -46,8 +36,8 @@ class Stream(_BaseStream[SyncConnection]):
     def __enter__(self) -> Stream:
         try:
             self._connection = self._open()
-        except _ATTEMPT_FAILURES as exc:
-            raise _open_failed(self.url, exc) from exc
+        except ATTEMPT_FAILURES as exc:
+            raise open_failed(self.url, exc) from exc
         return self
 
     def __exit__(self, *exc_info: object) -> None:
@@ -58,13 +48,13 @@ class Stream(_BaseStream[SyncConnection]):
             self._connection.close()
 
     def send_frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> int:
-        return self._send(_frame(targets, bones))
+        return self._send(messages.frame(targets, bones))
 
     def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
-        return self._send(_clip(frames, plan))
+        return self._send(messages.clip(frames, plan))
 
     def send_batch(self, frames: list[BatchFrame]) -> int:
-        return self._send(_batch(frames))
+        return self._send(messages.batch(frames))
 
     def send_ping(self) -> int:
         return self._send({"type": "ping"})
@@ -76,7 +66,7 @@ class Stream(_BaseStream[SyncConnection]):
         joints: dict[str, float] | None = None,
         bones: BoneOutput | None = None,
     ) -> int:
-        return self._send(_fk(q, joints, bones))
+        return self._send(messages.fk(q, joints, bones))
 
     def receive(self) -> Answer:
         while True:
@@ -87,25 +77,25 @@ class Stream(_BaseStream[SyncConnection]):
                 continue
             try:
                 return self._answer(data)
-            except _NotServing as exc:
+            except NotServing as exc:
                 self.connection.close()  # what waits is sent again on a new connection
                 self._recover(exc)
 
     def frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> FrameResult:
         self.send_frame(targets, bones=bones)
-        return _expect_frame(self.receive())
+        return messages.expect_frame(self.receive())
 
     def clip(self, frames: list[Frame], *, plan: bool = False) -> ClipResult:
         self.send_clip(frames, plan=plan)
-        return _expect_clip(self.receive())
+        return messages.expect_clip(self.receive())
 
     def batch(self, frames: list[BatchFrame]) -> list[BatchEntryResult]:
         self.send_batch(frames)
-        return _expect_batch(self.receive())
+        return messages.expect_batch(self.receive())
 
     def ping(self) -> Pong:
         self.send_ping()
-        return _expect_pong(self.receive())
+        return messages.expect_pong(self.receive())
 
     def fk(
         self,
@@ -118,7 +108,7 @@ class Stream(_BaseStream[SyncConnection]):
         session's current pose): its effectors' world poses (and, on skeleton chains,
         bone data) in the session's conventions; the pose does not change."""
         self.send_fk(q=q, joints=joints, bones=bones)
-        return _expect_fk(self.receive())
+        return messages.expect_fk(self.receive())
 
     def _open(self) -> SyncConnection:
         options = {**self._connect_options, **self._take_sock()}
@@ -135,7 +125,7 @@ class Stream(_BaseStream[SyncConnection]):
             self._recover(exc)
         return message_id
 
-    def _recover(self, exc: ConnectionClosed | _NotServing) -> None:
+    def _recover(self, exc: ConnectionClosed | NotServing) -> None:
         """Reconnect and resend what is waiting, or raise the close as a ``StreamClosed``."""
         self._note_failure(exc)
         for delay in self._retries.delays():
@@ -144,7 +134,7 @@ class Stream(_BaseStream[SyncConnection]):
                 connection = self._open()
                 for data in self._pipeline.resend():
                     connection.send(data)
-            except _ATTEMPT_FAILURES as failure:
+            except ATTEMPT_FAILURES as failure:
                 self._retries.attempt_failed(failure)
                 continue
             self._reconnected(connection)
