@@ -12,6 +12,7 @@
  * `Retry-After` and not at all when that would end after the deadline.
  */
 
+import type { Chain } from "./chains.js";
 import { encodeBody } from "./encode.js";
 import { NoAnswer, serviceError } from "./errors.js";
 import { Backoff, type Reconnect, type ReconnectOptions, reconnectPolicy, retryAfterMs } from "./reconnect.js";
@@ -21,7 +22,6 @@ import type {
   BatchFrame,
   BatchResults,
   BoneOutput,
-  Chain,
   Conventions,
   CompactFrameResult,
   FkResult,

@@ -9,6 +9,7 @@
  * ```
  */
 
+export type * from "./chains.js"; // types only: nothing in a bundle
 export * from "./client.js";
 export * from "./errors.js";
 export { DEFAULT_MAX_QUEUED } from "./queued.js";
