@@ -5,12 +5,15 @@
   private modules, no cycles between siblings).
 - No module imports an underscore *name* from another top-level package
   (import-linter sees modules only, so ``from solver.ik import _Planner`` needs this).
-- No Python file of the product is over 500 lines, unless its docstring says why.
+- No Python file of the product (the service's packages and the Python client) is over
+  500 lines, unless its docstring says why; nor is a TypeScript file of the TypeScript
+  client's src/, unless its leading comment says why.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +22,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PRODUCT = ("solver", "schemas", "service")
+# The clients are product too: what a game or a robot runs to reach the service.
+PYTHON_CLIENT = "clients/python/ik_client"
+TYPESCRIPT_CLIENT = "clients/typescript/src"
 CHECKED = (*PRODUCT, "bench", "loadtest", "tests")
 MAX_LINES = 500
 # A file may be longer when its docstring gives the reason with these words.
@@ -93,14 +99,52 @@ def test_private_name_check_can_fail(tmp_path: Path) -> None:
         bad.unlink()
 
 
-def test_product_files_are_small_or_say_why() -> None:
-    too_long = []
-    for path in _python_files(*PRODUCT):
-        text = path.read_text()
-        lines = text.count("\n")
-        if lines <= MAX_LINES:
-            continue
+def _too_long(path: Path) -> str | None:
+    """``path: N lines`` when ``path`` is over MAX_LINES and its docstring (a Python
+    module's; a TypeScript file's leading ``/** ... */`` comment) does not say why."""
+    text = path.read_text()
+    lines = text.count("\n")
+    if lines <= MAX_LINES:
+        return None
+    if path.suffix == ".py":
         doc = ast.get_docstring(ast.parse(text)) or ""
-        if LONG_FILE_MARK not in doc:
-            too_long.append(f"{path.relative_to(ROOT)}: {lines} lines")
+    else:
+        leading = re.match(r"\s*/\*\*(.*?)\*/", text, re.DOTALL)
+        doc = " ".join(leading.group(1).replace("*", " ").split()) if leading else ""
+    if LONG_FILE_MARK in doc:
+        return None
+    return f"{path.relative_to(ROOT)}: {lines} lines"
+
+
+def _product_files() -> list[Path]:
+    return [
+        *_python_files(*PRODUCT, PYTHON_CLIENT),
+        *sorted((ROOT / TYPESCRIPT_CLIENT).glob("*.ts")),
+    ]
+
+
+def test_product_files_are_small_or_say_why() -> None:
+    files = _product_files()
+    # The clients are in the list: a path that moved would otherwise check nothing.
+    assert ROOT / PYTHON_CLIENT / "__init__.py" in files
+    assert ROOT / TYPESCRIPT_CLIENT / "index.ts" in files
+    too_long = [line for path in files if (line := _too_long(path)) is not None]
     assert too_long == [], "\n".join(too_long)
+
+
+@pytest.mark.parametrize("suffix", [".py", ".ts"])
+def test_line_cap_can_fail(suffix: str) -> None:
+    # The check above must see a long file, and let one through whose docstring says why.
+    probe = ROOT / "tests" / f"_architecture_probe_tmp{suffix}"
+    body = "x = 1\n" * (MAX_LINES + 1)
+    if suffix == ".py":
+        because = f'"""A probe, {LONG_FILE_MARK} it must be."""\n'
+    else:
+        because = "/**\n * A probe, longer than 500\n * lines because it must be.\n */\n"
+    try:
+        probe.write_text(body)
+        assert _too_long(probe) == f"tests/{probe.name}: {MAX_LINES + 1} lines"
+        probe.write_text(because + body)
+        assert _too_long(probe) is None
+    finally:
+        probe.unlink()
