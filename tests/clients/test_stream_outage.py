@@ -227,6 +227,40 @@ def test_sends_while_reconnecting_wait_at_most_max_queued() -> None:
     assert [m for conn, m in server.seen if conn == 1] == [1, 4, 5, 6]  # 2, 3 never sent
 
 
+def test_close_while_reconnecting_abandons_the_reconnect() -> None:
+    """``close()`` from another task while the stream waits to reconnect ends the stream:
+    the task that was reconnecting gets a ``StreamClosed`` 1000, and no connection is
+    opened again (the TypeScript stream's ``close()`` abandons its reconnect alike).
+    Before, the reconnect went on after ``close()`` returned: it opened a connection
+    that nobody closed, and sent again what had no answer."""
+    server = Scripted(lambda conn, message_id: "drop" if (conn, message_id) == (0, 1) else "pong")
+    wait_s = 0.5
+    slow = Reconnect(initial_delay_s=wait_s, jitter=0.0, deadline_s=10.0)
+
+    async def close_while_reconnecting() -> tuple[Any, int]:
+        async with serve(server.handler, "127.0.0.1", 0) as ws:
+            port = ws.sockets[0].getsockname()[1]
+            async with (
+                AsyncClient(f"http://127.0.0.1:{port}") as ik,
+                ik.stream(REF, reconnect=slow) as stream,
+            ):
+                await stream.ping()
+                await stream.send_ping()  # id 1: goes out, and the server drops the connection
+                receiving = asyncio.create_task(stream.receive())  # meets the drop, waits
+                while not stream.reconnecting:
+                    await asyncio.sleep(0.005)
+                await stream.close()
+                (outcome,) = await asyncio.gather(receiving, return_exceptions=True)
+                await asyncio.sleep(wait_s)  # a reconnect that went on would be done by now
+                return outcome, stream.reconnects
+
+    outcome, reconnects = asyncio.run(asyncio.wait_for(close_while_reconnecting(), 30.0))
+    assert isinstance(outcome, StreamClosed) and outcome.close_code == 1000, outcome
+    assert reconnects == 0
+    assert len(server.opened) == 1
+    assert server.seen == [(0, 0), (0, 1)]
+
+
 @pytest.mark.parametrize("bad", [-1, 1.5, float("nan"), True])
 def test_max_queued_is_checked_before_anything_opens(bad: Any) -> None:
     with Client("http://127.0.0.1:9") as ik, pytest.raises(ValueError, match="max_queued"):

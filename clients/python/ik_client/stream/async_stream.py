@@ -12,7 +12,7 @@ from websockets.asyncio.client import ClientConnection as AsyncConnection
 from websockets.asyncio.client import connect as async_connect
 from websockets.exceptions import ConnectionClosed
 
-from ..errors import MessageDropped
+from ..errors import CloseCode, MessageDropped, stream_closed
 from ..queued import SendQueue
 from ..types import (
     Answer,
@@ -61,6 +61,9 @@ class AsyncStream(BaseStream[AsyncConnection]):
         await self.close()
 
     async def close(self) -> None:
+        """Close the connection; a reconnect under way in another task stops, and that
+        task's call raises ``StreamClosed`` 1000."""
+        self._closed = True
         if self._connection is not None:
             await self._connection.close()
 
@@ -151,6 +154,8 @@ class AsyncStream(BaseStream[AsyncConnection]):
 
     async def _recover(self, failed: AsyncConnection, exc: ConnectionClosed | NotServing) -> None:
         """Reconnect and resend what is waiting, or raise the close as a ``StreamClosed``."""
+        if self._closed:  # closed by the caller, whatever the close code says
+            raise stream_closed(CloseCode.NORMAL) from exc
         self._note_failure(exc)
         async with self._lock:
             if self._connection is not failed:
@@ -165,6 +170,7 @@ class AsyncStream(BaseStream[AsyncConnection]):
         """Connect again (holding the lock) and resend what waits, within the budget."""
         for delay in self._retries.delays():
             await asyncio.sleep(delay)
+            self._raise_if_closed()
             try:
                 connection = await self._open()
                 # What is held goes out now with the rest; a send from here on waits
@@ -177,5 +183,13 @@ class AsyncStream(BaseStream[AsyncConnection]):
                     self._held = SendQueue(self.max_queued)  # kept, and counted no more
                 self._retries.attempt_failed(failure)
                 continue
+            if self._closed:  # close() came while this connection opened: it goes too
+                await connection.close()
+                self._raise_if_closed()
             self._reconnected(connection)
             return
+
+    def _raise_if_closed(self) -> None:
+        """A reconnect stops here once ``close()`` was called (by another task)."""
+        if self._closed:
+            raise stream_closed(CloseCode.NORMAL)

@@ -67,6 +67,9 @@ class BaseStream(Generic[Connection]):
         # While an asyncio stream reconnects: what is sent meanwhile (None otherwise).
         self._held: SendQueue[int] | None = None
         self._connection: Connection | None = None
+        # close() was called: an asyncio stream's reconnect under way in another task
+        # stops rather than open a connection nobody would close.
+        self._closed = False
         self._sock = sock  # taken by the first _open()
         self._connect_options: dict[str, Any] = {
             "additional_headers": {"Authorization": f"Bearer {token}"},
