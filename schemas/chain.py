@@ -282,6 +282,14 @@ class GltfChain(_SkeletonChainBase):
     skin: int | Name | None = Field(
         default=None, description="Skin index or name; default: the first"
     )
+    unit_m: FiniteFloat = Field(
+        default=1.0,
+        gt=0.0,
+        le=MAX_COORDINATE,
+        description="Metres per file length unit: 1 as the glTF specification says; 0.01 "
+        "for a file an exporter wrote in centimetres with no 0.01 scale node above its "
+        "bones (a chain's warnings say unlikely_units when its bones span over 10 m)",
+    )
 
     @model_validator(mode="after")
     def _one_source(self) -> GltfChain:

@@ -50,10 +50,8 @@ def skeleton_chain(spec: SkeletonSpec, settings: Settings) -> SkeletonChain:
     # Before the file: the cheaper checks first.
     effectors = effectors_of(spec.effectors, settings.max_effectors)
     skeleton = _read(spec, settings)
-    if isinstance(spec, S.BvhChain):
-        _check_lengths(skeleton, "chain.bvh", "check the file's units (unit_m)")
-    else:  # glTF is metres by its specification: there is no unit to set
-        _check_lengths(skeleton, _source(spec), "glTF is in metres: check the node's values")
+    field = "chain.bvh" if isinstance(spec, S.BvhChain) else _source(spec)
+    _check_lengths(skeleton, field, "check the file's units (unit_m)")
     for name, bone in spec.bones.items():
         check_radians(bone.lower, bone.upper, f"bone {name!r}", f"chain.bones.{name}")
     free_root = None
@@ -170,7 +168,7 @@ def _read(spec: SkeletonSpec, settings: Settings) -> Skeleton:
         except ValueError:  # NaN or Infinity: the request's JSON parser accepts them
             raise _non_finite(spec.gltf, where) from None
     try:
-        return read_gltf(data, skin=spec.skin, max_bytes=cap)
+        return read_gltf(data, skin=spec.skin, max_bytes=cap, unit_m=spec.unit_m)
     except InvalidModel as e:
         raise _file_problem(e, _gltf_field(where, e)) from None
 

@@ -16,7 +16,9 @@ import enum
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from solver.arrays import Matrix
+import numpy as np
+
+from solver.arrays import Matrix, Vector
 from solver.errors import InvalidModel
 from solver.model import Transform
 
@@ -124,6 +126,17 @@ class Skeleton:
 
     def by_name(self) -> dict[str, Bone]:
         return {b.name: b for b in self.bones}
+
+    def rest_origins(self) -> dict[str, Vector]:
+        """Each bone's origin in the skeleton's world frame at rest [m]."""
+        frames: dict[str, tuple[Matrix, Vector]] = {}
+        for bone in self.bones:
+            rotation, origin = frames[bone.parent] if bone.parent else (np.eye(3), np.zeros(3))
+            for step in (bone.offset, bone.rest):
+                origin = rotation @ step.translation + origin
+                rotation = rotation @ step.rotation
+            frames[bone.name] = (rotation, origin)
+        return {name: origin for name, (_, origin) in frames.items()}
 
 
 @dataclass(frozen=True, slots=True)

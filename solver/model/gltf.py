@@ -42,7 +42,8 @@ these nodes is refused. A bone with no joint below it (a hand's tip, a hidden pr
 bone scaled to 0) scales nothing of the chain: its own scale, whatever it is, is left
 to the engine, which keeps it beside the rotation it is sent (a ``matrix`` there must
 still give a rotation: no mirror, shear or zero column). glTF is in metres, Y up,
-right-handed (spec 3.4).
+right-handed (spec 3.4); ``unit_m`` scales the whole file for one that is not (a
+centimetre export with no 0.01 scale node above its armature), as a scale node would.
 
 Errors are ``InvalidModel``. ``joint`` names the part: ``glb``, ``json``, ``asset``,
 ``buffers[i]``, ``nodes[i]`` (with the node's name in parentheses when it has one),
@@ -52,6 +53,7 @@ Errors are ``InvalidModel``. ``joint`` names the part: ``glb``, ``json``, ``asse
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -115,12 +117,15 @@ def read_gltf(
     max_json_bytes: int = MAX_JSON_BYTES,
     max_nodes: int = MAX_NODES,
     max_depth: int = MAX_DEPTH,
+    unit_m: float = 1.0,
 ) -> Skeleton:
     """The skeleton of one skin of a glTF 2.0 document.
 
     Args:
         data: A ``.glb`` file's bytes, or a ``.gltf`` JSON document (bytes or str).
         skin: Index or name of the skin; None for the first.
+        unit_m: Metres per file length unit: 1 by the specification; 0.01 for a file
+            an exporter wrote in centimetres with no scale node to say so.
         max_bytes: Cap on the input's size [bytes].
         max_json_bytes: Cap on a GLB's JSON chunk [bytes].
         max_nodes: Cap on the document's node count.
@@ -132,6 +137,8 @@ def read_gltf(
     Raises:
         InvalidModel: anything in the module docstring; the message names the part.
     """
+    if not (isinstance(unit_m, int | float) and math.isfinite(unit_m) and unit_m > 0.0):
+        raise InvalidModel(f"unit_m must be finite and > 0, got {unit_m!r}", joint="gltf")
     doc = read_document(data, max_bytes=max_bytes, max_json_bytes=max_json_bytes)
     nodes = json_array(doc, "nodes", "json", max_len=max_nodes, what="nodes")
     for i, node in enumerate(nodes):
@@ -141,7 +148,8 @@ def read_gltf(
     depth = _depths(nodes, parent, max_depth)
     skin_index, skin_doc = _choose_skin(doc, skin)
     joints = _skin_joints(skin_doc, skin_index, len(nodes))
-    return _skeleton(nodes, parent, depth, joints, _skin_name(skin_doc, skin_index))
+    name = _skin_name(skin_doc, skin_index)
+    return _skeleton(nodes, parent, depth, joints, name, float(unit_m))
 
 
 # -- node graph ----------------------------------------------------------------
@@ -387,12 +395,18 @@ def _bone_names(nodes: list[Any], joints: list[int]) -> dict[int, str]:
 
 
 def _skeleton(
-    nodes: list[Any], parent: list[int], depth: list[int], joints: list[int], name: str
+    nodes: list[Any],
+    parent: list[int],
+    depth: list[int],
+    joints: list[int],
+    name: str,
+    unit_m: float,
 ) -> Skeleton:
     joint_set = set(joints)
     names = _bone_names(nodes, joints)
     locals_: dict[int, _Local] = {}
-    cumulative: dict[int, float] = {}  # product of the scales of a node and its ancestors
+    # Product of the scales of a node and its ancestors, and the file's unit above them.
+    cumulative: dict[int, float] = {}
 
     def local(i: int) -> _Local:
         if i not in locals_:
@@ -406,11 +420,11 @@ def _skeleton(
         while node >= 0 and node not in cumulative:
             path.append(node)
             node = parent[node]
-        acc = 1.0 if node < 0 else cumulative[node]
+        acc = unit_m if node < 0 else cumulative[node]
         for k in reversed(path):
             acc *= local(k).uniform_scale()
             cumulative[k] = acc
-        return 1.0 if parent[i] < 0 else cumulative[parent[i]]
+        return unit_m if parent[i] < 0 else cumulative[parent[i]]
 
     def rigid(i: int) -> Transform:
         loc = local(i)

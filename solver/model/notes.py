@@ -6,7 +6,12 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+
+import numpy as np
+
+from solver.arrays import Vector
 
 
 class NoteKind(enum.StrEnum):
@@ -78,3 +83,38 @@ def unit_notes(
             )
         )
     return notes
+
+
+# A character whose bones span more than this from its root at rest reads as a file in
+# centimetres (a person's hips to head, 0.7 m, at 70 "m"), inches or another unit (a
+# CMU BVH conversion: 18); less than this, as a file in metres read as centimetres.
+# Between them lie the characters a game has, from a hand rig to a large creature.
+_SPAN_M = (0.01, 10.0)
+
+
+def skeleton_size_notes(origins: Mapping[str, Vector]) -> list[ModelNote]:
+    """An ``unlikely_units`` note for a skeleton whose bones' rest origins ([m], the
+    first one its root) span more or less than a character does: a file written in
+    other units than the reader took (``unit_m``). Only a note: the skeleton is kept."""
+    if len(origins) < 2:
+        return []
+    names = list(origins)
+    points = np.array([origins[n] for n in names])
+    distances = np.linalg.norm(points - points[0], axis=1)
+    far = int(np.argmax(distances))
+    span = float(distances[far])
+    if _SPAN_M[0] <= span <= _SPAN_M[1] or span == 0.0:
+        return []
+    if span > _SPAN_M[1]:
+        why = "is the file in centimetres or another unit? Set unit_m (0.01 for centimetres)"
+    else:
+        why = "is unit_m too small for the file? (1 for a file in metres)"
+    return [
+        ModelNote(
+            NoteKind.UNLIKELY_UNITS,
+            names[far],
+            "unit_m",
+            f"the skeleton spans {span:.4g} m at rest (from {names[0]!r} to {names[far]!r}): "
+            f"{why}; lengths are the file's numbers times unit_m",
+        )
+    ]

@@ -47,6 +47,7 @@ Errors are ``InvalidModel`` naming the bone (``joint``) and the setting (``field
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -74,6 +75,7 @@ from solver.model.bones import (
 )
 from solver.model.forward import forward_kinematics
 from solver.model.layout import ND_R, ND_T
+from solver.model.notes import skeleton_size_notes
 from solver.model.skeleton_settings import (
     DEFAULT_AXES,
     BoneSettings,
@@ -422,6 +424,9 @@ def chain_from_skeleton(skeleton: Skeleton, settings: SkeletonSettings) -> Skele
             )
         )
     chain = build_chain(joints, effectors, max_dof=settings.max_dof)
+    notes = skeleton_size_notes(skeleton.rest_origins())
+    if notes:
+        chain = dataclasses.replace(chain, notes=(*chain.notes, *notes))
     return _with_maps(skeleton, chain, moving)
 
 

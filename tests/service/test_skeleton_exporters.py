@@ -170,3 +170,28 @@ def test_a_bone_named_like_the_free_roots_translation_is_named_in_the_error(
     assert r.json()["field"] == "chain.free_root"
     assert "'Hips.ty'" in r.json()["detail"]
     create(client, chain)  # without a free root there is no clash
+
+
+def test_a_centimetre_gltf_without_a_scale_node_warns_and_reads_with_unit_m(
+    client: TestClient,
+) -> None:
+    # An exporter that writes centimetres and no 0.01 node: the same armature as _DOC
+    # (turned a quarter about X), its bones 100x too long for glTF's metres.
+    doc = copy.deepcopy(_DOC)
+    del doc["nodes"][0]["scale"]
+    as_written = create(client, _chain(doc))
+    [warning] = as_written.body["warnings"]
+    assert (warning["code"], warning["field"]) == ("unlikely_units", "unit_m")
+    assert "centimetres" in warning["message"] and "unit_m" in warning["message"]
+    read = create(client, _chain(doc, unit_m=0.01))
+    assert read.body["warnings"] == [] and create(client, _chain()).body["warnings"] == []
+    pose = {"joints": {"thigh.L.x": 0.5}, "bones": {"world": ["ヒザ.L"]}}
+    answers = [
+        client.post(f"/v1/sessions/{s.id}/fk", json=pose, headers=s.headers).json()
+        for s in (read, create(client, _chain()), as_written)
+    ]
+    knees = [a["bones"]["world"]["ヒザ.L"]["position"] for a in answers]
+    assert_allclose([knees[0][k] for k in "xyz"], [knees[1][k] for k in "xyz"], atol=1e-12)
+    assert_allclose([knees[2][k] for k in "xyz"], [100 * knees[1][k] for k in "xyz"], rtol=1e-12)
+    bad = client.post("/v1/sessions", json={"chain": _chain(doc, unit_m=0)})
+    assert bad.status_code == 422 and bad.json()["field"] == "chain.unit_m", bad.text

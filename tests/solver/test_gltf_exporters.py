@@ -244,3 +244,32 @@ def test_gltfpack_placeholder_buffer_and_a_data_uri_beside_the_bin_chunk(
     with pytest.raises(InvalidModel, match="EXT_meshopt_compression") as info:
         read_gltf(make_glb(doc, bytes(16)))
     assert (info.value.joint, info.value.field) == ("buffers[1]", "uri")
+
+
+def test_a_centimetre_file_read_with_unit_m_is_the_metre_file() -> None:
+    metres = _humanoid(np.random.default_rng(5))
+    centimetres = _humanoid(np.random.default_rng(5), unit=100.0)
+    expected = read_gltf(json.dumps(metres)).rest_origins()
+    scaled = read_gltf(json.dumps(centimetres), unit_m=0.01).rest_origins()
+    as_written = read_gltf(json.dumps(centimetres)).rest_origins()
+    for name, origin in expected.items():
+        assert_allclose(scaled[name], origin, rtol=0, atol=1e-12)
+        assert_allclose(as_written[name], 100.0 * origin, rtol=1e-12, atol=1e-12)
+    with pytest.raises(InvalidModel, match="unit_m"):
+        read_gltf(json.dumps(metres), unit_m=float("nan"))
+
+
+@pytest.mark.parametrize(
+    ("unit", "unit_m", "noted"),
+    [(100.0, 1.0, True), (100.0, 0.01, False), (1.0, 1.0, False), (1.0, 1e-3, True)],
+)
+def test_a_skeleton_too_large_or_small_for_a_character_is_noted(
+    unit: float, unit_m: float, noted: bool
+) -> None:
+    doc = _humanoid(np.random.default_rng(5), unit=unit)
+    skeleton = read_gltf(json.dumps(doc), unit_m=unit_m)
+    settings = SkeletonSettings(effectors=[Effector(name="hand", link="Hand.L")])
+    notes = chain_from_skeleton(skeleton, settings).chain.notes
+    assert [(n.kind.value, n.field) for n in notes] == (
+        [("unlikely_units", "unit_m")] if noted else []
+    )

@@ -89,12 +89,16 @@ export interface SkeletonSettings {
   free_root?: { lower?: Vec3; upper?: Vec3 } | null;
 }
 
-/** Schema `GltfChain`: a glTF skin's joints as bones (`gltf`: the .gltf JSON, or `glb_base64`). */
+/**
+ * Schema `GltfChain`: a glTF skin's joints as bones (`gltf`: the .gltf JSON, or `glb_base64`);
+ * `unit_m`: metres per file unit (1, as glTF says; 0.01 for a centimetre export without a scale node).
+ */
 export interface GltfChain extends SkeletonSettings {
   format: "gltf";
   gltf?: Record<string, unknown> | null;
   glb_base64?: string | null;
   skin?: number | string | null;
+  unit_m?: number;
 }
 
 /** Schema `BvhChain`: a BVH file's joints as bones; `unit_m`: metres per file unit. */

@@ -239,7 +239,7 @@ const DECLARED: Record<string, string[]> = {
   HierarchyChain: k<HierarchyChain>({ format: true, joints: true, effectors: true }),
   UrdfChain: k<UrdfChain>({ format: true, urdf: true, base_link: true, tip_links: true, mode: true }),
   ExampleChain: k<ExampleChain>({ format: true, name: true }),
-  GltfChain: k<GltfChain>({ ...SKELETON, format: true, gltf: true, glb_base64: true, skin: true }),
+  GltfChain: k<GltfChain>({ ...SKELETON, format: true, gltf: true, glb_base64: true, skin: true, unit_m: true }),
   BvhChain: k<BvhChain>({ ...SKELETON, format: true, bvh: true, unit_m: true }),
   BoneEffectorSpec: k<BoneEffectorSpec>({ ...EFFECTOR, bone: true, name: true }),
   BoneSettingsSpec: k<BoneSettingsSpec>({ axes: true, lower: true, upper: true, terminator: true }),
