@@ -149,3 +149,8 @@ class FkResult(StrictModel):
     bones: BonesOut | None = Field(
         default=None, description="Skeleton chains (gltf, bvh) only: the bone data asked for"
     )
+    clipped: list[str] = Field(
+        default_factory=list,
+        description="The DOFs the request's q or joints had outside their limits, which the "
+        "pose used sets to the nearest limit (as PUT .../pose does), in DOF order",
+    )

@@ -15,7 +15,7 @@ from solver.model.forward import effector_poses
 from ..errors import invalid_problem
 from .chains import ChainView, check_bone_output
 from .conventions import Convention
-from .poses import pose_vector
+from .poses import clipped_dofs, pose_vector
 from .results import SolvedFrame
 
 
@@ -106,10 +106,10 @@ def fk_dict(
     field: str = "",
 ) -> dict[str, Any]:
     """An ``FkResult``: the pose (``q`` or ``joints`` over ``current``, clipped into the
-    limits; neither: ``current``), its effectors' world poses and, on skeleton chains,
-    its bone data (``output``; None: ``DEFAULT_FK_BONES``). ``field``: where the request
-    sits in its message ("": the HTTP body and a WebSocket message alike, whose errors
-    name ``q``, ``joints.<name>``, ``bones``).
+    limits, named in ``clipped``; neither: ``current``), its effectors' world poses and,
+    on skeleton chains, its bone data (``output``; None: ``DEFAULT_FK_BONES``).
+    ``field``: where the request sits in its message ("": the HTTP body and a WebSocket
+    message alike, whose errors name ``q``, ``joints.<name>``, ``bones``).
 
     Raises:
         ServiceError: ``invalid_problem``: both ``q`` and ``joints`` (named ``joints``),
@@ -132,11 +132,14 @@ def fk_dict(
     else:
         output = DEFAULT_FK_BONES if output is None else output
         check_bone_output(output, skeleton, bones_field)
-    pose = current
+    pose, clipped = current, []
     if q is not None or joints is not None:
-        pose = pose_vector(S.PoseIn(q=q, joints=joints), view, current, field)
+        sent = S.PoseIn(q=q, joints=joints)
+        pose = pose_vector(sent, view, current, field)
+        clipped = clipped_dofs(sent, view)
     out: dict[str, Any] = {"q": pose.tolist(), "effectors": effectors_out(view, pose)}
     if skeleton is not None:
         assert output is not None
         out["bones"] = bones_dict(view, pose, output)
+    out["clipped"] = clipped
     return out

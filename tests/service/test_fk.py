@@ -267,3 +267,23 @@ def test_fk_over_the_websocket_is_the_http_answer(client: TestClient) -> None:
         S.FkResultMessage.model_validate(message)
         assert (message.pop("id"), message.pop("type")) == (msg_id, "fk_result")
         assert message == over_http
+
+
+def test_an_fk_pose_outside_the_limits_is_clipped_and_says_which_dofs(
+    client: TestClient,
+) -> None:
+    """FK clipped a value outside its limits silently (a trial's 57.3, degrees by mistake,
+    turned into 2 pi with no word); PUT .../pose says so in ``clipped``, as FK now does."""
+    s = create(client, PANDA)
+    bent = {"joints": {"panda_joint4": 57.3, "panda_joint2": -0.4}}
+    answer = _fk(client, s, bent)
+    assert answer["clipped"] == ["panda_joint4"]
+    assert answer["q"][3] == pytest.approx(-0.0698, abs=1e-4)  # the joint's upper limit
+    wide = list(Q)
+    wide[0], wide[6] = -9.0, 9.0
+    assert _fk(client, s, {"q": wide})["clipped"] == ["panda_joint1", "panda_joint7"]
+    assert _fk(client, s, {"q": Q})["clipped"] == [] and _fk(client, s, {})["clipped"] == []
+    with client.websocket_connect(f"/v1/sessions/{s.id}/ws", headers=s.headers) as ws:
+        ws.send_bytes(msgpack.packb({"type": "fk", "id": 1, **bent}))
+        message = S.FkResultMessage.model_validate(msgpack.unpackb(ws.receive_bytes()))
+    assert message.clipped == ["panda_joint4"]

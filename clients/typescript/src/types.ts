@@ -144,12 +144,20 @@ export interface FkResult {
   effectors: EffectorPoseOut[];
   /** Skeleton chains (gltf, bvh) only; null on chains without bones. */
   bones: BonesOut | null;
+  /** The DOFs the pose sent had outside their limits (set to the nearest limit in `q`). */
+  clipped: string[];
 }
 
 /** An `fk` answer as the client hands it on, over HTTP or the stream alike: `bones`
- * null where the server sends none, `effectors` empty from a server older than them. */
-export function fkResultFrom(json: { q: number[]; effectors?: EffectorPoseOut[]; bones?: BonesOut | null }): FkResult {
-  return { q: json.q, effectors: json.effectors ?? [], bones: json.bones ?? null };
+ * null where the server sends none, `effectors` and `clipped` empty from a server older
+ * than them. */
+export function fkResultFrom(json: {
+  q: number[];
+  effectors?: EffectorPoseOut[];
+  bones?: BonesOut | null;
+  clipped?: string[];
+}): FkResult {
+  return { q: json.q, effectors: json.effectors ?? [], bones: json.bones ?? null, clipped: json.clipped ?? [] };
 }
 
 /** Schema `PoseIn`: exactly one of `q` (every DOF, in order) or `joints` (some, by name). */

@@ -270,7 +270,7 @@ const DECLARED: Record<string, string[]> = {
   BatchEntryResult: k<BatchEntryResult>({ session: true, id: true, success: true, result: true }),
   BatchEntryError: k<BatchEntryError>({ session: true, id: true, success: true, error: true }),
   ErrorPayload: k<ErrorPayload>({ code: true, message: true, field: true, retry_after_s: true }),
-  FkResult: k<FkResult>({ q: true, effectors: true, bones: true }),
+  FkResult: k<FkResult>({ q: true, effectors: true, bones: true, clipped: true }),
   EffectorPoseOut: k<EffectorPoseOut>({ name: true, position: true, orientation: true, direction: true }),
 };
 

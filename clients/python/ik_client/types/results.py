@@ -107,11 +107,13 @@ class FkResult:
     bones: dict[str, Any] | None = None
     # Every effector, in the chain's order (empty from a server older than them).
     effectors: list[EffectorPose] = field(default_factory=list)
+    # The DOFs the pose sent had outside their limits (set to the nearest limit in q).
+    clipped: list[str] = field(default_factory=list)
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> FkResult:
         effectors = [EffectorPose.from_json(e) for e in d.get("effectors", [])]
-        return cls(d["q"], d.get("bones"), effectors)
+        return cls(d["q"], d.get("bones"), effectors, d.get("clipped", []))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
