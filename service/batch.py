@@ -30,8 +30,6 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
-from starlette import status
-
 import schemas as S
 from schemas import ErrorCode
 from solver.errors import IKError
@@ -39,12 +37,10 @@ from solver.ik import IKStatus
 from solver.ik import Target as SolverTarget
 
 from . import convert, stored_frames
+from .batch_errors import invalid_entry, raw_ids
 from .errors import (
     ServiceError,
-    echoable_id,
-    field_path,
     invalid_problem,
-    most_helpful,
     not_found,
     solver_error,
     store_unavailable,
@@ -89,19 +85,6 @@ def check_length(n_entries: int, limit: int) -> None:
         raise invalid_problem(
             f"at most {limit} entries per batch (IK_MAX_FRAMES_PER_REQUEST)", "frames"
         )
-
-
-def invalid_entry(index: int, entry: S.InvalidEntry) -> ServiceError:
-    """An entry that failed validation, as its ``invalid_format`` error (the field is
-    the entry's, ``frames[<index>].<loc>``, as a whole message's validation names it)."""
-    first = most_helpful(entry.errors)
-    field = field_path(["frames", index, *first["loc"]])
-    return ServiceError(
-        ErrorCode.INVALID_FORMAT,
-        str(first["msg"]),
-        status_code=status.HTTP_422_UNPROCESSABLE_CONTENT,
-        field=field,
-    )
 
 
 async def prepare(
@@ -473,18 +456,3 @@ def render(
         success = result["success"]
         out.append({"session": session.id, "id": frame_id, "success": success, "result": result})
     return out
-
-
-def raw_ids(raw: Any) -> tuple[str | None, int | None]:
-    """An entry's session id and frame id as sent, each if usable (echoed in its error)."""
-    if isinstance(raw, S.BatchFrame):
-        return raw.session, raw.id
-    if isinstance(raw, S.InvalidEntry):
-        raw = raw.raw
-    if not isinstance(raw, dict):
-        return None, None
-    session, frame_id = raw.get("session"), raw.get("id")
-    return (
-        session if isinstance(session, str) else None,
-        echoable_id(frame_id),
-    )

@@ -235,6 +235,40 @@ def test_http_batch(client: TestClient) -> None:
     assert np.isfinite(only.result.q).all()
 
 
+# Mistakes a game engine's serializer makes, with the field a frame sent alone names.
+_ENGINE_MISTAKES = [
+    ({"targets": [{"effector": "hand", "position": [0.3, 0.1, 0.6]}]}, "targets[0].position"),
+    ({"id": 3.0}, "id"),
+]
+
+
+@pytest.mark.parametrize(("mistake", "field"), _ENGINE_MISTAKES)
+@pytest.mark.parametrize("transport", ["ws-json", "ws-msgpack", "http"])
+def test_an_entry_s_mistake_gets_the_hint_a_frame_gets(
+    client: TestClient, mistake: dict[str, Any], field: str, transport: str
+) -> None:
+    """An array where a vector belongs, or an id sent as 3.0, is told what to send in a
+    batch entry too, not only pydantic's "a valid dictionary" or "a valid integer"."""
+    a, b = create(client), create(client)
+    with client.websocket_connect(ws_url(a), headers=a.headers) as ws:
+        ws.send_text(json.dumps({"type": "frame", "id": 1, **hand_frame(None), **mistake}))
+        alone = ws.receive_json()["error"]
+        entries = [entry(a, 2), {**entry(b, 2), **mistake}]
+        if transport == "http":
+            answer = client.post("/v1/batch", json={"frames": entries}).json()
+        elif transport == "ws-json":
+            ws.send_text(json.dumps(batch_msg(2, entries)))
+            answer = ws.receive_json()
+        else:
+            ws.send_bytes(msgpack.packb(batch_msg(2, entries)))
+            answer = msgpack.unpackb(ws.receive_bytes())
+    good, bad = answer["results"]
+    assert good["success"] and good["session"] == a.id
+    assert alone["field"] == f"frame.{field}"
+    assert bad["error"] == {**alone, "field": f"frames[1].{field}"}
+    assert "not an array" in alone["message"] or "whole number" in alone["message"]
+
+
 @pytest.mark.parametrize("body", [{}, {"frames": []}, {"frames": "x"}, [], {"frames": [], "x": 1}])
 def test_http_batch_envelope_errors(client: TestClient, body: Any) -> None:
     r = client.post("/v1/batch", json=body)
