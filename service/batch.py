@@ -148,6 +148,9 @@ async def solve(
         else:
             admitted.append((k, entry))
             by_id[session.id] = session
+            # In use from now on: the expiry sweep must not take it while the batch
+            # waits for its lock or is solved (it would answer, then be gone).
+            store.touch(session)
     sessions = sorted(by_id.values(), key=_by_id)
     locked: list[Session] = []
     marks: list[tuple[Session, StreamMark]] = []  # where each stood (Session.rewind)

@@ -4,6 +4,8 @@ order; each entry's own errors; the same solves as frames sent one by one; limit
 from __future__ import annotations
 
 import json
+import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -354,3 +356,38 @@ def test_refused_batches_and_frames_cost_nothing_of_the_rate_limit(
         assert limited["error"]["code"] == "rate_limited", limited
     r = client.post(f"/v1/sessions/{a.id}/frames", json=hand_frame(12), headers=a.headers)
     assert r.status_code == 429 and r.json()["code"] == "rate_limited", r.text
+
+
+def test_a_session_in_a_batch_does_not_expire_while_the_batch_waits(
+    make_client: Callable[..., TestClient],
+) -> None:
+    """A character idle for most of IK_SESSION_TTL_S whose batch waits for its session's
+    lock (another request on it) past the TTL is in use: the expiry sweep must not take
+    it meanwhile, answering the entry and leaving the next tick a not_found."""
+    now = [0.0]
+    store = InMemorySessionStore(max_sessions=10, ttl_s=10.0, clock=lambda: now[0])
+    client = make_client(store=store)
+    character = create(client)
+    session = client.portal.call(store.get, character.id)
+    assert session is not None
+    now[0] = 9.0  # idle 9 s of 10
+    client.portal.call(session.lock.acquire)  # another request holds the session
+    answers: list[Any] = []
+    sending = threading.Thread(
+        target=lambda: answers.append(
+            client.post("/v1/batch", json={"frames": [entry(character, 1)]})
+        )
+    )
+    sending.start()
+    deadline = time.monotonic() + 10
+    while not session.lock._waiters and time.monotonic() < deadline:  # the batch waits
+        time.sleep(0.005)
+    assert session.lock._waiters, "the batch never reached the session's lock"
+    now[0] = 11.0  # 11 s after the last frame before the batch, 2 s after the batch came
+    client.portal.call(store.expire)
+    client.portal.call(session.lock.release)
+    sending.join(10)
+    (first,) = answers
+    assert first.json()["results"][0]["success"], first.text
+    again = client.post("/v1/batch", json={"frames": [entry(character, 2)]}).json()
+    assert again["results"][0]["success"], again
