@@ -40,10 +40,12 @@ def invalid_entry(index: int, entry: S.InvalidEntry) -> ServiceError:
 
 def _with_input(error: dict[str, Any], raw: Any) -> dict[str, Any]:
     """The error with its ``input``, the value at its ``loc`` in the entry as sent (when
-    the error has none and the path leads to one)."""
+    the error has none and the path leads to one); for a missing field, the object it is
+    missing from, as pydantic gives it (the hint for an Euler rotation reads its keys)."""
     if "input" in error:
         return error
-    value = _at(raw, error.get("loc") or ())
+    loc = tuple(error.get("loc") or ())
+    value = _at(raw, loc[:-1] if error.get("type") == "missing" else loc)
     return error if value is _MISSING else {**error, "input": value}
 
 

@@ -241,6 +241,11 @@ def test_http_batch(client: TestClient) -> None:
 _ENGINE_MISTAKES = [
     ({"targets": [{"effector": "hand", "position": [0.3, 0.1, 0.6]}]}, "targets[0].position"),
     ({"id": 3.0}, "id"),
+    # A missing component: the hint reads the object it is missing from.
+    (
+        {"targets": [{"effector": "hand", "position": {"X": 0.3, "Y": 0.1, "Z": 0.6}}]},
+        "targets[0].position.x",
+    ),
 ]
 
 
@@ -268,7 +273,8 @@ def test_an_entry_s_mistake_gets_the_hint_a_frame_gets(
     assert good["success"] and good["session"] == a.id
     assert alone["field"] == f"frame.{field}"
     assert bad["error"] == {**alone, "field": f"frames[1].{field}"}
-    assert "not an array" in alone["message"] or "whole number" in alone["message"]
+    hinted = ("not an array", "whole number", "lower case")
+    assert any(words in alone["message"] for words in hinted), alone
 
 
 @pytest.mark.parametrize("body", [{}, {"frames": []}, {"frames": "x"}, [], {"frames": [], "x": 1}])
