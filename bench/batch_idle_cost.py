@@ -67,7 +67,7 @@ class _Socket:
         self.svc = svc
         self.build = convert.result_builder(S.ResultView.FULL)
         self.backlog = False
-        self.tokens = SessionTokens()
+        self.tokens = SessionTokens(svc.store)
         self.client = "bench"
 
 

@@ -98,7 +98,7 @@ async def prepare(
     if isinstance(frame, S.InvalidEntry):
         return invalid_entry(index, frame)
     try:
-        session = await tokens.open(store, frame.session, frame.token)
+        session = await tokens.open(frame.session, frame.token)
         view = session.view
         targets = convert.targets(frame.targets, view, f"frames[{index}].targets")
         if frame.bones is not None:

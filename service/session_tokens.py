@@ -17,19 +17,30 @@ MAX_REMEMBERED_SESSIONS = 4096
 class SessionTokens:
     """The sessions one connection has opened with their tokens (a WebSocket's, for
     its batches): an entry for one of them costs one constant-time comparison instead
-    of a store lookup and a hash. A session deleted since is looked up again (404)."""
+    of a store lookup and a hash. A session deleted since, or idle past the store's
+    TTL, is looked up again (404 once the store has expired it)."""
 
-    def __init__(self) -> None:
+    def __init__(self, store: SessionStore) -> None:
+        self._store = store
         self._opened: dict[str, tuple[str, Session]] = {}
 
     def known(self, session_id: str, token: str) -> Session | None:
-        """The session if this connection opened it with ``token`` and it still exists."""
+        """The session if this connection opened it with ``token``, it still exists and
+        it is not idle past the store's TTL: such a one is the store's to judge (the
+        in-memory store expires it; another worker may have used a shared one), or a
+        socket's batches would keep alive a session HTTP already answers 404 for."""
         known = self._opened.get(session_id)
-        if known is not None and not known[1].closed and secrets.compare_digest(known[0], token):
-            return known[1]
-        return None
+        if known is None:
+            return None
+        token_sent, session = known
+        if session.closed or not secrets.compare_digest(token_sent, token):
+            return None
+        store = self._store
+        if session.websockets == 0 and store.clock() - session.last_seen > store.ttl_s:
+            return None
+        return session
 
-    async def open(self, store: SessionStore, session_id: str, token: str) -> Session:
+    async def open(self, session_id: str, token: str) -> Session:
         """The session if ``token`` opens it.
 
         Raises:
@@ -37,7 +48,7 @@ class SessionTokens:
         """
         if (session := self.known(session_id, token)) is not None:
             return session
-        session = await authenticate(store, session_id, token)
+        session = await authenticate(self._store, session_id, token)
         if len(self._opened) >= MAX_REMEMBERED_SESSIONS:
             self._opened.pop(next(iter(self._opened)))
         self._opened[session_id] = (token, session)

@@ -424,7 +424,7 @@ async def post_batch(
     error (the other entries are still solved)."""
     t0 = received_at(request)
     batch.check_length(len(body.frames), svc.settings.max_frames_per_request)
-    tokens = SessionTokens()
+    tokens = SessionTokens(svc.store)
     entries = [
         await batch.prepare(i, frame, svc.store, tokens) for i, frame in enumerate(body.frames)
     ]

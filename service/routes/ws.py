@@ -100,7 +100,7 @@ class _Connection:
         self.build = build
         self.last_id = -1
         self.backlog = False
-        self.tokens = SessionTokens()  # the sessions this socket's batches opened
+        self.tokens = SessionTokens(svc.store)  # the sessions this socket's batches opened
         self._loop = asyncio.get_running_loop()
         self._task = asyncio.current_task()
         self._send_timeout_s = svc.settings.ws_send_timeout_s

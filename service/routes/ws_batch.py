@@ -141,7 +141,7 @@ async def _entry(
         # A session the token does not open: the pydantic path says so, after it has
         # checked the entry's format (the order of the errors stays the schema's).
         with contextlib.suppress(ServiceError):
-            session = await tokens.open(store, session_id, token)
+            session = await tokens.open(session_id, token)
             targets = convert.fast_targets(raw.get("targets"), session.view)
             if targets is not None:
                 return batch.new_entry(session, frame_id, targets)

@@ -397,3 +397,25 @@ def test_a_session_in_a_batch_does_not_expire_while_the_batch_waits(
     assert first.json()["results"][0]["success"], first.text
     again = client.post("/v1/batch", json={"frames": [entry(character, 2)]}).json()
     assert again["results"][0]["success"], again
+
+
+def test_a_session_idle_past_its_ttl_is_not_found_through_a_socket_that_opened_it(
+    make_client: Callable[..., TestClient],
+) -> None:
+    """A socket's batches remember the sessions they opened; one idle past the TTL (no
+    socket of its own, not yet swept) was still solved through them, and kept alive,
+    while HTTP answered 404 for it (game-server trial). Both now answer not_found."""
+    now = [0.0]
+    store = InMemorySessionStore(max_sessions=10, ttl_s=10.0, clock=lambda: now[0])
+    client = make_client(store=store)
+    owner, character = create(client), create(client)
+    with client.websocket_connect(ws_url(owner), headers=owner.headers) as ws:
+        ws.send_text(json.dumps(batch_msg(1, [entry(character, 1)])))
+        assert ws.receive_json()["results"][0]["success"]
+        now[0] = 11.0  # the character idle 11 s; the owner's socket keeps the owner
+        ws.send_text(json.dumps(batch_msg(2, [entry(owner, 2), entry(character, 2)])))
+        kept, gone = ws.receive_json()["results"]
+    assert kept["success"], kept
+    assert gone["error"]["code"] == "not_found" and gone["session"] == character.id, gone
+    r = client.get(f"/v1/sessions/{character.id}", headers=character.headers)
+    assert r.status_code == 404, r.text

@@ -372,7 +372,9 @@ def test_watchdog_and_endpoint_cancel_together_is_a_cancellation_not_a_slow_read
             async def send_text(self, data: str) -> None:
                 await never.wait()
 
-        svc = types.SimpleNamespace(settings=types.SimpleNamespace(ws_send_timeout_s=3600.0))
+        svc = types.SimpleNamespace(
+            settings=types.SimpleNamespace(ws_send_timeout_s=3600.0), store=None
+        )
         out: dict[str, str] = {}
 
         async def serve() -> None:
