@@ -165,7 +165,8 @@ def hint(error: Mapping[str, Any]) -> str | None:
     kind = error.get("type")
     value = error.get("input")
     if kind in _NOT_AN_OBJECT and isinstance(value, list | tuple):
-        return _array_hint(error, value)
+        if (array := _array_hint(error, value)) is not None:
+            return array
     if kind == "extra_forbidden":
         loc = error.get("loc") or ()
         if loc and isinstance(loc[-1], str):
@@ -174,6 +175,10 @@ def hint(error: Mapping[str, Any]) -> str | None:
         return _missing_hint(error)
     if kind in _NOT_AN_OBJECT and isinstance(value, str) and _names_conventions(error):
         return CONVENTIONS_OBJECT.format(_shown(value))
+    if kind in _NOT_AN_OBJECT and "input" in error:
+        # pydantic may name a Python class ("a valid dictionary or instance of Target"),
+        # which tells a client nothing: say it in the wire's terms.
+        return f"an object is expected (a JSON object, a MessagePack map), got {_shown(value)}"
     if kind == JSON_INVALID:
         return _json_hint(error)
     if kind == "int_type" and type(value) is float:

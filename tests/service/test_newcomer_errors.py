@@ -488,3 +488,24 @@ def test_conventions_in_the_answers_form_or_bare_are_told_the_requests(
     assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
     assert r.json()["field"].startswith("conventions")
     assert words in r.json()["detail"][0]["msg"], r.text
+
+
+@pytest.mark.parametrize("transport", ["http", "msgpack"])
+def test_a_value_where_an_object_belongs_is_told_in_the_wires_terms(
+    client: TestClient, session: Created, transport: str
+) -> None:
+    """pydantic's message named a Python class ("a valid dictionary or instance of
+    Target") for a string where a target belongs (game-server trial)."""
+    if transport == "http":
+        r = client.post(
+            f"/v1/sessions/{session.id}/frames",
+            json={"targets": ["hand"]},
+            headers=session.headers,
+        )
+        assert r.status_code == 422, r.text
+        message = r.json()["detail"][0]["msg"]
+    else:
+        frame = {"type": "frame", "id": 1, "targets": ["hand"]}
+        message = ws_exchange(client, session, frame, binary=True)["error"]["message"]
+    assert "instance of" not in message, message
+    assert "an object is expected" in message and '"hand"' in message, message
