@@ -137,6 +137,7 @@ async def solve(
     outcomes: list[Outcome | None] = [None] * len(entries)
     admitted: list[tuple[int, Entry]] = []
     by_id: dict[str, Session] = {}  # the admitted entries' sessions
+    seen_before: dict[str, float] = {}  # their last use before this batch (a refusal restores it)
     for k, entry in enumerate(entries):
         if isinstance(entry, ServiceError):
             outcomes[k] = entry
@@ -147,6 +148,8 @@ async def solve(
             outcomes[k] = rate_limited(wait_s, rate)
         else:
             admitted.append((k, entry))
+            if session.id not in by_id:
+                seen_before[session.id] = session.last_seen
             by_id[session.id] = session
             # In use from now on: the expiry sweep must not take it while the batch
             # waits for its lock or is solved (it would answer, then be gone).
@@ -195,9 +198,13 @@ async def solve(
                 shares.take(client, cost_s)
             except ServiceError:
                 # Refused whole, nothing solved or answered: the entries cost no frames
-                # of their sessions' rate limits (as a frame refused alone).
+                # of their sessions' rate limits, nor count as a use of their sessions
+                # (as a frame refused alone): a game server whose batches are refused
+                # does not keep its characters from expiring.
                 for _, entry in admitted:
                     entry.session.give_back_frames(1)
+                for session in sessions:
+                    session.last_seen = seen_before[session.id]
                 raise
             loop = asyncio.get_running_loop()
             metrics = runner.metrics

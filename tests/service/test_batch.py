@@ -419,3 +419,26 @@ def test_a_session_idle_past_its_ttl_is_not_found_through_a_socket_that_opened_i
     assert gone["error"]["code"] == "not_found" and gone["session"] == character.id, gone
     r = client.get(f"/v1/sessions/{character.id}", headers=character.headers)
     assert r.status_code == 404, r.text
+
+
+def test_a_batch_refused_whole_is_no_use_of_its_sessions(
+    make_client: Callable[..., TestClient],
+) -> None:
+    """A batch marks its sessions used when it admits them (so the sweep leaves them
+    while it waits); refused whole (over IK_MAX_REQUEST_WORK_S here), it is no use of
+    them, as a frame refused alone is not: their idle time stands (review)."""
+    now = [0.0]
+    store = InMemorySessionStore(max_sessions=10, ttl_s=10.0, clock=lambda: now[0])
+    client = make_client(Settings(max_request_work_s=0.01), store=store)
+    a, b = create(client), create(client)
+    patched = client.patch(f"/v1/sessions/{a.id}", json={"time_budget_us": 4000}, headers=a.headers)
+    assert patched.status_code == 200, patched.text
+    now[0] = 9.0
+    entries = [entry(a, 1), entry(a, 2), entry(a, 3), entry(b, 1)]
+    r = client.post("/v1/batch", json={"frames": entries})
+    assert r.status_code == 422 and r.json()["field"] == "frames", r.text
+    for s in (a, b):
+        session = client.portal.call(store.get, s.id)
+        assert session is not None and store.idle_s(session) == 9.0
+    now[0] = 10.5  # past the TTL since their last use: the refused batch was none
+    assert client.portal.call(store.expire) and len(store) == 0
