@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import difflib
 import functools
+import json
 import typing
 from collections.abc import Mapping
 from typing import Any
@@ -34,8 +35,9 @@ VECTOR_ARRAY = 'a vector is an object {"x": ..., "y": ..., "z": ...}, not an arr
 # Unreal's FRotator (and Euler angles in general) where a quaternion belongs.
 EULER_ANGLES = (
     'Euler angles (pitch, yaw, roll) are not taken: a rotation is a quaternion {"w": ..., '
-    '"x": ..., "y": ..., "z": ...} in the session\'s conventions (Unreal: '
-    "FRotator::Quaternion(); Unity: Quaternion.Euler(...); Godot: Basis.get_rotation_quaternion())"
+    '"x": ..., "y": ..., "z": ...} (Unreal: FRotator::Quaternion(); Unity: '
+    "Quaternion.Euler(...); Godot: Basis.get_rotation_quaternion()), in the frame the "
+    "field's description names"
 )
 _EULER_NAMES = frozenset({"pitch", "yaw", "roll", "heading", "bank", "euler"})
 # The answer's form of the conventions (ConventionsOut) sent back in a request.
@@ -98,7 +100,12 @@ def _numbers(values: list[Any] | tuple[Any, ...], n: int) -> bool:
 
 
 def _json(value: Any) -> str:
-    return orjson.dumps(value).decode()
+    """``value`` as JSON text; an integer beyond 64 bits (which a client's JSON may hold
+    and orjson does not write) through the stdlib's encoder."""
+    try:
+        return orjson.dumps(value).decode()
+    except (TypeError, orjson.JSONEncodeError):
+        return json.dumps(value, default=repr)
 
 
 def _quaternion_array(values: list[Any] | tuple[Any, ...]) -> str:

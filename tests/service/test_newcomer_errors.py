@@ -509,3 +509,29 @@ def test_a_value_where_an_object_belongs_is_told_in_the_wires_terms(
         message = ws_exchange(client, session, frame, binary=True)["error"]["message"]
     assert "instance of" not in message, message
     assert "an object is expected" in message and '"hand"' in message, message
+
+
+def test_an_array_with_an_integer_beyond_64_bits_is_hinted_not_a_500(
+    client: TestClient, session: Created
+) -> None:
+    """The array hint wrote the client's numbers with orjson, which refuses an integer
+    beyond 64 bits: a 500, and in a batch every other character's entry lost (review)."""
+    big = [10**30, 0, 0]
+    target = {"effector": "hand", "position": big}
+    r = client.post(
+        f"/v1/sessions/{session.id}/frames", json={"targets": [target]}, headers=session.headers
+    )
+    assert r.status_code == 422 and r.json()["code"] == "invalid_format", r.text
+    assert "1000000000000000000000000000000" in r.json()["detail"][0]["msg"], r.text
+    other = create(client)
+    entries = [
+        {"session": other.id, "token": other.token, "id": 1, **hand_frame(None)},
+        {"session": session.id, "token": session.token, "id": 1, "targets": [target]},
+    ]
+    r = client.post("/v1/batch", json={"frames": entries})
+    assert r.status_code == 200, r.text
+    good, bad = r.json()["results"]
+    assert good["success"] and bad["error"]["code"] == "invalid_format", r.text
+    frame = {"type": "frame", "id": 2, "targets": [target]}
+    error = ws_exchange(client, session, json.dumps(frame))["error"]
+    assert error["code"] == "invalid_format", error
