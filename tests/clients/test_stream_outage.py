@@ -227,37 +227,71 @@ def test_sends_while_reconnecting_wait_at_most_max_queued() -> None:
     assert [m for conn, m in server.seen if conn == 1] == [1, 4, 5, 6]  # 2, 3 never sent
 
 
+def _close_mid_reconnect(
+    reconnect: Reconnect,
+    closing_time: Callable[[Any], bool],
+    settle_s: float,
+    process_request: Any = None,
+) -> tuple[Scripted, Any, int]:
+    """A stream whose connection the server drops at message 1; ``close()`` from another
+    task once ``closing_time(stream)``; then ``settle_s`` for a reconnect that went on
+    to show. Returns the server, what the receiving task got, and the reconnects."""
+    server = Scripted(lambda conn, message_id: "drop" if (conn, message_id) == (0, 1) else "pong")
+
+    async def run() -> tuple[Any, int]:
+        async with serve(server.handler, "127.0.0.1", 0, process_request=process_request) as ws:
+            port = ws.sockets[0].getsockname()[1]
+            async with (
+                AsyncClient(f"http://127.0.0.1:{port}") as ik,
+                ik.stream(REF, reconnect=reconnect) as stream,
+            ):
+                await stream.ping()
+                await stream.send_ping()  # id 1: goes out, and the server drops the connection
+                receiving = asyncio.create_task(stream.receive())  # meets the drop, waits
+                while not closing_time(stream):
+                    await asyncio.sleep(0.005)
+                await stream.close()
+                (outcome,) = await asyncio.gather(receiving, return_exceptions=True)
+                await asyncio.sleep(settle_s)
+                return outcome, stream.reconnects
+
+    outcome, reconnects = asyncio.run(asyncio.wait_for(run(), 30.0))
+    return server, outcome, reconnects
+
+
 def test_close_while_reconnecting_abandons_the_reconnect() -> None:
     """``close()`` from another task while the stream waits to reconnect ends the stream:
     the task that was reconnecting gets a ``StreamClosed`` 1000, and no connection is
     opened again (the TypeScript stream's ``close()`` abandons its reconnect alike).
     Before, the reconnect went on after ``close()`` returned: it opened a connection
     that nobody closed, and sent again what had no answer."""
-    server = Scripted(lambda conn, message_id: "drop" if (conn, message_id) == (0, 1) else "pong")
     wait_s = 0.5
     slow = Reconnect(initial_delay_s=wait_s, jitter=0.0, deadline_s=10.0)
-
-    async def close_while_reconnecting() -> tuple[Any, int]:
-        async with serve(server.handler, "127.0.0.1", 0) as ws:
-            port = ws.sockets[0].getsockname()[1]
-            async with (
-                AsyncClient(f"http://127.0.0.1:{port}") as ik,
-                ik.stream(REF, reconnect=slow) as stream,
-            ):
-                await stream.ping()
-                await stream.send_ping()  # id 1: goes out, and the server drops the connection
-                receiving = asyncio.create_task(stream.receive())  # meets the drop, waits
-                while not stream.reconnecting:
-                    await asyncio.sleep(0.005)
-                await stream.close()
-                (outcome,) = await asyncio.gather(receiving, return_exceptions=True)
-                await asyncio.sleep(wait_s)  # a reconnect that went on would be done by now
-                return outcome, stream.reconnects
-
-    outcome, reconnects = asyncio.run(asyncio.wait_for(close_while_reconnecting(), 30.0))
+    server, outcome, reconnects = _close_mid_reconnect(slow, lambda s: s.reconnecting, wait_s)
     assert isinstance(outcome, StreamClosed) and outcome.close_code == 1000, outcome
     assert reconnects == 0
     assert len(server.opened) == 1
+    assert server.seen == [(0, 0), (0, 1)]
+
+
+def test_close_during_the_reconnects_handshake_sends_nothing_again() -> None:
+    """``close()`` while the reconnect's handshake is under way (a worker slow to
+    accept): the new connection is closed before anything is sent again on it. Before,
+    the messages without an answer went out after ``close()`` had returned, and the
+    server solved them (review)."""
+    quick = Reconnect(initial_delay_s=0.01, jitter=0.0, deadline_s=10.0)
+    handshakes: list[float] = []
+
+    async def slow_second_handshake(connection: Any, request: Any) -> None:
+        handshakes.append(time.monotonic())
+        if len(handshakes) == 2:
+            await asyncio.sleep(0.5)
+
+    # 0.7 s after close(): the slow handshake has ended, and a resend would be seen.
+    server, outcome, _ = _close_mid_reconnect(
+        quick, lambda _: len(handshakes) >= 2, 0.7, slow_second_handshake
+    )
+    assert isinstance(outcome, StreamClosed) and outcome.close_code == 1000, outcome
     assert server.seen == [(0, 0), (0, 1)]
 
 

@@ -177,6 +177,8 @@ class AsyncStream(BaseStream[AsyncConnection]):
                 # for the lock and goes out after them.
                 self._held = None
                 for data in self._pipeline.resend():
+                    if self._closed:  # close() came during the handshake or a send:
+                        break  # nothing more goes out (the server would solve it)
                     await connection.send(data)
             except ATTEMPT_FAILURES as failure:
                 if self._held is None:  # they went out on a connection that failed:
