@@ -87,9 +87,11 @@ def unit_notes(
 
 # A character whose bones span more than this from its root at rest reads as a file in
 # centimetres (a person's hips to head, 0.7 m, at 70 "m"), inches or another unit (a
-# CMU BVH conversion: 18); less than this, as a file in metres read as centimetres.
-# Between them lie the characters a game has, from a hand rig to a large creature.
-_SPAN_M = (0.01, 10.0)
+# CMU BVH conversion: 18); less than this, as a file in metres read as centimetres (a
+# person at 0.7 cm; a Mixamo file whose 0.01 scale node already gives metres, read with
+# unit_m 0.01). Between them lie the characters a game has, from a hand rig to a large
+# creature.
+_SPAN_M = (0.05, 10.0)
 
 
 def skeleton_size_notes(origins: Mapping[str, Vector]) -> list[ModelNote]:

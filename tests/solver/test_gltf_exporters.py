@@ -261,7 +261,7 @@ def test_a_centimetre_file_read_with_unit_m_is_the_metre_file() -> None:
 
 @pytest.mark.parametrize(
     ("unit", "unit_m", "noted"),
-    [(100.0, 1.0, True), (100.0, 0.01, False), (1.0, 1.0, False), (1.0, 1e-3, True)],
+    [(100.0, 1.0, True), (100.0, 0.01, False), (1.0, 1.0, False), (1.0, 0.01, True)],
 )
 def test_a_skeleton_too_large_or_small_for_a_character_is_noted(
     unit: float, unit_m: float, noted: bool
