@@ -87,6 +87,9 @@ WS_CLOSE_CODES: dict[int, str] = {
 MAX_DETAIL_CHARS = 2000
 MAX_FIELD_CHARS = 500
 MAX_LOC_PART_CHARS = 200
+# A 422 lists at most this many validation errors (pydantic reports each of 20,000
+# unknown keys: a 250 KB body answered 2.9 MB); the last entry says how many are left.
+MAX_LISTED_ERRORS = 50
 
 
 def clip(text: str, limit: int) -> str:
@@ -200,14 +203,20 @@ def plans_busy(limit: int) -> ServiceError:
 
 def validation_errors(errors: Any) -> list[dict[str, Any]]:
     """pydantic errors without the echoed input (it can be a whole URDF) or URLs; the
-    message says the expected form where service.hints knows it."""
+    message says the expected form where service.hints knows it. At most
+    ``MAX_LISTED_ERRORS``, then one entry counting the rest."""
+    errors = list(errors)
     out = []
-    for e in errors:
+    for e in errors[:MAX_LISTED_ERRORS]:
         msg = hint(e) or str(e.get("msg", ""))
         loc = [
             p if isinstance(p, int) else clip(str(p), MAX_LOC_PART_CHARS) for p in e.get("loc", ())
         ]
         out.append({"loc": loc, "msg": clip(msg, MAX_DETAIL_CHARS), "type": e.get("type", "")})
+    if len(errors) > MAX_LISTED_ERRORS:
+        left = len(errors) - MAX_LISTED_ERRORS
+        msg = f"{left} more errors not listed (the first {MAX_LISTED_ERRORS} are above)"
+        out.append({"loc": [], "msg": msg, "type": "too_many_errors"})
     return out
 
 
