@@ -24,10 +24,10 @@ def within_tolerance(
     targets: np.ndarray,
     position_m: float,
     rotation_rad: float,
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     """Per frame, whether every effector of the answer (our FK) is within the
-    tolerances of its target (``targets``: ``effector_frames`` of the reference);
-    rotations are judged on POSE effectors only."""
+    tolerances of its target (``targets``: ``effector_frames`` of the reference;
+    rotations are judged on POSE effectors only), and the largest position error [m]."""
     got = effector_frames(built, qs)
     position = np.linalg.norm(got[:, :, :3, 3] - targets[:, :, :3, 3], axis=2)
     ok: np.ndarray = (position <= position_m).all(axis=1)
@@ -36,7 +36,7 @@ def within_tolerance(
         r = np.einsum("fekj,fekl->fejl", targets[:, pose, :3, :3], got[:, pose, :3, :3])
         cos = np.clip(0.5 * (np.trace(r, axis1=2, axis2=3) - 1.0), -1.0, 1.0)
         ok &= (np.arccos(cos) <= rotation_rad).all(axis=1)
-    return ok
+    return ok, position.max(axis=1)
 
 
 def joint_steps(start: np.ndarray, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -17,7 +17,9 @@ runs in every variant:
 
 The solver starts each stream at the reference's first pose (``set_pose``) and
 follows it with ``IKSolver.track``. Per variant: frames within the tolerances (our FK
-of the answer against the target, every effector), streams whose largest joint step
+of the answer against the target, every effector), the streams with a frame outside
+them and the largest position error, the reference's largest joint step per stream
+(median, largest), streams whose largest joint step
 is at most twice the reference's, the worst joint step, streams with a joint step
 over 0.5 rad (a pop), the worst bone-rotation step (the angle of a moving bone's
 local rotation from one frame to the next, ``SkeletonChain.local_rotations``: what a
@@ -87,6 +89,8 @@ class Row:
     variables: set[int] = field(default_factory=set)
     frames: int = 0
     within_tol: int = 0
+    missed_streams: int = 0
+    worst_error_m: float = 0.0
     streams: int = 0
     within_2x: int = 0
     worst_step: float = 0.0
@@ -169,7 +173,7 @@ def one_stream(
             for label, opts in runs.items():
                 row = rows.setdefault((label, effectors, moving), Row())
                 qs, times = run(built, opts, ref[0], targets)
-                tol = within_tolerance(
+                tol, error = within_tolerance(
                     built, qs, poses, opts.position_tolerance_m, opts.rotation_tolerance_rad
                 )
                 steps, which = joint_steps(ref[0], qs)
@@ -179,6 +183,8 @@ def one_stream(
                 row.variables.add(built.chain.n_dof)
                 row.frames += frames
                 row.within_tol += int(tol.sum())
+                row.missed_streams += not tol.all()
+                row.worst_error_m = max(row.worst_error_m, float(error.max()))
                 row.streams += 1
                 row.reference_steps.append(ref_step)
                 row.within_2x += worst <= 2.0 * ref_step
@@ -267,11 +273,11 @@ def report(
     )
     print()
     print(
-        "| policy | effectors | moving | bones / variables | frames within tol | ref's largest "
+        "| policy | effectors | moving | bones / variables | frames within tol | streams with a miss | worst position error m | ref's largest "
         "step median / max | streams <= 2x ref step | worst joint step rad (x ref) | streams with a joint step > 0.5 | worst "
         "bone turn rad (x ref) | streams with a bone turn > 0.5 | median us | p99 us |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     order = {name: i for i, name in enumerate((*runs, *EFFECTOR_MODES, *MOVING_SETS))}
     for (label, effectors, moving), r in sorted(
         rows.items(), key=lambda kv: tuple(order[part] for part in kv[0])
@@ -279,7 +285,8 @@ def report(
         t = np.array(r.times_us)
         print(
             f"| {label} | {effectors} | {moving} | {span(r.bones)} / {span(r.variables)} | "
-            f"{100.0 * r.within_tol / r.frames:.2f}% | {np.median(r.reference_steps):.3f} / "
+            f"{100.0 * r.within_tol / r.frames:.2f}% | {r.missed_streams} | "
+            f"{r.worst_error_m:.1e} | {np.median(r.reference_steps):.3f} / "
             f"{max(r.reference_steps):.3f} | {r.within_2x}/{r.streams} | "
             f"{r.worst_step:.3f} ({r.worst_ratio:.1f}x) | {r.popped} | "
             f"{r.worst_turn:.3f} ({r.worst_turn_ratio:.1f}x) | {r.turned} | "
