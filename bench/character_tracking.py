@@ -90,6 +90,8 @@ class Row:
     frames: int = 0
     within_tol: int = 0
     missed_streams: int = 0
+    missed_at_cap: int = 0  # smooth: missed frames whose answer stepped its full limit
+    misses: list[str] = field(default_factory=list)  # per stream with a miss (--misses)
     worst_error_m: float = 0.0
     streams: int = 0
     within_2x: int = 0
@@ -184,6 +186,15 @@ def one_stream(
                 row.frames += frames
                 row.within_tol += int(tol.sum())
                 row.missed_streams += not tol.all()
+                if not tol.all():
+                    if opts.continuity is Continuity.SMOOTH:
+                        cap = steps >= opts.max_joint_step_rad - 1e-9
+                        row.missed_at_cap += int(np.sum(~tol & cap))
+                    row.misses.append(
+                        f"stream {spec.index} (speed {spec.speed:.2f}, ref step {ref_step:.3f}): "
+                        f"{int(np.sum(~tol))} frames, first {int(np.argmin(tol))}, "
+                        f"largest error {float(error.max()):.1e} m"
+                    )
                 row.worst_error_m = max(row.worst_error_m, float(error.max()))
                 row.streams += 1
                 row.reference_steps.append(ref_step)
@@ -236,6 +247,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         help="per-frame time budget (0: none; default: a session's)",
     )
+    ap.add_argument("--misses", action="store_true", help="list the streams with a missed frame")
     args = ap.parse_args(argv)
     path = walk_path(args.bvh)
     runs = policies(args.budget_us)
@@ -273,7 +285,7 @@ def report(
     )
     print()
     print(
-        "| policy | effectors | moving | bones / variables | frames within tol | streams with a miss | worst position error m | ref's largest "
+        "| policy | effectors | moving | bones / variables | frames within tol (smooth: missed at the step limit) | streams with a miss | worst position error m | ref's largest "
         "step median / max | streams <= 2x ref step | worst joint step rad (x ref) | streams with a joint step > 0.5 | worst "
         "bone turn rad (x ref) | streams with a bone turn > 0.5 | median us | p99 us |"
     )
@@ -283,15 +295,20 @@ def report(
         rows.items(), key=lambda kv: tuple(order[part] for part in kv[0])
     ):
         t = np.array(r.times_us)
+        at_cap = f" ({r.missed_at_cap})" if label == "smooth" else ""
         print(
             f"| {label} | {effectors} | {moving} | {span(r.bones)} / {span(r.variables)} | "
-            f"{100.0 * r.within_tol / r.frames:.2f}% | {r.missed_streams} | "
+            f"{100.0 * r.within_tol / r.frames:.2f}%{at_cap} | {r.missed_streams} | "
             f"{r.worst_error_m:.1e} | {np.median(r.reference_steps):.3f} / "
             f"{max(r.reference_steps):.3f} | {r.within_2x}/{r.streams} | "
             f"{r.worst_step:.3f} ({r.worst_ratio:.1f}x) | {r.popped} | "
             f"{r.worst_turn:.3f} ({r.worst_turn_ratio:.1f}x) | {r.turned} | "
             f"{np.median(t):.0f} | {np.percentile(t, 99):.0f} |"
         )
+    if args.misses:
+        for (label, effectors, moving), r in rows.items():
+            for line in r.misses:
+                print(f"# miss: {label} / {effectors} / {moving}: {line}")
     if pops:
         print()
         print(f"Streams with a joint step or a bone turn over {POP_RAD:g} rad:")
