@@ -71,13 +71,16 @@ EFFECTOR_MODES = ("position", "hands pose")
 MOVING_SETS = ("limbs", "every bone")
 
 
-def policies(budget_us: float | None) -> dict[str, IKOptions]:
+def policies(budget_us: float | None, max_step_rad: float | None = None) -> dict[str, IKOptions]:
     """A service session's options (``smooth``) and the same under ``reach``;
-    ``budget_us``: None for the session's budget, 0 for none, else that budget."""
-    base = session_defaults(Settings())
+    ``budget_us``: None for the session's budget, 0 for none, else that budget;
+    ``max_step_rad``: None for the session's ``max_joint_step_rad``, else that limit."""
+    base = session_defaults(Settings(), skeleton=True)
     assert base.continuity is Continuity.SMOOTH
     if budget_us is not None:
         base = replace(base, time_budget_us=budget_us or None)
+    if max_step_rad is not None:
+        base = replace(base, max_joint_step_rad=max_step_rad)
     return {"smooth": base, "reach": replace(base, continuity=Continuity.REACH)}
 
 
@@ -247,10 +250,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         help="per-frame time budget (0: none; default: a session's)",
     )
+    ap.add_argument(
+        "--max-step-rad",
+        type=float,
+        default=None,
+        help="smooth's step limit per frame (default: a session's max_joint_step_rad)",
+    )
     ap.add_argument("--misses", action="store_true", help="list the streams with a missed frame")
     args = ap.parse_args(argv)
     path = walk_path(args.bvh)
-    runs = policies(args.budget_us)
+    runs = policies(args.budget_us, args.max_step_rad)
     n_clip = walk(path)[1].n_frames - FIRST_FRAME
     warm_up(path, runs, n_clip)
     rows: dict[tuple[str, str, str], Row] = {}

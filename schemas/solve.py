@@ -75,8 +75,8 @@ _OPTION_FIELDS: dict[str, dict[str, Any]] = {
     "max_joint_step_rad": {
         "gt": 0.0,
         "le": 1e3,
-        "description": "Per-frame step limit of `smooth` [rad] or [m]; under `reach` a "
-        "larger step is reported as `jumped`",
+        "description": "Per-frame step limit of `smooth` [rad] or [m] (default 0.1; 0.3 on "
+        "gltf and bvh chains); under `reach` a larger step is reported as `jumped`",
     },
 }
 

@@ -28,9 +28,19 @@ def _with_server_defaults(base: IKOptions, settings: Settings) -> IKOptions:
     )
 
 
-def session_defaults(settings: Settings) -> IKOptions:
-    """Stream defaults (local restarts, light limit pull) with the server's settings."""
-    return _with_server_defaults(STREAM_DEFAULTS, settings)
+# A character's limbs turn faster than a robot arm's joints: walk.bvh played at 2x steps
+# up to 0.27 rad per 60 Hz frame, where smooth's 0.1 rad left the limbs lagging the
+# targets, up to 5 cm, on 1.3-1.4% of frames with every bone moving; at 0.3 no frame
+# missed at the step limit, and no joint or bone turned more than 0.31 rad in a frame
+# (bench.character_tracking, bench/RESULTS.md). Far below the pops it stops (radians).
+SKELETON_MAX_JOINT_STEP_RAD: Final = 0.3
+
+
+def session_defaults(settings: Settings, *, skeleton: bool = False) -> IKOptions:
+    """Stream defaults (local restarts, light limit pull) with the server's settings;
+    ``skeleton``: a game character's (glTF, BVH), whose smooth step limit is larger."""
+    base = _with_server_defaults(STREAM_DEFAULTS, settings)
+    return replace(base, max_joint_step_rad=SKELETON_MAX_JOINT_STEP_RAD) if skeleton else base
 
 
 def oneshot_defaults(settings: Settings) -> IKOptions:

@@ -226,7 +226,8 @@ async def create_session(
     view = await svc.runner.run(
         WorkClass.BUILD, convert.chain_from_spec, body.chain, settings, body.conventions, body.bones
     )
-    options = convert.apply_options(body.options, convert.session_defaults(settings), settings)
+    defaults = convert.session_defaults(settings, skeleton=view.skeleton is not None)
+    options = convert.apply_options(body.options, defaults, settings)
     solver = await svc.runner.run(WorkClass.BUILD, make_solver, view, options)
     session, token = new_session(view, solver, options, now=svc.store.clock(), owner=owner)
     clipped: list[str] = []

@@ -495,3 +495,27 @@ def test_the_path_of_a_nan_deep_in_a_long_document_is_found_in_bounded_memory() 
     tracemalloc.stop()
     assert path == ["a"] * 800 + [2_000_000]
     assert peak < 1_000_000, peak
+
+
+def test_a_skeleton_sessions_smooth_step_limit_is_a_characters(client: TestClient) -> None:
+    """A game character's limbs turn faster than a robot arm's joints: a skeleton
+    session's smooth step limit defaults to 0.3 rad a frame (a walk at 2x speed steps
+    0.27; bench.character_tracking), a robot's stays 0.1; an explicit option wins."""
+    leg = create(client, EXAMPLE_GLTF_LEG)
+    assert leg.body["options"]["max_joint_step_rad"] == 0.3
+    assert leg.body["options"]["continuity"] == "smooth"
+    assert create(client).body["options"]["max_joint_step_rad"] == 0.1
+    chosen = create(client, EXAMPLE_GLTF_LEG, options={"max_joint_step_rad": 0.05})
+    assert chosen.body["options"]["max_joint_step_rad"] == 0.05
+
+    def frame(frame_id: int, z: float) -> dict[str, Any]:
+        target = {"effector": "foot", "position": {"x": 0.0, "y": 0.2, "z": z}}
+        body = {"id": frame_id, "targets": [target]}
+        r = client.post(f"/v1/sessions/{leg.id}/frames", json=body, headers=leg.headers)
+        assert r.status_code == 200, r.text
+        result: dict[str, Any] = r.json()["results"][0]
+        return result
+
+    assert frame(1, 0.3)["success"]  # anchors the stream
+    far = frame(2, -0.3)  # the foot swung from the front to the back: over 0.3 rad
+    assert 0.1 < far["largest_step_rad"] <= 0.3 + 1e-9 and not far["jumped"], far
