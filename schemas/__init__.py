@@ -53,6 +53,7 @@ from .engines import (
 )
 from .errors import ERROR_CODE_DESCRIPTIONS, ErrorCode
 from .health import NotReadyBody, StartupPhase, StartupProgress
+from .poses import Pose, PoseIn
 from .results import (
     CompactFrameResult,
     CompactFrameResults,
@@ -74,8 +75,6 @@ from .solve import (
     ModelWarning,
     OptionsPatch,
     Pole,
-    Pose,
-    PoseIn,
     SessionCounters,
     SessionCreate,
     SessionCreated,

@@ -9,8 +9,9 @@ from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
 from solver.model.notes import NoteKind
 
 from .chain import EXAMPLE_ARM, ChainSpec, EffectorModeName, Name
-from .common import FiniteFloat, Quaternion, StrictModel, Vec3, check_exactly_one
+from .common import FiniteFloat, Quaternion, StrictModel, Vec3
 from .engines import BoneOutput, Conventions, ConventionsOut
+from .poses import FRAME_POSE_DESCRIPTION, Pose, PoseIn
 
 # Frame ids: non-negative integers that a JavaScript client can hold exactly.
 MAX_FRAME_ID = 2**53 - 1
@@ -18,7 +19,6 @@ FrameId = Annotated[int, Field(ge=0, le=MAX_FRAME_ID)]
 
 HARD_MAX_FRAMES = 10_000
 HARD_MAX_TARGETS = 256
-HARD_MAX_DOF_VALUES = 8192
 
 # --- solver options -------------------------------------------------------------------
 _OPTION_FIELDS: dict[str, dict[str, Any]] = {
@@ -236,6 +236,7 @@ class Frame(StrictModel):
     bones: BoneOutput | None = Field(
         default=None, description="Bone output for this frame (default: the session's)"
     )
+    pose: PoseIn | None = Field(default=None, description=FRAME_POSE_DESCRIPTION)
 
 
 # POST /v1/sessions/{id}/frames takes one frame, or {"frames": [...]} (a clip).
@@ -272,46 +273,6 @@ FramesBody = Annotated[
     Annotated[Frame, Tag("frame")] | Annotated[ClipRequest, Tag("clip")],
     Discriminator(_frames_tag),
 ]
-
-
-# --- poses -----------------------------------------------------------------------------
-class Pose(StrictModel):
-    """Joint values, by name and as an array in DOF order."""
-
-    q: list[float] = Field(description="Values in DOF order [rad] or [m]")
-    joints: dict[str, float] = Field(
-        description="Values by name [rad] or [m]: every DOF, then every mimic joint "
-        "(`followers`: multiplier x its leader + offset; not in `q`)",
-        examples=[{"panda_finger_joint1": 0.02, "panda_finger_joint2": 0.02}],
-    )
-    clipped: list[str] = Field(
-        default_factory=list,
-        description="The DOFs whose value the client sent (PUT pose, `initial_pose`) was "
-        "outside the limits and was set to the nearest limit; empty otherwise",
-        examples=[["joint1"]],
-    )
-
-
-class PoseIn(StrictModel):
-    """A pose: either ``q`` (every DOF, in order) or ``joints`` (some DOFs by name; the
-    others keep their current value). Values are clipped into the limits; the answer's
-    ``clipped`` names the DOFs that were."""
-
-    model_config = ConfigDict(
-        json_schema_extra={"examples": [{"joints": {"elbow": 1.2}}, {"q": [0.0, 0.2, 1.2]}]}
-    )
-
-    q: list[FiniteFloat] | None = Field(
-        default=None, max_length=HARD_MAX_DOF_VALUES, description="Every DOF, in order"
-    )
-    joints: dict[str, FiniteFloat] | None = Field(
-        default=None, max_length=HARD_MAX_DOF_VALUES, description="Some DOFs by name"
-    )
-
-    @model_validator(mode="after")
-    def _exactly_one(self) -> PoseIn:
-        check_exactly_one(self, "q", "joints")
-        return self
 
 
 # --- sessions --------------------------------------------------------------------------

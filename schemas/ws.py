@@ -14,6 +14,7 @@ from pydantic import Field
 from .batch import BatchEntry, BatchEntryError, BatchEntryResult
 from .common import ErrorPayload, StrictModel
 from .engines import BoneOutput, FkRequest, FkResult
+from .poses import FRAME_POSE_DESCRIPTION, PoseIn
 from .results import CompactFrameResult, FrameResult, PlanSummary
 from .solve import (
     HARD_MAX_FRAMES,
@@ -34,6 +35,7 @@ class FrameMessage(StrictModel):
     bones: BoneOutput | None = Field(
         default=None, description="Bone output for this frame (default: the session's)"
     )
+    pose: PoseIn | None = Field(default=None, description=FRAME_POSE_DESCRIPTION)
 
 
 class ClipMessage(StrictModel):

@@ -30,6 +30,8 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
+import numpy as np
+
 import schemas as S
 from schemas import ErrorCode
 from solver.errors import IKError
@@ -52,7 +54,8 @@ from .work import WorkClass
 
 
 class Entry(NamedTuple):
-    """A batch entry ready to solve: its session, its frame and its bone output.
+    """A batch entry ready to solve: its session, its frame, its bone output and the
+    animated pose it starts from (``convert.frame_pose``; None: the previous answer).
 
     A NamedTuple, not a frozen dataclass: one is built per character of every batch
     message, and the dataclass's ``__init__`` (``object.__setattr__`` per field) cost
@@ -63,6 +66,7 @@ class Entry(NamedTuple):
     frame_id: int | None
     targets: Sequence[SolverTarget]
     bones: S.BoneOutput | None = None
+    pose: np.ndarray | None = None
 
 
 _tuple_new = tuple.__new__
@@ -70,7 +74,7 @@ _tuple_new = tuple.__new__
 
 def new_entry(session: Session, frame_id: int | None, targets: Sequence[SolverTarget]) -> Entry:
     """``Entry(session, frame_id, targets)`` (no bone output), built as the tuple it is."""
-    return _tuple_new(Entry, (session, frame_id, targets, None))
+    return _tuple_new(Entry, (session, frame_id, targets, None, None))
 
 
 # What each entry comes to: its solved frame, or its own error.
@@ -93,8 +97,8 @@ async def prepare(
     store: SessionStore,
     tokens: SessionTokens,
 ) -> Entry | ServiceError:
-    """A validated entry checked against its session: its token, its targets and its
-    bone output (errors name ``frames[index].targets[j]...``)."""
+    """A validated entry checked against its session: its token, its targets, its
+    bone output and its pose (errors name ``frames[index].targets[j]...``)."""
     if isinstance(frame, S.InvalidEntry):
         return invalid_entry(index, frame)
     try:
@@ -103,9 +107,10 @@ async def prepare(
         targets = convert.targets(frame.targets, view, f"frames[{index}].targets")
         if frame.bones is not None:
             convert.check_bone_output(frame.bones, view.skeleton, f"frames[{index}].bones")
+        pose = convert.frame_pose(frame.pose, view, f"frames[{index}].pose")
     except ServiceError as e:
         return e
-    return Entry(session, frame.id, targets, frame.bones)
+    return Entry(session, frame.id, targets, frame.bones, pose)
 
 
 async def solve(
@@ -270,7 +275,7 @@ def _by_session(entries: Sequence[tuple[int, Entry]]) -> list[list[tuple[int, En
 
 
 def _jobs(group: Sequence[tuple[int, Entry]]) -> list[convert.FrameJob]:
-    return [(entry.frame_id, entry.targets) for _, entry in group]
+    return [(entry.frame_id, entry.targets, entry.pose) for _, entry in group]
 
 
 def _prepared_groups(
@@ -410,11 +415,13 @@ def _solve_entries(
     clock = time.perf_counter
     now = -math.inf  # when the last frame ended (``clock()``)
     try:
-        for session, frame_id, targets, _ in entries:
+        for session, frame_id, targets, _, pose in entries:
             if now > until:
                 break
             solver = session.solver
             try:
+                if pose is not None:  # as PUT pose, then the frame
+                    session.start_at(pose)
                 r = solver.track(targets, options=session.options)
             except IKError as e:
                 out.append(solver_error(e))
@@ -456,7 +463,7 @@ def render(
             out.append({"session": session_id, "id": frame_id, "success": False, "error": error})
             continue
         assert isinstance(entry, Entry)
-        session, _, _, bones = entry
+        session, _, _, bones, _ = entry
         frame_id, r, server_us, step = outcome
         result = build(r, frame_id, server_us, step)
         view = session.view

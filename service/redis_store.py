@@ -285,8 +285,7 @@ class RedisSessionStore(SessionStore):
         self, session: Session, stored: dict[bytes, bytes], answers: dict[bytes, bytes]
     ) -> None:
         record = unpack_stream(stored[b"state"], session.view.chain.n_dof)
-        if record.rest is not None:
-            session.set_pose(record.rest)
+        session.put_rest(record.rest)  # None: the middle of the limits
         state = StreamState(record.q, record.inverse_hessian, record.anchored, record.misses)
         session.solver.restore(state)
         session.frames, session.solved = record.frames, record.solved

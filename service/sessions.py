@@ -47,6 +47,7 @@ class StreamMark(NamedTuple):
     stream: StreamState
     frames: int
     solved: int
+    rest: np.ndarray | None  # Session.rest (a frame's animated pose changes it)
 
 
 # weakref_slot: a shared store finds a session it forgot while something still holds it.
@@ -103,17 +104,37 @@ class Session:
         self.solver.set_pose(q)
         self.rest = self.solver.q.copy()
 
+    def start_at(self, pose: np.ndarray) -> None:
+        """Set a frame's animated pose (``convert.frame_pose``) before its solve, as
+        ``set_pose`` does: a NaN (a DOF the frame's ``joints`` left out) keeps the
+        current value."""
+        q = self.solver.q
+        self.set_pose(np.where(np.isnan(pose), q, pose))
+
+    def put_rest(self, rest: np.ndarray | None) -> None:
+        """Put back a rest pose (None: the middle of the limits, the solver's default)
+        without changing where the stream stands."""
+        stream = self.solver.stream_state()
+        self.set_pose(self.view.chain.mid_limits() if rest is None else rest)
+        self.solver.restore(stream)
+        self.rest = rest
+
     def mark(self) -> StreamMark:
-        """Where the stream stands now (pose, carried BFGS matrix, counters)."""
+        """Where the stream stands now (pose, carried BFGS matrix, counters, rest pose)."""
         # tuple.__new__: the NamedTuple's own __new__ is Python code (a batch marks
         # each of its sessions).
-        return _tuple_new(StreamMark, (self.solver.stream_state(), self.frames, self.solved))
+        return _tuple_new(
+            StreamMark, (self.solver.stream_state(), self.frames, self.solved, self.rest)
+        )
 
     def rewind(self, mark: StreamMark) -> None:
         """Undo the frames solved since ``mark`` (answered to nobody: their request was
         cancelled while a thread solved them, as uvicorn cancels what still runs at the
         end of a graceful shutdown), so that they leave no trace: a resend starts where
-        they did, and a shared store's copy is the state it committed."""
+        they did, and a shared store's copy is the state it committed. A frame that
+        carried an animated pose changed the rest pose too: it is put back."""
+        if self.rest is not mark.rest:
+            self.put_rest(mark.rest)
         self.solver.restore(mark.stream)
         self.frames, self.solved = mark.frames, mark.solved
 

@@ -436,7 +436,9 @@ def _track_all(
     out: list[SolvedFrame] = []
     solver = session.solver
     try:
-        for frame_id, targets in jobs:
+        for frame_id, targets, pose in jobs:
+            if pose is not None:  # the frame's animated pose: as PUT pose, then the frame
+                session.start_at(pose)
             r = solver.track(targets, options=options)
             server_us = (time.perf_counter() - t0) * 1e6
             out.append(SolvedFrame(frame_id, r, server_us, solver.last_step))
@@ -455,12 +457,12 @@ def _plan_all(
     if session.closed:  # deleted while the plan waited for the planning thread
         raise not_found()
     start = session.solver.q.copy()
-    plan = plan_path(session.solver, [targets for _, targets in jobs], options=options)
+    plan = plan_path(session.solver, [targets for _, targets, _ in jobs], options=options)
     server_us = (time.perf_counter() - t0) * 1e6
     steps = plan_steps(start, [r.q for r in plan.results], options.max_joint_step_rad)
     out = [
         SolvedFrame(frame_id, r, server_us, step)
-        for (frame_id, _), r, step in zip(jobs, plan.results, steps, strict=True)
+        for (frame_id, _, _), r, step in zip(jobs, plan.results, steps, strict=True)
     ]
     session.frames += len(plan.results)
     session.solved += sum(r.success for r in plan.results)

@@ -34,11 +34,14 @@ KEPT_ANSWERS = 64
 
 
 def jobs_digest(jobs: Sequence[FrameJob]) -> bytes:
-    """16 bytes that change when any frame's id or targets change: each target's parts
-    (the packed row), its blend weights and its pole (which the row does not hold)."""
+    """16 bytes that change when any frame's id, targets or animated pose change: each
+    target's parts (the packed row), its blend weights and its pole (which the row does
+    not hold), and the frame's pose (a frame without one hashes as before poses were)."""
     h = hashlib.blake2b(digest_size=16)
-    for frame_id, targets in jobs:
+    for frame_id, targets, pose in jobs:
         h.update(str(frame_id).encode())
+        if pose is not None:
+            h.update(b"\x02" + pose.tobytes())
         for t in targets:
             h.update(t.effector.encode("utf-8", "surrogatepass"))
             h.update(t.given.to_bytes(2, "little"))
@@ -214,7 +217,7 @@ def answered_among(
     from the job under its key (its last frame's id) back.
     """
     found: dict[int, SolvedFrame] = {}
-    for end, (frame_id, _) in enumerate(jobs):
+    for end, (frame_id, _, _) in enumerate(jobs):
         answer = None if frame_id is None else answers.get(frame_id)
         if answer is None:
             continue

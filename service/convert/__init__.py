@@ -24,7 +24,7 @@ from .chains import ChainView, chain_from_spec, check_bone_output
 from .fast_path import FastFrame, fast_frame, fast_targets
 from .frames import FrameJob, clip_jobs, targets
 from .options import apply_options, oneshot_defaults, options_dict, session_defaults
-from .poses import clipped_dofs, pose_dict, pose_vector
+from .poses import clipped_dofs, frame_pose, pose_dict, pose_vector
 from .results import (
     ResultBuilder,
     SolvedFrame,
@@ -41,6 +41,7 @@ __all__ = [
     "bones_dict",
     "check_bone_output",
     "fk_dict",
+    "frame_pose",
     "wants_bones",
     "ChainView",
     "FastFrame",

@@ -11,6 +11,7 @@ import math
 from collections.abc import Sequence
 
 import schemas as S
+from solver.arrays import Vector
 from solver.errors import InvalidProblem
 from solver.ik import Pole as SolverPole
 from solver.ik import Target as SolverTarget
@@ -20,25 +21,43 @@ from solver.model import EffectorMode
 from ..errors import invalid_problem
 from .chains import ChainView
 from .geometry import rotation_matrix, vec3
+from .poses import frame_pose
 
-# One frame to solve: (the client's frame id, None if it sent none; its solver targets).
-# A plain tuple, not a NamedTuple: one is built per WebSocket frame, and a NamedTuple's
-# constructor costs 0.2 us more (measured), for names that only ever get unpacked.
-FrameJob = tuple[int | None, Sequence[SolverTarget]]
+# One frame to solve: (the client's frame id, None if it sent none; its solver targets;
+# the animated pose it starts from, None to start from the previous answer: see
+# ``poses.frame_pose``). A plain tuple, not a NamedTuple: one is built per WebSocket
+# frame, and a NamedTuple's constructor costs 0.2 us more (measured), for names that
+# only ever get unpacked.
+FrameJob = tuple[int | None, Sequence[SolverTarget], Vector | None]
 
 
-def clip_jobs(frames: Sequence[S.Frame], view: ChainView, limit: int) -> list[FrameJob]:
+def clip_jobs(
+    frames: Sequence[S.Frame], view: ChainView, limit: int, *, plan: bool = False
+) -> list[FrameJob]:
     """The frame jobs of a clip, at most ``limit`` frames
-    (IK_MAX_FRAMES_PER_REQUEST); the same over HTTP and WebSocket.
+    (IK_MAX_FRAMES_PER_REQUEST); the same over HTTP and WebSocket. A frame of a
+    tracked clip may carry its animated ``pose``; a planned clip's may not (the plan
+    has one start: the session's pose).
 
     Raises:
-        ServiceError: too many frames (``frames``), or a frame's targets (``targets``).
+        ServiceError: too many frames (``frames``), a frame's targets (``targets``), a
+            frame's pose (``frames[i].pose...``).
     """
     if len(frames) > limit:
         raise invalid_problem(
             f"at most {limit} frames per request (IK_MAX_FRAMES_PER_REQUEST)", "frames"
         )
-    return [(f.id, targets(f.targets, view, f"frames[{i}].targets")) for i, f in enumerate(frames)]
+    jobs: list[FrameJob] = []
+    for i, f in enumerate(frames):
+        if plan and f.pose is not None:
+            raise invalid_problem(
+                "a planned clip starts from the session's pose: its frames take no 'pose' "
+                "(send the clip without 'plan', or set the pose first with PUT .../pose)",
+                f"frames[{i}].pose",
+            )
+        ts = targets(f.targets, view, f"frames[{i}].targets")
+        jobs.append((f.id, ts, frame_pose(f.pose, view, f"frames[{i}].pose")))
+    return jobs
 
 
 def targets(ts: Sequence[S.Target], view: ChainView, field: str) -> Sequence[SolverTarget]:

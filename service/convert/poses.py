@@ -51,6 +51,19 @@ def pose_vector(pose: S.PoseIn, view: ChainView, current: Vector, field: str = "
     return np.clip(q, chain.lower, chain.upper)
 
 
+def frame_pose(pose: S.PoseIn | None, view: ChainView, field: str) -> Vector | None:
+    """A frame's animated ``pose`` as the frame's job carries it: every DOF's value
+    clipped into the limits, NaN for a DOF ``joints`` leaves out (it keeps the value the
+    session has when the frame is solved: ``Session.start_at``); None without a pose.
+
+    Raises:
+        ServiceError: ``invalid_problem`` naming ``<field>.q`` or ``<field>.joints.<name>``.
+    """
+    if pose is None:
+        return None
+    return pose_vector(pose, view, np.full(view.chain.n_dof, np.nan), field)
+
+
 def clipped_dofs(pose: S.PoseIn, view: ChainView) -> list[str]:
     """The DOFs whose value in ``pose`` is outside the limits (``pose_vector`` sets them
     to the nearest limit), in DOF order. Called after ``pose_vector`` accepted it."""

@@ -359,11 +359,13 @@ async def post_frames(
     plan = isinstance(body, S.ClipRequest) and body.plan
     view = session.view
     if isinstance(body, S.ClipRequest):
-        jobs = convert.clip_jobs(body.frames, view, svc.settings.max_frames_per_request)
+        limit = svc.settings.max_frames_per_request
+        jobs = convert.clip_jobs(body.frames, view, limit, plan=body.plan)
         outputs = [f.bones for f in body.frames]
         fields = [f"frames[{i}].bones" for i in range(len(body.frames))]
     else:
-        jobs = [(body.id, convert.targets(body.targets, view, "targets"))]
+        targets = convert.targets(body.targets, view, "targets")
+        jobs = [(body.id, targets, convert.frame_pose(body.pose, view, "pose"))]
         outputs, fields = [body.bones], ["bones"]
     for output, where in zip(outputs, fields, strict=True):
         if output is not None:

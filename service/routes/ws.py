@@ -36,6 +36,7 @@ from starlette import status
 
 import schemas as S
 from schemas import ErrorCode
+from solver.arrays import Vector
 from solver.errors import IKError
 from solver.ik import Target as SolverTarget
 
@@ -236,7 +237,8 @@ class _Connection:
                 targets = convert.targets(msg.targets, view, "targets")
                 if msg.bones is not None:
                     convert.check_bone_output(msg.bones, view.skeleton, "bones")
-                reply = await self.frame(msg_id, targets, t0, msg.bones)
+                pose = convert.frame_pose(msg.pose, view, "pose")
+                reply = await self.frame(msg_id, targets, t0, msg.bones, pose)
             elif isinstance(msg, S.ClipMessage):
                 reply = await self.clip(msg, t0)
             else:  # an FkMessage (a ping was answered above)
@@ -275,12 +277,14 @@ class _Connection:
         targets: Sequence[SolverTarget],
         t0: float,
         bones: S.BoneOutput | None = None,
+        pose: Vector | None = None,
     ) -> dict[str, Any]:
-        """Solve one valid frame (from the fast path, or validated by pydantic)."""
+        """Solve one valid frame (from the fast path, or validated by pydantic; only
+        the latter carries an animated ``pose``: ``convert.frame_pose``)."""
         (solved,) = await self.svc.runner.session_frames(
             self.session,
             self.svc.store,
-            [(msg_id, targets)],
+            [(msg_id, targets, pose)],
             t0,
             "ws",
             self.client,
@@ -299,7 +303,7 @@ class _Connection:
         runner = self.svc.runner
         limit = self.svc.settings.max_frames_per_request
         view = self.session.view
-        jobs = convert.clip_jobs(msg.frames, view, limit)
+        jobs = convert.clip_jobs(msg.frames, view, limit, plan=msg.plan)
         outputs = [f.bones for f in msg.frames]
         for i, output in enumerate(outputs):
             if output is not None:

@@ -305,6 +305,59 @@ def test_retry_after_from_a_rate_limit(start_server: Callable[..., Server]) -> N
     assert over_ws.value.retry_after_s is not None and over_ws.value.retry_after_s > 0
 
 
+@pytest.mark.parametrize("encoding", list(Encoding))
+def test_frames_and_batch_entries_carry_an_animated_pose(ik: Client, encoding: Encoding) -> None:
+    """``pose`` on a frame (HTTP, the stream, sync and async) and on a batch entry: the
+    frame starts from it (a target met there: answered as it is, a step of ~0)."""
+    session = ik.create_session(PANDA, options={"time_budget_us": 50_000})
+    animated = [0.1, -0.2, 0.05, -1.9, 0.1, 1.8, 0.6]
+    at = ik.fk(session, q=animated).effectors[0]
+    target: Target = {"effector": "tool", "position": at.position, "orientation": at.orientation}
+    assert ik.frame(session, [tool(0.1)]).q != pytest.approx(animated, abs=1e-3)
+
+    def from_animated(result: FrameResult) -> None:
+        assert result.q == pytest.approx(animated, rel=0, abs=1e-6)
+        assert result.largest_step_rad is not None and result.largest_step_rad < 1e-6
+
+    from_animated(ik.frame(session, [target], pose={"q": animated}))
+    # joints: the DOF named takes the animated value, the others keep the answer's.
+    now = ik.frame(session, [tool(0.1)]).q
+    start = [0.5, *now[1:]]
+    there = ik.fk(session, q=start).effectors[0]
+    near: Target = {
+        "effector": "tool",
+        "position": there.position,
+        "orientation": there.orientation,
+    }
+    partial = ik.frame(session, [near], pose={"joints": {session.dof[0].name: 0.5}})
+    assert partial.q == pytest.approx(start, rel=0, abs=1e-6)
+    with ik.stream(session, encoding=encoding) as stream:
+        stream.frame([tool(0.1)])
+        from_animated(stream.frame([target], pose={"q": animated}))
+    ik.frame(session, [tool(0.1)])
+    entry: ik_client.BatchFrame = {
+        "session": session.id,
+        "token": session.token,
+        "targets": [target],
+        "pose": {"q": animated},
+    }
+    (answer,) = ik.batch([entry])
+    assert answer.result is not None
+    from_animated(answer.result)
+
+    async def run() -> list[FrameResult]:
+        async with AsyncClient(ik.base_url) as aik:
+            await aik.frame(session, [tool(0.1)])
+            out = [await aik.frame(session, [target], pose={"q": animated})]
+            async with aik.stream(session, encoding=encoding) as stream:
+                await stream.frame([tool(0.1)])
+                out.append(await stream.frame([target], pose={"q": animated}))
+            return out
+
+    for result in asyncio.run(run()):
+        from_animated(result)
+
+
 def test_async_client_calls(server: Server) -> None:
     async def run() -> None:
         async with AsyncClient(server.base) as ik:

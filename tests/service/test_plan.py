@@ -189,7 +189,7 @@ class _HeldPlans:
         self.runner = solving.Runner(settings, metrics=Metrics(lambda: 1), warmup=warm)
         self.store = InMemorySessionStore(max_sessions=10, ttl_s=60.0)
         frame = S.Frame.model_validate(hand_frame(1))
-        self.jobs = [(1, convert.targets(frame.targets, self.view, "t"))]
+        self.jobs = [(1, convert.targets(frame.targets, self.view, "t"), None)]
 
     async def session(self, name: str, owner: str | None = None) -> Session:
         session, _ = new_session(

@@ -38,6 +38,8 @@ from service.redis_store import RedisSessionStore
 from service.sessions import Session
 from service.stored_frames import KEPT_ANSWERS, StreamRecord, unpack_stream
 from solver.ik import Target
+from solver.ik.kinematics import DD_REST
+from solver.model.forward import effector_poses
 
 from .helpers import Created, create, hand_frame
 from .test_continuity import DIAL
@@ -471,7 +473,9 @@ def test_a_frame_cancelled_while_its_thread_solves_leaves_no_trace(
     _cancelled_mid_solve(
         a,
         session,
-        lambda: runner.session_frames(session, store, [(1, targets)], time.perf_counter(), "http"),
+        lambda: runner.session_frames(
+            session, store, [(1, targets, None)], time.perf_counter(), "http"
+        ),
     )
     assert (session.frames, session.solver.q.tolist()) == (1, pytest.approx(answered, abs=0))
     r = a.get(f"/v1/sessions/{s.id}", headers=s.headers)
@@ -1042,3 +1046,83 @@ def test_a_slow_redis_shows_in_the_commit_histogram_not_only_to_clients(
     assert server[math.inf] - server[0.08192] == 0  # blind to it, as documented
     # Without Redis there is no commit, and no such series.
     assert "ik_redis_commit" not in make_client(Settings()).get("/metrics").text
+
+
+# --- a frame's animated pose (tests/service/test_frame_pose.py) -------------------------
+_ANIMATED = [0.4, 0.3, 1.1]
+
+
+def _posed(session: Session, frame_id: int, pose: list[float], at: list[float]) -> dict[str, Any]:
+    """A frame of the example arm starting from ``pose``, its hand's target where the
+    hand is at ``at`` (forward kinematics of the session's chain)."""
+    x, y, z = effector_poses(session.view.chain, np.array(at))[0][:3, 3]
+    frame = hand_frame(frame_id, x=float(x), y=float(y), z=float(z))
+    return {**frame, "pose": {"q": pose}}
+
+
+def test_a_frame_sent_again_with_another_animated_pose_is_solved_again(
+    workers: Workers, redis_url: str
+) -> None:
+    """The stored answer of a frame sent again (same id, same targets) is given only
+    when its animated pose is the same too: with another pose it is another frame,
+    solved from that pose, and its commit stores the new rest pose."""
+    a, b = workers()
+    s = create(a)
+
+    def post(client: TestClient, frame: dict[str, Any]) -> dict[str, Any]:
+        r = client.post(f"/v1/sessions/{s.id}/frames", json=frame, headers=s.headers)
+        assert r.status_code == 200, r.text
+        result: dict[str, Any] = r.json()["results"][0]
+        return result
+
+    session = a.portal.call(_store(a).get, s.id)
+    assert session is not None
+    frame = _posed(session, 1, _ANIMATED, _ANIMATED)
+    answer = post(a, frame)
+    assert answer["largest_step_rad"] < 1e-6
+    assert _stored_stream(redis_url, s).rest.tolist() == pytest.approx(_ANIMATED, abs=0)
+    frames = _in_redis(workers, s)["counters"]["frames"]
+    assert post(b, frame) == answer  # the same pose: the stored answer, not solved
+    assert _in_redis(workers, s)["counters"]["frames"] == frames
+    other = [0.5, 0.2, 1.2]
+    moved = post(b, {**frame, "pose": {"q": other}})  # the same id and targets
+    assert moved["largest_step_rad"] > 0.05  # from the other pose to the target
+    assert _in_redis(workers, s)["counters"]["frames"] == frames + 1
+    stored = _stored_stream(redis_url, s)
+    assert stored.rest.tolist() == pytest.approx(other, abs=0)
+    assert stored.q.tolist() == pytest.approx(moved["q"], abs=0)
+
+
+@pytest.mark.parametrize("shared", [True, False], ids=["redis", "memory"])
+def test_a_cancelled_frame_with_an_animated_pose_leaves_the_rest_pose_as_it_was(
+    workers: Workers, make_client: Callable[..., TestClient], redis_url: str, shared: bool
+) -> None:
+    """A frame that carried an animated pose and was cancelled while its thread solved
+    it leaves no trace: the pose, the counters and the rest pose (which the pose set)
+    are put back, in this worker and in Redis."""
+    a = _two_stores(workers, make_client, shared)
+    s = create(a)
+    rest = [0.1, -0.2, 0.9]
+    r = a.put(f"/v1/sessions/{s.id}/pose", json={"q": rest}, headers=s.headers)
+    assert r.status_code == 200, r.text
+    store = a.app.state.ik.store  # type: ignore[attr-defined]
+    answered = _frame_q(a, s, 0, 0.1)
+    session = a.portal.call(store.get, s.id)
+    assert session is not None
+    runner = a.app.state.ik.runner  # type: ignore[attr-defined]
+    frame = _posed(session, 1, _ANIMATED, [0.5, 0.2, 1.2])
+    pose = convert.frame_pose(S.Frame(**frame).pose, session.view, "pose")
+    job = (1, frame_targets(session, frame), pose)
+    _cancelled_mid_solve(
+        a,
+        session,
+        lambda: runner.session_frames(session, store, [job], time.perf_counter(), "http"),
+    )
+    assert (session.frames, session.solver.q.tolist()) == (1, pytest.approx(answered, abs=0))
+    assert session.rest is not None and session.rest.tolist() == rest
+    # The solver's own rest pose (where the null-space step steers), put back too.
+    assert session.solver._dd[DD_REST].tolist() == pytest.approx(rest, abs=0)
+    if shared:
+        stored = _stored_stream(redis_url, s)
+        assert stored.rest is not None and stored.rest.tolist() == rest
+        assert (stored.frames, stored.q.tolist()) == (1, pytest.approx(answered, abs=0))

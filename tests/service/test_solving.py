@@ -97,6 +97,7 @@ def test_concurrent_pooled_requests_of_one_session_run_in_arrival_order(
                     convert.targets(
                         S.Frame.model_validate(hand_frame(i, y=0.1 + 0.01 * i)).targets, view, "t"
                     ),
+                    None,
                 )
             ]
             for i in range(8)

@@ -87,7 +87,7 @@ def test_a_stored_answer_renders_as_the_solved_frame() -> None:
     solver = make_solver(view, convert.session_defaults(Settings()))
     middle = (view.chain.lower + view.chain.upper) / 2
     solver.track(_positions(view, middle))
-    jobs = [(7, _positions(view, middle + 0.05))]
+    jobs = [(7, _positions(view, middle + 0.05), None)]
     tracked = solver.track(jobs[0][1])
     solved = [SolvedFrame(7, tracked, 123.5, solver.last_step)]
     assert solver.last_step.largest_rad > 0
@@ -105,10 +105,29 @@ def test_a_stored_answer_renders_as_the_solved_frame() -> None:
 
 def test_the_digest_tells_other_targets_or_ids_apart() -> None:
     view = _panda()
-    a = [(1, _targets(view, 0.45))]
-    assert jobs_digest(a) == jobs_digest([(1, _targets(view, 0.45))])
-    assert jobs_digest(a) != jobs_digest([(1, _targets(view, 0.46))])
-    assert jobs_digest(a) != jobs_digest([(2, _targets(view, 0.45))])
+    a = [(1, _targets(view, 0.45), None)]
+    assert jobs_digest(a) == jobs_digest([(1, _targets(view, 0.45), None)])
+    assert jobs_digest(a) != jobs_digest([(1, _targets(view, 0.46), None)])
+    assert jobs_digest(a) != jobs_digest([(2, _targets(view, 0.45), None)])
+
+
+def test_the_digest_tells_other_animated_poses_apart() -> None:
+    """A frame's animated pose is part of the frame: the same id and targets from
+    another pose (or from none) is another frame; a partial pose's left-out DOFs (NaN)
+    hash alike every time."""
+    view = _panda()
+    n = view.chain.n_dof
+    targets = _targets(view, 0.45)
+    partial = np.full(n, np.nan)
+    partial[1] = 0.3
+
+    def digest(pose: np.ndarray | None) -> bytes:
+        return jobs_digest([(1, targets, pose)])
+
+    digests = [digest(None), digest(np.zeros(n)), digest(np.full(n, 0.1)), digest(partial)]
+    assert len(set(digests)) == 4
+    assert digest(partial.copy()) == digests[3]
+    assert digest(np.zeros(n)) == digests[1]
 
 
 def test_the_digest_tells_other_weights_or_poles_apart() -> None:
@@ -117,7 +136,7 @@ def test_the_digest_tells_other_weights_or_poles_apart() -> None:
     view = _panda()
 
     def digest(**extra: Any) -> bytes:
-        return jobs_digest([(1, _targets(view, 0.45, **extra))])
+        return jobs_digest([(1, _targets(view, 0.45, **extra), None)])
 
     plain = digest()
     assert digest(position_weight=1.0) == plain
@@ -138,8 +157,8 @@ def test_a_batch_sent_again_finds_each_stored_answer_among_its_entries() -> None
     there, or whose targets differ, is not used."""
     view = _panda()
     solver = make_solver(view, convert.session_defaults(Settings()))
-    jobs = [(k, _targets(view, 0.40 + 0.01 * k)) for k in range(1, 7)]
-    frames = {k: SolvedFrame(k, solver.track(t), float(k), solver.last_step) for k, t in jobs}
+    jobs = [(k, _targets(view, 0.40 + 0.01 * k), None) for k in range(1, 7)]
+    frames = {k: SolvedFrame(k, solver.track(t), float(k), solver.last_step) for k, t, _ in jobs}
 
     def stored(*ids: int) -> StoredAnswer:
         picked = [jobs[k - 1] for k in ids]
@@ -153,10 +172,10 @@ def test_a_batch_sent_again_finds_each_stored_answer_among_its_entries() -> None
     # Sent again without 1 (1 and 3 were one answer): only 4 is found.
     assert {f.frame_id for f in answered_among(answers, jobs[1:]).values()} == {4}
     # 3 with other targets: its answer is not used.
-    moved = [*jobs[:2], (3, _targets(view, 0.5)), *jobs[3:]]
+    moved = [*jobs[:2], (3, _targets(view, 0.5), None), *jobs[3:]]
     assert {f.frame_id for f in answered_among(answers, moved).values()} == {4}
     assert answered_among({}, jobs) == {}
-    assert answered_among(answers, [(None, jobs[0][1])]) == {}
+    assert answered_among(answers, [(None, jobs[0][1], None)]) == {}
 
 
 def test_a_stored_stream_state_continues_the_stream_exactly() -> None:

@@ -221,13 +221,16 @@ def frame(
     id: int | None = None,
     compact: bool = False,
     bones: BoneOutput | None = None,
+    pose: PoseIn | None = None,
 ) -> Call[FrameResult]:
     """Solve one frame from the session's pose (``compact``: no joints by name and no
-    per-effector errors; ``bones``: this frame's bone output, in place of the session's).
+    per-effector errors; ``bones``: this frame's bone output, in place of the session's;
+    ``pose``: this frame's animated pose, ``{"q": [...]}`` or ``{"joints": {...}}``, to
+    start from, as ``set_pose`` then the frame in one step: IK on top of an animation).
     With an ``id`` the client sends the frame again, same id, when it got no answer (a
     failed or dropped connection, a 502 or 503: the client's ``reconnect``); behind a
     balancer with a shared store it is then answered once."""
-    body = _without_none(id=id, targets=targets, bones=bones)
+    body = _without_none(id=id, targets=targets, bones=bones, pose=pose)
     return _post_frames(
         session,
         body,

@@ -167,16 +167,23 @@ export class Client {
   }
 
   /** Solve one frame from the session's pose (`compact`: no joints by name, no effector
-   * errors; `bones`: this frame's bone output, in place of the session's). With an `id`
+   * errors; `bones`: this frame's bone output, in place of the session's; `pose`: the
+   * animated pose it starts from, as `setPose` then the frame in one step). With an `id`
    * a frame that got no answer is sent again, same id (`reconnect`). */
   async frame<C extends boolean = false>(
     session: SessionRef,
     targets: Target[],
-    options: { id?: number | undefined; compact?: C | undefined; bones?: BoneOutput | undefined } = {},
+    options: {
+      id?: number | undefined;
+      compact?: C | undefined;
+      bones?: BoneOutput | undefined;
+      pose?: PoseIn | undefined;
+    } = {},
   ): Promise<Result<C>> {
+    const body = { id: options.id, targets: targetsAsSent(targets), bones: options.bones, pose: options.pose };
     const out: FrameResults<Result<C>> = await this.request("POST", `/v1/sessions/${session.id}/frames`, {
       session,
-      body: withoutUndefined({ id: options.id, targets: targetsAsSent(targets), bones: options.bones }),
+      body: withoutUndefined(body),
       compact: options.compact ?? false,
       repeatable: options.id !== undefined,
     });

@@ -1,7 +1,7 @@
 /** The stream's messages as sent, before their id: a frame, a clip, an fk. */
 
 import { framesAsSent, targetsAsSent } from "./targets.js";
-import type { BoneOutput, Frame, Target } from "./types.js";
+import type { BoneOutput, Frame, PoseIn, Target } from "./types.js";
 
 export type Envelope = Record<string, unknown>;
 
@@ -9,6 +9,8 @@ export type Envelope = Record<string, unknown>;
 export interface FrameOptions {
   /** This frame's bone output instead of the session's (skeleton chains; docs/websocket.md). */
   bones?: BoneOutput | undefined;
+  /** The animated pose this frame starts from, as `setPose` then the frame in one step. */
+  pose?: PoseIn | undefined;
 }
 
 /** `fk`'s pose: `q` (every DOF), or `joints` (some, by name; the others: the session's
@@ -31,8 +33,10 @@ export function fkMessage(options: FkOptions): Envelope {
 }
 
 export function frameMessage(given: Target[], options: FrameOptions): Envelope {
-  const targets = targetsAsSent(given);
-  return options.bones === undefined ? { type: "frame", targets } : { type: "frame", targets, bones: options.bones };
+  const message: Envelope = { type: "frame", targets: targetsAsSent(given) };
+  if (options.bones !== undefined) message["bones"] = options.bones;
+  if (options.pose !== undefined) message["pose"] = options.pose;
+  return message;
 }
 
 export function clipMessage(frames: Frame[], options: { plan?: boolean | undefined }): Envelope {

@@ -207,7 +207,8 @@ export class Stream<R = FrameResult> {
     return this.failure;
   }
 
-  /** `options.bones` overrides the session's bone output for this frame only. */
+  /** `options.bones` overrides the session's bone output for this frame only;
+   * `options.pose` is the animated pose it starts from. */
   sendFrame(targets: Target[], options: FrameOptions = {}): number {
     return this.send(frameMessage(targets, options)).id;
   }

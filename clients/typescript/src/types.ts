@@ -89,6 +89,9 @@ export interface Frame {
   targets: Target[];
   /** Bone output for this frame (skeleton chains; default: the session's). */
   bones?: BoneOutput | null | undefined;
+  /** The animated pose this frame starts from (IK on top of an animation): as `setPose`
+   * then the frame, in one step; not in a planned clip. */
+  pose?: PoseIn | null | undefined;
 }
 
 /** Schema `BatchFrame`: one session's frame in a batch, with that session's id and token. */

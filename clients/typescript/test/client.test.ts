@@ -217,7 +217,7 @@ const DECLARED: Record<string, string[]> = {
     pole: true,
   }),
   Pole: k<Pole>({ position: true, bone: true }),
-  Frame: k<Frame>({ id: true, targets: true, bones: true }),
+  Frame: k<Frame>({ id: true, targets: true, bones: true, pose: true }),
   PoseIn: k<PoseIn>({ q: true, joints: true }),
   OptionsPatch: k<OptionsPatch>(OPTIONS),
   SolverOptions: k<SolverOptions>(OPTIONS),
@@ -266,7 +266,7 @@ const DECLARED: Record<string, string[]> = {
   SessionCounters: k<SessionCounters>({ frames: true, solved: true, not_solved: true }),
   SessionInfo: k<SessionInfo>({ ...SESSION, counters: true, created_at: true, idle_s: true, websockets: true }),
   ErrorBody: k<ErrorBody>({ detail: true, code: true, field: true }),
-  BatchFrame: k<BatchFrame>({ session: true, token: true, id: true, targets: true, bones: true }),
+  BatchFrame: k<BatchFrame>({ session: true, token: true, id: true, targets: true, bones: true, pose: true }),
   BatchEntryResult: k<BatchEntryResult>({ session: true, id: true, success: true, result: true }),
   BatchEntryError: k<BatchEntryError>({ session: true, id: true, success: true, error: true }),
   ErrorPayload: k<ErrorPayload>({ code: true, message: true, field: true, retry_after_s: true }),
@@ -537,6 +537,32 @@ describe("http", () => {
     assert.ok(wrong !== undefined && "error" in wrong);
     assert.equal(wrong.error.code, ErrorCode.Forbidden);
     assert.deepEqual((await ik.getSession(a)).pose.q, first.result.q);
+  });
+
+  test("a frame's animated pose: HTTP frame, batch entry and stream frame start from it", async () => {
+    const session = await ik.createSession(PANDA, { options: { time_budget_us: 50_000 } });
+    const animated = [0.1, -0.2, 0.05, -1.9, 0.1, 1.8, 0.6];
+    const at = (await ik.fk(session, { q: animated })).effectors[0]!;
+    const target: Target = { effector: "tool", position: at.position, orientation: at.orientation };
+    const fromAnimated = (result: { q: number[]; largest_step_rad: number | null }): void => {
+      result.q.forEach((v, i) => assert.ok(Math.abs(v - animated[i]!) < 1e-6, `q[${i}] ${v}`));
+      assert.ok(result.largest_step_rad !== null && result.largest_step_rad < 1e-6, `${result.largest_step_rad}`);
+    };
+    await ik.frame(session, [tool(0.1)]);
+    fromAnimated(await ik.frame(session, [target], { pose: { q: animated } }));
+    await ik.frame(session, [tool(0.1)]);
+    const [entry] = await ik.batch([{ session: session.id, token: session.token, targets: [target], pose: { q: animated } }]);
+    assert.ok(entry !== undefined && "result" in entry);
+    fromAnimated(entry.result);
+    for (const encoding of ENCODINGS) {
+      const stream = await ik.stream(session, { encoding });
+      try {
+        await stream.frame([tool(0.1)]);
+        fromAnimated(await stream.frame([target], { pose: { q: animated } }));
+      } finally {
+        stream.close();
+      }
+    }
   });
 
   test("one-shot solve", async () => {

@@ -24,6 +24,7 @@ from ..types import (
     Frame,
     FrameResult,
     Pong,
+    PoseIn,
     Target,
 )
 from . import messages
@@ -67,8 +68,15 @@ class AsyncStream(BaseStream[AsyncConnection]):
         if self._connection is not None:
             await self._connection.close()
 
-    async def send_frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> int:
-        return await self._send(messages.frame(targets, bones))
+    async def send_frame(
+        self,
+        targets: list[Target],
+        *,
+        bones: BoneOutput | None = None,
+        pose: PoseIn | None = None,
+    ) -> int:
+        """Send a frame (``pose``: the animated pose it starts from); returns its id."""
+        return await self._send(messages.frame(targets, bones, pose))
 
     async def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
         return await self._send(messages.clip(frames, plan))
@@ -105,8 +113,14 @@ class AsyncStream(BaseStream[AsyncConnection]):
                 await connection.close()  # what waits is sent again on a new connection
                 await self._recover(connection, exc)
 
-    async def frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> FrameResult:
-        await self.send_frame(targets, bones=bones)
+    async def frame(
+        self,
+        targets: list[Target],
+        *,
+        bones: BoneOutput | None = None,
+        pose: PoseIn | None = None,
+    ) -> FrameResult:
+        await self.send_frame(targets, bones=bones, pose=pose)
         return messages.expect_frame(await self.receive())
 
     async def clip(self, frames: list[Frame], *, plan: bool = False) -> ClipResult:

@@ -21,15 +21,24 @@ from ..types import (
     FrameAnswer,
     FrameResult,
     Pong,
+    PoseIn,
     Target,
 )
 
 
-def frame(targets: list[Target], bones: BoneOutput | None) -> dict[str, Any]:
-    """A frame message; ``bones`` overrides the session's bone output for this frame."""
-    if bones is None:
+def frame(
+    targets: list[Target], bones: BoneOutput | None, pose: PoseIn | None = None
+) -> dict[str, Any]:
+    """A frame message; ``bones`` overrides the session's bone output for this frame,
+    ``pose`` is the animated pose it starts from (``q`` or ``joints``)."""
+    if bones is None and pose is None:
         return {"type": "frame", "targets": targets}
-    return {"type": "frame", "targets": targets, "bones": bones}
+    body: dict[str, Any] = {"type": "frame", "targets": targets}
+    if bones is not None:
+        body["bones"] = bones
+    if pose is not None:
+        body["pose"] = pose
+    return body
 
 
 def clip(frames: list[Frame], plan: bool) -> dict[str, Any]:

@@ -21,6 +21,7 @@ from ..types import (
     Frame,
     FrameResult,
     Pong,
+    PoseIn,
     Target,
 )
 from . import messages
@@ -47,8 +48,15 @@ class Stream(BaseStream[SyncConnection]):
         if self._connection is not None:
             self._connection.close()
 
-    def send_frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> int:
-        return self._send(messages.frame(targets, bones))
+    def send_frame(
+        self,
+        targets: list[Target],
+        *,
+        bones: BoneOutput | None = None,
+        pose: PoseIn | None = None,
+    ) -> int:
+        """Send a frame (``pose``: the animated pose it starts from); returns its id."""
+        return self._send(messages.frame(targets, bones, pose))
 
     def send_clip(self, frames: list[Frame], *, plan: bool = False) -> int:
         return self._send(messages.clip(frames, plan))
@@ -81,8 +89,14 @@ class Stream(BaseStream[SyncConnection]):
                 self.connection.close()  # what waits is sent again on a new connection
                 self._recover(exc)
 
-    def frame(self, targets: list[Target], *, bones: BoneOutput | None = None) -> FrameResult:
-        self.send_frame(targets, bones=bones)
+    def frame(
+        self,
+        targets: list[Target],
+        *,
+        bones: BoneOutput | None = None,
+        pose: PoseIn | None = None,
+    ) -> FrameResult:
+        self.send_frame(targets, bones=bones, pose=pose)
         return messages.expect_frame(self.receive())
 
     def clip(self, frames: list[Frame], *, plan: bool = False) -> ClipResult:

@@ -65,12 +65,22 @@ class Conventions(TypedDict, total=False):
     unit: str
 
 
+class PoseIn(TypedDict, total=False):
+    """A pose (schema ``PoseIn``): exactly one of ``q`` (every DOF, in order) or
+    ``joints`` (some DOFs by name) [rad] or [m]."""
+
+    q: list[float]
+    joints: dict[str, float]
+
+
 class Frame(TypedDict):
-    """One frame of a clip (schema ``Frame``); ``id`` is echoed in its result."""
+    """One frame of a clip (schema ``Frame``); ``id`` is echoed in its result, ``pose``
+    is the animated pose it starts from (not in a planned clip)."""
 
     targets: list[Target]
     id: NotRequired[int]
     bones: NotRequired[BoneOutput]
+    pose: NotRequired[PoseIn]
 
 
 class BatchFrame(TypedDict):
@@ -82,14 +92,7 @@ class BatchFrame(TypedDict):
     targets: list[Target]
     id: NotRequired[int]
     bones: NotRequired[BoneOutput]
-
-
-class PoseIn(TypedDict, total=False):
-    """A pose (schema ``PoseIn``): exactly one of ``q`` (every DOF, in order) or
-    ``joints`` (some DOFs by name) [rad] or [m]."""
-
-    q: list[float]
-    joints: dict[str, float]
+    pose: NotRequired[PoseIn]  # the animated pose it starts from
 
 
 class SolverOptionsPatch(TypedDict, total=False):
