@@ -219,18 +219,17 @@ Q_ID = {"w": 1.0, "x": 0.0, "y": 0.0, "z": 0.0}
 
 def test_a_one_shot_target_beyond_the_arm_is_not_reached(client: TestClient) -> None:
     """3 m from a panda's base, with restarts cut by the time: answered not_reached (no
-    time would reach it), not budget_exhausted (a robotics user's trial)."""
+    time would reach it), not budget_exhausted (a robotics user's trial). Which code
+    ends the search depends on the clock: ``deadline`` when the 100 us cut it,
+    ``stalled`` when it ended first (a fresh CI run met both)."""
     far = {"effector": "tool", "position": {"x": 3.0, "y": 0.0, "z": 0.5}, "orientation": Q_ID}
     body = {"chain": {"format": "example", "name": "panda_arm"}, "targets": [far]}
     body["options"] = {"time_budget_us": 100}
     r = client.post("/v1/solve", json=body)
     assert r.status_code == 200, r.text
     res = r.json()
-    assert (res["success"], res["status"], res["termination"]) == (
-        False,
-        "not_reached",
-        "deadline",
-    ), res
+    assert (res["success"], res["status"]) == (False, "not_reached"), res
+    assert res["termination"] in ("deadline", "stalled"), res
 
 
 # --- errors: auth ----------------------------------------------------------------------
