@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import json
 import logging
 import math
@@ -370,6 +371,14 @@ def _stored_stream(redis_url: str, s: Created) -> StreamRecord:
 def frame_targets(session: Session, frame: dict[str, Any]) -> Sequence[Target]:
     """A frame's targets as the solver takes them, for the session's chain."""
     return convert.targets(S.Frame(**frame).targets, session.view, "targets")
+
+
+def _post_frame(client: TestClient, frame: dict[str, Any], *, s: Created) -> dict[str, Any]:
+    """One frame of session ``s`` through ``client`` (a worker): its result."""
+    r = client.post(f"/v1/sessions/{s.id}/frames", json=frame, headers=s.headers)
+    assert r.status_code == 200, r.text
+    result: dict[str, Any] = r.json()["results"][0]
+    return result
 
 
 def _frame_q(client: TestClient, s: Created, frame_id: int, y: float) -> list[float]:
@@ -933,11 +942,7 @@ def test_an_id_sent_again_with_new_targets_keeps_its_answer_as_the_newest(
     a, b = workers()
     s = create(a)
 
-    def post(client: TestClient, frame: dict[str, Any]) -> dict[str, Any]:
-        r = client.post(f"/v1/sessions/{s.id}/frames", json=frame, headers=s.headers)
-        assert r.status_code == 200, r.text
-        result: dict[str, Any] = r.json()["results"][0]
-        return result
+    post = functools.partial(_post_frame, s=s)
 
     for k in (1, 2, 3):
         post(a, hand_frame(k, x=0.3 + 0.001 * k))
@@ -1069,11 +1074,7 @@ def test_a_frame_sent_again_with_another_animated_pose_is_solved_again(
     a, b = workers()
     s = create(a)
 
-    def post(client: TestClient, frame: dict[str, Any]) -> dict[str, Any]:
-        r = client.post(f"/v1/sessions/{s.id}/frames", json=frame, headers=s.headers)
-        assert r.status_code == 200, r.text
-        result: dict[str, Any] = r.json()["results"][0]
-        return result
+    post = functools.partial(_post_frame, s=s)
 
     session = a.portal.call(_store(a).get, s.id)
     assert session is not None
